@@ -1,0 +1,23 @@
+//! lidarsim: a simulation testbed for atmospheric lidars.
+//!
+//! The library follows the pipeline of `DESIGN.md`: each module is one stage, consuming the
+//! previous stage's plain data types and producing its own.
+//!
+//! | stage | module | produces |
+//! |---|---|---|
+//! | scene file | [`scene`] | a validated [`scene::Scene`] |
+//! | atmospheric state | [`atmosphere`] | [`atmosphere::Profile`] |
+//! | gas absorption | [`spectroscopy`] | cross-sections, layer optical depths |
+//! | particles | [`particles`] | phase functions, Rayleigh and Mie optics |
+//! | optical atmosphere | [`optics`] | [`optics::OpticalAtmosphere`], the one input of transport |
+//! | Monte Carlo | [`transport`] | [`returns::Returns`] by channel, FOV, gate and order |
+//! | analytic single scatter | [`lidar_eq`] | [`returns::Returns`], order 1 |
+
+#![forbid(unsafe_code)]
+#![deny(missing_docs)]
+
+pub mod atmosphere;
+pub mod constants;
+pub mod input;
+pub mod particles;
+pub mod spectroscopy;

@@ -1,0 +1,49 @@
+//! The `lidarsim` command line: parses arguments, dispatches to a subcommand, maps errors to an
+//! exit code (0 success, 2 error). Each subcommand lives in its own file under `src/cli/`.
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+mod cli;
+
+/// Simulation testbed for atmospheric lidars (DIAL, IPDA): line-by-line gas absorption, Mie and
+/// Rayleigh scattering, time-resolved Monte Carlo transport and the analytic lidar equation.
+#[derive(Parser)]
+#[command(name = "lidarsim", version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Run a scene (Monte Carlo and analytic lidar equation) and write DIR/returns.csv.
+    Run(cli::run::Args),
+    /// Line-by-line absorption cross-sections or layer optical depths from a HITRAN file.
+    Lbl(cli::lbl::Args),
+    /// Atmospheric profile sets: generate perturbed ensembles, plot sets.
+    Profiles(cli::profiles::Args),
+    /// Mie scattering of one sphere or a size distribution; write phase-function tables.
+    Mie(cli::mie::Args),
+    /// Measure speed and Monte Carlo efficiency on fixed workloads.
+    Bench(cli::bench::Args),
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Run(a) => cli::run::run(a),
+        Command::Lbl(a) => cli::lbl::run(a),
+        Command::Profiles(a) => cli::profiles::run(a),
+        Command::Mie(a) => cli::mie::run(a),
+        Command::Bench(a) => cli::bench::run(a),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("lidarsim: error: {e:#}");
+            ExitCode::from(2)
+        }
+    }
+}

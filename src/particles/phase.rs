@@ -1,0 +1,1 @@
+//! Phase functions (in progress).

@@ -1,0 +1,267 @@
+//! The phase-function table format of `phase_functions/`.
+//!
+//! A table is a text file:
+//!
+//! ```text
+//! # lidarsim phase function table
+//! # wavelength_nm = 1064
+//! # refractive_index = 1.3205+1.28e-6i
+//! # distribution = Deirmendjian C.1: modified gamma n(r) = a r^6 exp(-1.5 r), r in um
+//! # source = miepython 3.3.0 (shared/reference/c1_phase_1064.csv)
+//! theta_deg,phase_4pi
+//! 0.0,759.3225
+//! ...
+//! 180.0,0.6415
+//! ```
+//!
+//! * `# key = value` lines are metadata. `wavelength_nm`, `refractive_index` and `distribution`
+//!   are required (write `none` where one does not apply, e.g. a measured table); any other keys
+//!   (`source`, `single_scattering_albedo`, `asymmetry`, `lidar_ratio_sr`, …) are kept as text.
+//!   Other `#` lines are free comments.
+//! * The header line is `theta_deg,phase_4pi`: scattering angle in degrees, strictly increasing
+//!   from exactly 0 to exactly 180, and the phase function normalised so that its integral over
+//!   the sphere is 4π (an isotropic scatterer has phase_4pi = 1 everywhere).
+//! * Between nodes the phase function is linear in cos θ; the normalisation is checked with that
+//!   rule and a table off by more than 2 % is rejected (a table normalised to 1 or to 1/(4π) by
+//!   mistake is then caught). Smaller quadrature differences are removed by rescaling to exactly
+//!   4π when the table is turned into a [`PhaseFunction`](super::phase::PhaseFunction).
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use crate::input::{CsvTable, InputError, parse_f64, read_to_string};
+
+/// Metadata keys every table must carry.
+pub const REQUIRED_KEYS: [&str; 3] = ["wavelength_nm", "refractive_index", "distribution"];
+
+/// A phase-function table as read from or written to `phase_functions/`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PhaseTable {
+    /// `# key = value` metadata, in file order.
+    pub meta: Vec<(String, String)>,
+    /// Scattering angles [deg], strictly increasing from 0 to 180.
+    pub theta_deg: Vec<f64>,
+    /// Phase function normalised to 4π over the sphere.
+    pub phase_4pi: Vec<f64>,
+}
+
+impl PhaseTable {
+    /// Read and validate a table file.
+    pub fn read(path: &Path) -> Result<Self, InputError> {
+        Self::parse(path, &read_to_string(path)?)
+    }
+
+    /// Parse and validate table text; `path` names the file in errors.
+    pub fn parse(path: &Path, text: &str) -> Result<Self, InputError> {
+        let mut meta = Vec::new();
+        for (i, line) in text.lines().enumerate() {
+            let Some(c) = line.trim().strip_prefix('#') else {
+                continue;
+            };
+            if let Some((k, v)) = c.split_once('=') {
+                let key = k.trim();
+                if !key.is_empty()
+                    && key
+                        .chars()
+                        .all(|ch| ch.is_ascii_alphanumeric() || ch == '_')
+                {
+                    if meta.iter().any(|(k2, _): &(String, String)| k2 == key) {
+                        return Err(InputError::at(path, i + 1, key, "metadata key given twice"));
+                    }
+                    meta.push((key.to_string(), v.trim().to_string()));
+                }
+            }
+        }
+        for key in REQUIRED_KEYS {
+            if !meta.iter().any(|(k, _)| k == key) {
+                return Err(InputError::file(
+                    path,
+                    format!(
+                        "missing metadata line `# {key} = ...` (write `none` if it does not apply)"
+                    ),
+                ));
+            }
+        }
+        if let Some((_, v)) = meta.iter().find(|(k, _)| k == "wavelength_nm") {
+            if v != "none" {
+                let line = line_of_key(text, "wavelength_nm");
+                let w = parse_f64(path, line, "wavelength_nm", v)?;
+                if w <= 0.0 {
+                    return Err(InputError::at(
+                        path,
+                        line,
+                        "wavelength_nm",
+                        "must be positive",
+                    ));
+                }
+            }
+        }
+        let t = CsvTable::parse(path, text)?;
+        if t.header() != ["theta_deg", "phase_4pi"] {
+            return Err(InputError::file(
+                path,
+                format!(
+                    "header must be `theta_deg,phase_4pi`, found `{}`",
+                    t.header().join(",")
+                ),
+            ));
+        }
+        let theta_deg = t.f64_column("theta_deg")?;
+        let phase_4pi = t.f64_column("phase_4pi")?;
+        if theta_deg.len() < 2 {
+            return Err(InputError::file(
+                path,
+                "needs at least two angles (0 and 180)",
+            ));
+        }
+        for r in 0..theta_deg.len() {
+            let line = t.line_of(r);
+            if r > 0 && theta_deg[r] <= theta_deg[r - 1] {
+                return Err(InputError::at(
+                    path,
+                    line,
+                    "theta_deg",
+                    "angles must strictly increase",
+                ));
+            }
+            if phase_4pi[r] < 0.0 {
+                return Err(InputError::at(
+                    path,
+                    line,
+                    "phase_4pi",
+                    "must not be negative",
+                ));
+            }
+        }
+        if theta_deg[0] != 0.0 {
+            return Err(InputError::at(
+                path,
+                t.line_of(0),
+                "theta_deg",
+                "first angle must be 0",
+            ));
+        }
+        if *theta_deg.last().unwrap_or(&0.0) != 180.0 {
+            let line = t.line_of(theta_deg.len() - 1);
+            return Err(InputError::at(
+                path,
+                line,
+                "theta_deg",
+                "last angle must be 180",
+            ));
+        }
+        let table = PhaseTable {
+            meta,
+            theta_deg,
+            phase_4pi,
+        };
+        let norm = table.normalisation();
+        if (norm - 1.0).abs() > 0.02 {
+            return Err(InputError::at(
+                path,
+                t.line_of(0),
+                "phase_4pi",
+                format!(
+                    "integrates to {:.6} × 4π over the sphere; the format requires 4π (within 2 %)",
+                    norm
+                ),
+            ));
+        }
+        Ok(table)
+    }
+
+    /// (1/4π) ∫ P dΩ = ½ ∫ P dμ with P linear in μ = cos θ between nodes.
+    pub fn normalisation(&self) -> f64 {
+        let mu: Vec<f64> = self
+            .theta_deg
+            .iter()
+            .map(|t| t.to_radians().cos())
+            .collect();
+        let mut s = 0.0;
+        for i in 0..mu.len() - 1 {
+            s += 0.5 * (self.phase_4pi[i] + self.phase_4pi[i + 1]) * (mu[i] - mu[i + 1]);
+        }
+        0.5 * s
+    }
+
+    /// A metadata value.
+    pub fn meta(&self, key: &str) -> Option<&str> {
+        self.meta
+            .iter()
+            .find(|(k, _)| k == key)
+            .map(|(_, v)| v.as_str())
+    }
+
+    /// The table in the file format (see the module documentation).
+    pub fn to_text(&self) -> String {
+        let mut s = String::from("# lidarsim phase function table\n");
+        for (k, v) in &self.meta {
+            let _ = writeln!(s, "# {k} = {v}");
+        }
+        s.push_str("theta_deg,phase_4pi\n");
+        for (t, p) in self.theta_deg.iter().zip(&self.phase_4pi) {
+            let _ = writeln!(s, "{t},{p:.9e}");
+        }
+        s
+    }
+
+    /// Write the table to `path` (through a temporary file, so nothing is half-written).
+    pub fn write(&self, path: &Path) -> std::io::Result<()> {
+        let tmp = path.with_extension("tmp");
+        std::fs::write(&tmp, self.to_text())?;
+        std::fs::rename(&tmp, path)
+    }
+}
+
+fn line_of_key(text: &str, key: &str) -> usize {
+    text.lines()
+        .position(|l| {
+            l.trim()
+                .strip_prefix('#')
+                .and_then(|c| c.split_once('='))
+                .is_some_and(|(k, _)| k.trim() == key)
+        })
+        .map_or(1, |i| i + 1)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn iso(n: usize) -> PhaseTable {
+        PhaseTable {
+            meta: REQUIRED_KEYS
+                .iter()
+                .map(|k| (k.to_string(), "none".to_string()))
+                .collect(),
+            theta_deg: (0..n).map(|i| 180.0 * i as f64 / (n - 1) as f64).collect(),
+            phase_4pi: vec![1.0; n],
+        }
+    }
+
+    #[test]
+    fn round_trips_through_text() {
+        let t = iso(19);
+        let back = PhaseTable::parse(Path::new("x"), &t.to_text()).unwrap();
+        assert_eq!(back, t);
+        assert!((back.normalisation() - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn rejects_wrong_normalisation_missing_meta_and_bad_angles() {
+        let mut t = iso(19);
+        t.phase_4pi
+            .iter_mut()
+            .for_each(|p| *p /= 4.0 * std::f64::consts::PI);
+        let e = PhaseTable::parse(Path::new("p.txt"), &t.to_text()).unwrap_err();
+        assert_eq!(e.field.as_deref(), Some("phase_4pi"));
+
+        let text = iso(3).to_text().replace("# distribution = none\n", "");
+        let e = PhaseTable::parse(Path::new("p.txt"), &text).unwrap_err();
+        assert!(e.message.contains("distribution"), "{e}");
+
+        let text = iso(3).to_text().replace("\n90,", "\n190,");
+        let e = PhaseTable::parse(Path::new("p.txt"), &text).unwrap_err();
+        assert_eq!(e.field.as_deref(), Some("theta_deg"));
+    }
+}

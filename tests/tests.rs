@@ -1,0 +1,16 @@
+//! lidarsim integration tests: one binary, one module per theme (`cargo test --release`).
+
+mod util;
+
+/// Atmospheric state: standard atmospheres, profile sets, ensembles.
+mod atmosphere;
+/// The command line.
+mod cli;
+/// Particles: Mie, size distributions, phase-function tables and sampling.
+mod particles;
+/// Scenes: parsing, validation and their documented errors.
+mod scene;
+/// Line-by-line gas absorption against HAPI.
+mod spectroscopy;
+/// Monte Carlo transport against the analytic lidar equation and conservation laws.
+mod transport;

@@ -1,0 +1,29 @@
+//! Shared test helpers.
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+
+/// The project root (where Cargo.toml is).
+pub fn project_root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// A file under `../shared` (or under `$LIDARSIM_SHARED` when set), or `None` after printing one
+/// line naming the missing file: tests that need "tests only" data skip when it is absent.
+pub fn shared_file(relative: &str) -> Option<PathBuf> {
+    let base = std::env::var_os("LIDARSIM_SHARED")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| project_root().join("../shared"));
+    let p = base.join(relative);
+    if p.is_file() {
+        Some(p)
+    } else {
+        println!("skipped: {} is absent", p.display());
+        None
+    }
+}
+
+/// Path of the lidarsim binary built for these tests.
+pub fn lidarsim_bin() -> &'static Path {
+    Path::new(env!("CARGO_BIN_EXE_lidarsim"))
+}
