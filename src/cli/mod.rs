@@ -3,5 +3,6 @@
 pub mod bench;
 pub mod lbl;
 pub mod mie;
+pub mod plot;
 pub mod profiles;
 pub mod run;

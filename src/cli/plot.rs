@@ -1,0 +1,26 @@
+//! Shared set-up for figures: the embedded font.
+//!
+//! plotters' default font features link the system's fontconfig and freetype; with its
+//! `ab_glyph` feature and a TTF font compiled into the binary, labelled PNGs render on any machine
+//! (DejaVu Sans, free licence in `assets/DejaVuSans.LICENSE`).
+
+use std::sync::Once;
+
+/// Font family name to use in plotters text styles.
+pub const FONT: &str = "sans-serif";
+
+static REGISTER: Once = Once::new();
+
+/// Register the embedded font under [`FONT`]; call before drawing any text (idempotent).
+pub fn init_font() {
+    REGISTER.call_once(|| {
+        // The font is compiled in; failure to parse it is a build defect, not a user error.
+        plotters::style::register_font(
+            FONT,
+            plotters::style::FontStyle::Normal,
+            include_bytes!("../../assets/DejaVuSans.ttf"),
+        )
+        .map_err(|_| "embedded font")
+        .expect("assets/DejaVuSans.ttf is a valid TTF font");
+    });
+}
