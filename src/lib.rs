@@ -15,9 +15,19 @@
 
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
+// Numerical kernels index several parallel per-channel arrays with one index; iterator chains
+// would hide that. `!(x > 0.0)` is used on purpose: it is true for NaN as well.
+#![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod atmosphere;
 pub mod constants;
 pub mod input;
+pub mod lidar_eq;
+pub mod optics;
 pub mod particles;
+pub mod returns;
+pub mod rng;
+pub mod scene;
 pub mod spectroscopy;
+pub mod stats;
+pub mod transport;

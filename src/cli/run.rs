@@ -1,10 +1,136 @@
-//! `lidarsim run` (not implemented yet).
+//! `lidarsim run [SCENE] [--out DIR] [--photons N] [--seed S] [--threads T]`
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use anyhow::Context;
+
+use lidarsim::lidar_eq;
+use lidarsim::optics::OpticalAtmosphere;
+use lidarsim::returns::{self, Order, Returns};
+use lidarsim::scene::Scene;
+use lidarsim::transport::{self, McResult, TransportOptions};
 
 /// Arguments of `lidarsim run`.
 #[derive(clap::Args, Debug)]
-pub struct Args {}
+pub struct Args {
+    /// Scene file (TOML). Without it the embedded default scene runs.
+    pub scene: Option<PathBuf>,
+    /// Output directory (created if needed); receives returns.csv and summary.json.
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+    /// Photon packets (overrides the scene's `simulation.photons`).
+    #[arg(long)]
+    pub photons: Option<u64>,
+    /// Random seed (overrides `simulation.seed`).
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Worker threads, 0 for all cores (overrides `simulation.threads`).
+    #[arg(long)]
+    pub threads: Option<usize>,
+}
 
 /// Run the subcommand.
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("`lidarsim run` is not implemented yet")
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let mut scene = match &args.scene {
+        Some(p) => Scene::read(p)?,
+        None => Scene::default_scene()?,
+    };
+    scene
+        .override_simulation(args.photons, args.seed, args.threads)
+        .map_err(anyhow::Error::msg)?;
+    let atm = OpticalAtmosphere::build(&scene)?;
+    let analytic = lidar_eq::single_scatter(&scene, &atm);
+    let mut opts = TransportOptions::from_scene(&scene);
+    opts.progress = true;
+    let mc = transport::run(&scene, &atm, &opts)?;
+
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create the output directory {}", args.out.display()))?;
+    let csv = args.out.join("returns.csv");
+    returns::write_csv(&csv, &[&mc.returns, &analytic])
+        .with_context(|| format!("cannot write {}", csv.display()))?;
+    let summary = args.out.join("summary.json");
+    write_summary(&summary, &scene, &mc)
+        .with_context(|| format!("cannot write {}", summary.display()))?;
+
+    let mut out = std::io::stdout().lock();
+    print_summary(&mut out, &scene, &mc, &analytic)?;
+    writeln!(out, "wrote {} and {}", csv.display(), summary.display())?;
+    Ok(())
+}
+
+fn print_summary(
+    out: &mut impl Write,
+    scene: &Scene,
+    mc: &McResult,
+    analytic: &Returns,
+) -> std::io::Result<()> {
+    let name = if scene.description.is_empty() {
+        scene.path.display().to_string()
+    } else {
+        scene.description.clone()
+    };
+    writeln!(out, "scene: {name}")?;
+    writeln!(
+        out,
+        "transport: {} photons, {} scattering events in {:.2} s on {} threads ({:.2} M events/s)",
+        mc.photons,
+        mc.stats.collisions,
+        mc.wall_s,
+        mc.threads,
+        mc.stats.collisions as f64 / mc.wall_s.max(1e-9) * 1e-6
+    )?;
+    let r = &mc.returns;
+    for (k, ch) in r.channels.iter().enumerate() {
+        for (f, fov) in r.fov_full_angle_mrad.iter().enumerate() {
+            let (mut total, mut single, mut single_var, mut an) = (0.0, 0.0, 0.0, 0.0);
+            for g in 0..r.range_m.len() {
+                total += r.energy(k, f, g, Order::Total).unwrap_or(0.0);
+                single += r.energy(k, f, g, Order::Exactly(1)).unwrap_or(0.0);
+                // Gates are not independent; this sum of variances is only a rough guide.
+                single_var += r.stderr(k, f, g, Order::Exactly(1)).unwrap_or(0.0).powi(2);
+                an += analytic.energy(k, f, g, Order::Exactly(1)).unwrap_or(0.0);
+            }
+            let share = if total > 0.0 {
+                100.0 * single / total
+            } else {
+                0.0
+            };
+            writeln!(
+                out,
+                "  channel {ch}, FOV {fov} mrad: all gates {total:.4e} J, single scattering {share:.1} % \
+                 (MC {single:.4e} ± {:.1e} J, analytic {an:.4e} J)",
+                single_var.sqrt()
+            )?;
+        }
+    }
+    Ok(())
+}
+
+fn write_summary(path: &std::path::Path, scene: &Scene, mc: &McResult) -> std::io::Result<()> {
+    let s = &mc.stats;
+    let json = serde_json::json!({
+        "scene": scene.path.display().to_string(),
+        "description": scene.description,
+        "photons": mc.photons,
+        "batches": scene.simulation.batches,
+        "seed": scene.simulation.seed,
+        "threads": mc.threads,
+        "wall_s": mc.wall_s,
+        "counters": {
+            "collisions": s.collisions,
+            "surface_reflections": s.surface_reflections,
+            "local_estimates": s.local_estimates,
+            "roulette_kills": s.roulette_kills,
+            "cut": s.cut,
+            "escaped": s.escaped,
+        },
+    });
+    let tmp = path.with_extension("json.tmp");
+    std::fs::write(
+        &tmp,
+        serde_json::to_string_pretty(&json).unwrap_or_default(),
+    )?;
+    std::fs::rename(&tmp, path)
 }

@@ -7,3 +7,34 @@
 pub mod phase;
 pub mod rayleigh;
 pub mod table;
+
+use std::path::Path;
+
+use table::PhaseTable;
+
+/// The tables shipped in `phase_functions/`, compiled into the binary so scenes (and the
+/// embedded default scene) can name them with `builtin = "..."` without a path.
+const BUILTIN_TABLES: &[(&str, &str)] = &[(
+    "bissonnette_c1_1064nm",
+    include_str!("../../phase_functions/bissonnette_c1_1064nm.txt"),
+)];
+
+/// Names of the built-in tables.
+pub fn builtin_table_names() -> Vec<&'static str> {
+    BUILTIN_TABLES.iter().map(|(n, _)| *n).collect()
+}
+
+/// A built-in table by name (the file name in `phase_functions/` without `.txt`).
+pub fn builtin_table(name: &str) -> Result<PhaseTable, String> {
+    let (_, text) = BUILTIN_TABLES
+        .iter()
+        .find(|(n, _)| *n == name)
+        .ok_or_else(|| {
+            format!(
+                "no built-in phase-function table `{name}` (known: {})",
+                builtin_table_names().join(", ")
+            )
+        })?;
+    PhaseTable::parse(Path::new(&format!("phase_functions/{name}.txt")), text)
+        .map_err(|e| e.to_string())
+}

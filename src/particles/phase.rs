@@ -1,1 +1,574 @@
-//! Phase functions (in progress).
+//! Phase functions: evaluation toward the receiver and sampling of scattering angles.
+//!
+//! Conventions: `mu = cos Θ`, Θ the scattering angle between the incident and the scattered
+//! direction (Θ = 0 forward, Θ = π backward). Every phase function is normalised to 4π over the
+//! sphere, ∫ P dΩ = 2π ∫₋₁¹ P(μ) dμ = 4π, so an isotropic scatterer has P = 1 and the density of
+//! scattered directions per steradian is P/(4π). Samplers take a uniform number `u ∈ [0, 1)`, not
+//! an RNG, so tests can invert them; the azimuth is sampled by the caller.
+//!
+//! | variant | P(μ) | sampling |
+//! |---|---|---|
+//! | isotropic | 1 | μ = 2u − 1 |
+//! | Rayleigh | 3/(4(1+2γ)) [(1+3γ) + (1−γ)μ²] | exact: the cubic CDF solved by Cardano |
+//! | Henyey-Greenstein | (1−g²)/(1+g²−2gμ)^{3/2} | exact inverse CDF |
+//! | double HG | f HG(g₁) + (1−f) HG(g₂) | pick a lobe, then exact |
+//! | tabulated | linear in μ between nodes | inverse CDF (quadratic in a segment) with a guide table |
+
+use std::f64::consts::PI;
+
+use thiserror::Error;
+
+use super::table::PhaseTable;
+
+/// A phase-function parameter outside its domain.
+#[derive(Debug, Clone, PartialEq, Error)]
+#[non_exhaustive]
+pub enum PhaseError {
+    /// Henyey-Greenstein asymmetry must satisfy |g| < 1 (g = ±1 is a delta function).
+    #[error("asymmetry parameter g = {0} must satisfy -1 < g < 1")]
+    Asymmetry(f64),
+    /// A lobe weight outside [0, 1].
+    #[error("lobe weight f = {0} must lie in [0, 1]")]
+    LobeWeight(f64),
+    /// Rayleigh depolarisation factor outside [0, 0.5).
+    #[error("depolarisation factor rho_n = {0} must lie in [0, 0.5)")]
+    Depolarisation(f64),
+    /// A table that integrates to zero.
+    #[error("the phase-function table has no positive values")]
+    EmptyTable,
+}
+
+/// A phase function (normalised to 4π); see the module documentation.
+#[derive(Debug, Clone, PartialEq)]
+pub enum PhaseFunction {
+    /// P = 1.
+    Isotropic,
+    /// Molecular (Rayleigh-Cabannes with depolarisation), see [`RayleighPhase`].
+    Rayleigh(RayleighPhase),
+    /// Henyey-Greenstein.
+    HenyeyGreenstein(HenyeyGreenstein),
+    /// Two Henyey-Greenstein lobes: `f` HG(`g1`) + (1 − `f`) HG(`g2`).
+    DoubleHenyeyGreenstein {
+        /// Weight of the first lobe, in [0, 1].
+        f: f64,
+        /// First lobe.
+        hg1: HenyeyGreenstein,
+        /// Second lobe.
+        hg2: HenyeyGreenstein,
+    },
+    /// A table, linear in μ between nodes.
+    Tabulated(Box<TabulatedPhase>),
+}
+
+impl PhaseFunction {
+    /// Double Henyey-Greenstein with validated parameters.
+    pub fn double_hg(f: f64, g1: f64, g2: f64) -> Result<Self, PhaseError> {
+        if !(0.0..=1.0).contains(&f) {
+            return Err(PhaseError::LobeWeight(f));
+        }
+        Ok(PhaseFunction::DoubleHenyeyGreenstein {
+            f,
+            hg1: HenyeyGreenstein::new(g1)?,
+            hg2: HenyeyGreenstein::new(g2)?,
+        })
+    }
+
+    /// P(μ), normalised to 4π over the sphere.
+    #[inline]
+    pub fn eval(&self, mu: f64) -> f64 {
+        match self {
+            PhaseFunction::Isotropic => 1.0,
+            PhaseFunction::Rayleigh(r) => r.eval(mu),
+            PhaseFunction::HenyeyGreenstein(hg) => hg.eval(mu),
+            PhaseFunction::DoubleHenyeyGreenstein { f, hg1, hg2 } => {
+                f * hg1.eval(mu) + (1.0 - f) * hg2.eval(mu)
+            }
+            PhaseFunction::Tabulated(t) => t.eval(mu),
+        }
+    }
+
+    /// Sample μ = cos Θ from the phase function given a uniform `u ∈ [0, 1)`.
+    #[inline]
+    pub fn sample(&self, u: f64) -> f64 {
+        match self {
+            PhaseFunction::Isotropic => 2.0 * u - 1.0,
+            PhaseFunction::Rayleigh(r) => r.sample(u),
+            PhaseFunction::HenyeyGreenstein(hg) => hg.sample(u),
+            PhaseFunction::DoubleHenyeyGreenstein { f, hg1, hg2 } => {
+                // Reuse u: below f it is uniform on [0, f), above on [f, 1).
+                if u < *f {
+                    hg1.sample(u / f)
+                } else {
+                    hg2.sample((u - f) / (1.0 - f))
+                }
+            }
+            PhaseFunction::Tabulated(t) => t.sample(u),
+        }
+    }
+
+    /// Asymmetry parameter g = ⟨μ⟩ = ½ ∫ P μ dμ.
+    pub fn asymmetry(&self) -> f64 {
+        match self {
+            PhaseFunction::Isotropic | PhaseFunction::Rayleigh(_) => 0.0,
+            PhaseFunction::HenyeyGreenstein(hg) => hg.g,
+            PhaseFunction::DoubleHenyeyGreenstein { f, hg1, hg2 } => f * hg1.g + (1.0 - f) * hg2.g,
+            PhaseFunction::Tabulated(t) => t.asymmetry,
+        }
+    }
+
+    /// P(180°), the value the single-scatter lidar equation needs.
+    pub fn backscatter(&self) -> f64 {
+        self.eval(-1.0)
+    }
+}
+
+/// Henyey-Greenstein phase function with asymmetry g (Henyey & Greenstein 1941, ApJ 93, 70).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HenyeyGreenstein {
+    g: f64,
+}
+
+impl HenyeyGreenstein {
+    /// A validated HG phase function: −1 < g < 1 (never clamped).
+    pub fn new(g: f64) -> Result<Self, PhaseError> {
+        if g.is_finite() && g.abs() < 1.0 {
+            Ok(Self { g })
+        } else {
+            Err(PhaseError::Asymmetry(g))
+        }
+    }
+
+    /// The asymmetry parameter.
+    pub fn g(&self) -> f64 {
+        self.g
+    }
+
+    /// P(μ) = (1 − g²)/(1 + g² − 2gμ)^{3/2}.
+    #[inline]
+    pub fn eval(&self, mu: f64) -> f64 {
+        let g = self.g;
+        let d = 1.0 + g * g - 2.0 * g * mu;
+        (1.0 - g * g) / (d * d.sqrt())
+    }
+
+    /// Exact inverse of the CDF in μ: μ = [1 + g² − ((1 − g²)/(1 − g + 2gu))²]/(2g).
+    #[inline]
+    pub fn sample(&self, u: f64) -> f64 {
+        let g = self.g;
+        if g.abs() < 1e-6 {
+            // The closed form loses all digits as g → 0; the limit is isotropic, and the
+            // first-order correction is below 1e-6 in μ.
+            return 2.0 * u - 1.0;
+        }
+        let s = (1.0 - g * g) / (1.0 - g + 2.0 * g * u);
+        ((1.0 + g * g - s * s) / (2.0 * g)).clamp(-1.0, 1.0)
+    }
+}
+
+/// Molecular phase function with depolarisation (Chandrasekhar 1950; Bucholtz 1995, Eq. 12):
+/// P(μ) = 3/(4(1+2γ)) [(1+3γ) + (1−γ)μ²], γ = ρ_n/(2 − ρ_n).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RayleighPhase {
+    gamma: f64,
+}
+
+impl RayleighPhase {
+    /// From the depolarisation factor ρ_n (0 ≤ ρ_n < 0.5; air ≈ 0.027–0.045).
+    pub fn from_depolarisation(rho_n: f64) -> Result<Self, PhaseError> {
+        if !(0.0..0.5).contains(&rho_n) {
+            return Err(PhaseError::Depolarisation(rho_n));
+        }
+        Ok(Self {
+            gamma: rho_n / (2.0 - rho_n),
+        })
+    }
+
+    /// γ = ρ_n/(2 − ρ_n).
+    pub fn gamma(&self) -> f64 {
+        self.gamma
+    }
+
+    /// P(μ).
+    #[inline]
+    pub fn eval(&self, mu: f64) -> f64 {
+        let g = self.gamma;
+        0.75 / (1.0 + 2.0 * g) * ((1.0 + 3.0 * g) + (1.0 - g) * mu * mu)
+    }
+
+    /// Exact inverse CDF. F(μ) = 3/(8(1+2γ)) [(1+3γ)(μ+1) + (1−γ)(μ³+1)/3] = u is the depressed
+    /// cubic μ³ + pμ + q = 0 with p = 3(1+3γ)/(1−γ) > 0, which has one real root (Cardano).
+    #[inline]
+    pub fn sample(&self, u: f64) -> f64 {
+        let g = self.gamma;
+        let p = 3.0 * (1.0 + 3.0 * g) / (1.0 - g);
+        let c = (1.0 + 3.0 * g) + (1.0 - g) / 3.0 - 8.0 * (1.0 + 2.0 * g) * u / 3.0;
+        let q = 3.0 * c / (1.0 - g);
+        let d = (0.25 * q * q + p * p * p / 27.0).sqrt();
+        // Take the cube root of the larger-magnitude term to avoid cancellation; the other root
+        // term is −p/(3A) because their product is −p/3.
+        let a = if q >= 0.0 {
+            -(0.5 * q + d).cbrt()
+        } else {
+            (-0.5 * q + d).cbrt()
+        };
+        (a - p / (3.0 * a)).clamp(-1.0, 1.0)
+    }
+}
+
+/// Number of cells of the sampling guide table (in u) and of the evaluation guide table (per
+/// hemisphere, in sin(Θ/2) or cos(Θ/2)).
+const SAMPLE_GUIDE_CELLS: usize = 8192;
+const EVAL_GUIDE_CELLS: usize = 4096;
+
+/// A tabulated phase function, linear in μ between nodes, normalised to exactly 4π.
+///
+/// Sampling inverts the exact CDF of that piecewise-linear function (a quadratic in each
+/// segment), so sampled angles follow exactly the function that [`TabulatedPhase::eval`] returns.
+/// Two guide tables make both O(1) on average:
+/// * sampling: cells equal in probability map u to the first segment that can hold it, so the
+///   forward peak, which holds most of the probability, is spread over many cells;
+/// * evaluation: cells equal in s = sin(Θ/2) for the forward hemisphere and in c = cos(Θ/2) for
+///   the backward one, both nearly linear in angle at their pole, so the densely tabulated
+///   forward peak and the backscatter (glory) region are resolved as finely as the table itself.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TabulatedPhase {
+    /// Nodes μ_i, strictly increasing from −1 to 1.
+    mu: Vec<f64>,
+    /// P(μ_i), normalised so that ½ ∫ P dμ = 1.
+    p: Vec<f64>,
+    /// Slope of P in each segment.
+    slope: Vec<f64>,
+    /// CDF at nodes, cdf[0] = 0, cdf[n-1] = 1.
+    cdf: Vec<f64>,
+    sample_guide: Vec<u32>,
+    /// Segment index for cells in s = sqrt((1−μ)/2) ∈ [0, √½] (μ ≥ 0).
+    eval_guide_fwd: Vec<u32>,
+    /// Segment index for cells in c = sqrt((1+μ)/2) ∈ [0, √½] (μ < 0).
+    eval_guide_bwd: Vec<u32>,
+    asymmetry: f64,
+}
+
+impl TabulatedPhase {
+    /// From nodes in angle (degrees, increasing from 0 to 180) and values; the values are
+    /// rescaled so the function integrates to exactly 4π (linear in μ between nodes).
+    pub fn from_angles(theta_deg: &[f64], phase: &[f64]) -> Result<Self, PhaseError> {
+        // Reverse so that μ increases.
+        let mu: Vec<f64> = theta_deg
+            .iter()
+            .rev()
+            .map(|t| {
+                if *t == 180.0 {
+                    -1.0
+                } else if *t == 0.0 {
+                    1.0
+                } else {
+                    t.to_radians().cos()
+                }
+            })
+            .collect();
+        let p: Vec<f64> = phase.iter().rev().copied().collect();
+        Self::from_mu(mu, p)
+    }
+
+    /// From a validated [`PhaseTable`].
+    pub fn from_table(table: &PhaseTable) -> Result<Self, PhaseError> {
+        Self::from_angles(&table.theta_deg, &table.phase_4pi)
+    }
+
+    fn from_mu(mu: Vec<f64>, mut p: Vec<f64>) -> Result<Self, PhaseError> {
+        let n = mu.len();
+        // ∫ P dμ by the trapezoid rule, exact for P linear in μ.
+        let mut cdf = vec![0.0; n];
+        for i in 1..n {
+            cdf[i] = cdf[i - 1] + 0.5 * (p[i - 1] + p[i]) * (mu[i] - mu[i - 1]);
+        }
+        let total = cdf[n - 1];
+        if !(total > 0.0) {
+            return Err(PhaseError::EmptyTable);
+        }
+        let scale = 2.0 / total;
+        p.iter_mut().for_each(|v| *v *= scale);
+        cdf.iter_mut().for_each(|v| *v /= total);
+        cdf[n - 1] = 1.0;
+        let slope: Vec<f64> = (0..n - 1)
+            .map(|i| (p[i + 1] - p[i]) / (mu[i + 1] - mu[i]))
+            .collect();
+
+        // ⟨μ⟩ = ½ ∫ P μ dμ, exact for P linear in μ: ∫ (a + b t)(μ_i + t) dt over [0, h].
+        let mut asymmetry = 0.0;
+        for i in 0..n - 1 {
+            let h = mu[i + 1] - mu[i];
+            let (a, b) = (p[i], slope[i]);
+            asymmetry += a * mu[i] * h + (a + b * mu[i]) * h * h / 2.0 + b * h * h * h / 3.0;
+        }
+        asymmetry *= 0.5;
+
+        // Sampling guide: cell c covers u ∈ [c/G, (c+1)/G); store the segment holding c/G.
+        let mut sample_guide = Vec::with_capacity(SAMPLE_GUIDE_CELLS + 1);
+        let mut seg = 0usize;
+        for c in 0..=SAMPLE_GUIDE_CELLS {
+            let u = c as f64 / SAMPLE_GUIDE_CELLS as f64;
+            while seg < n - 2 && cdf[seg + 1] <= u {
+                seg += 1;
+            }
+            sample_guide.push(seg as u32);
+        }
+
+        // Evaluation guides: for each cell, the segment holding the cell's smallest |Θ| edge
+        // toward the pole, i.e. the segment containing μ at the cell start (moving away from
+        // the pole μ decreases in the forward table and increases in the backward one).
+        let segment_of = |m: f64| -> usize {
+            // Largest i with mu[i] <= m, capped to the last segment.
+            let i = mu.partition_point(|&x| x <= m);
+            i.saturating_sub(1).min(n - 2)
+        };
+        let half = std::f64::consts::FRAC_1_SQRT_2;
+        let eval_guide_fwd = (0..=EVAL_GUIDE_CELLS)
+            .map(|c| {
+                // s at the cell's far edge from the pole: μ = 1 − 2 s².
+                let s = half * (c + 1).min(EVAL_GUIDE_CELLS) as f64 / EVAL_GUIDE_CELLS as f64;
+                segment_of(1.0 - 2.0 * s * s) as u32
+            })
+            .collect();
+        let eval_guide_bwd = (0..=EVAL_GUIDE_CELLS)
+            .map(|c| {
+                let cc = half * c as f64 / EVAL_GUIDE_CELLS as f64;
+                segment_of(2.0 * cc * cc - 1.0) as u32
+            })
+            .collect();
+
+        Ok(TabulatedPhase {
+            mu,
+            p,
+            slope,
+            cdf,
+            sample_guide,
+            eval_guide_fwd,
+            eval_guide_bwd,
+            asymmetry,
+        })
+    }
+
+    /// Number of nodes.
+    pub fn len(&self) -> usize {
+        self.mu.len()
+    }
+
+    /// True for a table without nodes (never, after construction).
+    pub fn is_empty(&self) -> bool {
+        self.mu.is_empty()
+    }
+
+    /// Asymmetry parameter.
+    pub fn asymmetry(&self) -> f64 {
+        self.asymmetry
+    }
+
+    /// The segment i with μ_i ≤ μ ≤ μ_{i+1}.
+    #[inline]
+    fn segment(&self, mu: f64) -> usize {
+        let last = self.mu.len() - 2;
+        let half = std::f64::consts::FRAC_1_SQRT_2;
+        let cells = EVAL_GUIDE_CELLS as f64;
+        if mu >= 0.0 {
+            // Start at a segment at or below μ and walk up.
+            let s = (0.5 * (1.0 - mu)).max(0.0).sqrt();
+            let cell = ((s / half * cells) as usize).min(EVAL_GUIDE_CELLS);
+            let mut i = self.eval_guide_fwd[cell] as usize;
+            // Rounding in s can start one segment high; step back, then walk up.
+            while i > 0 && self.mu[i] > mu {
+                i -= 1;
+            }
+            while i < last && self.mu[i + 1] < mu {
+                i += 1;
+            }
+            i
+        } else {
+            let c = (0.5 * (1.0 + mu)).max(0.0).sqrt();
+            let cell = ((c / half * cells) as usize).min(EVAL_GUIDE_CELLS);
+            let mut i = self.eval_guide_bwd[cell] as usize;
+            while i > 0 && self.mu[i] > mu {
+                i -= 1;
+            }
+            while i < last && self.mu[i + 1] < mu {
+                i += 1;
+            }
+            i
+        }
+    }
+
+    /// P(μ), linear in μ between nodes.
+    #[inline]
+    pub fn eval(&self, mu: f64) -> f64 {
+        let mu = mu.clamp(-1.0, 1.0);
+        let i = self.segment(mu);
+        self.p[i] + self.slope[i] * (mu - self.mu[i])
+    }
+
+    /// Sample μ by inverting the CDF.
+    #[inline]
+    pub fn sample(&self, u: f64) -> f64 {
+        let cell = ((u * SAMPLE_GUIDE_CELLS as f64) as usize).min(SAMPLE_GUIDE_CELLS);
+        let mut i = self.sample_guide[cell] as usize;
+        let last = self.mu.len() - 2;
+        while i > 0 && self.cdf[i] > u {
+            i -= 1;
+        }
+        while i < last && self.cdf[i + 1] <= u {
+            i += 1;
+        }
+        // Within segment i solve ½ b t² + a t = A for t = μ − μ_i, with A the probability mass
+        // still needed, times 2 (P integrates to 2 over μ). The stable root is 2A/(a + √(a²+2bA)).
+        let area = 2.0 * (u - self.cdf[i]).max(0.0);
+        let a = self.p[i];
+        let b = self.slope[i];
+        let disc = (a * a + 2.0 * b * area).max(0.0);
+        let denom = a + disc.sqrt();
+        let h = self.mu[i + 1] - self.mu[i];
+        let t = if denom > 0.0 {
+            (2.0 * area / denom).min(h)
+        } else {
+            0.0
+        };
+        (self.mu[i] + t).clamp(-1.0, 1.0)
+    }
+}
+
+/// The ratio P/(4π): density of scattered directions per steradian.
+#[inline]
+pub fn per_steradian(p_4pi: f64) -> f64 {
+    p_4pi * (0.25 / PI)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{RngExt, SeedableRng};
+    use rand_xoshiro::Xoshiro256PlusPlus;
+
+    /// ½ ∫ f(μ) dμ by composite Simpson on many points (independent of the code's quadrature).
+    fn half_integral(f: impl Fn(f64) -> f64, n: usize) -> f64 {
+        let h = 2.0 / n as f64;
+        let mut s = f(-1.0) + f(1.0);
+        for i in 1..n {
+            let x = -1.0 + i as f64 * h;
+            s += if i % 2 == 1 { 4.0 } else { 2.0 } * f(x);
+        }
+        0.5 * s * h / 3.0
+    }
+
+    fn all_analytic() -> Vec<(&'static str, PhaseFunction)> {
+        vec![
+            ("isotropic", PhaseFunction::Isotropic),
+            (
+                "rayleigh",
+                PhaseFunction::Rayleigh(RayleighPhase::from_depolarisation(0.0279).unwrap()),
+            ),
+            (
+                "hg 0.85",
+                PhaseFunction::HenyeyGreenstein(HenyeyGreenstein::new(0.85).unwrap()),
+            ),
+            (
+                "hg -0.5",
+                PhaseFunction::HenyeyGreenstein(HenyeyGreenstein::new(-0.5).unwrap()),
+            ),
+            ("dhg", PhaseFunction::double_hg(0.9, 0.8, -0.4).unwrap()),
+        ]
+    }
+
+    #[test]
+    fn analytic_phase_functions_are_normalised_with_the_stated_g() {
+        for (name, pf) in all_analytic() {
+            let norm = half_integral(|m| pf.eval(m), 200_000);
+            assert!((norm - 1.0).abs() < 1e-6, "{name}: {norm}");
+            let g = half_integral(|m| m * pf.eval(m), 200_000);
+            assert!(
+                (g - pf.asymmetry()).abs() < 1e-6,
+                "{name}: {g} vs {}",
+                pf.asymmetry()
+            );
+        }
+    }
+
+    #[test]
+    fn rayleigh_backscatter_matches_bucholtz() {
+        // P(180°) = 3(1+γ)/(2(1+2γ)); 1.4798 at ρ_n = 0.0273 (shared/data/rayleigh).
+        let r = RayleighPhase::from_depolarisation(0.0273).unwrap();
+        assert!((r.eval(-1.0) - 1.4798).abs() < 1e-4);
+    }
+
+    #[test]
+    fn samplers_invert_their_cdf() {
+        // F(sample(u)) = u, with F by independent numerical integration of eval. (Double HG
+        // picks a lobe first, so it is not an inverse CDF; the chi-square tests cover it.)
+        for (name, pf) in all_analytic().into_iter().filter(|(n, _)| *n != "dhg") {
+            for &u in &[0.001, 0.1, 0.37, 0.5, 0.8, 0.999] {
+                let mu = pf.sample(u);
+                let n = 20_000;
+                let h = (mu + 1.0) / n as f64;
+                let mut f = 0.5 * (pf.eval(-1.0) + pf.eval(mu));
+                for i in 1..n {
+                    f += pf.eval(-1.0 + i as f64 * h);
+                }
+                let cdf = 0.5 * f * h;
+                assert!((cdf - u).abs() < 1e-5, "{name}: F(sample({u})) = {cdf}");
+            }
+        }
+    }
+
+    #[test]
+    fn tabulated_reproduces_its_nodes_and_hg() {
+        // Tabulate HG(0.7) on a fine angular grid; the table must evaluate back to HG and
+        // integrate (after its own normalisation) to the HG's g.
+        let hg = HenyeyGreenstein::new(0.7).unwrap();
+        let theta: Vec<f64> = (0..=3600).map(|i| i as f64 * 0.05).collect();
+        let p: Vec<f64> = theta
+            .iter()
+            .map(|t| hg.eval(t.to_radians().cos()))
+            .collect();
+        let tab = TabulatedPhase::from_angles(&theta, &p).unwrap();
+        for (t, pv) in theta.iter().zip(&p).step_by(37) {
+            let e = tab.eval(t.to_radians().cos());
+            assert!((e - pv).abs() < 1e-4 * pv, "θ={t}: {e} vs {pv}");
+        }
+        assert!((tab.asymmetry() - 0.7).abs() < 1e-5, "{}", tab.asymmetry());
+        let norm = half_integral(|m| tab.eval(m), 400_000);
+        assert!((norm - 1.0).abs() < 1e-6, "{norm}");
+    }
+
+    #[test]
+    fn tabulated_sampling_inverts_the_cdf_exactly() {
+        let hg = HenyeyGreenstein::new(0.9).unwrap();
+        let theta: Vec<f64> = (0..=1800).map(|i| i as f64 * 0.1).collect();
+        let p: Vec<f64> = theta
+            .iter()
+            .map(|t| hg.eval(t.to_radians().cos()))
+            .collect();
+        let tab = TabulatedPhase::from_angles(&theta, &p).unwrap();
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(3);
+        for _ in 0..2000 {
+            let u: f64 = rng.random();
+            let mu = tab.sample(u);
+            // CDF at mu: sum of whole segments plus the partial one, from the nodes.
+            let i = tab.segment(mu);
+            let t = mu - tab.mu[i];
+            let cdf = tab.cdf[i] + 0.5 * (tab.p[i] * t + 0.5 * tab.slope[i] * t * t);
+            assert!((cdf - u).abs() < 1e-12, "u={u}: {cdf}");
+        }
+    }
+
+    #[test]
+    fn constructors_reject_out_of_domain_parameters() {
+        assert_eq!(HenyeyGreenstein::new(1.0), Err(PhaseError::Asymmetry(1.0)));
+        assert!(HenyeyGreenstein::new(f64::NAN).is_err());
+        assert_eq!(
+            PhaseFunction::double_hg(1.5, 0.5, 0.1),
+            Err(PhaseError::LobeWeight(1.5))
+        );
+        assert!(RayleighPhase::from_depolarisation(0.6).is_err());
+        assert_eq!(
+            TabulatedPhase::from_angles(&[0.0, 180.0], &[0.0, 0.0]),
+            Err(PhaseError::EmptyTable)
+        );
+    }
+}

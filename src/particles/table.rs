@@ -82,8 +82,8 @@ impl PhaseTable {
                 ));
             }
         }
-        if let Some((_, v)) = meta.iter().find(|(k, _)| k == "wavelength_nm") {
-            if v != "none" {
+        if let Some((_, v)) = meta.iter().find(|(k, _)| k == "wavelength_nm")
+            && v != "none" {
                 let line = line_of_key(text, "wavelength_nm");
                 let w = parse_f64(path, line, "wavelength_nm", v)?;
                 if w <= 0.0 {
@@ -95,7 +95,6 @@ impl PhaseTable {
                     ));
                 }
             }
-        }
         let t = CsvTable::parse(path, text)?;
         if t.header() != ["theta_deg", "phase_4pi"] {
             return Err(InputError::file(

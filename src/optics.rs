@@ -1,0 +1,476 @@
+//! The optical atmosphere: horizontal homogeneous layers × channels, the one input of the
+//! transport and of the analytic lidar equation.
+//!
+//! Consumes a [`Scene`] (molecular atmosphere, particle and absorber layers, surface) and
+//! produces an [`OpticalAtmosphere`]: layer edges, per layer and channel the scattering and
+//! absorption coefficients, the scatterers present (molecules, each particle layer) with their
+//! phase functions, and cumulative vertical optical depths at the edges so that the optical depth
+//! of any straight segment is O(1) per channel: τ = |T(z₂) − T(z₁)|/|μ| (DESIGN §2).
+//!
+//! Molecular scattering: σ_R(λ) · n̄, with n̄ the layer mean of the air number density, ln n
+//! linear in altitude between profile levels (exact integral), and the Bucholtz (1995) cross-section.
+
+use std::sync::Arc;
+
+use thiserror::Error;
+
+use crate::particles::phase::{PhaseFunction, RayleighPhase};
+use crate::particles::rayleigh;
+use crate::scene::{Atmosphere, Scene};
+
+/// A problem building the optical atmosphere.
+#[derive(Debug, Error)]
+#[non_exhaustive]
+pub enum OpticsError {
+    /// Rayleigh cross-section or phase function not available at a channel.
+    #[error("channel `{channel}`: {message}")]
+    Channel {
+        /// Channel name.
+        channel: String,
+        /// What went wrong.
+        message: String,
+    },
+    /// Absorption table with the wrong shape.
+    #[error("absorption optical depths: {0}")]
+    Absorption(String),
+}
+
+/// One scatterer species in a layer (molecules, or one particle layer).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Component {
+    /// Scattering coefficient per channel [1/m].
+    pub sigma_s_per_m: Vec<f64>,
+    /// Index into [`OpticalAtmosphere::phases`] per channel.
+    pub phase: Vec<u32>,
+}
+
+/// Layers × channels of scattering and absorption; see the module documentation.
+#[derive(Debug, Clone)]
+pub struct OpticalAtmosphere {
+    /// Layer edges [m], strictly increasing; layer l spans edges_m[l]..edges_m[l+1]. Below the
+    /// first and above the last edge is vacuum.
+    pub edges_m: Vec<f64>,
+    /// Number of channels.
+    pub n_channels: usize,
+    /// Total scattering coefficient [1/m], index `layer * n_channels + channel`.
+    pub sigma_s_per_m: Vec<f64>,
+    /// Total absorption coefficient (gas and particles) [1/m], same index.
+    pub sigma_a_per_m: Vec<f64>,
+    /// Scatterers of each layer.
+    pub components: Vec<Vec<Component>>,
+    /// Distinct phase functions referenced by the components.
+    pub phases: Vec<Arc<PhaseFunction>>,
+    /// Cumulative vertical scattering optical depth from the bottom edge, `edge * n_channels + k`.
+    pub cum_tau_s: Vec<f64>,
+    /// Cumulative vertical absorption optical depth, same index.
+    pub cum_tau_a: Vec<f64>,
+    /// True when every scatterer has the same coefficient and phase function in every channel:
+    /// then only absorption differs between channels and the transport skips the ALIS
+    /// scattering-ratio weights.
+    pub grey_scattering: bool,
+}
+
+impl OpticalAtmosphere {
+    /// Build from a scene. Gas absorption from line-by-line calculations is added afterwards with
+    /// [`OpticalAtmosphere::add_absorption_tau`].
+    pub fn build(scene: &Scene) -> Result<Self, OpticsError> {
+        let nch = scene.channels.len();
+        let edges = layer_edges(scene);
+        let n_layers = edges.len().saturating_sub(1);
+        let mut phases: Vec<Arc<PhaseFunction>> = Vec::new();
+        let mut phase_index = |p: &Arc<PhaseFunction>| -> u32 {
+            match phases.iter().position(|q| Arc::ptr_eq(q, p) || **q == **p) {
+                Some(i) => i as u32,
+                None => {
+                    phases.push(p.clone());
+                    (phases.len() - 1) as u32
+                }
+            }
+        };
+
+        // Molecules: cross-section and phase function per channel.
+        let molecules = match &scene.atmosphere {
+            Some(a) if a.rayleigh => {
+                let mut sigma = Vec::with_capacity(nch);
+                let mut phase = Vec::with_capacity(nch);
+                for (k, c) in scene.channels.iter().enumerate() {
+                    let err = |e: String| OpticsError::Channel {
+                        channel: c.name.clone(),
+                        message: e,
+                    };
+                    sigma.push(
+                        rayleigh::cross_section_m2(c.wavelength_nm())
+                            .map_err(|e| err(e.to_string()))?,
+                    );
+                    let rp = RayleighPhase::from_depolarisation(a.depolarisation_factor[k])
+                        .map_err(|e| err(e.to_string()))?;
+                    phase.push(phase_index(&Arc::new(PhaseFunction::Rayleigh(rp))));
+                }
+                Some((a, sigma, phase))
+            }
+            _ => None,
+        };
+        let layer_phases: Vec<Vec<u32>> = scene
+            .layers
+            .iter()
+            .map(|l| l.phase.iter().map(&mut phase_index).collect())
+            .collect();
+
+        let mut sigma_s = vec![0.0; n_layers * nch];
+        let mut sigma_a = vec![0.0; n_layers * nch];
+        let mut components = Vec::with_capacity(n_layers);
+        for l in 0..n_layers {
+            let (z0, z1) = (edges[l], edges[l + 1]);
+            let mut comps = Vec::new();
+            if let Some((atm, sigma_r, phase)) = &molecules
+                && z0 >= atm.profile.altitude_m[0] - 1e-9 && z1 <= atm.top_m + 1e-9 {
+                    let n = mean_number_density(atm, z0, z1);
+                    let s: Vec<f64> = sigma_r.iter().map(|c| c * n).collect();
+                    if s.iter().any(|v| *v > 0.0) {
+                        comps.push(Component {
+                            sigma_s_per_m: s,
+                            phase: phase.clone(),
+                        });
+                    }
+                }
+            for (j, layer) in scene.layers.iter().enumerate() {
+                if layer.base_m <= z0 + 1e-9 && layer.top_m >= z1 - 1e-9 {
+                    let s: Vec<f64> = (0..nch)
+                        .map(|k| layer.extinction_per_m[k] * layer.single_scattering_albedo[k])
+                        .collect();
+                    for k in 0..nch {
+                        sigma_a[l * nch + k] += layer.extinction_per_m[k]
+                            * (1.0 - layer.single_scattering_albedo[k])
+                            + layer.absorption_per_m[k];
+                    }
+                    if s.iter().any(|v| *v > 0.0) {
+                        comps.push(Component {
+                            sigma_s_per_m: s,
+                            phase: layer_phases[j].clone(),
+                        });
+                    }
+                }
+            }
+            for c in &comps {
+                for k in 0..nch {
+                    sigma_s[l * nch + k] += c.sigma_s_per_m[k];
+                }
+            }
+            components.push(comps);
+        }
+        let grey_scattering = components.iter().flatten().all(|c| {
+            c.sigma_s_per_m.iter().all(|s| *s == c.sigma_s_per_m[0])
+                && c.phase.iter().all(|p| *p == c.phase[0])
+        });
+        let mut atm = OpticalAtmosphere {
+            edges_m: edges,
+            n_channels: nch,
+            sigma_s_per_m: sigma_s,
+            sigma_a_per_m: sigma_a,
+            components,
+            phases,
+            cum_tau_s: Vec::new(),
+            cum_tau_a: Vec::new(),
+            grey_scattering,
+        };
+        atm.accumulate();
+        Ok(atm)
+    }
+
+    /// Add vertical absorption optical depths per layer and channel (`layer * n_channels + k`),
+    /// e.g. gas absorption from line-by-line calculations, as layer-mean coefficients.
+    pub fn add_absorption_tau(&mut self, tau: &[f64]) -> Result<(), OpticsError> {
+        if tau.len() != self.sigma_a_per_m.len() {
+            return Err(OpticsError::Absorption(format!(
+                "{} values for {} layers × {} channels",
+                tau.len(),
+                self.n_layers(),
+                self.n_channels
+            )));
+        }
+        for l in 0..self.n_layers() {
+            let dz = self.edges_m[l + 1] - self.edges_m[l];
+            for k in 0..self.n_channels {
+                let t = tau[l * self.n_channels + k];
+                if !(t >= 0.0 && t.is_finite()) {
+                    return Err(OpticsError::Absorption(format!("layer {l}: τ = {t}")));
+                }
+                self.sigma_a_per_m[l * self.n_channels + k] += t / dz;
+            }
+        }
+        self.accumulate();
+        Ok(())
+    }
+
+    fn accumulate(&mut self) {
+        let nch = self.n_channels;
+        let n = self.edges_m.len();
+        self.cum_tau_s = vec![0.0; n * nch];
+        self.cum_tau_a = vec![0.0; n * nch];
+        for l in 0..n.saturating_sub(1) {
+            let dz = self.edges_m[l + 1] - self.edges_m[l];
+            for k in 0..nch {
+                self.cum_tau_s[(l + 1) * nch + k] =
+                    self.cum_tau_s[l * nch + k] + self.sigma_s_per_m[l * nch + k] * dz;
+                self.cum_tau_a[(l + 1) * nch + k] =
+                    self.cum_tau_a[l * nch + k] + self.sigma_a_per_m[l * nch + k] * dz;
+            }
+        }
+    }
+
+    /// Number of layers.
+    pub fn n_layers(&self) -> usize {
+        self.edges_m.len().saturating_sub(1)
+    }
+
+    /// Bottom edge [m] (−∞ for an empty atmosphere).
+    pub fn bottom_m(&self) -> f64 {
+        self.edges_m.first().copied().unwrap_or(f64::NEG_INFINITY)
+    }
+
+    /// Top edge [m].
+    pub fn top_m(&self) -> f64 {
+        self.edges_m.last().copied().unwrap_or(f64::NEG_INFINITY)
+    }
+
+    /// The layer holding altitude z, clamped to the first/last layer outside the atmosphere.
+    #[inline]
+    pub fn layer_of(&self, z: f64) -> usize {
+        let i = self.edges_m.partition_point(|e| *e <= z);
+        i.saturating_sub(1).min(self.n_layers().saturating_sub(1))
+    }
+
+    /// Cumulative vertical optical depth (scattering, absorption) of channel k at altitude z:
+    /// T(z) = cum[l] + (z − edge_l) σ_l, constant outside the atmosphere.
+    #[inline]
+    pub fn cumulative_tau(&self, z: f64, k: usize) -> (f64, f64) {
+        if self.n_layers() == 0 {
+            return (0.0, 0.0);
+        }
+        let z = z.clamp(self.bottom_m(), self.top_m());
+        let l = self.layer_of(z);
+        let nch = self.n_channels;
+        let dz = z - self.edges_m[l];
+        (
+            self.cum_tau_s[l * nch + k] + dz * self.sigma_s_per_m[l * nch + k],
+            self.cum_tau_a[l * nch + k] + dz * self.sigma_a_per_m[l * nch + k],
+        )
+    }
+
+    /// Extinction optical depth of channel k along a straight segment from altitude z0 with
+    /// direction cosine μ over length s (plane-parallel: vertical τ/|μ|).
+    pub fn segment_tau_ext(&self, z0: f64, mu: f64, s: f64, k: usize) -> f64 {
+        if mu.abs() < 1e-12 {
+            if self.n_layers() == 0 || z0 < self.bottom_m() || z0 > self.top_m() {
+                return 0.0;
+            }
+            let i = self.layer_of(z0) * self.n_channels + k;
+            return (self.sigma_s_per_m[i] + self.sigma_a_per_m[i]) * s;
+        }
+        let (s0, a0) = self.cumulative_tau(z0, k);
+        let (s1, a1) = self.cumulative_tau(z0 + mu * s, k);
+        ((s1 - s0) + (a1 - a0)).abs() / mu.abs()
+    }
+}
+
+impl OpticalAtmosphere {
+    /// Fraction of a beam of unit weight absorbed along a straight segment from altitude z0
+    /// with direction cosine μ over length s, for channel k:
+    /// ∫ σ_a e^{−τ_ext(s')} ds', summed exactly layer by layer.
+    pub fn absorbed_fraction(&self, z0: f64, mu: f64, s: f64, k: usize) -> f64 {
+        let nch = self.n_channels;
+        let piece = |l: usize, ds: f64, tau_in: f64| -> (f64, f64) {
+            let sa = self.sigma_a_per_m[l * nch + k];
+            let se = self.sigma_s_per_m[l * nch + k] + sa;
+            if se <= 0.0 {
+                return (0.0, 0.0);
+            }
+            let dt = se * ds;
+            (sa / se * (-tau_in).exp() * -(-dt).exp_m1(), dt)
+        };
+        if self.n_layers() == 0 || s <= 0.0 {
+            return 0.0;
+        }
+        if mu.abs() < 1e-12 {
+            if z0 < self.bottom_m() || z0 > self.top_m() {
+                return 0.0;
+            }
+            return piece(self.layer_of(z0), s, 0.0).0;
+        }
+        let z1 = z0 + mu * s;
+        let (lo, hi) = (
+            z0.min(z1).max(self.bottom_m()),
+            z0.max(z1).min(self.top_m()),
+        );
+        if hi <= lo {
+            return 0.0;
+        }
+        let (mut frac, mut tau) = (0.0, 0.0);
+        if mu > 0.0 {
+            let mut l = self.layer_of(lo);
+            let mut z = lo;
+            while z < hi && l < self.n_layers() {
+                let top = self.edges_m[l + 1].min(hi);
+                let (f, dt) = piece(l, (top - z) / mu, tau);
+                frac += f;
+                tau += dt;
+                z = top;
+                l += 1;
+            }
+        } else {
+            let mut l = self.layer_of(hi);
+            if l > 0 && self.edges_m[l] >= hi {
+                l -= 1;
+            }
+            let mut z = hi;
+            loop {
+                let bottom = self.edges_m[l].max(lo);
+                let (f, dt) = piece(l, (z - bottom) / -mu, tau);
+                frac += f;
+                tau += dt;
+                z = bottom;
+                if z <= lo || l == 0 {
+                    break;
+                }
+                l -= 1;
+            }
+        }
+        frac
+    }
+}
+
+/// Layer edges: the molecular grid (from the profile bottom or the surface to the top, in steps
+/// of the layer thickness) merged with every particle-layer and surface boundary.
+fn layer_edges(scene: &Scene) -> Vec<f64> {
+    let mut edges: Vec<f64> = Vec::new();
+    if let Some(a) = &scene.atmosphere {
+        let mut bottom = a.profile.altitude_m[0];
+        if let Some(s) = &scene.surface {
+            bottom = bottom.max(s.altitude_m);
+        }
+        let n = ((a.top_m - bottom) / a.layer_thickness_m).ceil().max(1.0) as usize;
+        for i in 0..n {
+            edges.push(bottom + i as f64 * a.layer_thickness_m);
+        }
+        edges.push(a.top_m);
+    }
+    for l in &scene.layers {
+        edges.push(l.base_m);
+        edges.push(l.top_m);
+    }
+    if let Some(s) = &scene.surface {
+        edges.push(s.altitude_m);
+    }
+    edges.sort_by(f64::total_cmp);
+    edges.dedup_by(|a, b| (*a - *b).abs() < 1e-6);
+    // Nothing exists below a surface.
+    if let Some(s) = &scene.surface {
+        edges.retain(|e| *e >= s.altitude_m - 1e-6);
+    }
+    if edges.len() < 2 {
+        edges.clear();
+        // A surface in vacuum still needs a bottom edge: one empty layer above it.
+        if let Some(s) = &scene.surface {
+            edges = vec![s.altitude_m, s.altitude_m + 1.0];
+        }
+    }
+    edges
+}
+
+/// Mean air number density over [z0, z1] with ln n linear in z between profile levels.
+fn mean_number_density(atm: &Atmosphere, z0: f64, z1: f64) -> f64 {
+    let z = &atm.profile.altitude_m;
+    let n = atm.profile.air_number_density_per_m3();
+    let mut integral = 0.0;
+    for i in 0..z.len() - 1 {
+        let (a, b) = (z0.max(z[i]), z1.min(z[i + 1]));
+        if b <= a {
+            continue;
+        }
+        let h = z[i + 1] - z[i];
+        let k = (n[i + 1] / n[i]).ln() / h; // d ln n / dz
+        let na = n[i] * (k * (a - z[i])).exp();
+        let x = k * (b - a);
+        // ∫ n_a e^{k t} dt over [0, b − a], with (e^x − 1)/x → 1 as x → 0.
+        let f = if x.abs() < 1e-8 {
+            1.0 + 0.5 * x
+        } else {
+            x.exp_m1() / x
+        };
+        integral += na * (b - a) * f;
+    }
+    integral / (z1 - z0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::Scene;
+    use std::path::Path;
+
+    const SCENE: &str = r#"
+[lidar]
+altitude_m = 0.0
+zenith_angle_deg = 0.0
+pulse_energy_j = 0.1
+beam_divergence_full_angle_mrad = 0.0
+telescope_diameter_m = 0.2
+optical_efficiency = 1.0
+fov_full_angle_mrad = 1.0
+[[channel]]
+name = "a"
+wavelength_nm = 532.0
+[gates]
+start_m = 100.0
+end_m = 10000.0
+width_m = 100.0
+[atmosphere]
+standard = "us_standard"
+layer_thickness_m = 250.0
+[[layer]]
+base_m = 1000.0
+top_m = 1300.0
+extinction_per_km = 2.0
+single_scattering_albedo = 0.9
+phase = { kind = "henyey_greenstein", g = 0.7 }
+"#;
+
+    #[test]
+    fn rayleigh_column_optical_depth_matches_bucholtz() {
+        // Bucholtz (1995) / shared/data/rayleigh: vertical Rayleigh optical depth of the US
+        // standard column at 532 nm is 0.111 for p0 = 1013.25 hPa (σ N_col, no gravity height
+        // correction). Our column integrates the AFGL density profile, 1013 hPa at the ground.
+        let scene = Scene::from_toml(Path::new("t.toml"), SCENE).unwrap();
+        let atm = OpticalAtmosphere::build(&scene).unwrap();
+        let (t_s, _) = atm.cumulative_tau(1e9, 0);
+        let particles = 2e-3 * 0.9 * 300.0;
+        let molecular = t_s - particles;
+        assert!((molecular / 0.110953 - 1.0).abs() < 0.01, "{molecular}");
+        // The particle layer's edges are layer edges; absorption is ext (1 − ϖ) Δz.
+        assert!(atm.edges_m.contains(&1000.0) && atm.edges_m.contains(&1300.0));
+        let (_, t_a) = atm.cumulative_tau(1e9, 0);
+        assert!((t_a - 2e-3 * 0.1 * 300.0).abs() < 1e-12);
+        assert!(atm.grey_scattering);
+    }
+
+    #[test]
+    fn mean_density_is_exact_for_an_exponential_profile() {
+        let mut scene = Scene::from_toml(Path::new("t.toml"), SCENE).unwrap();
+        let a = scene.atmosphere.as_mut().unwrap();
+        // n = n0 exp(−z/H) sampled on levels: the layer mean must be exact.
+        let h = 8000.0;
+        a.profile.altitude_m = vec![0.0, 5000.0, 20000.0];
+        a.profile.temperature_k = vec![250.0; 3];
+        a.profile.pressure_pa = a
+            .profile
+            .altitude_m
+            .iter()
+            .map(|z| 1e5 * (-z / h).exp())
+            .collect();
+        let n0 = 1e5 / (crate::constants::BOLTZMANN_J_PER_K * 250.0);
+        let (z0, z1) = (3000.0, 9000.0);
+        let exact = n0 * h * ((-z0 / h).exp() - (-z1 / h).exp()) / (z1 - z0);
+        let got = mean_number_density(a, z0, z1);
+        assert!((got / exact - 1.0).abs() < 1e-12);
+    }
+}

@@ -1,0 +1,288 @@
+//! The scene file as serde reads it, and the mapping of problems to file lines.
+
+use std::path::Path;
+
+use serde::Deserialize;
+use serde::de::{self, Deserializer, SeqAccess, Visitor};
+
+use crate::input::InputError;
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct SceneFile {
+    pub description: Option<String>,
+    pub lidar: LidarFile,
+    #[serde(default)]
+    pub channel: Vec<ChannelFile>,
+    pub gates: GatesFile,
+    pub atmosphere: Option<AtmosphereFile>,
+    #[serde(default)]
+    pub layer: Vec<LayerFile>,
+    pub surface: Option<SurfaceFile>,
+    pub simulation: Option<SimulationFile>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct LidarFile {
+    pub altitude_m: Option<f64>,
+    pub altitude_km: Option<f64>,
+    pub zenith_angle_deg: f64,
+    pub azimuth_deg: Option<f64>,
+    pub pulse_energy_j: f64,
+    pub beam_divergence_full_angle_mrad: f64,
+    pub beam_profile: Option<String>,
+    pub telescope_diameter_m: f64,
+    pub optical_efficiency: f64,
+    pub fov_full_angle_mrad: PerChannel,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct ChannelFile {
+    pub name: String,
+    pub wavelength_nm: Option<f64>,
+    pub wavenumber_cm1: Option<f64>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct GatesFile {
+    pub start_m: f64,
+    pub end_m: f64,
+    pub width_m: f64,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct AtmosphereFile {
+    pub standard: Option<String>,
+    pub altitude_m: Option<Vec<f64>>,
+    pub air_number_density_per_m3: Option<Vec<f64>>,
+    pub top_m: Option<f64>,
+    pub layer_thickness_m: Option<f64>,
+    pub rayleigh: Option<bool>,
+    pub depolarization_factor: Option<PerChannel>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct LayerFile {
+    pub name: Option<String>,
+    pub base_m: f64,
+    pub top_m: f64,
+    pub extinction_per_m: Option<PerChannel>,
+    pub extinction_per_km: Option<PerChannel>,
+    pub single_scattering_albedo: Option<PerChannel>,
+    pub phase: Option<OneOrMany<PhaseSpecFile>>,
+    pub absorption_per_m: Option<PerChannel>,
+}
+
+#[derive(Debug, Deserialize, PartialEq)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub(super) enum PhaseSpecFile {
+    Isotropic {},
+    Rayleigh {
+        depolarization_factor: Option<f64>,
+    },
+    HenyeyGreenstein {
+        g: f64,
+    },
+    DoubleHenyeyGreenstein {
+        f: f64,
+        g1: f64,
+        g2: f64,
+    },
+    Table {
+        file: Option<String>,
+        builtin: Option<String>,
+    },
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct SurfaceFile {
+    pub altitude_m: f64,
+    pub albedo: PerChannel,
+}
+
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct SimulationFile {
+    pub photons: Option<u64>,
+    pub seed: Option<u64>,
+    pub max_order: Option<u32>,
+    pub threads: Option<usize>,
+    pub batches: Option<usize>,
+}
+
+/// One number for every channel, or a list with one number per channel.
+#[derive(Debug, Clone, PartialEq)]
+pub(super) enum PerChannel {
+    One(f64),
+    Many(Vec<f64>),
+}
+
+impl<'de> Deserialize<'de> for PerChannel {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct V;
+        impl<'de> Visitor<'de> for V {
+            type Value = PerChannel;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("a number or a list of numbers (one per channel)")
+            }
+            fn visit_f64<E: de::Error>(self, v: f64) -> Result<PerChannel, E> {
+                Ok(PerChannel::One(v))
+            }
+            fn visit_i64<E: de::Error>(self, v: i64) -> Result<PerChannel, E> {
+                Ok(PerChannel::One(v as f64))
+            }
+            fn visit_u64<E: de::Error>(self, v: u64) -> Result<PerChannel, E> {
+                Ok(PerChannel::One(v as f64))
+            }
+            fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<PerChannel, A::Error> {
+                let mut v = Vec::new();
+                while let Some(x) = seq.next_element::<f64>()? {
+                    v.push(x);
+                }
+                Ok(PerChannel::Many(v))
+            }
+        }
+        d.deserialize_any(V)
+    }
+}
+
+/// One item for every channel, or a list with one per channel.
+#[derive(Debug, PartialEq)]
+pub(super) enum OneOrMany<T> {
+    One(T),
+    Many(Vec<T>),
+}
+
+impl<'de, T: Deserialize<'de>> Deserialize<'de> for OneOrMany<T> {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        // A table is one item, an array is one per channel; keep serde's own error for a bad
+        // item so the message names the field at fault.
+        let v = toml::Value::deserialize(d)?;
+        match v {
+            toml::Value::Array(items) => items
+                .into_iter()
+                .map(|i| T::deserialize(i).map_err(de::Error::custom))
+                .collect::<Result<Vec<T>, _>>()
+                .map(OneOrMany::Many),
+            other => T::deserialize(other)
+                .map(OneOrMany::One)
+                .map_err(de::Error::custom),
+        }
+    }
+}
+
+/// Where a value sits in the file: a section (`[name]`, or the i-th `[[name]]`) and a key.
+#[derive(Debug, Clone)]
+pub(super) struct KeyPath {
+    section: Option<(String, Option<usize>)>,
+    key: Option<String>,
+}
+
+impl KeyPath {
+    pub fn root() -> Self {
+        KeyPath {
+            section: None,
+            key: None,
+        }
+    }
+    pub fn table(name: &str) -> Self {
+        KeyPath {
+            section: Some((name.into(), None)),
+            key: None,
+        }
+    }
+    pub fn array(name: &str, index: usize) -> Self {
+        KeyPath {
+            section: Some((name.into(), Some(index))),
+            key: None,
+        }
+    }
+    pub fn key(&self, key: &str) -> Self {
+        KeyPath {
+            section: self.section.clone(),
+            key: Some(key.into()),
+        }
+    }
+
+    /// `lidar.pulse_energy_j`, `layer.top_m`, `channel` …
+    pub fn dotted(&self) -> String {
+        match (&self.section, &self.key) {
+            (Some((s, _)), Some(k)) => format!("{s}.{k}"),
+            (Some((s, _)), None) => s.clone(),
+            (None, Some(k)) => k.clone(),
+            (None, None) => "(scene)".into(),
+        }
+    }
+
+    /// 1-based line of the key (or of its section header when the key is absent).
+    pub fn line(&self, text: &str) -> usize {
+        let mut in_section = self.section.is_none();
+        let mut header_line = 1;
+        let mut seen = 0usize;
+        for (i, raw) in text.lines().enumerate() {
+            let line = raw.trim();
+            if line.starts_with('[') {
+                let (name, is_array) = if let Some(n) = line.strip_prefix("[[") {
+                    (n.split("]]").next().unwrap_or("").trim(), true)
+                } else {
+                    (line.trim_start_matches('[').split(']').next().unwrap_or("").trim(), false)
+                };
+                in_section = match &self.section {
+                    Some((s, None)) => !is_array && name == s,
+                    Some((s, Some(idx))) => {
+                        let hit = is_array && name == s && seen == *idx;
+                        if is_array && name == s {
+                            seen += 1;
+                        }
+                        hit
+                    }
+                    None => false,
+                };
+                if in_section {
+                    header_line = i + 1;
+                }
+                continue;
+            }
+            if in_section
+                && let Some(k) = &self.key
+                    && let Some(rest) = line.strip_prefix(k.as_str())
+                        && rest.trim_start().starts_with('=') {
+                            return i + 1;
+                        }
+        }
+        header_line
+    }
+}
+
+/// Turn a TOML/serde error into an [`InputError`] with the line and the key.
+pub(super) fn toml_error(path: &Path, text: &str, e: &toml::de::Error) -> InputError {
+    let message = e.message().trim().to_string();
+    let line = e
+        .span()
+        .map(|s| text[..s.start.min(text.len())].matches('\n').count() + 1);
+    // The key: quoted in messages about unknown or missing fields, otherwise the key of the
+    // line the span starts on.
+    let quoted = ["unknown field `", "missing field `", "unknown variant `"]
+        .iter()
+        .find_map(|p| message.split(p).nth(1).and_then(|r| r.split('`').next()))
+        .map(str::to_string);
+    let field = quoted.or_else(|| {
+        line.and_then(|l| text.lines().nth(l - 1)).and_then(|l| {
+            l.split_once('=')
+                .map(|(k, _)| k.trim().to_string())
+                .filter(|k| !k.is_empty())
+        })
+    });
+    InputError {
+        path: path.to_path_buf(),
+        line,
+        field,
+        message,
+    }
+}

@@ -1,0 +1,832 @@
+//! Scenes: the TOML description of a lidar, its channels, range gates, atmosphere, particle
+//! layers, surface and simulation settings, validated into a [`Scene`].
+//!
+//! **contract** (DESIGN §4): units in every key name, full angles where a cone is meant, every
+//! unknown key rejected with the file, line and key named. The key reference is in README.md;
+//! the files in `scenes/` are worked examples.
+//!
+//! Parsing has two steps: serde reads the file into the `*File` structs (types, unknown keys,
+//! missing keys; the TOML parser gives byte spans that become line numbers), then
+//! [`Scene::from_toml`] checks values and relations (ranges, per-channel list lengths, layer
+//! order) and reports each problem at the line of the key it concerns.
+
+mod file;
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use crate::atmosphere::{Profile, StandardAtmosphere};
+use crate::input::InputError;
+use crate::particles::phase::{HenyeyGreenstein, PhaseFunction, RayleighPhase, TabulatedPhase};
+use crate::particles::table::PhaseTable;
+use crate::particles::{builtin_table, rayleigh};
+
+use file::{KeyPath, PerChannel, PhaseSpecFile, SceneFile};
+
+/// The scene run when `lidarsim run` gets no file.
+pub const DEFAULT_SCENE_TOML: &str = include_str!("../../scenes/default.toml");
+/// Pseudo-path of the embedded default scene in messages.
+pub const DEFAULT_SCENE_NAME: &str = "<embedded default scene>";
+
+/// A validated scene. Constructed only by [`Scene::from_toml`] / [`Scene::read`].
+#[derive(Debug, Clone)]
+pub struct Scene {
+    /// The file it came from (or [`DEFAULT_SCENE_NAME`]).
+    pub path: PathBuf,
+    /// Free text.
+    pub description: String,
+    /// The lidar: platform, pointing, emitter, receiver.
+    pub lidar: Lidar,
+    /// Channels, in file order; channel 0 is the reference channel of the transport.
+    pub channels: Vec<Channel>,
+    /// Range gates.
+    pub gates: Gates,
+    /// Molecular atmosphere, if any.
+    pub atmosphere: Option<Atmosphere>,
+    /// Particle and absorber layers.
+    pub layers: Vec<Layer>,
+    /// Lambertian surface, if any.
+    pub surface: Option<Surface>,
+    /// Monte Carlo settings.
+    pub simulation: Simulation,
+}
+
+/// Beam divergence profile.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BeamProfile {
+    /// Directions uniform in solid angle inside the full divergence angle.
+    Uniform,
+    /// Gaussian in angle; the full divergence angle is the 1/e² intensity diameter.
+    Gaussian,
+}
+
+/// A monostatic, coaxial lidar.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Lidar {
+    /// Altitude of the lidar above the scene's zero [m].
+    pub altitude_m: f64,
+    /// Pointing: angle from the upward vertical [deg] (0 looks up, 180 looks down).
+    pub zenith_angle_deg: f64,
+    /// Pointing azimuth [deg] (matters only for the direction of a slant path).
+    pub azimuth_deg: f64,
+    /// Pulse energy [J].
+    pub pulse_energy_j: f64,
+    /// Full divergence angle of the beam [mrad] (0: pencil beam).
+    pub beam_divergence_full_angle_mrad: f64,
+    /// Shape of the divergence.
+    pub beam_profile: BeamProfile,
+    /// Telescope diameter [m].
+    pub telescope_diameter_m: f64,
+    /// Receiver optical efficiency (0–1].
+    pub optical_efficiency: f64,
+    /// Receiver fields of view, full angles [mrad], all tallied in one run.
+    pub fov_full_angle_mrad: Vec<f64>,
+}
+
+impl Lidar {
+    /// Telescope collecting area [m²].
+    pub fn telescope_area_m2(&self) -> f64 {
+        std::f64::consts::PI * 0.25 * self.telescope_diameter_m * self.telescope_diameter_m
+    }
+
+    /// Unit pointing vector (z up; azimuth from +x toward +y).
+    pub fn axis(&self) -> glam::DVec3 {
+        let (st, ct) = self.zenith_angle_deg.to_radians().sin_cos();
+        let (sp, cp) = self.azimuth_deg.to_radians().sin_cos();
+        glam::DVec3::new(st * cp, st * sp, ct)
+    }
+}
+
+/// One monochromatic channel.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Channel {
+    /// Name (`on`, `off`, …).
+    pub name: String,
+    /// Vacuum wavenumber [cm⁻¹].
+    pub wavenumber_cm1: f64,
+}
+
+impl Channel {
+    /// Vacuum wavelength [nm].
+    pub fn wavelength_nm(&self) -> f64 {
+        1e7 / self.wavenumber_cm1
+    }
+}
+
+/// Range gates [start, start + count·width).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Gates {
+    /// Start of the first gate [m].
+    pub start_m: f64,
+    /// Gate width [m].
+    pub width_m: f64,
+    /// Number of gates.
+    pub count: usize,
+}
+
+impl Gates {
+    /// End of the last gate [m].
+    pub fn end_m(&self) -> f64 {
+        self.start_m + self.width_m * self.count as f64
+    }
+    /// Centre of gate i [m].
+    pub fn centre_m(&self, i: usize) -> f64 {
+        self.start_m + (i as f64 + 0.5) * self.width_m
+    }
+}
+
+/// Where molecular scattering comes from.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Atmosphere {
+    /// The profile (altitudes in the scene's frame).
+    pub profile: Profile,
+    /// Thickness of the optical layers the molecular atmosphere is cut into [m].
+    pub layer_thickness_m: f64,
+    /// Top of the model atmosphere [m].
+    pub top_m: f64,
+    /// Rayleigh scattering on or off.
+    pub rayleigh: bool,
+    /// Depolarisation factor per channel (Bucholtz 1995 Table 1 unless given).
+    pub depolarisation_factor: Vec<f64>,
+}
+
+/// A horizontal layer of particles and/or extra absorption.
+#[derive(Debug, Clone)]
+pub struct Layer {
+    /// Name for messages.
+    pub name: String,
+    /// Base altitude [m].
+    pub base_m: f64,
+    /// Top altitude [m].
+    pub top_m: f64,
+    /// Particle extinction coefficient per channel [1/m].
+    pub extinction_per_m: Vec<f64>,
+    /// Particle single-scattering albedo per channel.
+    pub single_scattering_albedo: Vec<f64>,
+    /// Particle phase function per channel.
+    pub phase: Vec<Arc<PhaseFunction>>,
+    /// Extra (e.g. gas) absorption coefficient per channel [1/m].
+    pub absorption_per_m: Vec<f64>,
+}
+
+/// A Lambertian surface.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Surface {
+    /// Altitude [m].
+    pub altitude_m: f64,
+    /// Albedo per channel.
+    pub albedo: Vec<f64>,
+}
+
+/// Monte Carlo settings.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Simulation {
+    /// Number of photon packets.
+    pub photons: u64,
+    /// Random seed.
+    pub seed: u64,
+    /// Highest scattering order tallied separately; higher orders go into `N+`.
+    pub max_order: u32,
+    /// Worker threads (0: all cores).
+    pub threads: usize,
+    /// Independent batches for the standard errors.
+    pub batches: usize,
+}
+
+impl Scene {
+    /// Read and validate a scene file.
+    pub fn read(path: &Path) -> Result<Scene, InputError> {
+        let text = crate::input::read_to_string(path)?;
+        Scene::from_toml(path, &text)
+    }
+
+    /// The embedded default scene.
+    pub fn default_scene() -> Result<Scene, InputError> {
+        Scene::from_toml(Path::new(DEFAULT_SCENE_NAME), DEFAULT_SCENE_TOML)
+    }
+
+    /// Parse and validate scene text; `path` names the file in errors and anchors relative
+    /// paths (phase-function tables) at its directory.
+    pub fn from_toml(path: &Path, text: &str) -> Result<Scene, InputError> {
+        let raw: SceneFile = toml::from_str(text).map_err(|e| file::toml_error(path, text, &e))?;
+        let v = Validator { path, text };
+        v.scene(raw)
+    }
+}
+
+struct Validator<'a> {
+    path: &'a Path,
+    text: &'a str,
+}
+
+impl Validator<'_> {
+    fn err(&self, at: &KeyPath, message: impl Into<String>) -> InputError {
+        InputError {
+            path: self.path.to_path_buf(),
+            line: Some(at.line(self.text)),
+            field: Some(at.dotted()),
+            message: message.into(),
+        }
+    }
+
+    fn positive(&self, at: &KeyPath, v: f64) -> Result<f64, InputError> {
+        if v > 0.0 && v.is_finite() {
+            Ok(v)
+        } else {
+            Err(self.err(at, format!("{v} must be > 0")))
+        }
+    }
+
+    fn non_negative(&self, at: &KeyPath, v: f64) -> Result<f64, InputError> {
+        if v >= 0.0 && v.is_finite() {
+            Ok(v)
+        } else {
+            Err(self.err(at, format!("{v} must be ≥ 0")))
+        }
+    }
+
+    fn in_range(&self, at: &KeyPath, v: f64, lo: f64, hi: f64) -> Result<f64, InputError> {
+        if v >= lo && v <= hi {
+            Ok(v)
+        } else {
+            Err(self.err(at, format!("{v} must lie in [{lo}, {hi}]")))
+        }
+    }
+
+    /// Exactly one of two alternative keys, scaled to a common unit.
+    fn one_of(
+        &self,
+        section: &KeyPath,
+        a: (&str, Option<f64>, f64),
+        b: (&str, Option<f64>, f64),
+    ) -> Result<(KeyPath, f64), InputError> {
+        match (a.1, b.1) {
+            (Some(x), None) => Ok((section.key(a.0), x * a.2)),
+            (None, Some(x)) => Ok((section.key(b.0), x * b.2)),
+            (Some(_), Some(_)) => Err(self.err(
+                &section.key(b.0),
+                format!("give `{}` or `{}`, not both", a.0, b.0),
+            )),
+            (None, None) => Err(self.err(section, format!("needs `{}` or `{}`", a.0, b.0))),
+        }
+    }
+
+    fn per_channel(
+        &self,
+        at: &KeyPath,
+        v: &PerChannel,
+        n_channels: usize,
+    ) -> Result<Vec<f64>, InputError> {
+        match v {
+            PerChannel::One(x) => Ok(vec![*x; n_channels]),
+            PerChannel::Many(xs) if xs.len() == n_channels => Ok(xs.clone()),
+            PerChannel::Many(xs) => Err(self.err(
+                at,
+                format!(
+                    "has {} values; give one value or one per channel ({n_channels})",
+                    xs.len()
+                ),
+            )),
+        }
+    }
+
+    fn scene(&self, raw: SceneFile) -> Result<Scene, InputError> {
+        let lidar = self.lidar(&raw)?;
+        let channels = self.channels(&raw)?;
+        let nch = channels.len();
+        let gates = self.gates(&raw)?;
+        let atmosphere = match &raw.atmosphere {
+            Some(a) => Some(self.atmosphere(a, &channels)?),
+            None => None,
+        };
+        let mut layers = Vec::new();
+        for (i, l) in raw.layer.iter().enumerate() {
+            layers.push(self.layer(i, l, &channels)?);
+        }
+        let surface = match &raw.surface {
+            Some(s) => {
+                let sec = KeyPath::table("surface");
+                let albedo = self.per_channel(&sec.key("albedo"), &s.albedo, nch)?;
+                for a in &albedo {
+                    self.in_range(&sec.key("albedo"), *a, 0.0, 1.0)?;
+                }
+                Some(Surface {
+                    altitude_m: s.altitude_m,
+                    albedo,
+                })
+            }
+            None => None,
+        };
+        if let Some(s) = &surface {
+            let at = KeyPath::table("surface").key("altitude_m");
+            if lidar.altitude_m < s.altitude_m {
+                return Err(self.err(&at, "the lidar is below the surface"));
+            }
+            if let Some(a) = &atmosphere
+                && (s.altitude_m < a.profile.altitude_m[0] || s.altitude_m >= a.top_m) {
+                    return Err(self.err(
+                        &at,
+                        format!(
+                            "{} m is outside the atmosphere profile ({} to {} m)",
+                            s.altitude_m, a.profile.altitude_m[0], a.top_m
+                        ),
+                    ));
+                }
+            for (i, l) in layers.iter().enumerate() {
+                if l.base_m < s.altitude_m {
+                    return Err(self.err(
+                        &KeyPath::array("layer", i).key("base_m"),
+                        format!("layer `{}` reaches below the surface", l.name),
+                    ));
+                }
+            }
+        }
+        let simulation = self.simulation(&raw)?;
+        Ok(Scene {
+            path: self.path.to_path_buf(),
+            description: raw.description.clone().unwrap_or_default(),
+            lidar,
+            channels,
+            gates,
+            atmosphere,
+            layers,
+            surface,
+            simulation,
+        })
+    }
+
+    fn lidar(&self, raw: &SceneFile) -> Result<Lidar, InputError> {
+        let l = &raw.lidar;
+        let sec = KeyPath::table("lidar");
+        let (_, altitude_m) = self.one_of(
+            &sec,
+            ("altitude_m", l.altitude_m, 1.0),
+            ("altitude_km", l.altitude_km, 1e3),
+        )?;
+        let zenith_angle_deg =
+            self.in_range(&sec.key("zenith_angle_deg"), l.zenith_angle_deg, 0.0, 180.0)?;
+        let azimuth_deg = l.azimuth_deg.unwrap_or(0.0);
+        let pulse_energy_j = self.positive(&sec.key("pulse_energy_j"), l.pulse_energy_j)?;
+        let div = self.non_negative(
+            &sec.key("beam_divergence_full_angle_mrad"),
+            l.beam_divergence_full_angle_mrad,
+        )?;
+        if div >= 1000.0 {
+            return Err(self.err(
+                &sec.key("beam_divergence_full_angle_mrad"),
+                "must be below 1000 mrad (a lidar beam, not a lamp)",
+            ));
+        }
+        let beam_profile = match l.beam_profile.as_deref() {
+            None | Some("uniform") => BeamProfile::Uniform,
+            Some("gaussian") => BeamProfile::Gaussian,
+            Some(other) => {
+                return Err(self.err(
+                    &sec.key("beam_profile"),
+                    format!("`{other}` is not a beam profile (uniform, gaussian)"),
+                ));
+            }
+        };
+        let telescope_diameter_m =
+            self.positive(&sec.key("telescope_diameter_m"), l.telescope_diameter_m)?;
+        let eff_at = sec.key("optical_efficiency");
+        let optical_efficiency = self.in_range(&eff_at, l.optical_efficiency, 0.0, 1.0)?;
+        self.positive(&eff_at, optical_efficiency)?;
+        let fov_at = sec.key("fov_full_angle_mrad");
+        let fov_full_angle_mrad = match &l.fov_full_angle_mrad {
+            PerChannel::One(x) => vec![*x],
+            PerChannel::Many(xs) => xs.clone(),
+        };
+        if fov_full_angle_mrad.is_empty() {
+            return Err(self.err(&fov_at, "needs at least one field of view"));
+        }
+        for f in &fov_full_angle_mrad {
+            self.positive(&fov_at, *f)?;
+            if *f >= 1000.0 {
+                return Err(self.err(&fov_at, format!("{f} mrad: must be below 1000 mrad")));
+            }
+        }
+        for (i, f) in fov_full_angle_mrad.iter().enumerate() {
+            if fov_full_angle_mrad[..i].contains(f) {
+                return Err(self.err(&fov_at, format!("{f} mrad is given twice")));
+            }
+        }
+        Ok(Lidar {
+            altitude_m,
+            zenith_angle_deg,
+            azimuth_deg,
+            pulse_energy_j,
+            beam_divergence_full_angle_mrad: div,
+            beam_profile,
+            telescope_diameter_m,
+            optical_efficiency,
+            fov_full_angle_mrad,
+        })
+    }
+
+    fn channels(&self, raw: &SceneFile) -> Result<Vec<Channel>, InputError> {
+        if raw.channel.is_empty() {
+            return Err(self.err(&KeyPath::root(), "needs at least one [[channel]]"));
+        }
+        let mut out: Vec<Channel> = Vec::new();
+        for (i, c) in raw.channel.iter().enumerate() {
+            let sec = KeyPath::array("channel", i);
+            let (at, wavenumber_cm1) = match (c.wavelength_nm, c.wavenumber_cm1) {
+                (Some(w), None) => (
+                    sec.key("wavelength_nm"),
+                    1e7 / self.positive(&sec.key("wavelength_nm"), w)?,
+                ),
+                (None, Some(k)) => (sec.key("wavenumber_cm1"), k),
+                (Some(_), Some(_)) => {
+                    return Err(self.err(
+                        &sec.key("wavenumber_cm1"),
+                        "give `wavelength_nm` or `wavenumber_cm1`, not both",
+                    ));
+                }
+                (None, None) => {
+                    return Err(self.err(&sec, "needs `wavelength_nm` or `wavenumber_cm1`"));
+                }
+            };
+            self.positive(&at, wavenumber_cm1)?;
+            if out.iter().any(|o| o.name == c.name) {
+                return Err(self.err(
+                    &sec.key("name"),
+                    format!("channel `{}` is given twice", c.name),
+                ));
+            }
+            if c.name.is_empty() || c.name.contains(',') {
+                return Err(self.err(&sec.key("name"), "must be non-empty and without commas"));
+            }
+            out.push(Channel {
+                name: c.name.clone(),
+                wavenumber_cm1,
+            });
+        }
+        Ok(out)
+    }
+
+    fn gates(&self, raw: &SceneFile) -> Result<Gates, InputError> {
+        let g = &raw.gates;
+        let sec = KeyPath::table("gates");
+        // r = 0 is excluded: the single-scatter return diverges as 1/r² at the lidar.
+        let start_m = self.positive(&sec.key("start_m"), g.start_m)?;
+        let width_m = self.positive(&sec.key("width_m"), g.width_m)?;
+        if !(g.end_m > start_m) {
+            return Err(self.err(&sec.key("end_m"), "must be greater than `start_m`"));
+        }
+        let n = (g.end_m - start_m) / width_m;
+        let count = n.round();
+        if (n - count).abs() > 1e-6 * n.max(1.0) {
+            return Err(self.err(
+                &sec.key("end_m"),
+                format!(
+                    "end_m − start_m = {} m is not a whole number of {width_m} m gates",
+                    g.end_m - start_m
+                ),
+            ));
+        }
+        if count > 10_000_000.0 {
+            return Err(self.err(&sec.key("width_m"), format!("{count} gates is too many")));
+        }
+        Ok(Gates {
+            start_m,
+            width_m,
+            count: count as usize,
+        })
+    }
+
+    fn atmosphere(
+        &self,
+        a: &file::AtmosphereFile,
+        channels: &[Channel],
+    ) -> Result<Atmosphere, InputError> {
+        let sec = KeyPath::table("atmosphere");
+        let profile = match (&a.standard, &a.altitude_m, &a.air_number_density_per_m3) {
+            (Some(name), None, None) => name
+                .parse::<StandardAtmosphere>()
+                .map_err(|m| self.err(&sec.key("standard"), m))?
+                .profile(),
+            (None, Some(z), Some(n)) => self.density_profile(&sec, z, n)?,
+            (Some(_), _, _) => {
+                return Err(self.err(
+                    &sec.key("altitude_m"),
+                    "give `standard` or (`altitude_m`, `air_number_density_per_m3`), not both",
+                ));
+            }
+            _ => {
+                return Err(self.err(
+                    &sec,
+                    "needs `standard` (an AFGL atmosphere) or both `altitude_m` and `air_number_density_per_m3`",
+                ));
+            }
+        };
+        let z_top = *profile.altitude_m.last().unwrap_or(&0.0);
+        let top_m = match a.top_m {
+            Some(t) => {
+                let at = sec.key("top_m");
+                if t > z_top || t <= profile.altitude_m[0] {
+                    return Err(self.err(
+                        &at,
+                        format!(
+                            "{t} m is outside the profile ({} to {z_top} m)",
+                            profile.altitude_m[0]
+                        ),
+                    ));
+                }
+                t
+            }
+            None => z_top,
+        };
+        let layer_thickness_m = self.positive(
+            &sec.key("layer_thickness_m"),
+            a.layer_thickness_m.unwrap_or(100.0),
+        )?;
+        if (top_m - profile.altitude_m[0]) / layer_thickness_m > 1e6 {
+            return Err(self.err(
+                &sec.key("layer_thickness_m"),
+                "makes more than a million layers",
+            ));
+        }
+        let depolarisation_factor = match &a.depolarization_factor {
+            Some(v) => {
+                let at = sec.key("depolarization_factor");
+                let d = self.per_channel(&at, v, channels.len())?;
+                for x in &d {
+                    self.in_range(&at, *x, 0.0, 0.49)?;
+                }
+                d
+            }
+            None => {
+                let mut d = Vec::new();
+                for c in channels {
+                    d.push(
+                        rayleigh::depolarisation_factor(c.wavelength_nm()).map_err(|e| {
+                            self.err(&KeyPath::table("atmosphere").key("rayleigh"), e.to_string())
+                        })?,
+                    );
+                }
+                d
+            }
+        };
+        let rayleigh_on = a.rayleigh.unwrap_or(true);
+        if rayleigh_on {
+            for (i, c) in channels.iter().enumerate() {
+                rayleigh::cross_section_m2(c.wavelength_nm())
+                    .map_err(|e| self.err(&KeyPath::array("channel", i), e.to_string()))?;
+            }
+        }
+        Ok(Atmosphere {
+            profile,
+            layer_thickness_m,
+            top_m,
+            rayleigh: rayleigh_on,
+            depolarisation_factor,
+        })
+    }
+
+    fn density_profile(&self, sec: &KeyPath, z: &[f64], n: &[f64]) -> Result<Profile, InputError> {
+        let at_z = sec.key("altitude_m");
+        let at_n = sec.key("air_number_density_per_m3");
+        if z.len() != n.len() || z.len() < 2 {
+            return Err(self.err(&at_n, "needs as many values as `altitude_m`, at least two"));
+        }
+        if z.windows(2).any(|w| w[1] <= w[0]) {
+            return Err(self.err(&at_z, "must strictly increase"));
+        }
+        if n.iter().any(|v| !(*v > 0.0)) {
+            return Err(self.err(&at_n, "values must be > 0"));
+        }
+        // Only the number density matters for Rayleigh scattering: carry it as p = n k T at a
+        // nominal 273.15 K.
+        let t = 273.15;
+        Ok(Profile {
+            name: "scene air-density profile".into(),
+            altitude_m: z.to_vec(),
+            pressure_pa: n
+                .iter()
+                .map(|v| v * crate::constants::BOLTZMANN_J_PER_K * t)
+                .collect(),
+            temperature_k: vec![t; z.len()],
+            gases: Vec::new(),
+        })
+    }
+
+    fn layer(
+        &self,
+        i: usize,
+        l: &file::LayerFile,
+        channels: &[Channel],
+    ) -> Result<Layer, InputError> {
+        let nch = channels.len();
+        let sec = KeyPath::array("layer", i);
+        let name = l.name.clone().unwrap_or_else(|| format!("layer {}", i + 1));
+        if !(l.top_m > l.base_m) {
+            return Err(self.err(&sec.key("top_m"), "must be above `base_m`"));
+        }
+        let ext = match (&l.extinction_per_m, &l.extinction_per_km) {
+            (Some(v), None) => Some((sec.key("extinction_per_m"), v, 1.0)),
+            (None, Some(v)) => Some((sec.key("extinction_per_km"), v, 1e-3)),
+            (Some(_), Some(_)) => {
+                return Err(self.err(
+                    &sec.key("extinction_per_km"),
+                    "give `extinction_per_m` or `extinction_per_km`, not both",
+                ));
+            }
+            (None, None) => None,
+        };
+        let has_particles = ext.is_some();
+        let (extinction_per_m, single_scattering_albedo, phase) = match ext {
+            Some((at, v, scale)) => {
+                let mut e = self.per_channel(&at, v, nch)?;
+                for x in e.iter_mut() {
+                    self.non_negative(&at, *x)?;
+                    *x *= scale;
+                }
+                let ssa_at = sec.key("single_scattering_albedo");
+                let ssa_raw = l.single_scattering_albedo.as_ref().ok_or_else(|| {
+                    self.err(
+                        &sec,
+                        "a layer with extinction needs `single_scattering_albedo`",
+                    )
+                })?;
+                let ssa = self.per_channel(&ssa_at, ssa_raw, nch)?;
+                for x in &ssa {
+                    self.in_range(&ssa_at, *x, 0.0, 1.0)?;
+                }
+                let phase_at = sec.key("phase");
+                let specs = l
+                    .phase
+                    .as_ref()
+                    .ok_or_else(|| self.err(&sec, "a layer with extinction needs `phase`"))?;
+                let specs: Vec<&PhaseSpecFile> = match specs {
+                    file::OneOrMany::One(s) => vec![s; nch],
+                    file::OneOrMany::Many(v) if v.len() == nch => v.iter().collect(),
+                    file::OneOrMany::Many(v) => {
+                        return Err(self.err(
+                            &phase_at,
+                            format!(
+                                "has {} entries; give one or one per channel ({nch})",
+                                v.len()
+                            ),
+                        ));
+                    }
+                };
+                let mut phase: Vec<Arc<PhaseFunction>> = Vec::new();
+                for (k, s) in specs.iter().enumerate() {
+                    // Identical specs share one phase function (tables are large).
+                    if let Some(j) = (0..k).find(|&j| specs[j] == *s) {
+                        phase.push(phase[j].clone());
+                    } else {
+                        phase.push(Arc::new(self.phase(&phase_at, s, &channels[k])?));
+                    }
+                }
+                (e, ssa, phase)
+            }
+            None => {
+                if l.single_scattering_albedo.is_some() || l.phase.is_some() {
+                    return Err(self.err(
+                        &sec,
+                        "`single_scattering_albedo` and `phase` need `extinction_per_m` or `extinction_per_km`",
+                    ));
+                }
+                (
+                    vec![0.0; nch],
+                    vec![1.0; nch],
+                    (0..nch).map(|_| Arc::new(PhaseFunction::Isotropic)).collect(),
+                )
+            }
+        };
+        let absorption_per_m = match &l.absorption_per_m {
+            Some(v) => {
+                let at = sec.key("absorption_per_m");
+                let a = self.per_channel(&at, v, nch)?;
+                for x in &a {
+                    self.non_negative(&at, *x)?;
+                }
+                a
+            }
+            None => vec![0.0; nch],
+        };
+        if !has_particles && l.absorption_per_m.is_none() {
+            return Err(self.err(
+                &sec,
+                "a layer needs particles (`extinction_per_m`/`_per_km`) or `absorption_per_m`",
+            ));
+        }
+        Ok(Layer {
+            name,
+            base_m: l.base_m,
+            top_m: l.top_m,
+            extinction_per_m,
+            single_scattering_albedo,
+            phase,
+            absorption_per_m,
+        })
+    }
+
+    fn phase(
+        &self,
+        at: &KeyPath,
+        spec: &PhaseSpecFile,
+        channel: &Channel,
+    ) -> Result<PhaseFunction, InputError> {
+        let bad = |m: String| self.err(at, m);
+        Ok(match spec {
+            PhaseSpecFile::Isotropic {} => PhaseFunction::Isotropic,
+            PhaseSpecFile::Rayleigh {
+                depolarization_factor,
+            } => {
+                let rho = match depolarization_factor {
+                    Some(r) => *r,
+                    None => rayleigh::depolarisation_factor(channel.wavelength_nm())
+                        .map_err(|e| bad(e.to_string()))?,
+                };
+                PhaseFunction::Rayleigh(
+                    RayleighPhase::from_depolarisation(rho).map_err(|e| bad(e.to_string()))?,
+                )
+            }
+            PhaseSpecFile::HenyeyGreenstein { g } => PhaseFunction::HenyeyGreenstein(
+                HenyeyGreenstein::new(*g).map_err(|e| bad(e.to_string()))?,
+            ),
+            PhaseSpecFile::DoubleHenyeyGreenstein { f, g1, g2 } => {
+                PhaseFunction::double_hg(*f, *g1, *g2).map_err(|e| bad(e.to_string()))?
+            }
+            PhaseSpecFile::Table { file, builtin } => {
+                let table = match (file, builtin) {
+                    (Some(f), None) => {
+                        let p = self.path.parent().unwrap_or(Path::new(".")).join(f);
+                        PhaseTable::read(&p)
+                            .map_err(|e| bad(format!("phase-function table: {e}")))?
+                    }
+                    (None, Some(name)) => builtin_table(name).map_err(bad)?,
+                    _ => {
+                        return Err(bad(
+                            "a table phase function needs `file` (relative to the scene) or `builtin`, not both".into(),
+                        ));
+                    }
+                };
+                PhaseFunction::Tabulated(Box::new(
+                    TabulatedPhase::from_table(&table).map_err(|e| bad(e.to_string()))?,
+                ))
+            }
+        })
+    }
+
+    fn simulation(&self, raw: &SceneFile) -> Result<Simulation, InputError> {
+        let s = raw.simulation.clone().unwrap_or_default();
+        let sec = KeyPath::table("simulation");
+        let sim = Simulation {
+            photons: s.photons.unwrap_or(1_000_000),
+            seed: s.seed.unwrap_or(1),
+            max_order: s.max_order.unwrap_or(5),
+            threads: s.threads.unwrap_or(0),
+            batches: s.batches.unwrap_or(100),
+        };
+        if sim.max_order < 1 || sim.max_order > 1000 {
+            return Err(self.err(&sec.key("max_order"), "must lie in 1..=1000"));
+        }
+        if sim.batches < 2 {
+            return Err(self.err(
+                &sec.key("batches"),
+                "needs at least 2 batches for error bars",
+            ));
+        }
+        if sim.photons < sim.batches as u64 {
+            return Err(self.err(
+                &sec.key("photons"),
+                "must be at least the number of batches",
+            ));
+        }
+        Ok(sim)
+    }
+}
+
+impl Scene {
+    /// Override the Monte Carlo settings from the command line (validated like the file).
+    pub fn override_simulation(
+        &mut self,
+        photons: Option<u64>,
+        seed: Option<u64>,
+        threads: Option<usize>,
+    ) -> Result<(), String> {
+        if let Some(p) = photons {
+            if p < self.simulation.batches as u64 {
+                return Err(format!(
+                    "--photons {p} is fewer than the {} batches",
+                    self.simulation.batches
+                ));
+            }
+            self.simulation.photons = p;
+        }
+        if let Some(s) = seed {
+            self.simulation.seed = s;
+        }
+        if let Some(t) = threads {
+            self.simulation.threads = t;
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,1 @@
+//! Unit tests of scene parsing (the documented errors are tested in tests/scene.rs).

@@ -1,0 +1,372 @@
+//! Time-resolved Monte Carlo transport of photon packets through the optical atmosphere.
+//!
+//! Consumes a [`Scene`] (lidar, gates, settings) and its [`OpticalAtmosphere`]; produces
+//! [`Returns`] by channel × FOV × range gate × scattering order with standard errors, plus a
+//! flux tally (energy leaving up, down, absorbed, cut) and run counters.
+//!
+//! This module drives batches and merges them; `photon.rs` follows one photon from top to
+//! bottom. Photons are split into fixed batches; batch i draws from its own random stream
+//! ([`crate::rng::streams`]) and scores into its own buffer; buffers are folded in batch order.
+//! The numbers therefore depend on the scene and the seed, never on the thread count.
+
+mod photon;
+mod tally;
+
+use std::io::IsTerminal;
+use std::time::{Duration, Instant};
+
+use glam::DVec3;
+use rayon::prelude::*;
+use thiserror::Error;
+
+use crate::optics::OpticalAtmosphere;
+use crate::returns::Returns;
+use crate::rng::{self, Stream};
+use crate::scene::{BeamProfile, Scene};
+
+pub use tally::Flux;
+use tally::{Accumulator, TallyShape};
+
+/// Run counters, summed over batches.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct RunStats {
+    /// Photon packets emitted.
+    pub photons: u64,
+    /// Scattering events in the atmosphere.
+    pub collisions: u64,
+    /// Reflections at the surface.
+    pub surface_reflections: u64,
+    /// Local estimates that reached a gate inside a field of view.
+    pub local_estimates: u64,
+    /// Photons ended by Russian roulette.
+    pub roulette_kills: u64,
+    /// Photons ended because no gate could still receive them.
+    pub cut: u64,
+    /// Photons that left the atmosphere.
+    pub escaped: u64,
+}
+
+impl RunStats {
+    fn add(&mut self, o: &RunStats) {
+        self.photons += o.photons;
+        self.collisions += o.collisions;
+        self.surface_reflections += o.surface_reflections;
+        self.local_estimates += o.local_estimates;
+        self.roulette_kills += o.roulette_kills;
+        self.cut += o.cut;
+        self.escaped += o.escaped;
+    }
+}
+
+/// How to run the transport.
+#[derive(Debug, Clone)]
+pub struct TransportOptions {
+    /// Photon packets (rounded up to a whole number per batch).
+    pub photons: u64,
+    /// Random seed.
+    pub seed: u64,
+    /// Number of batches (≥ 2).
+    pub batches: usize,
+    /// Worker threads (0: all cores).
+    pub threads: usize,
+    /// Highest order tallied separately.
+    pub max_order: u32,
+    /// Also tally the energy leaving the scene and absorbed in it (costs a layer walk per
+    /// flight).
+    pub flux_tally: bool,
+    /// Show a progress bar on a terminal for runs longer than about a second.
+    pub progress: bool,
+}
+
+impl TransportOptions {
+    /// The scene's own settings.
+    pub fn from_scene(scene: &Scene) -> Self {
+        let s = &scene.simulation;
+        TransportOptions {
+            photons: s.photons,
+            seed: s.seed,
+            batches: s.batches,
+            threads: s.threads,
+            max_order: s.max_order,
+            flux_tally: false,
+            progress: false,
+        }
+    }
+}
+
+/// A problem running the transport.
+#[derive(Debug, Error)]
+#[non_exhaustive]
+pub enum TransportError {
+    /// The worker pool could not be built.
+    #[error("cannot start {0} worker threads: {1}")]
+    Threads(usize, String),
+    /// Nonsensical options.
+    #[error("transport options: {0}")]
+    Options(String),
+}
+
+/// What a transport run produces.
+#[derive(Debug, Clone)]
+pub struct McResult {
+    /// Received energy by channel, FOV, gate and order, with standard errors.
+    pub returns: Returns,
+    /// Energy leaving the scene per channel, as a fraction of the emitted energy (zero unless
+    /// the flux tally was on).
+    pub flux: Flux,
+    /// Standard errors of `flux`.
+    pub flux_stderr: Flux,
+    /// Counters.
+    pub stats: RunStats,
+    /// Wall-clock time of the transport [s].
+    pub wall_s: f64,
+    /// Photons actually traced.
+    pub photons: u64,
+    /// Worker threads used.
+    pub threads: usize,
+}
+
+/// Read-only set-up shared by all batches.
+pub(crate) struct Setup<'a> {
+    atm: &'a OpticalAtmosphere,
+    receiver: DVec3,
+    axis: DVec3,
+    axis_e1: DVec3,
+    axis_e2: DVec3,
+    beam_half_angle_rad: f64,
+    beam_profile: BeamProfile,
+    /// cos of FOV half-angles, narrowest first.
+    fov_cos: Vec<f64>,
+    shape: TallyShape,
+    gate_start_m: f64,
+    gate_width_m: f64,
+    r_end_m: f64,
+    max_order: u32,
+    surface: Option<Vec<f64>>,
+    flux_tally: bool,
+    /// Cumulative vertical extinction optical depth at the receiver altitude, per channel.
+    tau_rx: Vec<f64>,
+    /// Reference-channel cumulative scattering optical depth at the edges, and σ_s per layer.
+    cum_ref: Vec<f64>,
+    sigma_ref: Vec<f64>,
+}
+
+impl Setup<'_> {
+    /// Order bin: exact orders 1..=max_order, then the overflow bin.
+    #[inline]
+    fn order_bin(&self, order: u32) -> usize {
+        (order.min(self.max_order + 1) - 1) as usize
+    }
+
+    /// Phase function of the scatterer mixture of `layer` for channel k at μ.
+    #[inline]
+    fn mixture_phase(&self, layer: usize, k: usize, mu: f64) -> f64 {
+        let comps = &self.atm.components[layer];
+        if comps.len() == 1 {
+            return self.atm.phases[comps[0].phase[k] as usize].eval(mu);
+        }
+        let total = self.atm.sigma_s_per_m[layer * self.atm.n_channels + k];
+        if total <= 0.0 {
+            return 0.0;
+        }
+        comps
+            .iter()
+            .map(|c| c.sigma_s_per_m[k] * self.atm.phases[c.phase[k] as usize].eval(mu))
+            .sum::<f64>()
+            / total
+    }
+
+    /// Extinction optical depth from altitude z (cumulative value `t_here`) to the receiver along
+    /// a straight line with vertical direction cosine `omega_z` and length d.
+    #[inline]
+    fn tau_to_receiver(
+        &self,
+        z: f64,
+        omega_z: f64,
+        d: f64,
+        layer: usize,
+        k: usize,
+        t_here: f64,
+    ) -> f64 {
+        if omega_z.abs() < 1e-12 {
+            let atm = self.atm;
+            if atm.n_layers() == 0 || z < atm.bottom_m() || z > atm.top_m() {
+                return 0.0;
+            }
+            let i = layer * atm.n_channels + k;
+            return (atm.sigma_s_per_m[i] + atm.sigma_a_per_m[i]) * d;
+        }
+        (t_here - self.tau_rx[k]).abs() / omega_z.abs()
+    }
+
+    /// Altitude (and its layer) at which a photon leaving a point of cumulative reference
+    /// scattering optical depth `t0` with direction cosine μ ≠ 0 has accumulated τ*.
+    #[inline]
+    fn altitude_at_tau(&self, t0: f64, mu: f64, tau_star: f64) -> (f64, usize) {
+        let target = t0 + tau_star * mu;
+        let n = self.sigma_ref.len();
+        let l = if mu > 0.0 {
+            self.cum_ref.partition_point(|c| *c <= target)
+        } else {
+            self.cum_ref.partition_point(|c| *c < target)
+        }
+        .saturating_sub(1)
+        .min(n - 1);
+        let e = &self.atm.edges_m;
+        let sigma = self.sigma_ref[l];
+        let z = if sigma > 0.0 {
+            e[l] + (target - self.cum_ref[l]) / sigma
+        } else {
+            e[l]
+        };
+        (z.clamp(e[l], e[l + 1]), l)
+    }
+}
+
+/// Run the Monte Carlo transport of a scene through its optical atmosphere.
+pub fn run(
+    scene: &Scene,
+    atm: &OpticalAtmosphere,
+    opts: &TransportOptions,
+) -> Result<McResult, TransportError> {
+    if opts.batches < 2 || opts.photons < opts.batches as u64 {
+        return Err(TransportError::Options(format!(
+            "{} photons in {} batches: need at least 2 batches and one photon per batch",
+            opts.photons, opts.batches
+        )));
+    }
+    let lidar = &scene.lidar;
+    let nch = scene.channels.len();
+    let axis = lidar.axis();
+    let (axis_e1, axis_e2) = axis.any_orthonormal_pair();
+    let receiver = DVec3::new(0.0, 0.0, lidar.altitude_m);
+
+    // FOV annuli: narrowest first.
+    let mut fov_order: Vec<usize> = (0..lidar.fov_full_angle_mrad.len()).collect();
+    fov_order
+        .sort_by(|a, b| lidar.fov_full_angle_mrad[*a].total_cmp(&lidar.fov_full_angle_mrad[*b]));
+    let fov_cos: Vec<f64> = fov_order
+        .iter()
+        .map(|i| (0.5e-3 * lidar.fov_full_angle_mrad[*i]).cos())
+        .collect();
+
+    let shape = TallyShape {
+        n_gates: scene.gates.count,
+        n_order_bins: opts.max_order as usize + 1,
+        n_fov: fov_order.len(),
+        n_channels: nch,
+    };
+    let n_layers = atm.n_layers();
+    let setup = Setup {
+        atm,
+        receiver,
+        axis,
+        axis_e1,
+        axis_e2,
+        beam_half_angle_rad: 0.5e-3 * lidar.beam_divergence_full_angle_mrad,
+        beam_profile: lidar.beam_profile,
+        fov_cos,
+        shape,
+        gate_start_m: scene.gates.start_m,
+        gate_width_m: scene.gates.width_m,
+        r_end_m: scene.gates.end_m(),
+        max_order: opts.max_order,
+        surface: scene.surface.as_ref().map(|s| s.albedo.clone()),
+        flux_tally: opts.flux_tally,
+        tau_rx: (0..nch)
+            .map(|k| {
+                let (s, a) = atm.cumulative_tau(receiver.z, k);
+                s + a
+            })
+            .collect(),
+        cum_ref: (0..atm.edges_m.len())
+            .map(|e| atm.cum_tau_s[e * nch])
+            .collect(),
+        sigma_ref: (0..n_layers).map(|l| atm.sigma_s_per_m[l * nch]).collect(),
+    };
+
+    let batches = opts.batches;
+    let per_batch = opts.photons.div_ceil(batches as u64);
+    let streams = rng::streams(opts.seed, Stream::Transport, batches);
+    // Energy per photon reaching the detector, per unit weight × geometric factor.
+    let scale = lidar.pulse_energy_j * lidar.optical_efficiency * lidar.telescope_area_m2()
+        / per_batch as f64;
+    let flux_scale = 1.0 / per_batch as f64;
+
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(opts.threads)
+        .build()
+        .map_err(|e| TransportError::Threads(opts.threads, e.to_string()))?;
+    let threads = pool.current_num_threads();
+
+    let mut acc = Accumulator::new(shape, fov_order);
+    let mut stats = RunStats::default();
+    let started = Instant::now();
+    let bar = indicatif::ProgressBar::hidden();
+    bar.set_length(batches as u64);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{spinner} transport {bar:40} {pos}/{len} batches, {elapsed} (eta {eta})",
+        )
+        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    let show_bar = opts.progress && std::io::stderr().is_terminal();
+
+    // Chunks keep at most a few batch buffers alive; their size does not change the numbers.
+    let chunk = (4 * threads).max(1);
+    let mut start = 0;
+    while start < batches {
+        let end = (start + chunk).min(batches);
+        let results: Vec<(Vec<f64>, Flux, RunStats)> = pool.install(|| {
+            (start..end)
+                .into_par_iter()
+                .map(|b| {
+                    let mut rng = streams[b].clone();
+                    let mut tracer = photon::Tracer::new(&setup);
+                    for _ in 0..per_batch {
+                        tracer.trace(&mut rng);
+                    }
+                    bar.inc(1);
+                    (tracer.bins, tracer.flux, tracer.stats)
+                })
+                .collect()
+        });
+        for (mut bins, mut flux, st) in results {
+            bins.iter_mut().for_each(|v| *v *= scale);
+            for part in [
+                &mut flux.up,
+                &mut flux.down,
+                &mut flux.absorbed,
+                &mut flux.cut,
+            ] {
+                part.iter_mut().for_each(|v| *v *= flux_scale);
+            }
+            acc.add_batch(&bins, &flux);
+            stats.add(&st);
+        }
+        if show_bar && bar.is_hidden() && started.elapsed() > Duration::from_secs(1) {
+            bar.set_draw_target(indicatif::ProgressDrawTarget::stderr());
+        }
+        start = end;
+    }
+    bar.finish_and_clear();
+    let wall_s = started.elapsed().as_secs_f64();
+
+    let range_m = (0..scene.gates.count)
+        .map(|i| scene.gates.centre_m(i))
+        .collect();
+    let (returns, flux, flux_stderr) = acc.finish(
+        scene.channels.iter().map(|c| c.name.clone()).collect(),
+        lidar.fov_full_angle_mrad.clone(),
+        range_m,
+    );
+    Ok(McResult {
+        returns,
+        flux,
+        flux_stderr,
+        stats,
+        wall_s,
+        photons: per_batch * batches as u64,
+        threads,
+    })
+}

@@ -1,0 +1,463 @@
+//! One photon packet's life, read from top to bottom:
+//! emit → (range check → flight → surface or collision → local estimate → roulette → scatter)*.
+//!
+//! Method (DESIGN §2; `docs/methods.md` has the derivations):
+//! * Free paths are sampled on the scattering coefficient of the reference channel (channel 0);
+//!   all absorption, and any difference in scattering between channels, rides in per-channel
+//!   weights (ALIS, Emde et al. 2011, JQSRT 112, 1622): per segment
+//!   w_k ← w_k · e^{−τ_a,k} · (σ_s,k/σ_s,0) · e^{−(τ_s,k − τ_s,0)}, and after a scattering
+//!   w_k ← w_k · P_k(Θ)/P_0(Θ). Hence the local estimate carries no single-scattering albedo.
+//! * Every flight is cut to the part of its path from which the photon could still reach a gate
+//!   (an ellipsoid with the receiver as one focus: total path + return leg ≤ 2 r_end). A collision
+//!   is forced inside that part with weight factor 1 − e^{−τ}, the uncollided remainder being
+//!   scored to the flux tally as escaped (Cashwell & Everett 1959; Marchuk et al. 1980). A flight
+//!   that ends on the surface instead either collides (probability q = max(1 − e^{−τ}, ½)) or
+//!   reaches the surface (1 − q), each branch weighted by true/chosen probability, so that thin
+//!   atmospheres over a bright surface still get scattering events.
+//! * The surface contribution to the signal is scored at every flight that heads for the surface,
+//!   as an expected value (the uncollided weight e^{−τ} reaching it), not when the photon happens
+//!   to arrive; the reflected branch then continues without scoring again.
+//! * Local (peel-off) estimate at every collision for every field of view at once:
+//!   ΔE_k = w_k · P(Θ_r)/(4π) · cos θ_r/d² · e^{−τ_k(x→receiver)}, and at the surface
+//!   ΔE_k = w_k e^{−τ_k} · ρ_k cos θ_s/π · cos θ_r/d² · e^{−τ_k(S→receiver)}; the telescope area,
+//!   optical efficiency and pulse energy per photon multiply in once, when a batch is folded.
+//! * Russian roulette below a weight of 1e-2 (survivors continue at 5e-2).
+
+use std::f64::consts::PI;
+
+use glam::DVec3;
+use rand::RngExt;
+
+use super::tally::{Flux, TallyShape};
+use super::{RunStats, Setup};
+use crate::rng::Rng;
+use crate::scene::BeamProfile;
+
+/// Weight below which Russian roulette is played, and the weight survivors continue with.
+const ROULETTE_BELOW: f64 = 1e-2;
+const ROULETTE_SURVIVOR: f64 = 5e-2;
+/// Smallest probability of colliding before the surface on a flight that ends there.
+const MIN_COLLISION_PROBABILITY: f64 = 0.5;
+/// Direction cosines below this are treated as horizontal (the flight stays in its layer).
+const HORIZONTAL: f64 = 1e-12;
+
+/// Per-batch state: buffers reused by every photon of the batch.
+pub(crate) struct Tracer<'a> {
+    s: &'a Setup<'a>,
+    /// Weights per channel.
+    w: Vec<f64>,
+    /// Cumulative vertical scattering / absorption optical depth at the photon's altitude.
+    ts: Vec<f64>,
+    ta: Vec<f64>,
+    /// Scratch per channel.
+    tmp: Vec<f64>,
+    pub bins: Vec<f64>,
+    pub flux: Flux,
+    pub stats: RunStats,
+    shape: TallyShape,
+}
+
+/// Where a flight ends if nothing happens on the way.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum End {
+    Top,
+    Bottom,
+    Surface,
+    Cut,
+}
+
+impl<'a> Tracer<'a> {
+    pub fn new(s: &'a Setup<'a>) -> Self {
+        let nch = s.atm.n_channels;
+        Tracer {
+            s,
+            w: vec![0.0; nch],
+            ts: vec![0.0; nch],
+            ta: vec![0.0; nch],
+            tmp: vec![0.0; nch],
+            bins: vec![0.0; s.shape.len()],
+            flux: Flux::zeros(nch),
+            stats: RunStats::default(),
+            shape: s.shape,
+        }
+    }
+
+    /// Update the cumulative optical depths for altitude z.
+    #[inline]
+    fn set_altitude(&mut self, z: f64) {
+        for k in 0..self.w.len() {
+            let (s, a) = self.s.atm.cumulative_tau(z, k);
+            self.ts[k] = s;
+            self.ta[k] = a;
+        }
+    }
+
+    /// Follow one photon from emission to its end.
+    pub fn trace(&mut self, rng: &mut Rng) {
+        let s = self.s;
+        let atm = s.atm;
+        let nch = self.w.len();
+        self.stats.photons += 1;
+
+        // Emit: from the receiver position into the divergence cone around the axis.
+        let mut pos = s.receiver;
+        let mut dir = s.emit_direction(rng.random(), rng.random());
+        let mut path = 0.0;
+        let mut order = 0u32;
+        self.w.iter_mut().for_each(|w| *w = 1.0);
+        self.set_altitude(pos.z);
+
+        loop {
+            // Range check: even a straight return from here arrives after the last gate.
+            let to_rx = s.receiver - pos;
+            let d0 = to_rx.length();
+            let budget = 2.0 * s.r_end_m - path;
+            if d0 >= budget {
+                self.stats.cut += 1;
+                for k in 0..nch {
+                    self.flux.cut[k] += self.w[k];
+                }
+                return;
+            }
+
+            // Flight: the useful part of the path and where it ends.
+            let mu = dir.z;
+            let (s_bound, boundary) = if mu > HORIZONTAL {
+                if pos.z >= atm.top_m() {
+                    (0.0, End::Top)
+                } else {
+                    ((atm.top_m() - pos.z) / mu, End::Top)
+                }
+            } else if mu < -HORIZONTAL {
+                let end = if s.surface.is_some() {
+                    End::Surface
+                } else {
+                    End::Bottom
+                };
+                if pos.z <= atm.bottom_m() {
+                    (0.0, end)
+                } else {
+                    ((atm.bottom_m() - pos.z) / mu, end)
+                }
+            } else {
+                (f64::INFINITY, End::Top)
+            };
+            // Ellipsoid with foci at the photon and the receiver: path + s + |rx − x(s)| = 2 r_end.
+            let s_range = (budget * budget - d0 * d0) / (2.0 * (budget - dir.dot(to_rx)));
+            let (s_end, end) = if s_range < s_bound {
+                (s_range, End::Cut)
+            } else {
+                (s_bound, boundary)
+            };
+
+            // Optical depths along the flight: reference scattering, and every channel.
+            let horizontal = mu.abs() <= HORIZONTAL;
+            let layer0 = atm.layer_of(pos.z);
+            let inside = atm.n_layers() > 0 && pos.z >= atm.bottom_m() && pos.z <= atm.top_m();
+            let z_end = pos.z + mu * s_end;
+            let tau_ref = if horizontal {
+                if inside {
+                    atm.sigma_s_per_m[layer0 * nch] * s_end
+                } else {
+                    0.0
+                }
+            } else {
+                (atm.cumulative_tau(z_end, 0).0 - self.ts[0]).abs() / mu.abs()
+            };
+            // Extinction to the end of the flight per channel, into tmp.
+            for k in 0..nch {
+                self.tmp[k] = if horizontal {
+                    if inside {
+                        let i = layer0 * nch + k;
+                        (atm.sigma_s_per_m[i] + atm.sigma_a_per_m[i]) * s_end
+                    } else {
+                        0.0
+                    }
+                } else {
+                    let (ts1, ta1) = atm.cumulative_tau(z_end, k);
+                    ((ts1 - self.ts[k]) + (ta1 - self.ta[k])).abs() / mu.abs()
+                };
+            }
+            if s.flux_tally {
+                self.score_absorption(pos.z, mu, s_end);
+            }
+
+            let p_collide = -(-tau_ref).exp_m1(); // 1 − e^{−τ}, accurate for small τ
+            let collide_factor;
+            if end == End::Surface {
+                let hit = pos + dir * s_end;
+                self.score_surface(hit, path + s_end, order + 1);
+                let q = if tau_ref > 0.0 {
+                    p_collide.max(MIN_COLLISION_PROBABILITY)
+                } else {
+                    0.0
+                };
+                let albedo = s.surface.as_ref().map_or(&[][..], |v| v.as_slice());
+                if rng.random::<f64>() >= q {
+                    // Reach the surface and reflect (its signal was scored above).
+                    for k in 0..nch {
+                        let arriving = self.w[k] * (-self.tmp[k]).exp();
+                        self.flux.down[k] += arriving * (1.0 - albedo[k]);
+                        self.w[k] = arriving / (1.0 - q) * albedo[k];
+                    }
+                    pos = hit;
+                    pos.z = atm.bottom_m();
+                    path += s_end;
+                    order += 1;
+                    self.stats.surface_reflections += 1;
+                    self.set_altitude(pos.z);
+                    dir = lambertian(rng.random(), rng.random());
+                    if !self.roulette(rng) {
+                        return;
+                    }
+                    continue;
+                }
+                // Collide before the surface; the surface absorbs its share in expectation.
+                for k in 0..nch {
+                    self.flux.down[k] += self.w[k] * (-self.tmp[k]).exp() * (1.0 - albedo[k]);
+                }
+                collide_factor = p_collide / q;
+            } else {
+                // Escape or cut: the uncollided part leaves; a collision is forced in the rest.
+                let out = match end {
+                    End::Top => &mut self.flux.up,
+                    End::Bottom => &mut self.flux.down,
+                    _ => &mut self.flux.cut,
+                };
+                for k in 0..nch {
+                    out[k] += self.w[k] * (-self.tmp[k]).exp();
+                }
+                if !(tau_ref > 0.0) {
+                    self.stats.escaped += 1;
+                    return;
+                }
+                collide_factor = p_collide;
+            }
+
+            // Sample the collision: τ* from the exponential truncated to [0, τ_ref).
+            let tau_star = -(-rng.random::<f64>() * p_collide).ln_1p();
+            let (s_coll, layer) = if horizontal {
+                (tau_star / atm.sigma_s_per_m[layer0 * nch], layer0)
+            } else {
+                let (z, l) = s.altitude_at_tau(self.ts[0], mu, tau_star);
+                (((z - pos.z) / mu).clamp(0.0, s_end), l)
+            };
+            pos += dir * s_coll;
+            path += s_coll;
+            order += 1;
+            self.stats.collisions += 1;
+
+            // Per-channel weights over the flight (ALIS): absorption, and the scattering ratio
+            // where channels scatter differently (for channel 0 that factor is 1).
+            let i = layer * nch;
+            let dts_ref = if horizontal {
+                atm.sigma_s_per_m[i] * s_coll
+            } else {
+                (atm.cumulative_tau(pos.z, 0).0 - self.ts[0]).abs() / mu.abs()
+            };
+            for k in 0..nch {
+                let (ts_new, ta_new) = atm.cumulative_tau(pos.z, k);
+                let (dts, dta) = if horizontal {
+                    (
+                        atm.sigma_s_per_m[i + k] * s_coll,
+                        atm.sigma_a_per_m[i + k] * s_coll,
+                    )
+                } else {
+                    (
+                        (ts_new - self.ts[k]).abs() / mu.abs(),
+                        (ta_new - self.ta[k]).abs() / mu.abs(),
+                    )
+                };
+                let mut f = collide_factor * (-dta).exp();
+                if !atm.grey_scattering {
+                    f *= atm.sigma_s_per_m[i + k] / atm.sigma_s_per_m[i] * (-(dts - dts_ref)).exp();
+                }
+                self.w[k] *= f;
+                self.ts[k] = ts_new;
+                self.ta[k] = ta_new;
+            }
+
+            // Local estimate toward the receiver, every field of view.
+            self.score_collision(pos, dir, path, order, layer);
+
+            if !self.roulette(rng) {
+                return;
+            }
+
+            // Scatter: pick a scatterer by its share of the reference scattering, then Θ from
+            // its phase function and a uniform azimuth.
+            let comps = &atm.components[layer];
+            let c = if comps.len() == 1 {
+                0
+            } else {
+                let mut x = rng.random::<f64>() * atm.sigma_s_per_m[layer * nch];
+                let mut c = comps.len() - 1;
+                for (j, comp) in comps.iter().enumerate() {
+                    x -= comp.sigma_s_per_m[0];
+                    if x < 0.0 {
+                        c = j;
+                        break;
+                    }
+                }
+                c
+            };
+            let mu_s = atm.phases[comps[c].phase[0] as usize].sample(rng.random());
+            let phi = 2.0 * PI * rng.random::<f64>();
+            let new_dir = rotate(dir, mu_s, phi);
+            if !atm.grey_scattering {
+                let p0 = s.mixture_phase(layer, 0, mu_s);
+                for k in 1..nch {
+                    self.w[k] *= s.mixture_phase(layer, k, mu_s) / p0;
+                }
+            }
+            dir = new_dir;
+        }
+    }
+
+    /// Russian roulette on the largest channel weight; false if the photon dies.
+    #[inline]
+    fn roulette(&mut self, rng: &mut Rng) -> bool {
+        let w_max = self.w.iter().fold(0.0f64, |m, w| m.max(*w));
+        if w_max >= ROULETTE_BELOW {
+            return true;
+        }
+        let p = w_max / ROULETTE_SURVIVOR;
+        if rng.random::<f64>() < p {
+            self.w.iter_mut().for_each(|w| *w /= p);
+            true
+        } else {
+            self.stats.roulette_kills += 1;
+            false
+        }
+    }
+
+    /// Gate of a return arriving after a total path of `two_way_m`, if any.
+    #[inline]
+    fn gate(&self, two_way_m: f64) -> Option<usize> {
+        let r = 0.5 * two_way_m;
+        let x = (r - self.s.gate_start_m) / self.s.gate_width_m;
+        if x >= 0.0 && x < self.shape.n_gates as f64 {
+            Some(x as usize)
+        } else {
+            None
+        }
+    }
+
+    /// Narrowest field-of-view annulus containing the direction to x, if any.
+    #[inline]
+    fn annulus(&self, cos_axis: f64) -> Option<usize> {
+        self.s.fov_cos.iter().position(|c| cos_axis >= *c)
+    }
+
+    /// Local estimate from a collision at `x` in `layer` of a photon travelling along `dir`.
+    fn score_collision(&mut self, x: DVec3, dir: DVec3, path: f64, order: u32, layer: usize) {
+        let s = self.s;
+        let v = s.receiver - x;
+        let d2 = v.length_squared();
+        let d = d2.sqrt();
+        let omega = v / d;
+        let cos_axis = -omega.dot(s.axis);
+        let Some(annulus) = self.annulus(cos_axis) else {
+            return;
+        };
+        let Some(gate) = self.gate(path + d) else {
+            return;
+        };
+        self.stats.local_estimates += 1;
+        let mu_s = dir.dot(omega);
+        let p_ref = s.mixture_phase(layer, 0, mu_s);
+        let geometric = p_ref * (0.25 / PI) * cos_axis / d2;
+        let base = self.shape.base(gate, s.order_bin(order), annulus);
+        let nch = self.w.len();
+        for k in 0..nch {
+            let tau = s.tau_to_receiver(x.z, omega.z, d, layer, k, self.ts[k] + self.ta[k]);
+            let mut e = self.w[k] * geometric * (-tau).exp();
+            if !s.atm.grey_scattering && k > 0 {
+                e *= s.mixture_phase(layer, k, mu_s) / p_ref;
+            }
+            self.bins[base + k] += e;
+        }
+    }
+
+    /// Expected surface contribution of a flight that heads for the surface point `hit`; the
+    /// uncollided weights are w_k e^{−tmp_k}.
+    fn score_surface(&mut self, hit: DVec3, path: f64, order: u32) {
+        let s = self.s;
+        let Some(albedo) = &s.surface else { return };
+        let v = s.receiver - hit;
+        let d2 = v.length_squared();
+        let d = d2.sqrt();
+        let omega = v / d;
+        if omega.z <= 0.0 {
+            return;
+        }
+        let cos_axis = -omega.dot(s.axis);
+        let Some(annulus) = self.annulus(cos_axis) else {
+            return;
+        };
+        let Some(gate) = self.gate(path + d) else {
+            return;
+        };
+        self.stats.local_estimates += 1;
+        let geometric = omega.z / PI * cos_axis / d2;
+        let base = self.shape.base(gate, s.order_bin(order), annulus);
+        let layer = 0;
+        for k in 0..self.w.len() {
+            let (ts, ta) = s.atm.cumulative_tau(hit.z, k);
+            let tau_back = s.tau_to_receiver(hit.z, omega.z, d, layer, k, ts + ta);
+            self.bins[base + k] +=
+                self.w[k] * (-self.tmp[k]).exp() * albedo[k] * geometric * (-tau_back).exp();
+        }
+    }
+
+    /// Expected absorption in the atmosphere along a flight, per channel (flux tally only):
+    /// w_k ∫ σ_a e^{−τ_ext(s)} ds, layer by layer.
+    fn score_absorption(&mut self, z0: f64, mu: f64, s_end: f64) {
+        let atm = self.s.atm;
+        let nch = self.w.len();
+        for k in 0..nch {
+            self.flux.absorbed[k] += self.w[k] * atm.absorbed_fraction(z0, mu, s_end, k);
+        }
+    }
+}
+
+/// Rotate `dir` by a scattering angle with cosine `mu` and azimuth `phi`.
+#[inline]
+pub(crate) fn rotate(dir: DVec3, mu: f64, phi: f64) -> DVec3 {
+    let (e1, e2) = dir.any_orthonormal_pair();
+    let sin_t = (1.0 - mu * mu).max(0.0).sqrt();
+    let (sp, cp) = phi.sin_cos();
+    (dir * mu + (e1 * cp + e2 * sp) * sin_t).normalize()
+}
+
+/// Cosine-weighted (Lambertian) direction into the upper hemisphere.
+#[inline]
+fn lambertian(u1: f64, u2: f64) -> DVec3 {
+    let mu = u1.sqrt();
+    let sin_t = (1.0 - u1).sqrt();
+    let (sp, cp) = (2.0 * PI * u2).sin_cos();
+    DVec3::new(sin_t * cp, sin_t * sp, mu.max(1e-300))
+}
+
+impl Setup<'_> {
+    /// A direction inside the beam's divergence around the axis.
+    pub(crate) fn emit_direction(&self, u1: f64, u2: f64) -> DVec3 {
+        if self.beam_half_angle_rad == 0.0 {
+            return self.axis;
+        }
+        let theta = match self.beam_profile {
+            BeamProfile::Uniform => {
+                let cos_max = self.beam_half_angle_rad.cos();
+                (1.0 - u1 * (1.0 - cos_max)).acos()
+            }
+            // Intensity ∝ exp(−2θ²/θ_e²) with θ_e the 1/e² half-angle: a 2-D Gaussian with
+            // σ = θ_e/2 per axis, whose radial angle is Rayleigh distributed.
+            BeamProfile::Gaussian => {
+                0.5 * self.beam_half_angle_rad * (-2.0 * (1.0 - u1).ln()).sqrt()
+            }
+        };
+        let (sp, cp) = (2.0 * PI * u2).sin_cos();
+        let (st, ct) = theta.sin_cos();
+        (self.axis * ct + (self.axis_e1 * cp + self.axis_e2 * sp) * st).normalize()
+    }
+}
