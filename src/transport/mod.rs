@@ -137,6 +137,11 @@ pub(crate) struct Setup<'a> {
     beam_profile: BeamProfile,
     /// cos of FOV half-angles, narrowest first.
     fov_cos: Vec<f64>,
+    /// Square of the cosine of the widest half-angle.
+    fov_cos_widest_sq: f64,
+    has_layers: bool,
+    bottom_m: f64,
+    top_m: f64,
     shape: TallyShape,
     gate_start_m: f64,
     gate_width_m: f64,
@@ -199,6 +204,18 @@ impl Setup<'_> {
         (t_here - self.tau_rx[k]).abs() / omega_z.abs()
     }
 
+    /// Reference-channel cumulative vertical scattering optical depth at altitude z.
+    #[inline]
+    fn ref_tau_at(&self, z: f64) -> f64 {
+        if !self.has_layers {
+            return 0.0;
+        }
+        let z = z.clamp(self.bottom_m, self.top_m);
+        let e = &self.atm.edges_m;
+        let l = e.partition_point(|x| *x <= z).saturating_sub(1).min(self.sigma_ref.len() - 1);
+        self.cum_ref[l] + (z - e[l]) * self.sigma_ref[l]
+    }
+
     /// Altitude (and its layer) at which a photon leaving a point of cumulative reference
     /// scattering optical depth `t0` with direction cosine μ ≠ 0 has accumulated τ*.
     #[inline]
@@ -257,8 +274,13 @@ pub fn run(
         n_channels: nch,
     };
     let n_layers = atm.n_layers();
+    let widest = fov_cos.last().copied().unwrap_or(1.0);
     let setup = Setup {
         atm,
+        fov_cos_widest_sq: widest * widest,
+        has_layers: atm.n_layers() > 0,
+        bottom_m: atm.bottom_m(),
+        top_m: atm.top_m(),
         receiver,
         axis,
         axis_e1,

@@ -114,85 +114,68 @@ impl<'a> Tracer<'a> {
             let budget = 2.0 * s.r_end_m - path;
             if d0 >= budget {
                 self.stats.cut += 1;
-                for k in 0..nch {
-                    self.flux.cut[k] += self.w[k];
+                if s.flux_tally {
+                    for k in 0..nch {
+                        self.flux.cut[k] += self.w[k];
+                    }
                 }
                 return;
             }
 
             // Flight: the useful part of the path and where it ends.
             let mu = dir.z;
+            let horizontal = mu.abs() <= HORIZONTAL;
             let (s_bound, boundary) = if mu > HORIZONTAL {
-                if pos.z >= atm.top_m() {
-                    (0.0, End::Top)
-                } else {
-                    ((atm.top_m() - pos.z) / mu, End::Top)
-                }
+                ((s.top_m - pos.z).max(0.0) / mu, End::Top)
             } else if mu < -HORIZONTAL {
-                let end = if s.surface.is_some() {
-                    End::Surface
-                } else {
-                    End::Bottom
-                };
-                if pos.z <= atm.bottom_m() {
-                    (0.0, end)
-                } else {
-                    ((atm.bottom_m() - pos.z) / mu, end)
-                }
+                let end = if s.surface.is_some() { End::Surface } else { End::Bottom };
+                ((s.bottom_m - pos.z).min(0.0) / mu, end)
             } else {
                 (f64::INFINITY, End::Top)
             };
             // Ellipsoid with foci at the photon and the receiver: path + s + |rx − x(s)| = 2 r_end.
             let s_range = (budget * budget - d0 * d0) / (2.0 * (budget - dir.dot(to_rx)));
-            let (s_end, end) = if s_range < s_bound {
-                (s_range, End::Cut)
-            } else {
-                (s_bound, boundary)
-            };
+            let (s_end, end) =
+                if s_range < s_bound { (s_range, End::Cut) } else { (s_bound, boundary) };
 
-            // Optical depths along the flight: reference scattering, and every channel.
-            let horizontal = mu.abs() <= HORIZONTAL;
-            let layer0 = atm.layer_of(pos.z);
-            let inside = atm.n_layers() > 0 && pos.z >= atm.bottom_m() && pos.z <= atm.top_m();
-            let z_end = pos.z + mu * s_end;
+            // Reference scattering optical depth of the flight.
+            let inside = pos.z >= s.bottom_m && pos.z <= s.top_m && s.has_layers;
+            let layer0 = if horizontal && inside { atm.layer_of(pos.z) } else { 0 };
             let tau_ref = if horizontal {
-                if inside {
-                    atm.sigma_s_per_m[layer0 * nch] * s_end
-                } else {
-                    0.0
-                }
+                if inside { s.sigma_ref[layer0] * s_end } else { 0.0 }
             } else {
-                (atm.cumulative_tau(z_end, 0).0 - self.ts[0]).abs() / mu.abs()
+                (s.ref_tau_at(pos.z + mu * s_end) - self.ts[0]).abs() / mu.abs()
             };
-            // Extinction to the end of the flight per channel, into tmp.
-            for k in 0..nch {
-                self.tmp[k] = if horizontal {
-                    if inside {
-                        let i = layer0 * nch + k;
-                        (atm.sigma_s_per_m[i] + atm.sigma_a_per_m[i]) * s_end
+            // Per-channel extinction to the end of the flight (into tmp), only where needed.
+            let need_end_tau = end == End::Surface || s.flux_tally;
+            if need_end_tau {
+                let z_end = pos.z + mu * s_end;
+                for k in 0..nch {
+                    self.tmp[k] = if horizontal {
+                        if inside {
+                            let i = layer0 * nch + k;
+                            (atm.sigma_s_per_m[i] + atm.sigma_a_per_m[i]) * s_end
+                        } else {
+                            0.0
+                        }
                     } else {
-                        0.0
-                    }
-                } else {
-                    let (ts1, ta1) = atm.cumulative_tau(z_end, k);
-                    ((ts1 - self.ts[k]) + (ta1 - self.ta[k])).abs() / mu.abs()
-                };
+                        let (ts1, ta1) = atm.cumulative_tau(z_end, k);
+                        ((ts1 - self.ts[k]) + (ta1 - self.ta[k])).abs() / mu.abs()
+                    };
+                }
             }
             if s.flux_tally {
                 self.score_absorption(pos.z, mu, s_end);
             }
 
-            let p_collide = -(-tau_ref).exp_m1(); // 1 − e^{−τ}, accurate for small τ
+            // 1 − e^{−τ}, accurate for small τ; exactly 1 in double precision beyond τ ≈ 37.
+            let p_collide = if tau_ref > 40.0 { 1.0 } else { -(-tau_ref).exp_m1() };
             let collide_factor;
             if end == End::Surface {
                 let hit = pos + dir * s_end;
                 self.score_surface(hit, path + s_end, order + 1);
-                let q = if tau_ref > 0.0 {
-                    p_collide.max(MIN_COLLISION_PROBABILITY)
-                } else {
-                    0.0
-                };
-                let albedo = s.surface.as_ref().map_or(&[][..], |v| v.as_slice());
+                let q = if tau_ref > 0.0 { p_collide.max(MIN_COLLISION_PROBABILITY) } else { 0.0 };
+                let albedo = s.surface.as_deref().unwrap_or(&[]);
                 if rng.random::<f64>() >= q {
                     // Reach the surface and reflect (its signal was scored above).
                     for k in 0..nch {
@@ -201,7 +184,7 @@ impl<'a> Tracer<'a> {
                         self.w[k] = arriving / (1.0 - q) * albedo[k];
                     }
                     pos = hit;
-                    pos.z = atm.bottom_m();
+                    pos.z = s.bottom_m;
                     path += s_end;
                     order += 1;
                     self.stats.surface_reflections += 1;
@@ -219,13 +202,15 @@ impl<'a> Tracer<'a> {
                 collide_factor = p_collide / q;
             } else {
                 // Escape or cut: the uncollided part leaves; a collision is forced in the rest.
-                let out = match end {
-                    End::Top => &mut self.flux.up,
-                    End::Bottom => &mut self.flux.down,
-                    _ => &mut self.flux.cut,
-                };
-                for k in 0..nch {
-                    out[k] += self.w[k] * (-self.tmp[k]).exp();
+                if s.flux_tally {
+                    let out = match end {
+                        End::Top => &mut self.flux.up,
+                        End::Bottom => &mut self.flux.down,
+                        _ => &mut self.flux.cut,
+                    };
+                    for k in 0..nch {
+                        out[k] += self.w[k] * (-self.tmp[k]).exp();
+                    }
                 }
                 if !(tau_ref > 0.0) {
                     self.stats.escaped += 1;
@@ -237,7 +222,7 @@ impl<'a> Tracer<'a> {
             // Sample the collision: τ* from the exponential truncated to [0, τ_ref).
             let tau_star = -(-rng.random::<f64>() * p_collide).ln_1p();
             let (s_coll, layer) = if horizontal {
-                (tau_star / atm.sigma_s_per_m[layer0 * nch], layer0)
+                (tau_star / s.sigma_ref[layer0], layer0)
             } else {
                 let (z, l) = s.altitude_at_tau(self.ts[0], mu, tau_star);
                 (((z - pos.z) / mu).clamp(0.0, s_end), l)
@@ -250,25 +235,18 @@ impl<'a> Tracer<'a> {
             // Per-channel weights over the flight (ALIS): absorption, and the scattering ratio
             // where channels scatter differently (for channel 0 that factor is 1).
             let i = layer * nch;
-            let dts_ref = if horizontal {
-                atm.sigma_s_per_m[i] * s_coll
-            } else {
-                (atm.cumulative_tau(pos.z, 0).0 - self.ts[0]).abs() / mu.abs()
-            };
+            let dts_ref = if horizontal { tau_star } else { (s.ref_tau_at(pos.z) - self.ts[0]).abs() / mu.abs() };
             for k in 0..nch {
                 let (ts_new, ta_new) = atm.cumulative_tau(pos.z, k);
                 let (dts, dta) = if horizontal {
-                    (
-                        atm.sigma_s_per_m[i + k] * s_coll,
-                        atm.sigma_a_per_m[i + k] * s_coll,
-                    )
+                    (atm.sigma_s_per_m[i + k] * s_coll, atm.sigma_a_per_m[i + k] * s_coll)
                 } else {
-                    (
-                        (ts_new - self.ts[k]).abs() / mu.abs(),
-                        (ta_new - self.ta[k]).abs() / mu.abs(),
-                    )
+                    ((ts_new - self.ts[k]).abs() / mu.abs(), (ta_new - self.ta[k]).abs() / mu.abs())
                 };
-                let mut f = collide_factor * (-dta).exp();
+                let mut f = collide_factor;
+                if dta > 0.0 {
+                    f *= (-dta).exp();
+                }
                 if !atm.grey_scattering {
                     f *= atm.sigma_s_per_m[i + k] / atm.sigma_s_per_m[i] * (-(dts - dts_ref)).exp();
                 }
@@ -290,7 +268,7 @@ impl<'a> Tracer<'a> {
             let c = if comps.len() == 1 {
                 0
             } else {
-                let mut x = rng.random::<f64>() * atm.sigma_s_per_m[layer * nch];
+                let mut x = rng.random::<f64>() * s.sigma_ref[layer];
                 let mut c = comps.len() - 1;
                 for (j, comp) in comps.iter().enumerate() {
                     x -= comp.sigma_s_per_m[0];
@@ -302,8 +280,7 @@ impl<'a> Tracer<'a> {
                 c
             };
             let mu_s = atm.phases[comps[c].phase[0] as usize].sample(rng.random());
-            let phi = 2.0 * PI * rng.random::<f64>();
-            let new_dir = rotate(dir, mu_s, phi);
+            let new_dir = rotate(dir, mu_s, unit_azimuth(rng));
             if !atm.grey_scattering {
                 let p0 = s.mixture_phase(layer, 0, mu_s);
                 for k in 1..nch {
@@ -421,12 +398,25 @@ impl<'a> Tracer<'a> {
     }
 }
 
-/// Rotate `dir` by a scattering angle with cosine `mu` and azimuth `phi`.
+/// (cos φ, sin φ) of a uniform azimuth, by rejection from the unit disc and angle doubling
+/// (von Neumann 1951): cheaper than a sine and a cosine.
 #[inline]
-pub(crate) fn rotate(dir: DVec3, mu: f64, phi: f64) -> DVec3 {
+fn unit_azimuth(rng: &mut Rng) -> (f64, f64) {
+    loop {
+        let x = 2.0 * rng.random::<f64>() - 1.0;
+        let y = 2.0 * rng.random::<f64>() - 1.0;
+        let r2 = x * x + y * y;
+        if r2 <= 1.0 && r2 > 1e-12 {
+            return ((x * x - y * y) / r2, 2.0 * x * y / r2);
+        }
+    }
+}
+
+/// Rotate `dir` by a scattering angle with cosine `mu` and azimuth (cos φ, sin φ).
+#[inline]
+pub(crate) fn rotate(dir: DVec3, mu: f64, (cp, sp): (f64, f64)) -> DVec3 {
     let (e1, e2) = dir.any_orthonormal_pair();
     let sin_t = (1.0 - mu * mu).max(0.0).sqrt();
-    let (sp, cp) = phi.sin_cos();
     (dir * mu + (e1 * cp + e2 * sp) * sin_t).normalize()
 }
 
