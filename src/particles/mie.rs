@@ -7,8 +7,9 @@
 //! refractive index; the Riccati–Neumann function `η_n(x)` is run upward (its growing direction).
 //! The Riccati–Bessel function `ψ_n(x)` is built upward from ratios,
 //! `ψ_n = ψ_(n−1) / (D_n(x) + n/x)` (which follows from `ψ_(n−1) = ψ_n' + (n/x) ψ_n`), with the real
-//! `D_n(x)` also from the downward recurrence: every `ψ_n` then has full relative precision,
-//! even for `n ≫ x` and for `x = 10⁻³` where the plain upward recurrence loses all digits. No
+//! `D_n(x)` also from the downward recurrence, started from the larger of `ψ_0`, `ψ_1`: every
+//! `ψ_n` then has full relative precision, even for `n ≫ x`, for `x = 10⁻³` where the plain
+//! upward recurrence loses all digits, and at `x ≈ jπ` where `sin x` itself is inexact. No
 //! separate small-particle formula is needed: the series is accurate from `x = 10⁻⁶` up (tested
 //! against Wiscombe's small-particle values, which are themselves accurate to ~10⁻⁷ there).
 //!
@@ -179,6 +180,29 @@ fn d_downward_real(x: f64, n: usize, d: &mut Vec<f64>) {
     }
 }
 
+/// `ψ_k(x)`, k = 0..=n, from the ratios `ψ_k = ψ_(k−1) / (D_k(x) + k/x)` (exact relation, full
+/// relative precision at every order). The chain starts from whichever of `ψ_0 = sin x` and
+/// `ψ_1 = sin x / x − cos x` is larger: near a zero of sin x (x ≈ jπ) `sin x` has a large
+/// relative rounding error that the chain would otherwise carry to every order.
+fn psi_table(x: f64, n: usize, dx: &[f64], psi: &mut Vec<f64>) {
+    psi.clear();
+    psi.resize(n + 1, 0.0);
+    let (sin_x, cos_x) = x.sin_cos();
+    psi[0] = sin_x;
+    if n == 0 {
+        return;
+    }
+    let psi1 = sin_x / x - cos_x;
+    psi[1] = if psi1.abs() >= sin_x.abs() {
+        psi1
+    } else {
+        sin_x / (dx[1] + 1.0 / x)
+    };
+    for k in 2..=n {
+        psi[k] = psi[k - 1] / (dx[k] + k as f64 / x);
+    }
+}
+
 impl MieCoefficients {
     /// Coefficients of a sphere with relative refractive index `m` (imaginary part ≥ 0 absorbing)
     /// and size parameter `x`.
@@ -194,17 +218,19 @@ impl MieCoefficients {
         d_downward(m * x, n, &mut dmx);
         let mut dx = Vec::new();
         d_downward_real(x, n, &mut dx);
+        let mut psis = Vec::new();
+        psi_table(x, n, &dx, &mut psis);
         let (sin_x, cos_x) = x.sin_cos();
         let inv_x = 1.0 / x;
         let mut a = Vec::with_capacity(n);
         let mut b = Vec::with_capacity(n);
-        // ψ_0 = sin x, η_0 = −cos x, η_1 = −cos x / x − sin x.
-        let mut psi_prev = sin_x;
+        // η_0 = −cos x, η_1 = −cos x / x − sin x (upward: η grows with n).
+        let mut psi_prev = psis[0];
         let mut eta_prev = -cos_x;
         let mut eta = -cos_x * inv_x - sin_x;
         for k in 1..=n {
             let kx = k as f64 * inv_x;
-            let psi = psi_prev / (dx[k] + kx);
+            let psi = psis[k];
             let xi = Complex64::new(psi, eta);
             let xi_prev = Complex64::new(psi_prev, eta_prev);
             let t = dmx[k] / m + kx;
@@ -232,16 +258,18 @@ impl MieCoefficients {
         let n = n_terms(x);
         let mut dx = Vec::new();
         d_downward_real(x, n, &mut dx);
+        let mut psis = Vec::new();
+        psi_table(x, n, &dx, &mut psis);
         let (sin_x, cos_x) = x.sin_cos();
         let inv_x = 1.0 / x;
         let mut a = Vec::with_capacity(n);
         let mut b = Vec::with_capacity(n);
-        let mut psi_prev = sin_x;
+        let mut psi_prev = psis[0];
         let mut eta_prev = -cos_x;
         let mut eta = -cos_x * inv_x - sin_x;
         for k in 1..=n {
             let kx = k as f64 * inv_x;
-            let psi = psi_prev / (dx[k] + kx);
+            let psi = psis[k];
             let xi = Complex64::new(psi, eta);
             let xi_prev = Complex64::new(psi_prev, eta_prev);
             a.push((kx * psi - psi_prev) / (kx * xi - xi_prev));
