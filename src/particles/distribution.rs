@@ -568,7 +568,11 @@ pub fn bulk_optics(
 
 /// Format a complex refractive index as `1.3205+1.28e-6i` (the CLI's syntax).
 pub fn format_refractive_index(m: Complex64) -> String {
-    format!("{}{:+}i", m.re, m.im)
+    if m.im != 0.0 && m.im.abs() < 1e-3 {
+        format!("{}+{:e}i", m.re, m.im)
+    } else {
+        format!("{}{:+}i", m.re, m.im)
+    }
 }
 
 /// A stable text fingerprint of the inputs of [`bulk_optics_mixture`] (components, wavelength,
@@ -812,9 +816,20 @@ fn phase_integral(g: &ModeGrid, tables: &AngleTables) -> Result<Vec<f64>, MieErr
     let kk = tables.plus.nrows();
     let npts = g.points + 1;
     let k = g.k_per_um;
+    let n_max = tables.plus.ncols();
+    // Per-thread scratch matrices (reused: large fresh allocations cost page faults); they hold
+    // no state between blocks, so results do not depend on the thread count.
+    let scratch = || {
+        (
+            DMatrix::<f64>::zeros(n_max, 2 * R),
+            DMatrix::<f64>::zeros(n_max, 2 * R),
+            DMatrix::<f64>::zeros(kk, 2 * R),
+            DMatrix::<f64>::zeros(kk, 2 * R),
+        )
+    };
     let blocks: Vec<Result<Vec<f64>, MieError>> = (0..npts.div_ceil(R))
         .into_par_iter()
-        .map(|b| {
+        .map_init(scratch, |(bp, bm, cp, cm), b| {
             let idx: Vec<usize> = (b * R..((b + 1) * R).min(npts)).collect();
             let mut coeffs = Vec::with_capacity(idx.len());
             let mut weights = Vec::with_capacity(idx.len());
@@ -836,38 +851,36 @@ fn phase_integral(g: &ModeGrid, tables: &AngleTables) -> Result<Vec<f64>, MieErr
                 .iter()
                 .map(|c| c.as_ref().map_or(0, |c| c.len()))
                 .max()
-                .unwrap_or(0);
+                .unwrap_or(0)
+                .min(n_max);
             let mut acc = vec![0.0; kk];
             if nb == 0 {
                 return Ok(acc);
             }
-            let nr = idx.len();
-            let mut bp = DMatrix::<f64>::zeros(nb, 2 * nr);
-            let mut bm = DMatrix::<f64>::zeros(nb, 2 * nr);
+            bp.fill(0.0);
+            bm.fill(0.0);
             for (j, c) in coeffs.iter().enumerate() {
                 if let Some(c) = c {
-                    for n in 0..c.len() {
+                    for n in 0..c.len().min(nb) {
                         let p = c.a[n] + c.b[n];
                         let q = c.a[n] - c.b[n];
                         bp[(n, j)] = p.re;
-                        bp[(n, nr + j)] = p.im;
+                        bp[(n, R + j)] = p.im;
                         bm[(n, j)] = q.re;
-                        bm[(n, nr + j)] = q.im;
+                        bm[(n, R + j)] = q.im;
                     }
                 }
             }
-            let mut cp = DMatrix::<f64>::zeros(kk, 2 * nr);
-            let mut cm = DMatrix::<f64>::zeros(kk, 2 * nr);
-            cp.gemm(1.0, &tables.plus.columns(0, nb), &bp, 0.0);
-            cm.gemm(1.0, &tables.minus.columns(0, nb), &bm, 0.0);
+            cp.gemm(1.0, &tables.plus.columns(0, nb), &bp.rows(0, nb), 0.0);
+            cm.gemm(1.0, &tables.minus.columns(0, nb), &bm.rows(0, nb), 0.0);
             for (j, w) in weights.iter().enumerate() {
                 if *w == 0.0 {
                     continue;
                 }
                 // |S1|²+|S2|² = (|S+|² + |S−|²)/2 with S± = S1 ± S2; dC/dΩ = (|S1|²+|S2|²)/(2k²).
                 let f = w / (4.0 * k * k);
-                let (p_re, p_im) = (cp.column(j), cp.column(nr + j));
-                let (m_re, m_im) = (cm.column(j), cm.column(nr + j));
+                let (p_re, p_im) = (cp.column(j), cp.column(R + j));
+                let (m_re, m_im) = (cm.column(j), cm.column(R + j));
                 for a in 0..kk {
                     acc[a] += f
                         * (p_re[a] * p_re[a]

@@ -409,6 +409,48 @@ pub fn mie_amplitudes(
     MieCoefficients::compute(m, x)?.amplitudes(mu)
 }
 
+/// Parse a complex refractive index written `1.33`, `1.33+0i`, `1.5+1e-3i` or `1.5+0.001j`
+/// (imaginary part ≥ 0 means absorption). The error message says what was expected.
+pub fn parse_refractive_index(text: &str) -> Result<Complex64, String> {
+    let t = text.trim();
+    let bad = || {
+        format!(
+            "`{text}` is not a refractive index: write n or n+ki, e.g. 1.33, 1.33+0.0i, 1.5+1e-3i (k ≥ 0 means absorption)"
+        )
+    };
+    let parse = |s: &str| -> Result<f64, String> {
+        let v: f64 = s.trim().parse().map_err(|_| bad())?;
+        if v.is_finite() { Ok(v) } else { Err(bad()) }
+    };
+    let m = if let Some(body) = t.strip_suffix(['i', 'j']) {
+        // Split at the last sign that is not a leading sign or an exponent sign.
+        let bytes = body.as_bytes();
+        let split = (1..bytes.len())
+            .rev()
+            .find(|&i| {
+                (bytes[i] == b'+' || bytes[i] == b'-') && !matches!(bytes[i - 1], b'e' | b'E')
+            })
+            .ok_or_else(bad)?;
+        let re = parse(&body[..split])?;
+        let im_text = &body[split..];
+        let im = if im_text == "+" || im_text == "-" {
+            return Err(bad());
+        } else {
+            parse(im_text)?
+        };
+        Complex64::new(re, im)
+    } else {
+        Complex64::new(parse(t)?, 0.0)
+    };
+    if m.im < 0.0 {
+        return Err(format!(
+            "`{text}`: the imaginary part must be ≥ 0 (lidarsim writes m = n + ik with k ≥ 0 for absorption; MIEV0/miepython write the same index as n − ik)"
+        ));
+    }
+    check_refractive_index(m).map_err(|e| format!("`{text}`: {e}"))?;
+    Ok(m)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -451,6 +493,29 @@ mod tests {
                     assert!((a.re - a.norm_sqr()).abs() < 1e-12);
                 }
             }
+        }
+    }
+
+    #[test]
+    fn parses_refractive_indices() {
+        assert_eq!(parse_refractive_index("1.33").unwrap(), c(1.33, 0.0));
+        assert_eq!(parse_refractive_index("1.33+0.0i").unwrap(), c(1.33, 0.0));
+        assert_eq!(parse_refractive_index("1.5+1e-3i").unwrap(), c(1.5, 1e-3));
+        assert_eq!(
+            parse_refractive_index("1.3205+1.28e-6i").unwrap(),
+            c(1.3205, 1.28e-6)
+        );
+        assert_eq!(parse_refractive_index("1.5e0+2E-1j").unwrap(), c(1.5, 0.2));
+        for bad in [
+            "",
+            "abc",
+            "1.33+i",
+            "1.33-0.1i",
+            "0+0.1i",
+            "1.33+0.1",
+            "1..3",
+        ] {
+            assert!(parse_refractive_index(bad).is_err(), "{bad}");
         }
     }
 
