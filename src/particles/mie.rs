@@ -160,8 +160,9 @@ fn d_downward(z: Complex64, n: usize, d: &mut Vec<Complex64>) {
     d.resize(n + 1, Complex64::new(0.0, 0.0));
     let mut dk = lentz_dn(z, n);
     d[n] = dk;
+    let inv_z = 1.0 / z;
     for k in (1..=n).rev() {
-        let k_over_z = k as f64 / z;
+        let k_over_z = k as f64 * inv_z;
         dk = k_over_z - 1.0 / (dk + k_over_z);
         d[k - 1] = dk;
     }
@@ -222,6 +223,7 @@ impl MieCoefficients {
         psi_table(x, n, &dx, &mut psis);
         let (sin_x, cos_x) = x.sin_cos();
         let inv_x = 1.0 / x;
+        let inv_m = 1.0 / m;
         let mut a = Vec::with_capacity(n);
         let mut b = Vec::with_capacity(n);
         // η_0 = −cos x, η_1 = −cos x / x − sin x (upward: η grows with n).
@@ -233,7 +235,7 @@ impl MieCoefficients {
             let psi = psis[k];
             let xi = Complex64::new(psi, eta);
             let xi_prev = Complex64::new(psi_prev, eta_prev);
-            let t = dmx[k] / m + kx;
+            let t = dmx[k] * inv_m + kx;
             a.push((t * psi - psi_prev) / (t * xi - xi_prev));
             let t = dmx[k] * m + kx;
             b.push((t * psi - psi_prev) / (t * xi - xi_prev));
