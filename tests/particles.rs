@@ -242,7 +242,7 @@ fn mie_agrees_with_reference_codes() {
                 worst_full_precision = worst_full_precision.max(err / r.value.re.abs());
             }
         }
-        if !(err <= tol) {
+        if err > tol || err.is_nan() {
             failures.push(format!(
                 "{} [{}] {} θ={:?}: ours {} ref {} |diff| {:.3e} > tol {:.3e}",
                 r.case, r.source, r.quantity, r.theta_deg, ours, r.value, err, tol

@@ -40,6 +40,9 @@
 //! backscatter used for the lidar ratio. Radii are evaluated in parallel (rayon) in fixed blocks
 //! whose sums are reduced in block order: the numbers do not depend on the thread count.
 
+// `!(v > 0.0)` is used on purpose: unlike `v <= 0.0` it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use std::f64::consts::PI;
 use std::fmt;
 
@@ -759,8 +762,7 @@ fn integrate_mode(
             passes = 0;
         }
     }
-    let mut sums = Sums::default();
-    sums.0 = prev;
+    let sums = Sums(prev);
     Ok((
         ModeGrid {
             m,
@@ -941,10 +943,8 @@ pub fn bulk_optics_mixture(
     let mut number_density = 0.0;
     for c in components {
         check_refractive_index(c.refractive_index)?;
-        if let SizeDistribution::Sum(v) = &c.distribution {
-            if v.is_empty() {
-                return Err(param("modes", 0.0, "a sum needs at least one mode"));
-            }
+        if matches!(&c.distribution, SizeDistribution::Sum(v) if v.is_empty()) {
+            return Err(param("modes", 0.0, "a sum needs at least one mode"));
         }
         number_density += c.distribution.number_density_per_cm3();
         for mode in c.distribution.modes() {

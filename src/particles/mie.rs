@@ -33,6 +33,9 @@
 //! [^lentz]: Lentz, W. J. (1976), Generating Bessel functions in Mie scattering calculations
 //!     using continued fractions, *Appl. Opt.* 15, 668–671, doi:10.1364/AO.15.000668.
 
+// `!(v > 0.0)` is used on purpose: unlike `v <= 0.0` it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use num_complex::Complex64;
 
 /// Largest size parameter accepted (the solver is tested to 2·10⁴; memory and time grow as x).
@@ -199,8 +202,8 @@ fn psi_table(x: f64, n: usize, dx: &[f64], psi: &mut Vec<f64>) {
     } else {
         sin_x / (dx[1] + 1.0 / x)
     };
-    for k in 2..=n {
-        psi[k] = psi[k - 1] / (dx[k] + k as f64 / x);
+    for (k, d) in dx.iter().enumerate().take(n + 1).skip(2) {
+        psi[k] = psi[k - 1] / (d + k as f64 / x);
     }
 }
 
@@ -269,9 +272,8 @@ impl MieCoefficients {
         let mut psi_prev = psis[0];
         let mut eta_prev = -cos_x;
         let mut eta = -cos_x * inv_x - sin_x;
-        for k in 1..=n {
+        for (k, &psi) in psis.iter().enumerate().skip(1) {
             let kx = k as f64 * inv_x;
-            let psi = psis[k];
             let xi = Complex64::new(psi, eta);
             let xi_prev = Complex64::new(psi_prev, eta_prev);
             a.push((kx * psi - psi_prev) / (kx * xi - xi_prev));
