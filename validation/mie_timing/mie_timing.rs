@@ -27,7 +27,11 @@ fn main() {
         let n = (30000.0f64 / x).max(3.0) as usize;
         let e = best_ms(
             &mut || {
-                black_box(MieCoefficients::compute(black_box(m), black_box(x)).unwrap().efficiencies());
+                black_box(
+                    MieCoefficients::compute(black_box(m), black_box(x))
+                        .unwrap()
+                        .efficiencies(),
+                );
             },
             n,
         );
