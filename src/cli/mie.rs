@@ -1,10 +1,249 @@
-//! `lidarsim mie` (not implemented yet).
+//! `lidarsim mie`: Mie scattering of one sphere, or bulk optics of a size distribution written as
+//! a phase-function table (see `docs/particles.md`).
+
+use std::path::PathBuf;
+
+use anyhow::{Context, bail};
+use clap::ValueEnum;
+use lidarsim::particles::distribution::{
+    BulkOptions, SizeDistribution, bulk_optics, format_refractive_index,
+};
+use lidarsim::particles::mie::{MieCoefficients, parse_refractive_index};
+use serde_json::json;
+
+/// Kind of size distribution.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Distribution {
+    /// Log-normal: --number-density-per-cm3, --median-radius-um, --sigma-g (or --mode, repeated).
+    Lognormal,
+    /// Modified gamma n(r) = a r^alpha exp(-b r^gamma): --a, --alpha, --b, --gamma.
+    ModifiedGamma,
+    /// Deirmendjian's C.1 cloud (modified gamma a=2.373, alpha=6, b=1.5, gamma=1).
+    C1,
+}
 
 /// Arguments of `lidarsim mie`.
+///
+/// One sphere: `lidarsim mie --refractive-index 1.33+0.0i --size-parameter 10` prints JSON with
+/// qext, qsca, qback, g and ssa (add --angles-deg 0,90,180 for the amplitudes S1, S2).
+///
+/// A size distribution: `lidarsim mie --distribution c1 --refractive-index 1.3205+1.28e-6i
+/// --wavelength-nm 1064 --out table.txt` writes a phase-function table and prints the bulk
+/// properties (per-particle cross-sections, single-scattering albedo, g, lidar ratio) as JSON.
 #[derive(clap::Args, Debug)]
-pub struct Args {}
+pub struct Args {
+    /// Complex refractive index relative to the medium, n+ki: 1.33, 1.33+0.0i, 1.5+1e-3i. A
+    /// POSITIVE imaginary part means ABSORPTION (MIEV0 and miepython write the same as n-ki).
+    #[arg(long, allow_hyphen_values = true)]
+    refractive_index: String,
+    /// Size parameter x = 2 pi r / lambda of a single sphere.
+    #[arg(long, conflicts_with = "distribution")]
+    size_parameter: Option<f64>,
+    /// Scattering angles [deg] at which to print S1, S2 for a single sphere (comma-separated).
+    #[arg(long, value_delimiter = ',', requires = "size_parameter")]
+    angles_deg: Vec<f64>,
+    /// Size distribution (instead of --size-parameter).
+    #[arg(long, value_enum)]
+    distribution: Option<Distribution>,
+    /// Wavelength in the medium [nm] (distributions).
+    #[arg(long)]
+    wavelength_nm: Option<f64>,
+    /// Log-normal total number density [cm^-3].
+    #[arg(long, default_value_t = 1.0)]
+    number_density_per_cm3: f64,
+    /// Log-normal median (number mode) radius [um].
+    #[arg(long)]
+    median_radius_um: Option<f64>,
+    /// Log-normal geometric standard deviation (> 1).
+    #[arg(long)]
+    sigma_g: Option<f64>,
+    /// A log-normal mode N_per_cm3,r_g_um,sigma_g; repeat for a multimodal distribution.
+    #[arg(long = "mode", value_name = "N,R_G,SIGMA_G")]
+    modes: Vec<String>,
+    /// Modified gamma: a [cm^-3 um^-(alpha+1)].
+    #[arg(long)]
+    a: Option<f64>,
+    /// Modified gamma: alpha.
+    #[arg(long)]
+    alpha: Option<f64>,
+    /// Modified gamma: b [um^-gamma].
+    #[arg(long)]
+    b: Option<f64>,
+    /// Modified gamma: gamma.
+    #[arg(long)]
+    gamma: Option<f64>,
+    /// Truncate every mode below this radius [um].
+    #[arg(long)]
+    r_min_um: Option<f64>,
+    /// Truncate every mode above this radius [um].
+    #[arg(long)]
+    r_max_um: Option<f64>,
+    /// Fraction of the geometric cross-section left outside the integrated radius range.
+    #[arg(long, default_value_t = 1e-5)]
+    tail_fraction: f64,
+    /// Relative convergence tolerance of the size integration (two successive halvings).
+    #[arg(long, default_value_t = 1e-3)]
+    rel_tol: f64,
+    /// Write the phase-function table here (distributions).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Extra metadata line KEY=VALUE for the table (repeatable), e.g. the refractive index's source.
+    #[arg(long = "meta", value_name = "KEY=VALUE")]
+    meta: Vec<String>,
+}
+
+fn need(v: Option<f64>, flag: &str) -> anyhow::Result<f64> {
+    v.with_context(|| format!("{flag} is required for this distribution"))
+}
+
+fn parse_mode(text: &str) -> anyhow::Result<SizeDistribution> {
+    let parts: Vec<&str> = text.split(',').collect();
+    if parts.len() != 3 {
+        bail!("--mode `{text}`: expected N_per_cm3,r_g_um,sigma_g");
+    }
+    let v: Vec<f64> = parts
+        .iter()
+        .map(|p| {
+            p.trim()
+                .parse::<f64>()
+                .with_context(|| format!("--mode `{text}`: `{p}` is not a number"))
+        })
+        .collect::<Result<_, _>>()?;
+    SizeDistribution::lognormal(v[0], v[1], v[2]).with_context(|| format!("--mode `{text}`"))
+}
 
 /// Run the subcommand.
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("`lidarsim mie` is not implemented yet")
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let m = parse_refractive_index(&args.refractive_index)
+        .map_err(anyhow::Error::msg)
+        .context("--refractive-index")?;
+    if let Some(x) = args.size_parameter {
+        let k = MieCoefficients::compute(m, x).context("--size-parameter")?;
+        let e = k.efficiencies();
+        let mut out = json!({
+            "refractive_index": format_refractive_index(m),
+            "size_parameter": x,
+            "qext": e.qext,
+            "qsca": e.qsca,
+            "qback": e.qback,
+            "g": e.g,
+            "ssa": e.ssa,
+            "n_terms": e.n_terms,
+        });
+        if !args.angles_deg.is_empty() {
+            if let Some(t) = args.angles_deg.iter().find(|t| !(0.0..=180.0).contains(*t)) {
+                bail!("--angles-deg: {t} is outside [0, 180]");
+            }
+            let mu: Vec<f64> = args
+                .angles_deg
+                .iter()
+                .map(|t| t.to_radians().cos())
+                .collect();
+            let (s1, s2) = k.amplitudes(&mu)?;
+            out["amplitudes"] = json!(
+                args.angles_deg
+                    .iter()
+                    .zip(s1.iter().zip(&s2))
+                    .map(|(t, (a, b))| json!({"theta_deg": t, "s1": [a.re, a.im], "s2": [b.re, b.im]}))
+                    .collect::<Vec<_>>()
+            );
+        }
+        println!("{}", serde_json::to_string_pretty(&out)?);
+        return Ok(());
+    }
+    let Some(kind) = args.distribution else {
+        bail!("give either --size-parameter (one sphere) or --distribution (a size distribution)");
+    };
+    let wavelength_nm = need(args.wavelength_nm, "--wavelength-nm")?;
+    let mut dist = match kind {
+        Distribution::C1 => SizeDistribution::deirmendjian_c1(),
+        Distribution::ModifiedGamma => SizeDistribution::modified_gamma(
+            need(args.a, "--a")?,
+            need(args.alpha, "--alpha")?,
+            need(args.b, "--b")?,
+            need(args.gamma, "--gamma")?,
+        )?,
+        Distribution::Lognormal => {
+            if args.modes.is_empty() {
+                SizeDistribution::lognormal(
+                    args.number_density_per_cm3,
+                    need(args.median_radius_um, "--median-radius-um")?,
+                    need(args.sigma_g, "--sigma-g")?,
+                )?
+            } else {
+                if args.median_radius_um.is_some() || args.sigma_g.is_some() {
+                    bail!(
+                        "give either --mode (repeated) or --median-radius-um/--sigma-g, not both"
+                    );
+                }
+                SizeDistribution::sum(
+                    args.modes
+                        .iter()
+                        .map(|s| parse_mode(s))
+                        .collect::<Result<_, _>>()?,
+                )?
+            }
+        }
+    };
+    if args.r_min_um.is_some() || args.r_max_um.is_some() {
+        dist = dist.truncated(
+            args.r_min_um.unwrap_or(0.0),
+            args.r_max_um.unwrap_or(f64::INFINITY),
+        )?;
+    }
+    let opts = BulkOptions {
+        tail_fraction: args.tail_fraction,
+        rel_tol: args.rel_tol,
+        angles_deg: if args.out.is_some() {
+            None
+        } else {
+            Some(Vec::new())
+        },
+        ..BulkOptions::default()
+    };
+    let mut b = bulk_optics(&dist, m, wavelength_nm * 1e-9, &opts)?;
+    for kv in &args.meta {
+        let Some((k, v)) = kv.split_once('=') else {
+            bail!("--meta `{kv}`: expected KEY=VALUE");
+        };
+        let k = k.trim();
+        if k.is_empty() || !k.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
+            bail!("--meta `{kv}`: the key must be letters, digits and _");
+        }
+        if b.phase.meta(k).is_some() {
+            bail!("--meta `{kv}`: key `{k}` is already set");
+        }
+        // Keep `source` last.
+        let at = b.phase.meta.len().saturating_sub(1);
+        b.phase
+            .meta
+            .insert(at, (k.to_string(), v.trim().to_string()));
+    }
+    if let Some(path) = &args.out {
+        b.phase
+            .write(path)
+            .with_context(|| format!("cannot write {}", path.display()))?;
+    }
+    let out = json!({
+        "wavelength_nm": wavelength_nm,
+        "refractive_index": format_refractive_index(m),
+        "distribution": dist.to_string(),
+        "number_density_per_cm3": b.number_density_per_m3 * 1e-6,
+        "extinction_cross_section_um2": b.extinction_cross_section_m2 * 1e12,
+        "scattering_cross_section_um2": b.scattering_cross_section_m2 * 1e12,
+        "backscatter_cross_section_um2": b.backscatter_cross_section_m2 * 1e12,
+        "extinction_per_km": b.extinction_per_m(b.number_density_per_m3) * 1e3,
+        "single_scattering_albedo": b.single_scattering_albedo,
+        "asymmetry": b.asymmetry,
+        "lidar_ratio_sr": b.lidar_ratio_sr,
+        "phase_180": b.phase_180(),
+        "effective_radius_um": b.effective_radius_um,
+        "size_grid": b.convergence.iter().map(|c| json!({
+            "r_min_um": c.r_range_um.0, "r_max_um": c.r_range_um.1, "step_x": c.step_x,
+            "points": c.points, "last_rel_change": c.last_rel_change, "converged": c.converged,
+        })).collect::<Vec<_>>(),
+        "table": args.out.as_ref().map(|p| p.display().to_string()),
+    });
+    println!("{}", serde_json::to_string_pretty(&out)?);
+    Ok(())
 }
