@@ -25,7 +25,7 @@ enum Command {
     /// Atmospheric profile sets: generate perturbed ensembles, plot sets.
     Profiles(cli::profiles::Args),
     /// Mie scattering of one sphere or a size distribution; write phase-function tables.
-    Mie(cli::mie::Args),
+    Mie(Box<cli::mie::Args>),
     /// Measure speed and Monte Carlo efficiency on fixed workloads.
     Bench(cli::bench::Args),
 }
@@ -36,7 +36,7 @@ fn main() -> ExitCode {
         Command::Run(a) => cli::run::run(a),
         Command::Lbl(a) => cli::lbl::run(a),
         Command::Profiles(a) => cli::profiles::run(a),
-        Command::Mie(a) => cli::mie::run(a),
+        Command::Mie(a) => cli::mie::run(*a),
         Command::Bench(a) => cli::bench::run(a),
     };
     match result {

@@ -123,16 +123,18 @@ impl OpticalAtmosphere {
             let (z0, z1) = (edges[l], edges[l + 1]);
             let mut comps = Vec::new();
             if let Some((atm, sigma_r, phase)) = &molecules
-                && z0 >= atm.profile.altitude_m[0] - 1e-9 && z1 <= atm.top_m + 1e-9 {
-                    let n = mean_number_density(atm, z0, z1);
-                    let s: Vec<f64> = sigma_r.iter().map(|c| c * n).collect();
-                    if s.iter().any(|v| *v > 0.0) {
-                        comps.push(Component {
-                            sigma_s_per_m: s,
-                            phase: phase.clone(),
-                        });
-                    }
+                && z0 >= atm.profile.altitude_m[0] - 1e-9
+                && z1 <= atm.top_m + 1e-9
+            {
+                let n = mean_number_density(atm, z0, z1);
+                let s: Vec<f64> = sigma_r.iter().map(|c| c * n).collect();
+                if s.iter().any(|v| *v > 0.0) {
+                    comps.push(Component {
+                        sigma_s_per_m: s,
+                        phase: phase.clone(),
+                    });
                 }
+            }
             for (j, layer) in scene.layers.iter().enumerate() {
                 if layer.base_m <= z0 + 1e-9 && layer.top_m >= z1 - 1e-9 {
                     let s: Vec<f64> = (0..nch)

@@ -83,18 +83,19 @@ impl PhaseTable {
             }
         }
         if let Some((_, v)) = meta.iter().find(|(k, _)| k == "wavelength_nm")
-            && v != "none" {
-                let line = line_of_key(text, "wavelength_nm");
-                let w = parse_f64(path, line, "wavelength_nm", v)?;
-                if w <= 0.0 {
-                    return Err(InputError::at(
-                        path,
-                        line,
-                        "wavelength_nm",
-                        "must be positive",
-                    ));
-                }
+            && v != "none"
+        {
+            let line = line_of_key(text, "wavelength_nm");
+            let w = parse_f64(path, line, "wavelength_nm", v)?;
+            if w <= 0.0 {
+                return Err(InputError::at(
+                    path,
+                    line,
+                    "wavelength_nm",
+                    "must be positive",
+                ));
             }
+        }
         let t = CsvTable::parse(path, text)?;
         if t.header() != ["theta_deg", "phase_4pi"] {
             return Err(InputError::file(

@@ -231,7 +231,14 @@ impl KeyPath {
                 let (name, is_array) = if let Some(n) = line.strip_prefix("[[") {
                     (n.split("]]").next().unwrap_or("").trim(), true)
                 } else {
-                    (line.trim_start_matches('[').split(']').next().unwrap_or("").trim(), false)
+                    (
+                        line.trim_start_matches('[')
+                            .split(']')
+                            .next()
+                            .unwrap_or("")
+                            .trim(),
+                        false,
+                    )
                 };
                 in_section = match &self.section {
                     Some((s, None)) => !is_array && name == s,
@@ -251,10 +258,11 @@ impl KeyPath {
             }
             if in_section
                 && let Some(k) = &self.key
-                    && let Some(rest) = line.strip_prefix(k.as_str())
-                        && rest.trim_start().starts_with('=') {
-                            return i + 1;
-                        }
+                && let Some(rest) = line.strip_prefix(k.as_str())
+                && rest.trim_start().starts_with('=')
+            {
+                return i + 1;
+            }
         }
         header_line
     }

@@ -323,15 +323,16 @@ impl Validator<'_> {
                 return Err(self.err(&at, "the lidar is below the surface"));
             }
             if let Some(a) = &atmosphere
-                && (s.altitude_m < a.profile.altitude_m[0] || s.altitude_m >= a.top_m) {
-                    return Err(self.err(
-                        &at,
-                        format!(
-                            "{} m is outside the atmosphere profile ({} to {} m)",
-                            s.altitude_m, a.profile.altitude_m[0], a.top_m
-                        ),
-                    ));
-                }
+                && (s.altitude_m < a.profile.altitude_m[0] || s.altitude_m >= a.top_m)
+            {
+                return Err(self.err(
+                    &at,
+                    format!(
+                        "{} m is outside the atmosphere profile ({} to {} m)",
+                        s.altitude_m, a.profile.altitude_m[0], a.top_m
+                    ),
+                ));
+            }
             for (i, l) in layers.iter().enumerate() {
                 if l.base_m < s.altitude_m {
                     return Err(self.err(
@@ -692,7 +693,9 @@ impl Validator<'_> {
                 (
                     vec![0.0; nch],
                     vec![1.0; nch],
-                    (0..nch).map(|_| Arc::new(PhaseFunction::Isotropic)).collect(),
+                    (0..nch)
+                        .map(|_| Arc::new(PhaseFunction::Isotropic))
+                        .collect(),
                 )
             }
         };

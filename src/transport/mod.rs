@@ -27,6 +27,15 @@ use crate::scene::{BeamProfile, Scene};
 pub use tally::Flux;
 use tally::{Accumulator, TallyShape};
 
+/// Default probability of detector-directed importance sampling.
+pub const DDIS_EPSILON: f64 = 0.1;
+/// DDIS is used where the scattering point is seen from the receiver within the widest field
+/// of view plus this margin [rad]: further out, a photon sent toward the receiver stays outside
+/// the fields of view (the line to the receiver keeps its angle to the axis).
+const DDIS_MARGIN_RAD: f64 = 0.01;
+/// Phase functions whose forward value P(0°) exceeds this get DDIS (Rayleigh, 1.5, does not).
+const DDIS_FORWARD_PEAK: f64 = 5.0;
+
 /// Run counters, summed over batches.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct RunStats {
@@ -76,6 +85,9 @@ pub struct TransportOptions {
     pub flux_tally: bool,
     /// Show a progress bar on a terminal for runs longer than about a second.
     pub progress: bool,
+    /// Probability ε of detector-directed importance sampling at a scattering near the
+    /// receiver's line of sight (0 turns it off).
+    pub ddis_epsilon: f64,
 }
 
 impl TransportOptions {
@@ -90,6 +102,7 @@ impl TransportOptions {
             max_order: s.max_order,
             flux_tally: false,
             progress: false,
+            ddis_epsilon: DDIS_EPSILON,
         }
     }
 }
@@ -154,6 +167,12 @@ pub(crate) struct Setup<'a> {
     /// Reference-channel cumulative scattering optical depth at the edges, and σ_s per layer.
     cum_ref: Vec<f64>,
     sigma_ref: Vec<f64>,
+    /// Detector-directed importance sampling: probability ε, the cone around the receiver axis
+    /// where it is used (cosine of its half-angle), and the layers whose phase function has a
+    /// forward peak worth it.
+    ddis_epsilon: f64,
+    ddis_cos: f64,
+    forward_peaked: Vec<bool>,
 }
 
 impl Setup<'_> {
@@ -212,7 +231,10 @@ impl Setup<'_> {
         }
         let z = z.clamp(self.bottom_m, self.top_m);
         let e = &self.atm.edges_m;
-        let l = e.partition_point(|x| *x <= z).saturating_sub(1).min(self.sigma_ref.len() - 1);
+        let l = e
+            .partition_point(|x| *x <= z)
+            .saturating_sub(1)
+            .min(self.sigma_ref.len() - 1);
         self.cum_ref[l] + (z - e[l]) * self.sigma_ref[l]
     }
 
@@ -275,6 +297,10 @@ pub fn run(
     };
     let n_layers = atm.n_layers();
     let widest = fov_cos.last().copied().unwrap_or(1.0);
+    let widest_fov_mrad = lidar
+        .fov_full_angle_mrad
+        .iter()
+        .fold(0.0f64, |m, f| m.max(*f));
     let setup = Setup {
         atm,
         fov_cos_widest_sq: widest * widest,
@@ -305,7 +331,20 @@ pub fn run(
             .map(|e| atm.cum_tau_s[e * nch])
             .collect(),
         sigma_ref: (0..n_layers).map(|l| atm.sigma_s_per_m[l * nch]).collect(),
+        ddis_epsilon: opts.ddis_epsilon,
+        ddis_cos: (0.5e-3 * widest_fov_mrad + DDIS_MARGIN_RAD)
+            .min(std::f64::consts::PI)
+            .cos(),
+        forward_peaked: vec![false; n_layers],
     };
+    // Which layers get DDIS: a forward-peaked scatterer mixture.
+    let mut setup = setup;
+    setup.forward_peaked = (0..n_layers)
+        .map(|l| {
+            !atm.components[l].is_empty() && setup.mixture_phase(l, 0, 1.0) > DDIS_FORWARD_PEAK
+        })
+        .collect();
+    let setup = setup;
 
     let batches = opts.batches;
     let per_batch = opts.photons.div_ceil(batches as u64);

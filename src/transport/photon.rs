@@ -128,21 +128,36 @@ impl<'a> Tracer<'a> {
             let (s_bound, boundary) = if mu > HORIZONTAL {
                 ((s.top_m - pos.z).max(0.0) / mu, End::Top)
             } else if mu < -HORIZONTAL {
-                let end = if s.surface.is_some() { End::Surface } else { End::Bottom };
+                let end = if s.surface.is_some() {
+                    End::Surface
+                } else {
+                    End::Bottom
+                };
                 ((s.bottom_m - pos.z).min(0.0) / mu, end)
             } else {
                 (f64::INFINITY, End::Top)
             };
             // Ellipsoid with foci at the photon and the receiver: path + s + |rx − x(s)| = 2 r_end.
             let s_range = (budget * budget - d0 * d0) / (2.0 * (budget - dir.dot(to_rx)));
-            let (s_end, end) =
-                if s_range < s_bound { (s_range, End::Cut) } else { (s_bound, boundary) };
+            let (s_end, end) = if s_range < s_bound {
+                (s_range, End::Cut)
+            } else {
+                (s_bound, boundary)
+            };
 
             // Reference scattering optical depth of the flight.
             let inside = pos.z >= s.bottom_m && pos.z <= s.top_m && s.has_layers;
-            let layer0 = if horizontal && inside { atm.layer_of(pos.z) } else { 0 };
+            let layer0 = if horizontal && inside {
+                atm.layer_of(pos.z)
+            } else {
+                0
+            };
             let tau_ref = if horizontal {
-                if inside { s.sigma_ref[layer0] * s_end } else { 0.0 }
+                if inside {
+                    s.sigma_ref[layer0] * s_end
+                } else {
+                    0.0
+                }
             } else {
                 (s.ref_tau_at(pos.z + mu * s_end) - self.ts[0]).abs() / mu.abs()
             };
@@ -169,12 +184,20 @@ impl<'a> Tracer<'a> {
             }
 
             // 1 − e^{−τ}, accurate for small τ; exactly 1 in double precision beyond τ ≈ 37.
-            let p_collide = if tau_ref > 40.0 { 1.0 } else { -(-tau_ref).exp_m1() };
+            let p_collide = if tau_ref > 40.0 {
+                1.0
+            } else {
+                -(-tau_ref).exp_m1()
+            };
             let collide_factor;
             if end == End::Surface {
                 let hit = pos + dir * s_end;
                 self.score_surface(hit, path + s_end, order + 1);
-                let q = if tau_ref > 0.0 { p_collide.max(MIN_COLLISION_PROBABILITY) } else { 0.0 };
+                let q = if tau_ref > 0.0 {
+                    p_collide.max(MIN_COLLISION_PROBABILITY)
+                } else {
+                    0.0
+                };
                 let albedo = s.surface.as_deref().unwrap_or(&[]);
                 if rng.random::<f64>() >= q {
                     // Reach the surface and reflect (its signal was scored above).
@@ -235,13 +258,23 @@ impl<'a> Tracer<'a> {
             // Per-channel weights over the flight (ALIS): absorption, and the scattering ratio
             // where channels scatter differently (for channel 0 that factor is 1).
             let i = layer * nch;
-            let dts_ref = if horizontal { tau_star } else { (s.ref_tau_at(pos.z) - self.ts[0]).abs() / mu.abs() };
+            let dts_ref = if horizontal {
+                tau_star
+            } else {
+                (s.ref_tau_at(pos.z) - self.ts[0]).abs() / mu.abs()
+            };
             for k in 0..nch {
                 let (ts_new, ta_new) = atm.cumulative_tau(pos.z, k);
                 let (dts, dta) = if horizontal {
-                    (atm.sigma_s_per_m[i + k] * s_coll, atm.sigma_a_per_m[i + k] * s_coll)
+                    (
+                        atm.sigma_s_per_m[i + k] * s_coll,
+                        atm.sigma_a_per_m[i + k] * s_coll,
+                    )
                 } else {
-                    ((ts_new - self.ts[k]).abs() / mu.abs(), (ta_new - self.ta[k]).abs() / mu.abs())
+                    (
+                        (ts_new - self.ts[k]).abs() / mu.abs(),
+                        (ta_new - self.ta[k]).abs() / mu.abs(),
+                    )
                 };
                 let mut f = collide_factor;
                 if dta > 0.0 {
@@ -262,29 +295,42 @@ impl<'a> Tracer<'a> {
                 return;
             }
 
-            // Scatter: pick a scatterer by its share of the reference scattering, then Θ from
-            // its phase function and a uniform azimuth.
-            let comps = &atm.components[layer];
-            let c = if comps.len() == 1 {
-                0
-            } else {
-                let mut x = rng.random::<f64>() * s.sigma_ref[layer];
-                let mut c = comps.len() - 1;
-                for (j, comp) in comps.iter().enumerate() {
-                    x -= comp.sigma_s_per_m[0];
-                    if x < 0.0 {
-                        c = j;
-                        break;
-                    }
-                }
-                c
-            };
-            let mu_s = atm.phases[comps[c].phase[0] as usize].sample(rng.random());
-            let new_dir = rotate(dir, mu_s, unit_azimuth(rng));
-            if !atm.grey_scattering {
+            // Scatter: a scatterer by its share of the reference scattering, Θ from its phase
+            // function, a uniform azimuth. Near the receiver's line of sight and in forward-
+            // peaked media, detector-directed importance sampling (DDIS; Buras & Mayer 2011,
+            // JQSRT 112, 434) draws the new direction, with probability ε, from the same phase
+            // function centred on the direction to the receiver instead; every channel is then
+            // weighted by P_k(Θ)/[(1 − ε) P_0(Θ) + ε P_0(Θ_rx)] (balance heuristic), which is
+            // unbiased and caps the local-estimate spikes of the forward peak.
+            let to_rx = s.receiver - pos;
+            let d_rx = to_rx.length();
+            let omega_rx = to_rx / d_rx;
+            let ddis = s.ddis_epsilon > 0.0
+                && s.forward_peaked[layer]
+                && -omega_rx.dot(s.axis) >= s.ddis_cos;
+            let towards_rx = ddis && rng.random::<f64>() < s.ddis_epsilon;
+            let c = pick_component(&atm.components[layer], s.sigma_ref[layer], rng);
+            let mu_sampled =
+                atm.phases[atm.components[layer][c].phase[0] as usize].sample(rng.random());
+            let centre = if towards_rx { omega_rx } else { dir };
+            let new_dir = rotate(centre, mu_sampled, unit_azimuth(rng));
+            if ddis {
+                let mu_s = dir.dot(new_dir);
                 let p0 = s.mixture_phase(layer, 0, mu_s);
+                let q = (1.0 - s.ddis_epsilon) * p0
+                    + s.ddis_epsilon * s.mixture_phase(layer, 0, omega_rx.dot(new_dir));
+                for k in 0..nch {
+                    let pk = if atm.grey_scattering {
+                        p0
+                    } else {
+                        s.mixture_phase(layer, k, mu_s)
+                    };
+                    self.w[k] *= pk / q;
+                }
+            } else if !atm.grey_scattering {
+                let p0 = s.mixture_phase(layer, 0, mu_sampled);
                 for k in 1..nch {
-                    self.w[k] *= s.mixture_phase(layer, k, mu_s) / p0;
+                    self.w[k] *= s.mixture_phase(layer, k, mu_sampled) / p0;
                 }
             }
             dir = new_dir;
@@ -331,9 +377,14 @@ impl<'a> Tracer<'a> {
         let s = self.s;
         let v = s.receiver - x;
         let d2 = v.length_squared();
+        // Outside the widest field of view? (x − rx)·axis ≥ cos α_max · d, squared: no root.
+        let along = -v.dot(s.axis);
+        if along <= 0.0 || along * along < s.fov_cos_widest_sq * d2 {
+            return;
+        }
         let d = d2.sqrt();
         let omega = v / d;
-        let cos_axis = -omega.dot(s.axis);
+        let cos_axis = along / d;
         let Some(annulus) = self.annulus(cos_axis) else {
             return;
         };
@@ -396,6 +447,22 @@ impl<'a> Tracer<'a> {
             self.flux.absorbed[k] += self.w[k] * atm.absorbed_fraction(z0, mu, s_end, k);
         }
     }
+}
+
+/// A scatterer of the layer, chosen with probability σ_c/σ (reference channel).
+#[inline]
+fn pick_component(comps: &[crate::optics::Component], sigma: f64, rng: &mut Rng) -> usize {
+    if comps.len() == 1 {
+        return 0;
+    }
+    let mut x = rng.random::<f64>() * sigma;
+    for (j, comp) in comps.iter().enumerate() {
+        x -= comp.sigma_s_per_m[0];
+        if x < 0.0 {
+            return j;
+        }
+    }
+    comps.len() - 1
 }
 
 /// (cos φ, sin φ) of a uniform azimuth, by rejection from the unit disc and angle doubling
