@@ -142,7 +142,7 @@ mod tests {
     /// log-linear rule is exact: ∫ n dz = n0 H (1 − e^{−Δz/H}).
     #[test]
     fn log_linear_rule_is_exact_for_exponential() {
-        let (n0, h, dz) = (2.5e25, 8000.0, 3000.0);
+        let (n0, h, dz): (f64, f64, f64) = (2.5e25, 8000.0, 3000.0);
         let n1 = n0 * (-dz / h).exp();
         let exact = n0 * h * (1.0 - (-dz / h).exp());
         assert!((log_linear_layer(n0, n1, dz) / exact - 1.0).abs() < 1e-12);

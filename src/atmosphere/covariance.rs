@@ -39,7 +39,12 @@ pub enum StateVariable {
 
 impl StateVariable {
     /// All variables in state-vector order.
-    pub const ALL: [StateVariable; 4] = [Self::Temperature, Self::LnH2o, Self::Co2, Self::SurfacePressure];
+    pub const ALL: [StateVariable; 4] = [
+        Self::Temperature,
+        Self::LnH2o,
+        Self::Co2,
+        Self::SurfacePressure,
+    ];
 
     /// Name in covariance files: `T_K`, `lnq`, `CO2_ppmv`, `ps_hPa`.
     pub fn name(self) -> &'static str {
@@ -108,7 +113,11 @@ impl fmt::Display for RepairReport {
             "the covariance was not positive definite: {} of {} eigenvalues ≤ 0 (smallest {:.3e}, \
              largest {:.3e}) were set to 0 (nearest positive semi-definite matrix, Higham 1988); \
              relative change of the matrix {:.2e}",
-            self.clipped, self.dimension, self.min_eigenvalue, self.max_eigenvalue, self.relative_change
+            self.clipped,
+            self.dimension,
+            self.min_eigenvalue,
+            self.max_eigenvalue,
+            self.relative_change
         )
     }
 }
@@ -121,7 +130,11 @@ impl Covariance {
     /// The state elements of a profile: T, ln H2O and CO2 at each level (bottom-up), then p_s.
     pub fn profile_elements(profile: &Profile) -> Vec<StateElement> {
         let mut e = Vec::with_capacity(3 * profile.len() + 1);
-        for v in [StateVariable::Temperature, StateVariable::LnH2o, StateVariable::Co2] {
+        for v in [
+            StateVariable::Temperature,
+            StateVariable::LnH2o,
+            StateVariable::Co2,
+        ] {
             e.extend(profile.pressure_pa.iter().map(|p| StateElement {
                 variable: v,
                 pressure_pa: Some(*p),
@@ -141,7 +154,9 @@ impl Covariance {
 
     /// Standard deviation of each element.
     pub fn std_devs(&self) -> Vec<f64> {
-        (0..self.dimension()).map(|i| self.matrix[(i, i)].max(0.0).sqrt()).collect()
+        (0..self.dimension())
+            .map(|i| self.matrix[(i, i)].max(0.0).sqrt())
+            .collect()
     }
 
     /// True when the elements are exactly those of `profile` ([`Self::profile_elements`]).
@@ -176,10 +191,16 @@ impl Covariance {
                 .map(|(i, e)| (i, e.pressure_pa.map_or(0.0, |p| -p.ln())))
                 .collect();
             src.sort_by(|a, b| a.1.total_cmp(&b.1));
-            let rows: Vec<(usize, &StateElement)> =
-                target.iter().enumerate().filter(|(_, e)| e.variable == v).collect();
+            let rows: Vec<(usize, &StateElement)> = target
+                .iter()
+                .enumerate()
+                .filter(|(_, e)| e.variable == v)
+                .collect();
             if src.is_empty() {
-                notes.push(format!("{}: not in the covariance, not perturbed", v.name()));
+                notes.push(format!(
+                    "{}: not in the covariance, not perturbed",
+                    v.name()
+                ));
                 continue;
             }
             let mut clamped = false;
@@ -227,25 +248,40 @@ impl Covariance {
         let cv = t.column("variable")?;
         let cp = t.column("p_hPa")?;
         let n = t.len();
-        let value_cols: Vec<usize> = (0..t.header().len()).filter(|c| *c != cv && *c != cp).collect();
+        let value_cols: Vec<usize> = (0..t.header().len())
+            .filter(|c| *c != cv && *c != cp)
+            .collect();
         if value_cols.len() != n {
             return Err(InputError::file(
                 path,
-                format!("{} matrix columns for {n} rows: the matrix must be square", value_cols.len()),
+                format!(
+                    "{} matrix columns for {n} rows: the matrix must be square",
+                    value_cols.len()
+                ),
             ));
         }
         let mut elements = Vec::with_capacity(n);
         let mut m = DMatrix::<f64>::zeros(n, n);
         for (i, (line, f)) in t.rows().enumerate() {
             let variable = StateVariable::parse(&f[cv]).ok_or_else(|| {
-                InputError::at(path, line, "variable", format!("`{}` is not one of T_K, lnq, CO2_ppmv, ps_hPa", f[cv]))
+                InputError::at(
+                    path,
+                    line,
+                    "variable",
+                    format!("`{}` is not one of T_K, lnq, CO2_ppmv, ps_hPa", f[cv]),
+                )
             })?;
             let pressure_pa = if variable == StateVariable::SurfacePressure {
                 None
             } else {
                 let p = parse_f64(path, line, "p_hPa", &f[cp])?;
                 if !(p > 0.0) {
-                    return Err(InputError::at(path, line, "p_hPa", "pressure must be positive"));
+                    return Err(InputError::at(
+                        path,
+                        line,
+                        "p_hPa",
+                        "pressure must be positive",
+                    ));
                 }
                 Some(p * 100.0)
             };
@@ -256,14 +292,27 @@ impl Covariance {
                         _ => true,
                     }
             }) {
-                return Err(InputError::at(path, line, "variable", "this element appears twice"));
+                return Err(InputError::at(
+                    path,
+                    line,
+                    "variable",
+                    "this element appears twice",
+                ));
             }
-            elements.push(StateElement { variable, pressure_pa });
+            elements.push(StateElement {
+                variable,
+                pressure_pa,
+            });
             for (j, c) in value_cols.iter().enumerate() {
                 m[(i, j)] = parse_f64(path, line, &t.header()[*c], &f[*c])?;
             }
             if m[(i, i)] < 0.0 {
-                return Err(InputError::at(path, line, &t.header()[value_cols[i]], "negative variance"));
+                return Err(InputError::at(
+                    path,
+                    line,
+                    &t.header()[value_cols[i]],
+                    "negative variance",
+                ));
             }
         }
         for i in 0..n {
@@ -422,7 +471,9 @@ impl Covariance {
     pub fn factor(&self, allow_repair: bool) -> Result<Factor, AtmosphereError> {
         let n = self.dimension();
         if self.matrix.iter().any(|v| !v.is_finite()) {
-            return Err(AtmosphereError::Covariance("the matrix has non-finite values".into()));
+            return Err(AtmosphereError::Covariance(
+                "the matrix has non-finite values".into(),
+            ));
         }
         let active: Vec<usize> = (0..n).filter(|&i| self.matrix[(i, i)] > 0.0).collect();
         let m = active.len();
@@ -481,13 +532,21 @@ impl Covariance {
 
 /// The state (T, ln H2O, CO2 ppmv, p_s hPa) of `p` on `grid`'s levels moved to `p`'s surface
 /// pressure (level-following).
-pub(crate) fn state_on(grid: &Profile, p: &Profile, h2o: bool, co2: bool) -> Result<Vec<f64>, AtmosphereError> {
+pub(crate) fn state_on(
+    grid: &Profile,
+    p: &Profile,
+    h2o: bool,
+    co2: bool,
+) -> Result<Vec<f64>, AtmosphereError> {
     let ps_grid = grid.surface_pressure_pa();
     let ps = p.surface_pressure_pa();
-    let top = *p.pressure_pa.last().ok_or_else(|| AtmosphereError::InvalidProfile {
-        profile: p.name.clone(),
-        message: "no levels".into(),
-    })?;
+    let top = *p
+        .pressure_pa
+        .last()
+        .ok_or_else(|| AtmosphereError::InvalidProfile {
+            profile: p.name.clone(),
+            message: "no levels".into(),
+        })?;
     let targets: Vec<f64> = grid
         .pressure_pa
         .iter()
@@ -571,13 +630,18 @@ impl ErrorModel {
     /// (the values its header states). It has no CO2: σ_CO2 = 0 (not perturbed) until set with
     /// [`Self::with_co2`].
     pub fn representative() -> ErrorModel {
-        let mut m = Self::parse_table(Path::new("<embedded data/nwp_error/bg_error_representative.csv>"), REPRESENTATIVE_CSV)
-            .expect("embedded error table parses");
+        let mut m = Self::parse_table(
+            Path::new("<embedded data/nwp_error/bg_error_representative.csv>"),
+            REPRESENTATIVE_CSV,
+        )
+        .expect("embedded error table parses");
         m.temperature_corr_length_lnp = 0.35;
         m.ln_h2o_corr_length_lnp = 0.25;
         m.co2_corr_length_lnp = 0.35;
         m.surface_pressure_std_hpa = 0.7;
-        m.source = "representative 6-h NWP forecast error (data/nwp_error/bg_error_representative.csv)".into();
+        m.source =
+            "representative 6-h NWP forecast error (data/nwp_error/bg_error_representative.csv)"
+                .into();
         m
     }
 
@@ -598,8 +662,22 @@ impl ErrorModel {
     fn parse_table(path: &Path, text: &str) -> Result<ErrorModel, InputError> {
         let t = CsvTable::parse(path, text)?;
         for h in t.header() {
-            if !["p_hPa", "T_std_K", "lnq_std", "CO2_std_ppmv", "basis", "note"].contains(&h.as_str()) {
-                return Err(InputError::file(path, format!("unknown column `{h}` (expected p_hPa, T_std_K, lnq_std, CO2_std_ppmv, basis, note)")));
+            if ![
+                "p_hPa",
+                "T_std_K",
+                "lnq_std",
+                "CO2_std_ppmv",
+                "basis",
+                "note",
+            ]
+            .contains(&h.as_str())
+            {
+                return Err(InputError::file(
+                    path,
+                    format!(
+                        "unknown column `{h}` (expected p_hPa, T_std_K, lnq_std, CO2_std_ppmv, basis, note)"
+                    ),
+                ));
             }
         }
         let p: Vec<f64> = t.f64_column("p_hPa")?.iter().map(|p| p * 100.0).collect();
@@ -615,11 +693,25 @@ impl ErrorModel {
         for r in 0..p.len() {
             let line = t.line_of(r);
             if !(p[r] > 0.0) || (r > 0 && !(p[r] < p[r - 1])) {
-                return Err(InputError::at(path, line, "p_hPa", "pressures must be positive and strictly decreasing"));
+                return Err(InputError::at(
+                    path,
+                    line,
+                    "p_hPa",
+                    "pressures must be positive and strictly decreasing",
+                ));
             }
-            for (name, v) in [("T_std_K", ts[r]), ("lnq_std", qs[r]), ("CO2_std_ppmv", cs[r])] {
+            for (name, v) in [
+                ("T_std_K", ts[r]),
+                ("lnq_std", qs[r]),
+                ("CO2_std_ppmv", cs[r]),
+            ] {
                 if v < 0.0 {
-                    return Err(InputError::at(path, line, name, "a standard deviation cannot be negative"));
+                    return Err(InputError::at(
+                        path,
+                        line,
+                        name,
+                        "a standard deviation cannot be negative",
+                    ));
                 }
             }
         }
@@ -660,12 +752,17 @@ impl ErrorModel {
     /// Check the parameters.
     pub fn validate(&self) -> Result<(), AtmosphereError> {
         for (name, v) in [
-            ("temperature correlation length", self.temperature_corr_length_lnp),
+            (
+                "temperature correlation length",
+                self.temperature_corr_length_lnp,
+            ),
             ("lnq correlation length", self.ln_h2o_corr_length_lnp),
             ("CO2 correlation length", self.co2_corr_length_lnp),
         ] {
             if !(v.is_finite() && v > 0.0) {
-                return Err(AtmosphereError::InvalidArgument(format!("{name} {v} (ln p) must be positive")));
+                return Err(AtmosphereError::InvalidArgument(format!(
+                    "{name} {v} (ln p) must be positive"
+                )));
             }
         }
         if !(self.surface_pressure_std_hpa.is_finite() && self.surface_pressure_std_hpa >= 0.0) {
@@ -674,8 +771,14 @@ impl ErrorModel {
                 self.surface_pressure_std_hpa
             )));
         }
-        if self.co2_std_ppmv.iter().any(|s| !(s.is_finite() && *s >= 0.0)) {
-            return Err(AtmosphereError::InvalidArgument("CO2 std must be ≥ 0".into()));
+        if self
+            .co2_std_ppmv
+            .iter()
+            .any(|s| !(s.is_finite() && *s >= 0.0))
+        {
+            return Err(AtmosphereError::InvalidArgument(
+                "CO2 std must be ≥ 0".into(),
+            ));
         }
         Ok(())
     }
@@ -689,7 +792,8 @@ impl ErrorModel {
             return (values[n - 1], p < self.pressure_pa[n - 1] * (1.0 - 1e-12));
         }
         let k = self.pressure_pa.partition_point(|q| *q > p) - 1;
-        let w = (p.ln() - self.pressure_pa[k].ln()) / (self.pressure_pa[k + 1].ln() - self.pressure_pa[k].ln());
+        let w = (p.ln() - self.pressure_pa[k].ln())
+            / (self.pressure_pa[k + 1].ln() - self.pressure_pa[k].ln());
         (values[k] + w * (values[k + 1] - values[k]), false)
     }
 
@@ -762,14 +866,23 @@ mod tests {
     fn not_positive_definite_is_an_error_or_repaired() {
         let c = Covariance {
             elements: vec![
-                StateElement { variable: StateVariable::Temperature, pressure_pa: Some(1e5) },
-                StateElement { variable: StateVariable::Temperature, pressure_pa: Some(5e4) },
+                StateElement {
+                    variable: StateVariable::Temperature,
+                    pressure_pa: Some(1e5),
+                },
+                StateElement {
+                    variable: StateVariable::Temperature,
+                    pressure_pa: Some(5e4),
+                },
             ],
             matrix: DMatrix::from_row_slice(2, 2, &[1.0, 2.0, 2.0, 1.0]),
             notes: vec![],
         };
         let e = c.factor(false).unwrap_err();
-        assert!(matches!(e, AtmosphereError::NotPositiveDefinite { negative: 1, .. }), "{e}");
+        assert!(
+            matches!(e, AtmosphereError::NotPositiveDefinite { negative: 1, .. }),
+            "{e}"
+        );
         let f = c.factor(true).unwrap();
         let r = f.repair.unwrap();
         assert_eq!(r.clipped, 1);

@@ -162,14 +162,30 @@ pub fn perturb_member(
         profile: format!("{} member {id}", prof.name),
         message,
     };
-    let (dt, dq, dc, dps) = (&delta[..n], &delta[n..2 * n], &delta[2 * n..3 * n], delta[3 * n]);
+    let (dt, dq, dc, dps) = (
+        &delta[..n],
+        &delta[n..2 * n],
+        &delta[2 * n..3 * n],
+        delta[3 * n],
+    );
     let ps = prof.surface_pressure_pa();
     let ps_new = ps + dps * 100.0;
     if !(ps_new > HYBRID_TOP_PA) {
-        return Err(bad(format!("perturbed surface pressure {ps_new} Pa is not above {HYBRID_TOP_PA} Pa")));
+        return Err(bad(format!(
+            "perturbed surface pressure {ps_new} Pa is not above {HYBRID_TOP_PA} Pa"
+        )));
     }
-    let pressure_pa: Vec<f64> = prof.pressure_pa.iter().map(|&p| hybrid_shift_pa(p, ps, ps_new)).collect();
-    let temperature_k: Vec<f64> = prof.temperature_k.iter().zip(dt).map(|(t, d)| t + d).collect();
+    let pressure_pa: Vec<f64> = prof
+        .pressure_pa
+        .iter()
+        .map(|&p| hybrid_shift_pa(p, ps, ps_new))
+        .collect();
+    let temperature_k: Vec<f64> = prof
+        .temperature_k
+        .iter()
+        .zip(dt)
+        .map(|(t, d)| t + d)
+        .collect();
     if let Some((k, t)) = temperature_k.iter().enumerate().find(|(_, t)| !(**t > 0.0)) {
         return Err(bad(format!(
             "perturbed temperature {t} K at level {k}: the covariance is too large for this profile"
@@ -195,7 +211,11 @@ pub fn perturb_member(
         match g.name.as_str() {
             "H2O" => {
                 for k in 0..n {
-                    let x = if g.vmr[k] > 0.0 { (g.vmr[k].ln() + dq[k]).exp() } else { 0.0 };
+                    let x = if g.vmr[k] > 0.0 {
+                        (g.vmr[k].ln() + dq[k]).exp()
+                    } else {
+                        0.0
+                    };
                     let e_s = saturation_vapour_pressure_pa(out.temperature_k[k], cfg.saturation);
                     let x_max = (cfg.max_relative_humidity * e_s / out.pressure_pa[k]).min(1.0);
                     g.vmr[k] = if x > x_max {

@@ -23,8 +23,8 @@ pub enum SaturationOver {
 
 /// Saturation vapour pressure over plane liquid water [Pa] (Murphy and Koop 2005, Eq. 10).
 ///
-/// `ln e_w = 54.842763 − 6763.22/T − 4.210 ln T + 0.000367 T
-///  + tanh(0.0415 (T − 218.8)) (53.878 − 1331.22/T − 9.44523 ln T + 0.014025 T)`, T in K.
+/// `ln e_w = 54.842763 − 6763.22/T − 4.210 ln T + 0.000367 T +
+/// tanh(0.0415 (T − 218.8)) (53.878 − 1331.22/T − 9.44523 ln T + 0.014025 T)`, T in K.
 /// Valid 123 K < T < 332 K (the authors' stated range; within 0.05 % of IAPWS above 273 K);
 /// evaluated as is outside it.
 ///

@@ -18,6 +18,11 @@
 //! gas amounts are volume mixing ratios of moist air (mol/mol); SI units unless a name says
 //! otherwise. The method and its citations are in `docs/atmosphere.md`.
 
+// `!(x > 0.0)` is the NaN-rejecting form of a range check; keep it.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+// Level loops index several parallel per-level vectors at once.
+#![allow(clippy::needless_range_loop)]
+
 use std::str::FromStr;
 
 use crate::constants::BOLTZMANN_J_PER_K;
@@ -201,7 +206,10 @@ impl Profile {
                 self.len()
             )));
         }
-        if let Some(v) = vmr.iter().find(|v| !(v.is_finite() && (0.0..=1.0).contains(*v))) {
+        if let Some(v) = vmr
+            .iter()
+            .find(|v| !(v.is_finite() && (0.0..=1.0).contains(*v)))
+        {
             return Err(AtmosphereError::InvalidArgument(format!(
                 "gas `{name}`: volume mixing ratio {v} is not in [0, 1]"
             )));
@@ -261,7 +269,9 @@ impl Profile {
             .enumerate()
             .find(|(_, t)| !(t.is_finite() && **t > 0.0))
         {
-            return Err(bad(format!("temperature {t} K at level {k} is not positive")));
+            return Err(bad(format!(
+                "temperature {t} K at level {k} is not positive"
+            )));
         }
         for g in &self.gases {
             if g.vmr.len() != n {
@@ -440,7 +450,10 @@ pub fn parse_afgl(path: &str, text: &str) -> Result<Profile, InputError> {
 
 /// Write `contents` to `path` through a temporary file in the same folder and a rename, so that
 /// a failure never leaves a half-written file.
-pub(crate) fn write_atomically(path: &std::path::Path, contents: &[u8]) -> Result<(), AtmosphereError> {
+pub(crate) fn write_atomically(
+    path: &std::path::Path,
+    contents: &[u8],
+) -> Result<(), AtmosphereError> {
     let err = |e: std::io::Error| AtmosphereError::Write {
         path: path.to_path_buf(),
         message: e.to_string(),

@@ -20,7 +20,9 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use super::humidity::{moist_air_molar_mass_kg_per_mol, vmr_from_dry_mole_ratio, vmr_from_specific_humidity};
+use super::humidity::{
+    moist_air_molar_mass_kg_per_mol, vmr_from_dry_mole_ratio, vmr_from_specific_humidity,
+};
 use super::hydrostatic::hydrostatic_altitudes_m;
 use super::set::{ProfileMeta, ProfileSet, SetMember};
 use super::{GasProfile, Profile, molar_mass_kg_per_mol};
@@ -33,9 +35,14 @@ fn group_by_profile<'a>(t: &'a CsvTable, id_col: &str) -> Result<Grouped<'a>, In
     let c = t.column(id_col)?;
     let mut g: Grouped = BTreeMap::new();
     for (line, f) in t.rows() {
-        let id: i64 = f[c]
-            .parse()
-            .map_err(|_| InputError::at(t.path(), line, id_col, format!("`{}` is not an integer", f[c])))?;
+        let id: i64 = f[c].parse().map_err(|_| {
+            InputError::at(
+                t.path(),
+                line,
+                id_col,
+                format!("`{}` is not an integer", f[c]),
+            )
+        })?;
         g.entry(id).or_default().push((line, f));
     }
     Ok(g)
@@ -46,6 +53,9 @@ fn num(t: &CsvTable, line: usize, f: &[String], col: &str) -> Result<f64, InputE
     crate::input::parse_f64(t.path(), line, col, &f[c])
 }
 
+/// (pressure [Pa], temperature [K], per-quantity values), bottom-up.
+type LevelColumns = (Vec<f64>, Vec<f64>, Vec<Vec<f64>>);
+
 /// Levels of one profile on pressure levels (bottom-up after this call): keep the levels above
 /// the surface and add the surface level, values interpolated linearly in ln p.
 /// `rows`: (line, p_Pa, T, values...) in any monotonic order.
@@ -54,10 +64,15 @@ fn cut_at_surface(
     id: i64,
     mut levels: Vec<(usize, f64, f64, Vec<f64>)>,
     ps: f64,
-) -> Result<(Vec<f64>, Vec<f64>, Vec<Vec<f64>>), InputError> {
+) -> Result<LevelColumns, InputError> {
     levels.sort_by(|a, b| b.1.total_cmp(&a.1));
     if let Some(w) = levels.windows(2).find(|w| w[1].1 >= w[0].1) {
-        return Err(InputError::at(path, w[1].0, "p_hPa", format!("profile {id}: repeated pressure")));
+        return Err(InputError::at(
+            path,
+            w[1].0,
+            "p_hPa",
+            format!("profile {id}: repeated pressure"),
+        ));
     }
     let bottom = levels[0].1;
     if ps > bottom || ps <= levels[levels.len() - 1].1 {
@@ -75,7 +90,11 @@ fn cut_at_surface(
     let lerp = |a: f64, b: f64| a + w * (b - a);
     let mut p = vec![ps];
     let mut t = vec![lerp(lo.2, hi.2)];
-    let mut v: Vec<Vec<f64>> = lo.3.iter().zip(&hi.3).map(|(a, b)| vec![lerp(*a, *b)]).collect();
+    let mut v: Vec<Vec<f64>> =
+        lo.3.iter()
+            .zip(&hi.3)
+            .map(|(a, b)| vec![lerp(*a, *b)])
+            .collect();
     for l in &levels[k..] {
         p.push(l.1);
         t.push(l.2);
@@ -93,9 +112,13 @@ fn finish(
     temperature_k: Vec<f64>,
     gases: Vec<GasProfile>,
 ) -> Result<SetMember, InputError> {
-    let h2o = gases.iter().find(|g| g.name == "H2O").map(|g| g.vmr.as_slice());
-    let altitude_m = hydrostatic_altitudes_m(&pressure_pa, &temperature_k, h2o, 0.0, meta.latitude_deg)
-        .map_err(|e| InputError::at(path, line, "profile", e.to_string()))?;
+    let h2o = gases
+        .iter()
+        .find(|g| g.name == "H2O")
+        .map(|g| g.vmr.as_slice());
+    let altitude_m =
+        hydrostatic_altitudes_m(&pressure_pa, &temperature_k, h2o, 0.0, meta.latitude_deg)
+            .map_err(|e| InputError::at(path, line, "profile", e.to_string()))?;
     let profile = Profile {
         name,
         altitude_m,
@@ -135,7 +158,11 @@ pub fn read_ecmwf83(levels_path: &Path, meta_path: &Path) -> Result<ProfileSet, 
         let id: i64 = f[m.column("profile")?]
             .parse()
             .map_err(|_| InputError::at(meta_path, line, "profile", "not an integer"))?;
-        let (y, mo, d) = (num(&m, line, f, "year")?, num(&m, line, f, "month")?, num(&m, line, f, "day")?);
+        let (y, mo, d) = (
+            num(&m, line, f, "year")?,
+            num(&m, line, f, "month")?,
+            num(&m, line, f, "day")?,
+        );
         let meta = ProfileMeta {
             id: id.to_string(),
             latitude_deg: num(&m, line, f, "lat_deg")?,
@@ -144,16 +171,26 @@ pub fn read_ecmwf83(levels_path: &Path, meta_path: &Path) -> Result<ProfileSet, 
             weight: None,
         };
         let ps = num(&m, line, f, "psurf_hPa")? * 100.0;
-        let rows = groups
-            .get(&id)
-            .ok_or_else(|| InputError::at(meta_path, line, "profile", format!("profile {id} has no levels in {}", levels_path.display())))?;
+        let rows = groups.get(&id).ok_or_else(|| {
+            InputError::at(
+                meta_path,
+                line,
+                "profile",
+                format!("profile {id} has no levels in {}", levels_path.display()),
+            )
+        })?;
         let mut levels = Vec::with_capacity(rows.len());
         for (l, r) in rows {
             let mut v = Vec::with_capacity(gases.len());
             for g in gases {
                 v.push(num(&t, *l, r, &format!("{g}_ppmv"))? * 1e-6);
             }
-            levels.push((*l, num(&t, *l, r, "p_hPa")? * 100.0, num(&t, *l, r, "T_K")?, v));
+            levels.push((
+                *l,
+                num(&t, *l, r, "p_hPa")? * 100.0,
+                num(&t, *l, r, "T_K")?,
+                v,
+            ));
         }
         let (p, temp, v) = cut_at_surface(levels_path, id, levels, ps)?;
         // Per dry air → moist air.
@@ -168,7 +205,15 @@ pub fn read_ecmwf83(levels_path: &Path, meta_path: &Path) -> Result<ProfileSet, 
                 vmr: r.iter().zip(&x_w).map(|(r, x)| r * (1.0 - x)).collect(),
             });
         }
-        set.members.push(finish(levels_path, rows[0].0, format!("ecmwf83 #{id}"), meta, p, temp, gas_profiles)?);
+        set.members.push(finish(
+            levels_path,
+            rows[0].0,
+            format!("ecmwf83 #{id}"),
+            meta,
+            p,
+            temp,
+            gas_profiles,
+        )?);
     }
     Ok(set)
 }
@@ -201,27 +246,51 @@ pub fn read_ecmwf52(levels_path: &Path, meta_path: &Path) -> Result<ProfileSet, 
             .map_err(|_| InputError::at(meta_path, line, "profile", "not an integer"))?;
         let dt = &f[m.column("datetime_yyyymmddhh")?];
         if dt.len() != 10 || !dt.bytes().all(|b| b.is_ascii_digit()) {
-            return Err(InputError::at(meta_path, line, "datetime_yyyymmddhh", format!("`{dt}` is not yyyymmddhh")));
+            return Err(InputError::at(
+                meta_path,
+                line,
+                "datetime_yyyymmddhh",
+                format!("`{dt}` is not yyyymmddhh"),
+            ));
         }
         let meta = ProfileMeta {
             id: id.to_string(),
             latitude_deg: num(&m, line, f, "lat_deg")?,
             longitude_deg: num(&m, line, f, "lon_deg")?,
-            time_utc: format!("{}-{}-{}T{}:00Z", &dt[0..4], &dt[4..6], &dt[6..8], &dt[8..10]),
+            time_utc: format!(
+                "{}-{}-{}T{}:00Z",
+                &dt[0..4],
+                &dt[4..6],
+                &dt[6..8],
+                &dt[8..10]
+            ),
             weight: None,
         };
         let ps = num(&m, line, f, "psurf_hPa")? * 100.0;
-        let rows = groups
-            .get(&id)
-            .ok_or_else(|| InputError::at(meta_path, line, "profile", format!("profile {id} has no levels")))?;
+        let rows = groups.get(&id).ok_or_else(|| {
+            InputError::at(
+                meta_path,
+                line,
+                "profile",
+                format!("profile {id} has no levels"),
+            )
+        })?;
         let mut levels = Vec::with_capacity(rows.len());
         for (l, r) in rows {
             let q = num(&t, *l, r, "q_kgkg")?;
             let o3 = num(&t, *l, r, "O3_kgkg")?;
-            levels.push((*l, num(&t, *l, r, "p_hPa")? * 100.0, num(&t, *l, r, "T_K")?, vec![q, o3]));
+            levels.push((
+                *l,
+                num(&t, *l, r, "p_hPa")? * 100.0,
+                num(&t, *l, r, "T_K")?,
+                vec![q, o3],
+            ));
         }
         let (p, temp, v) = cut_at_surface(levels_path, id, levels, ps)?;
-        let x_w: Vec<f64> = v[0].iter().map(|q| vmr_from_specific_humidity(*q)).collect();
+        let x_w: Vec<f64> = v[0]
+            .iter()
+            .map(|q| vmr_from_specific_humidity(*q))
+            .collect();
         // Ozone: x = m_O3 · M_air(moist) / M_O3.
         let x_o3: Vec<f64> = v[1]
             .iter()
@@ -238,7 +307,15 @@ pub fn read_ecmwf52(levels_path: &Path, meta_path: &Path) -> Result<ProfileSet, 
                 vmr: x_o3,
             },
         ];
-        set.members.push(finish(levels_path, rows[0].0, format!("ecmwf52 #{id}"), meta, p, temp, gases)?);
+        set.members.push(finish(
+            levels_path,
+            rows[0].0,
+            format!("ecmwf52 #{id}"),
+            meta,
+            p,
+            temp,
+            gases,
+        )?);
     }
     Ok(set)
 }
@@ -251,23 +328,34 @@ pub fn rfmip_global_means(meta: &CsvTable) -> Result<Vec<(String, f64)>, InputEr
         .comments
         .iter()
         .find(|c| c.contains("global means"))
-        .ok_or_else(|| InputError::file(meta.path(), "no `global means` comment line with the gas amounts"))?;
+        .ok_or_else(|| {
+            InputError::file(
+                meta.path(),
+                "no `global means` comment line with the gas amounts",
+            )
+        })?;
     let body = line.split_once(':').map(|(_, b)| b).unwrap_or("");
     let mut out = Vec::new();
     for item in body.split(';') {
         let item = item.trim();
-        let Some((gas, rest)) = item.split_once('=') else { continue };
+        let Some((gas, rest)) = item.split_once('=') else {
+            continue;
+        };
         let mut words = rest.split_whitespace();
-        let value: f64 = words
-            .next()
-            .and_then(|v| v.parse().ok())
-            .ok_or_else(|| InputError::at(meta.path(), 1, gas.trim(), format!("cannot read `{item}`")))?;
+        let value: f64 = words.next().and_then(|v| v.parse().ok()).ok_or_else(|| {
+            InputError::at(meta.path(), 1, gas.trim(), format!("cannot read `{item}`"))
+        })?;
         let scale = match words.next() {
             Some("ppm") => 1e-6,
             Some("ppb") => 1e-9,
             None | Some("(stored") => 1.0,
             Some(u) => {
-                return Err(InputError::at(meta.path(), 1, gas.trim(), format!("unknown unit `{u}`")));
+                return Err(InputError::at(
+                    meta.path(),
+                    1,
+                    gas.trim(),
+                    format!("unknown unit `{u}`"),
+                ));
             }
         };
         let gas = gas.trim();
@@ -316,9 +404,9 @@ pub fn read_rfmip(layers_path: &Path, meta_path: &Path) -> Result<ProfileSet, In
             time_utc: time_from_days_2014(day),
             weight: Some(num(&m, line, f, "profile_weight")?),
         };
-        let rows = groups
-            .get(&id)
-            .ok_or_else(|| InputError::at(meta_path, line, "site", format!("site {id} has no layers")))?;
+        let rows = groups.get(&id).ok_or_else(|| {
+            InputError::at(meta_path, line, "site", format!("site {id} has no layers"))
+        })?;
         // Layers bottom-up.
         let mut layers = Vec::with_capacity(rows.len());
         for (l, r) in rows {
@@ -340,7 +428,10 @@ pub fn read_rfmip(layers_path: &Path, meta_path: &Path) -> Result<ProfileSet, In
                     layers_path,
                     w[1].0,
                     "p_bottom_edge_Pa",
-                    format!("site {id}: layer edges do not join ({} vs {} Pa)", w[0].6, w[1].4),
+                    format!(
+                        "site {id}: layer edges do not join ({} vs {} Pa)",
+                        w[0].6, w[1].4
+                    ),
                 ));
             }
         }
@@ -388,7 +479,15 @@ pub fn read_rfmip(layers_path: &Path, meta_path: &Path) -> Result<ProfileSet, In
                 vmr: (0..p.len()).map(|k| dry(*v, k)).collect(),
             });
         }
-        set.members.push(finish(layers_path, rows[0].0, format!("rfmip #{id}"), meta, p, temp, gases)?);
+        set.members.push(finish(
+            layers_path,
+            rows[0].0,
+            format!("rfmip #{id}"),
+            meta,
+            p,
+            temp,
+            gases,
+        )?);
     }
     Ok(set)
 }
@@ -403,7 +502,13 @@ fn time_from_days_2014(days: f64) -> String {
         d -= MONTH_DAYS[month] as i64;
         month += 1;
     }
-    format!("2014-{:02}-{:02}T{:02}:{:02}Z", month + 1, d + 1, rem / 60, rem % 60)
+    format!(
+        "2014-{:02}-{:02}T{:02}:{:02}Z",
+        month + 1,
+        d + 1,
+        rem / 60,
+        rem % 60
+    )
 }
 
 #[cfg(test)]

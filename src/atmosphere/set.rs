@@ -251,7 +251,12 @@ impl ProfileSet {
             .map(|m| m.profile.surface_pressure_pa())
             .sum::<f64>()
             / nm;
-        let zs_mean = self.members.iter().map(|m| m.profile.altitude_m[0]).sum::<f64>() / nm;
+        let zs_mean = self
+            .members
+            .iter()
+            .map(|m| m.profile.altitude_m[0])
+            .sum::<f64>()
+            / nm;
         let ps0 = first.profile.surface_pressure_pa();
         let mut grid: Vec<f64> = first
             .profile
@@ -274,7 +279,12 @@ impl ProfileSet {
         }
         let nl = grid.len();
         let mut t_sum = vec![0.0; nl];
-        let gas_order: Vec<String> = first.profile.gas_names().iter().map(|s| s.to_string()).collect();
+        let gas_order: Vec<String> = first
+            .profile
+            .gas_names()
+            .iter()
+            .map(|s| s.to_string())
+            .collect();
         let mut gas_sum = vec![vec![0.0; nl]; gas_order.len()];
         for m in &self.members {
             let prof = &m.profile;
@@ -285,7 +295,10 @@ impl ProfileSet {
                 .map(|&p| hybrid_shift_pa(p, ps_mean, ps).clamp(top, ps))
                 .collect();
             let at = prof.interpolate_to_pressures(&targets)?;
-            t_sum.iter_mut().zip(&at.temperature_k).for_each(|(s, t)| *s += t);
+            t_sum
+                .iter_mut()
+                .zip(&at.temperature_k)
+                .for_each(|(s, t)| *s += t);
             for (g, sum) in gas_order.iter().zip(gas_sum.iter_mut()) {
                 let v = at.gas(g).expect("same gases (checked)");
                 sum.iter_mut().zip(v).for_each(|(s, x)| *s += x);
@@ -300,13 +313,21 @@ impl ProfileSet {
                 vmr: s.iter().map(|x| x / nm).collect(),
             })
             .collect();
-        let abs_lat = self.members.iter().map(|m| m.meta.latitude_deg.abs()).sum::<f64>() / nm;
+        let abs_lat = self
+            .members
+            .iter()
+            .map(|m| m.meta.latitude_deg.abs())
+            .sum::<f64>()
+            / nm;
         let sign = if self.members.iter().all(|m| m.meta.latitude_deg < 0.0) {
             -1.0
         } else {
             1.0
         };
-        let h2o = gases.iter().find(|g| g.name == "H2O").map(|g| g.vmr.as_slice());
+        let h2o = gases
+            .iter()
+            .find(|g| g.name == "H2O")
+            .map(|g| g.vmr.as_slice());
         let altitude_m = hydrostatic_altitudes_m(&grid, &temperature_k, h2o, zs_mean, abs_lat)?;
         let profile = Profile {
             name: format!("mean of {}", self.name),
@@ -335,7 +356,12 @@ impl ProfileSet {
             .members
             .first()
             .ok_or_else(|| AtmosphereError::EmptySet(self.name.clone()))?;
-        let gases: Vec<String> = first.profile.gas_names().iter().map(|s| s.to_string()).collect();
+        let gases: Vec<String> = first
+            .profile
+            .gas_names()
+            .iter()
+            .map(|s| s.to_string())
+            .collect();
         let with_weight = first.meta.weight.is_some();
         let mut out = String::new();
         out.push_str("# lidarsim profile set (format: docs/atmosphere.md)\n");
@@ -361,8 +387,11 @@ impl ProfileSet {
                 profile: meta.id.clone(),
                 message: msg,
             };
-            if meta.id.is_empty() || meta.id.contains([',', '\n', '#']) || meta.id.trim() != meta.id {
-                return Err(bad("the id must be non-empty without commas, `#` or surrounding blanks".into()));
+            if meta.id.is_empty() || meta.id.contains([',', '\n', '#']) || meta.id.trim() != meta.id
+            {
+                return Err(bad(
+                    "the id must be non-empty without commas, `#` or surrounding blanks".into(),
+                ));
             }
             if !ids.insert(meta.id.as_str()) {
                 return Err(bad("the id appears twice".into()));
@@ -378,7 +407,10 @@ impl ProfileSet {
                     gases.join(", ")
                 )));
             }
-            let cols: Vec<&[f64]> = gases.iter().map(|g| m.profile.gas(g).expect("checked")).collect();
+            let cols: Vec<&[f64]> = gases
+                .iter()
+                .map(|g| m.profile.gas(g).expect("checked"))
+                .collect();
             for k in 0..m.profile.len() {
                 let _ = write!(
                     out,
@@ -427,12 +459,22 @@ fn check_time(s: &str) -> Result<(), String> {
         return Ok(());
     }
     let b = s.as_bytes();
-    let digits = |r: std::ops::Range<usize>| b.get(r.clone()).is_some_and(|x| x.iter().all(u8::is_ascii_digit));
-    let date_ok = b.len() >= 10 && digits(0..4) && b[4] == b'-' && digits(5..7) && b[7] == b'-' && digits(8..10);
+    let digits = |r: std::ops::Range<usize>| {
+        b.get(r.clone())
+            .is_some_and(|x| x.iter().all(u8::is_ascii_digit))
+    };
+    let date_ok = b.len() >= 10
+        && digits(0..4)
+        && b[4] == b'-'
+        && digits(5..7)
+        && b[7] == b'-'
+        && digits(8..10);
     let ok = date_ok
         && match b.len() {
             10 => true,
-            17 => b[10] == b'T' && digits(11..13) && b[13] == b':' && digits(14..16) && b[16] == b'Z',
+            17 => {
+                b[10] == b'T' && digits(11..13) && b[13] == b':' && digits(14..16) && b[16] == b'Z'
+            }
             20 => {
                 b[10] == b'T'
                     && digits(11..13)
@@ -536,9 +578,15 @@ pub fn parse_profile_set(path: &Path, text: &str) -> Result<ProfileSet, InputErr
     let (c_p, p_scale) = match one_of("pressure_hPa", "pressure_Pa")? {
         Some((i, 0.0)) => (i, 100.0),
         Some((i, _)) => (i, 1.0),
-        None => return Err(col_err("pressure_hPa", "missing column (or `pressure_Pa`)".into())),
+        None => {
+            return Err(col_err(
+                "pressure_hPa",
+                "missing column (or `pressure_Pa`)".into(),
+            ));
+        }
     };
-    let c_z = one_of("altitude_m", "altitude_km")?.map(|(i, k)| (i, if k == 0.0 { 1.0 } else { 1e3 }));
+    let c_z =
+        one_of("altitude_m", "altitude_km")?.map(|(i, k)| (i, if k == 0.0 { 1.0 } else { 1e3 }));
     let c_time = t.column_opt("time_utc");
     let c_weight = t.column_opt("weight");
     let c_zs = t.column_opt("surface_altitude_m");
@@ -629,7 +677,20 @@ pub fn parse_profile_set(path: &Path, text: &str) -> Result<ProfileSet, InputErr
             end += 1;
         }
         let member = parse_member(
-            path, &t, &rows[r..end], &id, &stem, c_lat, c_lon, c_time, c_weight, c_zs, c_p, p_scale, c_t, c_z,
+            path,
+            &t,
+            &rows[r..end],
+            &id,
+            &stem,
+            c_lat,
+            c_lon,
+            c_time,
+            c_weight,
+            c_zs,
+            c_p,
+            p_scale,
+            c_t,
+            c_z,
             &gas_cols,
         )?;
         set.members.push(member);
@@ -668,10 +729,15 @@ fn parse_member(
 ) -> Result<SetMember, InputError> {
     let header = t.header();
     let (line0, f0) = all[0];
-    let num = |line: usize, fields: &[String], col: usize| parse_f64(path, line, &header[col], &fields[col]);
+    let num = |line: usize, fields: &[String], col: usize| {
+        parse_f64(path, line, &header[col], &fields[col])
+    };
     // Per-profile metadata: from the first row, identical on all rows.
     for (line, f) in &all[1..] {
-        for c in [Some(c_lat), Some(c_lon), c_time, c_weight, c_zs].into_iter().flatten() {
+        for c in [Some(c_lat), Some(c_lon), c_time, c_weight, c_zs]
+            .into_iter()
+            .flatten()
+        {
             if f[c] != f0[c] {
                 return Err(InputError::at(
                     path,
@@ -687,7 +753,12 @@ fn parse_member(
     }
     let latitude_deg = num(line0, f0, c_lat)?;
     if latitude_deg.abs() > 90.0 {
-        return Err(InputError::at(path, line0, "latitude_deg", format!("{latitude_deg} is not in [−90, 90]")));
+        return Err(InputError::at(
+            path,
+            line0,
+            "latitude_deg",
+            format!("{latitude_deg} is not in [−90, 90]"),
+        ));
     }
     let longitude_deg = num(line0, f0, c_lon)?;
     let time_utc = c_time.map(|c| f0[c].clone()).unwrap_or_default();
@@ -707,20 +778,37 @@ fn parse_member(
     for (line, f) in all {
         let p = num(*line, f, c_p)? * p_scale;
         if !(p > 0.0) {
-            return Err(InputError::at(path, *line, &header[c_p], "pressure must be positive"));
+            return Err(InputError::at(
+                path,
+                *line,
+                &header[c_p],
+                "pressure must be positive",
+            ));
         }
         let temp = num(*line, f, c_t)?;
         if !(temp > 0.0) {
-            return Err(InputError::at(path, *line, &header[c_t], "temperature must be positive (K)"));
+            return Err(InputError::at(
+                path,
+                *line,
+                &header[c_t],
+                "temperature must be positive (K)",
+            ));
         }
-        let z = c_z.map(|(c, s)| num(*line, f, c).map(|v| v * s)).transpose()?;
+        let z = c_z
+            .map(|(c, s)| num(*line, f, c).map(|v| v * s))
+            .transpose()?;
         let mut gas = Vec::with_capacity(gas_cols.len());
         let mut x_h2o = 0.0;
         for (c, g, u) in gas_cols {
             let v = num(*line, f, *c)?;
             let x = if u.specific_humidity {
                 if !(0.0..1.0).contains(&v) {
-                    return Err(InputError::at(path, *line, &header[*c], "specific humidity must be in [0, 1)"));
+                    return Err(InputError::at(
+                        path,
+                        *line,
+                        &header[*c],
+                        "specific humidity must be in [0, 1)",
+                    ));
                 }
                 vmr_from_specific_humidity(v)
             } else {
@@ -753,11 +841,20 @@ fn parse_member(
         });
     }
     if levels.len() < 2 {
-        return Err(InputError::at(path, line0, "profile", format!("profile `{id}` has fewer than 2 levels")));
+        return Err(InputError::at(
+            path,
+            line0,
+            "profile",
+            format!("profile `{id}` has fewer than 2 levels"),
+        ));
     }
     let descending = levels[1].p < levels[0].p;
     for w in levels.windows(2) {
-        let ok = if descending { w[1].p < w[0].p } else { w[1].p > w[0].p };
+        let ok = if descending {
+            w[1].p < w[0].p
+        } else {
+            w[1].p > w[0].p
+        };
         if !ok {
             return Err(InputError::at(
                 path,
@@ -786,7 +883,10 @@ fn parse_member(
         .collect();
     let altitude_m = match c_z {
         Some((c, _)) => {
-            let z: Vec<f64> = levels.iter().map(|l| l.z.expect("column present")).collect();
+            let z: Vec<f64> = levels
+                .iter()
+                .map(|l| l.z.expect("column present"))
+                .collect();
             if let Some(k) = (1..z.len()).find(|&k| !(z[k] > z[k - 1])) {
                 return Err(InputError::at(
                     path,
@@ -798,9 +898,18 @@ fn parse_member(
             z
         }
         None => {
-            let h2o = gases.iter().find(|g| g.name == "H2O").map(|g| g.vmr.as_slice());
-            hydrostatic_altitudes_m(&pressure_pa, &temperature_k, h2o, surface_altitude_m, latitude_deg)
-                .map_err(|e| InputError::at(path, line0, "profile", e.to_string()))?
+            let h2o = gases
+                .iter()
+                .find(|g| g.name == "H2O")
+                .map(|g| g.vmr.as_slice());
+            hydrostatic_altitudes_m(
+                &pressure_pa,
+                &temperature_k,
+                h2o,
+                surface_altitude_m,
+                latitude_deg,
+            )
+            .map_err(|e| InputError::at(path, line0, "profile", e.to_string()))?
         }
     };
     let profile = Profile {
@@ -832,14 +941,26 @@ mod tests {
     #[test]
     fn classes_follow_the_paper_boundaries() {
         use LatitudeClass::*;
-        for (lat, c) in [(0.0, Tropical), (-29.9, Tropical), (30.0, Mid), (-50.0, Mid), (50.01, High), (-90.0, High)] {
+        for (lat, c) in [
+            (0.0, Tropical),
+            (-29.9, Tropical),
+            (30.0, Mid),
+            (-50.0, Mid),
+            (50.01, High),
+            (-90.0, High),
+        ] {
             assert_eq!(LatitudeClass::of_latitude_deg(lat), c, "{lat}");
         }
     }
 
     #[test]
     fn time_format() {
-        for ok in ["", "2007-02-20", "2007-02-20T06:00Z", "2014-01-05T06:00:00Z"] {
+        for ok in [
+            "",
+            "2007-02-20",
+            "2007-02-20T06:00Z",
+            "2014-01-05T06:00:00Z",
+        ] {
             assert!(check_time(ok).is_ok(), "{ok}");
         }
         for bad in ["2007-2-20", "20070220", "2007-02-20T06:00", "yesterday"] {
