@@ -71,6 +71,10 @@ pub struct EnsembleReport {
     pub total_values: usize,
     /// Set when the covariance had to be repaired.
     pub repair: Option<RepairReport>,
+    /// Levels at which the mean profile itself exceeds the relative-humidity limit (a mean of
+    /// profiles from different climates can: mean q with a colder mean T). Every member is
+    /// capped there.
+    pub mean_levels_above_limit: usize,
 }
 
 /// Draw `n` perturbation vectors δ = L z (columns of the result), as [`generate_ensemble`]
@@ -121,11 +125,22 @@ pub fn generate_ensemble(
         members: Vec::with_capacity(cfg.n),
         notes: Vec::new(),
     };
+    let mean_levels_above_limit = match prof.gas("H2O") {
+        Some(x) => (0..prof.len())
+            .filter(|&k| {
+                x[k] * prof.pressure_pa[k]
+                    > cfg.max_relative_humidity
+                        * saturation_vapour_pressure_pa(prof.temperature_k[k], cfg.saturation)
+            })
+            .count(),
+        None => 0,
+    };
     let mut report = EnsembleReport {
         capped_values: 0,
         capped_members: 0,
         total_values: 0,
         repair: factor.repair,
+        mean_levels_above_limit,
     };
     for j in 0..cfg.n {
         let delta: Vec<f64> = deltas.column(j).iter().copied().collect();

@@ -324,6 +324,16 @@ fn generate(a: GenerateArgs) -> anyhow::Result<()> {
     );
     println!("{cap}");
     notes.push(cap);
+    if report.mean_levels_above_limit > 0 {
+        let w = format!(
+            "the mean profile itself exceeds {} % relative humidity at {} of {} levels (a mean over different climates?); members are capped there",
+            a.max_rh_percent,
+            report.mean_levels_above_limit,
+            mean.profile.len()
+        );
+        println!("warning: {w}");
+        notes.push(w);
+    }
     for n in &cov.notes {
         println!("covariance: {n}");
     }
@@ -470,7 +480,15 @@ fn plot(a: PlotArgs) -> anyhow::Result<()> {
                     let v: Vec<f64> = match row {
                         0 => p.temperature_k.clone(),
                         1 => p.gas("H2O")?.iter().map(|x| x * 1e6).collect(),
-                        _ => p.gas("CO2")?.iter().map(|x| x * 1e6).collect(),
+                        // CO2 per dry air: what a well-mixed gas keeps constant.
+                        _ => {
+                            let w = p.gas("H2O");
+                            p.gas("CO2")?
+                                .iter()
+                                .enumerate()
+                                .map(|(k, x)| x * 1e6 / (1.0 - w.map_or(0.0, |w| w[k])))
+                                .collect()
+                        }
                     };
                     Some(
                         p.pressure_pa
@@ -482,7 +500,7 @@ fn plot(a: PlotArgs) -> anyhow::Result<()> {
                     )
                 };
                 let lines: Vec<Vec<(f64, f64)>> = sub.members.iter().filter_map(xs).collect();
-                let label = ["temperature [K]", "H2O [ppmv]", "CO2 [ppmv]"][row];
+                let label = ["temperature [K]", "H2O [ppmv]", "CO2 [ppmv of dry air]"][row];
                 let caption = if row == 0 {
                     format!("{c} (n = {})", sub.len())
                 } else {
