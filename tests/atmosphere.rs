@@ -84,20 +84,20 @@ fn afgl_columns_match_check_values() {
 }
 
 /// The US standard table's altitudes are reproduced by the hydrostatic integration from its p, T
-/// and H2O: within 0.5 % of the altitude up to 80 km (below the homopause, where the USSA-76
-/// molar mass is constant). The residual comes from the table's 4-digit pressures and the
-/// USSA-76 gravity model (g0 = 9.80665, r0 = 6356.766 km) vs WGS 84 normal gravity at 45°.
+/// and H2O: within 40 m up to 100 km (measured: 27 m). Below the homopause the USSA-76 molar
+/// mass is constant, as ours; the residual comes from the table's 4-digit pressures (±0.05 %,
+/// ~4 m per level) and the USSA-76 gravity model (g0 = 9.80665, r0 = 6356.766 km) vs WGS 84
+/// normal gravity at 45°.
 #[test]
 fn us_standard_altitudes_are_hydrostatic() {
     let p = StandardAtmosphere::UsStandard.profile();
     let z =
         hydrostatic_altitudes_m(&p.pressure_pa, &p.temperature_k, p.gas("H2O"), 0.0, 45.0).unwrap();
     for (zk, table) in z.iter().zip(&p.altitude_m).skip(1) {
-        if *table > 80e3 {
+        if *table > 100e3 {
             break;
         }
-        let rel = (zk - table) / table;
-        assert!(rel.abs() < 5e-3, "{} km: {zk} m", table / 1e3);
+        assert!((zk - table).abs() < 40.0, "{} km: {zk} m", table / 1e3);
     }
 }
 

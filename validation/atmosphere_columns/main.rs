@@ -60,7 +60,7 @@ fn main() -> anyhow::Result<()> {
     let p = StandardAtmosphere::UsStandard.profile();
     let z = hydrostatic_altitudes_m(&p.pressure_pa, &p.temperature_k, p.gas("H2O"), 0.0, 45.0)?;
     for (zk, t) in z.iter().zip(&p.altitude_m) {
-        if [10e3, 20e3, 30e3, 40e3, 50e3, 70e3, 80e3, 100e3, 120e3].contains(t) {
+        if *t > 0.0 && (t % 10e3 == 0.0 || *t > 80e3) {
             println!(
                 "{:>5.0} km: {:+8.1} m ({:+.2e})",
                 t / 1e3,
@@ -69,6 +69,15 @@ fn main() -> anyhow::Result<()> {
             );
         }
     }
+
+    let (mut worst_abs, mut worst_rel) = (0.0f64, 0.0f64);
+    for (zk, t) in z.iter().zip(&p.altitude_m).skip(1) {
+        if *t <= 100e3 {
+            worst_abs = worst_abs.max((zk - t).abs());
+            worst_rel = worst_rel.max(((zk - t) / t).abs());
+        }
+    }
+    println!("up to 100 km: worst {worst_abs:.1} m, worst relative {worst_rel:.2e}");
 
     println!("\n## Profile sets: counts per class and hydrostatic air column");
     let sets: Vec<ProfileSet> = vec![
