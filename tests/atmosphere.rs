@@ -4,7 +4,7 @@
 
 use std::path::Path;
 
-use lidarsim::atmosphere::covariance::{Covariance, ErrorModel, StateElement, StateVariable};
+use lidarsim::atmosphere::covariance::{Covariance, ErrorModel};
 use lidarsim::atmosphere::ensemble::{draw_perturbations, perturb_member};
 use lidarsim::atmosphere::humidity::{SaturationOver, relative_humidity};
 use lidarsim::atmosphere::hydrostatic::hydrostatic_altitudes_m;
@@ -18,7 +18,6 @@ use lidarsim::constants::{
     AVOGADRO_PER_MOL, DOBSON_UNIT_PER_M2, MOLAR_MASS_DRY_AIR_KG_PER_MOL,
     MOLAR_MASS_WATER_KG_PER_MOL,
 };
-use nalgebra::DMatrix;
 
 use crate::util::shared_file;
 
@@ -615,11 +614,6 @@ fn covariance_file_projects_to_profile_levels() {
             .iter()
             .any(|n| n.contains("lnq: not in the covariance"))
     );
-    let _ = StateElement {
-        variable: StateVariable::Temperature,
-        pressure_pa: None,
-    };
-    let _: DMatrix<f64> = c.matrix;
 }
 
 // ---------------------------------------------------------------------------------------------

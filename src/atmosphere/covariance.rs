@@ -391,7 +391,6 @@ impl Covariance {
         grid.validate()?;
         let elements = Self::profile_elements(grid);
         let dim = elements.len();
-        let n_lev = grid.len();
         let has = |s: &ProfileSet, g: &str| s.members.iter().all(|m| m.profile.gas(g).is_some());
         let use_h2o = has(forecast, "H2O") && has(analysis, "H2O");
         let use_co2 = has(forecast, "CO2") && has(analysis, "CO2");
@@ -449,7 +448,6 @@ impl Covariance {
             }
             notes.push(format!("localized with a Gaussian of length {l} in ln p"));
         }
-        let _ = n_lev;
         Ok((
             Covariance {
                 elements,

@@ -635,7 +635,6 @@ pub fn parse_profile_set(path: &Path, text: &str) -> Result<ProfileSet, InputErr
     }
     // H2O first: dry-air conversions of other gases need it.
     gas_cols.sort_by_key(|(_, g, _)| g != "H2O");
-    let h2o_dry = gas_cols.iter().any(|(_, g, u)| g == "H2O" && u.dry);
     let needs_h2o = gas_cols.iter().any(|(_, g, u)| u.dry && g != "H2O");
     if needs_h2o && !gas_cols.iter().any(|(_, g, _)| g == "H2O") {
         return Err(col_err(
@@ -643,7 +642,6 @@ pub fn parse_profile_set(path: &Path, text: &str) -> Result<ProfileSet, InputErr
             "per-dry-air mixing ratios need a water vapour column to convert".into(),
         ));
     }
-    let _ = h2o_dry;
 
     let stem = path
         .file_stem()
