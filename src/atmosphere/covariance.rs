@@ -27,13 +27,13 @@ use crate::input::{CsvTable, InputError, parse_f64, read_to_string};
 /// One variable of the state vector.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub enum StateVariable {
-    /// Temperature [K].
+    /// Temperature \[K\].
     Temperature,
-    /// Natural log of the H2O volume mixing ratio [1] (so σ = 0.2 is a 20 % error).
+    /// Natural log of the H2O volume mixing ratio \[1\] (so σ = 0.2 is a 20 % error).
     LnH2o,
-    /// CO2 volume mixing ratio of moist air [ppmv].
+    /// CO2 volume mixing ratio of moist air \[ppmv\].
     Co2,
-    /// Surface pressure [hPa].
+    /// Surface pressure \[hPa\].
     SurfacePressure,
 }
 
@@ -67,7 +67,7 @@ impl StateVariable {
 pub struct StateElement {
     /// The variable.
     pub variable: StateVariable,
-    /// The level's pressure [Pa]; `None` for the surface pressure.
+    /// The level's pressure \[Pa\]; `None` for the surface pressure.
     pub pressure_pa: Option<f64>,
 }
 
@@ -598,13 +598,13 @@ fn symmetrize(m: DMatrix<f64>) -> DMatrix<f64> {
 /// them (reported in the covariance notes).
 #[derive(Debug, Clone, PartialEq)]
 pub struct ErrorModel {
-    /// Table levels [Pa], strictly decreasing.
+    /// Table levels \[Pa\], strictly decreasing.
     pub pressure_pa: Vec<f64>,
-    /// σ_T [K] per table level.
+    /// σ_T \[K\] per table level.
     pub temperature_std_k: Vec<f64>,
-    /// σ of ln H2O [1] per table level.
+    /// σ of ln H2O \[1\] per table level.
     pub ln_h2o_std: Vec<f64>,
-    /// σ of CO2 [ppmv] per table level.
+    /// σ of CO2 \[ppmv\] per table level.
     pub co2_std_ppmv: Vec<f64>,
     /// Correlation length of T in ln p.
     pub temperature_corr_length_lnp: f64,
@@ -612,7 +612,7 @@ pub struct ErrorModel {
     pub ln_h2o_corr_length_lnp: f64,
     /// Correlation length of CO2 in ln p.
     pub co2_corr_length_lnp: f64,
-    /// σ of the surface pressure [hPa].
+    /// σ of the surface pressure \[hPa\].
     pub surface_pressure_std_hpa: f64,
     /// Where the numbers come from.
     pub source: String,
@@ -726,7 +726,7 @@ impl ErrorModel {
         })
     }
 
-    /// Set a height-independent CO2 standard deviation [ppmv] and its correlation length.
+    /// Set a height-independent CO2 standard deviation \[ppmv\] and its correlation length.
     pub fn with_co2(mut self, std_ppmv: f64, corr_length_lnp: f64) -> ErrorModel {
         self.co2_std_ppmv = vec![std_ppmv; self.pressure_pa.len()];
         self.co2_corr_length_lnp = corr_length_lnp;

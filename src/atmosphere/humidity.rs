@@ -7,7 +7,7 @@
 
 use crate::constants::{MOLAR_MASS_DRY_AIR_KG_PER_MOL, MOLAR_MASS_WATER_KG_PER_MOL};
 
-/// Temperature of the triple point of water [K].
+/// Temperature of the triple point of water \[K\].
 pub const TRIPLE_POINT_K: f64 = 273.16;
 
 /// Which phase saturation refers to.
@@ -21,7 +21,7 @@ pub enum SaturationOver {
     IceBelowTriplePoint,
 }
 
-/// Saturation vapour pressure over plane liquid water [Pa] (Murphy and Koop 2005, Eq. 10).
+/// Saturation vapour pressure over plane liquid water \[Pa\] (Murphy and Koop 2005, Eq. 10).
 ///
 /// `ln e_w = 54.842763 − 6763.22/T − 4.210 ln T + 0.000367 T +
 /// tanh(0.0415 (T − 218.8)) (53.878 − 1331.22/T − 9.44523 ln T + 0.014025 T)`, T in K.
@@ -40,7 +40,7 @@ pub fn saturation_vapour_pressure_water_pa(temperature_k: f64) -> f64 {
         .exp()
 }
 
-/// Saturation vapour pressure over plane ice [Pa] (Murphy and Koop 2005, Eq. 7).
+/// Saturation vapour pressure over plane ice \[Pa\] (Murphy and Koop 2005, Eq. 7).
 ///
 /// `ln e_i = 9.550426 − 5723.265/T + 3.53068 ln T − 0.00728332 T`, T in K, valid T > 110 K
 /// (up to the triple point).
@@ -51,7 +51,7 @@ pub fn saturation_vapour_pressure_ice_pa(temperature_k: f64) -> f64 {
     (9.550426 - 5723.265 / t + 3.53068 * t.ln() - 0.00728332 * t).exp()
 }
 
-/// Saturation vapour pressure [Pa] over the phase `over` selects.
+/// Saturation vapour pressure \[Pa\] over the phase `over` selects.
 pub fn saturation_vapour_pressure_pa(temperature_k: f64, over: SaturationOver) -> f64 {
     match over {
         SaturationOver::Water => saturation_vapour_pressure_water_pa(temperature_k),
@@ -104,7 +104,7 @@ pub fn moist_air_molar_mass_kg_per_mol(h2o_vmr: f64) -> f64 {
     MOLAR_MASS_DRY_AIR_KG_PER_MOL * (1.0 - h2o_vmr) + MOLAR_MASS_WATER_KG_PER_MOL * h2o_vmr
 }
 
-/// Virtual temperature [K]: the temperature dry air would need to have the density of moist air
+/// Virtual temperature \[K\]: the temperature dry air would need to have the density of moist air
 /// at the same pressure, T_v = T M_d / M(x).
 pub fn virtual_temperature_k(temperature_k: f64, h2o_vmr: f64) -> f64 {
     temperature_k * MOLAR_MASS_DRY_AIR_KG_PER_MOL / moist_air_molar_mass_kg_per_mol(h2o_vmr)

@@ -13,7 +13,7 @@ use super::AtmosphereError;
 use super::humidity::virtual_temperature_k;
 use crate::constants::{AVOGADRO_PER_MOL, BOLTZMANN_J_PER_K, MOLAR_MASS_DRY_AIR_KG_PER_MOL};
 
-/// WGS 84 semi-major axis a [m] (NIMA TR8350.2, 2000, Table 3.1).
+/// WGS 84 semi-major axis a \[m\] (NIMA TR8350.2, 2000, Table 3.1).
 const WGS84_A_M: f64 = 6_378_137.0;
 /// WGS 84 flattening f.
 const WGS84_F: f64 = 1.0 / 298.257_223_563;
@@ -36,7 +36,7 @@ pub fn normal_gravity_surface_m_per_s2(latitude_deg: f64) -> f64 {
     WGS84_GAMMA_E * (1.0 + WGS84_K * s2) / (1.0 - WGS84_E2 * s2).sqrt()
 }
 
-/// Normal gravity [m/s²] at height h [m] above the ellipsoid (second-order expansion):
+/// Normal gravity [m/s²] at height h \[m\] above the ellipsoid (second-order expansion):
 /// `γ_h = γ(φ) [1 − (2/a)(1 + f + m − 2 f sin²φ) h + 3 h²/a²]`.
 ///
 /// Valid for |h| ≪ a; the neglected third-order term is below 1e-5 relative at 120 km.
@@ -61,7 +61,7 @@ pub fn geopotential_m2_per_s2(latitude_deg: f64, height_m: f64) -> f64 {
     normal_gravity_surface_m_per_s2(latitude_deg) * (h - 0.5 * c1 * h * h + c2 * h * h * h / 3.0)
 }
 
-/// Height [m] whose geopotential is `phi` (Newton iteration on [`geopotential_m2_per_s2`]).
+/// Height \[m\] whose geopotential is `phi` (Newton iteration on [`geopotential_m2_per_s2`]).
 pub fn height_from_geopotential_m(latitude_deg: f64, phi: f64) -> f64 {
     let g0 = normal_gravity_surface_m_per_s2(latitude_deg);
     let mut h = phi / g0;
@@ -81,7 +81,7 @@ pub fn dry_air_gas_constant_j_per_kg_k() -> f64 {
     AVOGADRO_PER_MOL * BOLTZMANN_J_PER_K / MOLAR_MASS_DRY_AIR_KG_PER_MOL
 }
 
-/// Geometric altitudes [m] of pressure levels (bottom to top) from the hydrostatic equation.
+/// Geometric altitudes \[m\] of pressure levels (bottom to top) from the hydrostatic equation.
 ///
 /// `Φ_{k+1} = Φ_k + R_d (T_v,k + T_v,k+1)/2 · ln(p_k/p_{k+1})`, then z_k = h(Φ_k) with
 /// Φ_0 = Φ(`surface_altitude_m`); T_v from T and the water vapour volume mixing ratio

@@ -13,7 +13,7 @@
 
 use super::{AtmosphereError, GasProfile, Profile};
 
-/// Pressure [Pa] above which levels follow the surface in [`hybrid_shift_pa`]; above this
+/// Pressure \[Pa\] above which levels follow the surface in [`hybrid_shift_pa`]; above this
 /// pressure level (lower pressures) levels stay at fixed pressure. 100 hPa: levels above the
 /// tropopause region do not move (as in ECMWF's hybrid η levels, pure pressure aloft).
 pub const HYBRID_TOP_PA: f64 = 10_000.0;
@@ -37,7 +37,7 @@ fn locate(coords: &[f64], c: f64) -> (usize, f64) {
 }
 
 impl Profile {
-    /// The profile at the given altitudes [m] (strictly increasing, within the profile's
+    /// The profile at the given altitudes \[m\] (strictly increasing, within the profile's
     /// range): ln p and T linear in z, ln(mixing ratio) linear in ln p (see the module docs).
     pub fn interpolate_to_altitudes(&self, altitude_m: &[f64]) -> Result<Profile, AtmosphereError> {
         self.validate()?;
@@ -62,7 +62,7 @@ impl Profile {
         Ok(self.build(&at))
     }
 
-    /// The profile at the given pressures [Pa] (strictly decreasing, within the profile's
+    /// The profile at the given pressures \[Pa\] (strictly decreasing, within the profile's
     /// range): z, T and ln(mixing ratio) linear in ln p (the inverse of
     /// [`Self::interpolate_to_altitudes`]).
     pub fn interpolate_to_pressures(

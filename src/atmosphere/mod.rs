@@ -128,11 +128,11 @@ pub enum AtmosphereError {
 pub struct Profile {
     /// A name for messages and output (e.g. `afgl us_standard`, `ecmwf83 #12`).
     pub name: String,
-    /// Geometric altitude of each level [m], strictly increasing.
+    /// Geometric altitude of each level \[m\], strictly increasing.
     pub altitude_m: Vec<f64>,
-    /// Pressure [Pa], strictly decreasing.
+    /// Pressure \[Pa\], strictly decreasing.
     pub pressure_pa: Vec<f64>,
-    /// Temperature [K].
+    /// Temperature \[K\].
     pub temperature_k: Vec<f64>,
     /// Gases and their volume mixing ratios per level.
     pub gases: Vec<GasProfile>,
@@ -189,7 +189,7 @@ impl Profile {
         self.gases.iter().map(|g| g.name.as_str()).collect()
     }
 
-    /// Pressure at the lowest level (the surface) [Pa].
+    /// Pressure at the lowest level (the surface) \[Pa\].
     pub fn surface_pressure_pa(&self) -> f64 {
         self.pressure_pa.first().copied().unwrap_or(f64::NAN)
     }

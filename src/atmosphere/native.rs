@@ -53,7 +53,7 @@ fn num(t: &CsvTable, line: usize, f: &[String], col: &str) -> Result<f64, InputE
     crate::input::parse_f64(t.path(), line, col, &f[c])
 }
 
-/// (pressure [Pa], temperature [K], per-quantity values), bottom-up.
+/// (pressure \[Pa\], temperature \[K\], per-quantity values), bottom-up.
 type LevelColumns = (Vec<f64>, Vec<f64>, Vec<Vec<f64>>);
 
 /// Levels of one profile on pressure levels (bottom-up after this call): keep the levels above
