@@ -6,7 +6,7 @@
 //!    `rand_distr::StandardNormal`, element by element, member after member: the same seed gives
 //!    the same members, and the first k members do not depend on how many are drawn);
 //! 2. moves the levels to the new surface pressure p_s' = p̄_s + δp_s with
-//!    [`hybrid_shift_pa`](super::interp::hybrid_shift_pa) (sigma-like near the surface, fixed
+//!    [`super::interp::hybrid_shift_pa`] (sigma-like near the surface, fixed
 //!    pressure above 100 hPa), so perturbations are level-following;
 //! 3. sets T' = T̄ + δT, x_H2O' = exp(ln x̄_H2O + δ) (always positive), CO2' = CO2̄ + δ; other
 //!    gases keep their mixing ratios;

@@ -6,7 +6,7 @@
 //!
 //! | what | where |
 //! |---|---|
-//! | one column on levels, columns, rescaling, interpolation | [`Profile`] (this file, [`column`], [`interp`]) |
+//! | one column on levels, columns, rescaling, interpolation | [`Profile`] (this file, [`column`](mod@column), [`interp`]) |
 //! | hydrostatic altitudes, normal gravity | [`hydrostatic`] |
 //! | saturation vapour pressure, humidity units | [`humidity`] |
 //! | profile sets (the lidarsim long-table format), latitude classes, class means | [`set`] |
