@@ -22,3 +22,7 @@ pub const MOLAR_MASS_DRY_AIR_KG_PER_MOL: f64 = 0.028_964_4;
 pub const MOLAR_MASS_WATER_KG_PER_MOL: f64 = 0.018_015_28;
 /// Loschmidt number density at 273.15 K and 1 atm [1/m³].
 pub const LOSCHMIDT_PER_M3: f64 = 2.686_780_111e25;
+/// Molar gas constant R = N_A k [J/(mol K)].
+pub const MOLAR_GAS_CONSTANT_J_PER_MOL_K: f64 = 8.314_462_618;
+/// One Dobson unit [molecules/m²] (2.686 780 111e20, the Loschmidt number times 10 µm).
+pub const DOBSON_UNIT_PER_M2: f64 = 2.686_780_111e20;

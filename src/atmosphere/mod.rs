@@ -3,11 +3,122 @@
 //! Consumes built-in AFGL standard atmospheres (Anderson et al. 1986, AFGL-TR-86-0110), profile
 //! files and perturbed ensembles; produces [`Profile`]s, the input of Rayleigh scattering and
 //! line-by-line gas absorption.
+//!
+//! | what | where |
+//! |---|---|
+//! | one column on levels, columns, rescaling, interpolation | [`Profile`] (this file, [`column`](mod@column), [`interp`]) |
+//! | hydrostatic altitudes, normal gravity | [`hydrostatic`] |
+//! | saturation vapour pressure, humidity units | [`humidity`] |
+//! | profile sets (the lidarsim long-table format), latitude classes, class means | [`set`] |
+//! | readers for the ECMWF 83 / ECMWF 52 / RFMIP files as distributed | [`native`] |
+//! | covariances (file, per-level error model, forecast − analysis pairs) | [`covariance`] |
+//! | perturbed ensembles `x = x̄ + L z` | [`ensemble`] |
+//!
+//! Conventions: levels bottom to top; altitude strictly increasing, pressure strictly decreasing;
+//! gas amounts are volume mixing ratios of moist air (mol/mol); SI units unless a name says
+//! otherwise. The method and its citations are in `docs/atmosphere.md`.
+
+// `!(x > 0.0)` is the NaN-rejecting form of a range check; keep it.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+// Level loops index several parallel per-level vectors at once.
+#![allow(clippy::needless_range_loop)]
 
 use std::str::FromStr;
 
 use crate::constants::BOLTZMANN_J_PER_K;
 use crate::input::{CsvTable, InputError};
+
+pub mod column;
+pub mod covariance;
+pub mod ensemble;
+pub mod humidity;
+pub mod hydrostatic;
+pub mod interp;
+pub mod native;
+pub mod set;
+
+pub use column::RescaleBasis;
+pub use covariance::{Covariance, ErrorModel, Factor, RepairReport, StateVariable};
+pub use ensemble::{EnsembleConfig, EnsembleReport, generate_ensemble};
+pub use humidity::SaturationOver;
+pub use set::{LatitudeClass, ProfileMeta, ProfileSet, SetMember, read_profile_set};
+
+/// Errors of the atmosphere stage (bad profiles, missing gases, covariances that cannot be used).
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum AtmosphereError {
+    /// A problem in an input file (file, line, field).
+    #[error(transparent)]
+    Input(#[from] InputError),
+    /// A profile that breaks an invariant (levels, ordering, physical range).
+    #[error("profile `{profile}`: {message}")]
+    InvalidProfile {
+        /// The profile's name.
+        profile: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// A gas asked for by name is not in the profile.
+    #[error("profile `{profile}` has no gas `{gas}` (it has: {available})")]
+    MissingGas {
+        /// The profile's name.
+        profile: String,
+        /// The gas asked for.
+        gas: String,
+        /// The gases the profile carries, comma-separated.
+        available: String,
+    },
+    /// A requested coordinate lies outside the profile (no extrapolation is done).
+    #[error(
+        "profile `{profile}`: requested {coordinate} {value} is outside the profile ({min} to {max}); \
+         lidarsim does not extrapolate"
+    )]
+    OutOfRange {
+        /// The profile's name.
+        profile: String,
+        /// `altitude_m` or `pressure_pa`.
+        coordinate: &'static str,
+        /// The offending value.
+        value: f64,
+        /// The profile's lower bound of that coordinate.
+        min: f64,
+        /// The profile's upper bound.
+        max: f64,
+    },
+    /// An argument that is not a valid value (non-finite, negative, empty grid, ...).
+    #[error("{0}")]
+    InvalidArgument(String),
+    /// An empty profile set where members are needed.
+    #[error("profile set `{0}` has no profiles")]
+    EmptySet(String),
+    /// A covariance matrix that is not positive semi-definite beyond rounding.
+    #[error(
+        "the covariance is not positive semi-definite: {negative} of {dimension} eigenvalues are \
+         negative, the smallest is {min_eigenvalue:.3e} (largest {max_eigenvalue:.3e}); fix the \
+         covariance or allow repair (nearest positive semi-definite matrix, Higham 1988)"
+    )]
+    NotPositiveDefinite {
+        /// Number of negative eigenvalues beyond the rounding threshold.
+        negative: usize,
+        /// Dimension of the (active part of the) matrix.
+        dimension: usize,
+        /// The most negative eigenvalue.
+        min_eigenvalue: f64,
+        /// The largest eigenvalue.
+        max_eigenvalue: f64,
+    },
+    /// A covariance that does not fit the profile or the other inputs.
+    #[error("covariance: {0}")]
+    Covariance(String),
+    /// An output file could not be written.
+    #[error("cannot write {path}: {message}")]
+    Write {
+        /// The file.
+        path: std::path::PathBuf,
+        /// The I/O error.
+        message: String,
+    },
+}
 
 /// One atmospheric column on levels ordered bottom to top.
 ///
@@ -17,11 +128,11 @@ use crate::input::{CsvTable, InputError};
 pub struct Profile {
     /// A name for messages and output (e.g. `afgl us_standard`, `ecmwf83 #12`).
     pub name: String,
-    /// Geometric altitude of each level [m], strictly increasing.
+    /// Geometric altitude of each level \[m\], strictly increasing.
     pub altitude_m: Vec<f64>,
-    /// Pressure [Pa], strictly decreasing.
+    /// Pressure \[Pa\], strictly decreasing.
     pub pressure_pa: Vec<f64>,
-    /// Temperature [K].
+    /// Temperature \[K\].
     pub temperature_k: Vec<f64>,
     /// Gases and their volume mixing ratios per level.
     pub gases: Vec<GasProfile>,
@@ -63,6 +174,143 @@ impl Profile {
             .find(|g| g.name == name)
             .map(|g| g.vmr.as_slice())
     }
+
+    /// The mixing-ratio profile of a gas, or [`AtmosphereError::MissingGas`].
+    pub fn require_gas(&self, name: &str) -> Result<&[f64], AtmosphereError> {
+        self.gas(name).ok_or_else(|| AtmosphereError::MissingGas {
+            profile: self.name.clone(),
+            gas: name.to_string(),
+            available: self.gas_names().join(", "),
+        })
+    }
+
+    /// Names of the gases carried, in order.
+    pub fn gas_names(&self) -> Vec<&str> {
+        self.gases.iter().map(|g| g.name.as_str()).collect()
+    }
+
+    /// Pressure at the lowest level (the surface) \[Pa\].
+    pub fn surface_pressure_pa(&self) -> f64 {
+        self.pressure_pa.first().copied().unwrap_or(f64::NAN)
+    }
+
+    /// Set (add or replace) a gas's volume mixing ratio profile [mol/mol].
+    ///
+    /// The vector must have one finite value in [0, 1] per level.
+    pub fn set_gas(&mut self, name: &str, vmr: Vec<f64>) -> Result<(), AtmosphereError> {
+        if vmr.len() != self.len() {
+            return Err(AtmosphereError::InvalidArgument(format!(
+                "gas `{name}` has {} values, profile `{}` has {} levels",
+                vmr.len(),
+                self.name,
+                self.len()
+            )));
+        }
+        if let Some(v) = vmr
+            .iter()
+            .find(|v| !(v.is_finite() && (0.0..=1.0).contains(*v)))
+        {
+            return Err(AtmosphereError::InvalidArgument(format!(
+                "gas `{name}`: volume mixing ratio {v} is not in [0, 1]"
+            )));
+        }
+        match self.gases.iter_mut().find(|g| g.name == name) {
+            Some(g) => g.vmr = vmr,
+            None => self.gases.push(GasProfile {
+                name: name.to_string(),
+                vmr,
+            }),
+        }
+        Ok(())
+    }
+
+    /// Check the invariants every profile handed out must hold: at least two levels, equal
+    /// lengths, finite values, altitude strictly increasing, pressure strictly decreasing and
+    /// positive, temperature positive, mixing ratios in [0, 1].
+    pub fn validate(&self) -> Result<(), AtmosphereError> {
+        let bad = |message: String| AtmosphereError::InvalidProfile {
+            profile: self.name.clone(),
+            message,
+        };
+        let n = self.len();
+        if n < 2 {
+            return Err(bad(format!("has {n} levels, at least 2 are needed")));
+        }
+        if self.pressure_pa.len() != n || self.temperature_k.len() != n {
+            return Err(bad(format!(
+                "level vectors differ in length (altitude {n}, pressure {}, temperature {})",
+                self.pressure_pa.len(),
+                self.temperature_k.len()
+            )));
+        }
+        for (k, w) in self.altitude_m.windows(2).enumerate() {
+            if !(w[1] > w[0]) || !w[0].is_finite() || !w[1].is_finite() {
+                return Err(bad(format!(
+                    "altitude is not strictly increasing at levels {k}–{} ({} m, {} m)",
+                    k + 1,
+                    w[0],
+                    w[1]
+                )));
+            }
+        }
+        for (k, w) in self.pressure_pa.windows(2).enumerate() {
+            if !(w[1] < w[0]) || !(w[1] > 0.0) || !w[0].is_finite() {
+                return Err(bad(format!(
+                    "pressure is not strictly decreasing and positive at levels {k}–{} ({} Pa, {} Pa)",
+                    k + 1,
+                    w[0],
+                    w[1]
+                )));
+            }
+        }
+        if let Some((k, t)) = self
+            .temperature_k
+            .iter()
+            .enumerate()
+            .find(|(_, t)| !(t.is_finite() && **t > 0.0))
+        {
+            return Err(bad(format!(
+                "temperature {t} K at level {k} is not positive"
+            )));
+        }
+        for g in &self.gases {
+            if g.vmr.len() != n {
+                return Err(bad(format!(
+                    "gas `{}` has {} values for {n} levels",
+                    g.name,
+                    g.vmr.len()
+                )));
+            }
+            if let Some((k, v)) = g
+                .vmr
+                .iter()
+                .enumerate()
+                .find(|(_, v)| !(v.is_finite() && (0.0..=1.0).contains(*v)))
+            {
+                return Err(bad(format!(
+                    "gas `{}` volume mixing ratio {v} at level {k} is not in [0, 1]",
+                    g.name
+                )));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Molar mass [kg/mol] of the gases lidarsim knows by HITRAN formula (main isotopologue
+/// abundance-weighted values, IUPAC 2013 atomic weights).
+pub fn molar_mass_kg_per_mol(gas: &str) -> Option<f64> {
+    Some(match gas {
+        "H2O" => crate::constants::MOLAR_MASS_WATER_KG_PER_MOL,
+        "CO2" => 0.044_009_5,
+        "O3" => 0.047_998_2,
+        "N2O" => 0.044_012_8,
+        "CO" => 0.028_010_1,
+        "CH4" => 0.016_042_5,
+        "O2" => 0.031_998_8,
+        "N2" => 0.028_013_4,
+        _ => return None,
+    })
 }
 
 /// The six AFGL standard atmospheres (Anderson et al. 1986).
@@ -105,6 +353,16 @@ impl StandardAtmosphere {
         }
     }
 
+    /// The latitude the atmosphere represents [°N] (Anderson et al. 1986, Table 1): 15, 45, 60;
+    /// 45 for the US standard.
+    pub fn latitude_deg(self) -> f64 {
+        match self {
+            Self::Tropical => 15.0,
+            Self::MidlatitudeSummer | Self::MidlatitudeWinter | Self::UsStandard => 45.0,
+            Self::SubarcticSummer | Self::SubarcticWinter => 60.0,
+        }
+    }
+
     fn embedded_csv(self) -> &'static str {
         match self {
             Self::Tropical => include_str!("../../data/afgl/afgl_tropical.csv"),
@@ -116,11 +374,29 @@ impl StandardAtmosphere {
         }
     }
 
-    /// The atmosphere as a [`Profile`] (AFGL 1986 values: CO2 330 ppmv; rescale as needed).
+    /// The atmosphere as a [`Profile`] (AFGL 1986 values: CO2 330 ppmv; rescale as needed with
+    /// [`Profile::rescale_gas`]). 50 levels, 0–120 km, altitudes as tabulated.
     pub fn profile(self) -> Profile {
         let path = format!("<embedded AFGL {}>", self.name());
         // The embedded tables are part of the build and are checked by tests.
-        parse_afgl(&path, self.embedded_csv()).expect("embedded AFGL table parses")
+        let mut p = parse_afgl(&path, self.embedded_csv()).expect("embedded AFGL table parses");
+        p.name = format!("afgl {}", self.name());
+        p
+    }
+
+    /// The atmosphere as a one-member [`SetMember`] placed at its nominal latitude
+    /// ([`Self::latitude_deg`]), longitude 0, time unknown.
+    pub fn member(self) -> SetMember {
+        SetMember {
+            meta: ProfileMeta {
+                id: self.name().to_string(),
+                latitude_deg: self.latitude_deg(),
+                longitude_deg: 0.0,
+                time_utc: String::new(),
+                weight: None,
+            },
+            profile: self.profile(),
+        }
     }
 }
 
@@ -142,6 +418,8 @@ impl FromStr for StandardAtmosphere {
 }
 
 /// Parse an AFGL table as shipped in `data/afgl/` (z_km, p_hPa, T_K, n_air, gases in ppmv).
+///
+/// The tabulated `n_air_cm-3` column is not used: number densities are always p/(kT).
 pub fn parse_afgl(path: &str, text: &str) -> Result<Profile, InputError> {
     let t = CsvTable::parse(path, text)?;
     let altitude_m = t.f64_column("z_km")?.iter().map(|z| z * 1e3).collect();
@@ -157,12 +435,42 @@ pub fn parse_afgl(path: &str, text: &str) -> Result<Profile, InputError> {
             });
         }
     }
-    Ok(Profile {
+    let profile = Profile {
         name: format!("afgl {path}"),
         altitude_m,
         pressure_pa,
         temperature_k,
         gases,
+    };
+    profile
+        .validate()
+        .map_err(|e| InputError::file(path, e.to_string()))?;
+    Ok(profile)
+}
+
+/// Write `contents` to `path` through a temporary file in the same folder and a rename, so that
+/// a failure never leaves a half-written file.
+pub(crate) fn write_atomically(
+    path: &std::path::Path,
+    contents: &[u8],
+) -> Result<(), AtmosphereError> {
+    let err = |e: std::io::Error| AtmosphereError::Write {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    };
+    let file_name = path
+        .file_name()
+        .ok_or_else(|| AtmosphereError::Write {
+            path: path.to_path_buf(),
+            message: "not a file name".into(),
+        })?
+        .to_string_lossy()
+        .into_owned();
+    let tmp = path.with_file_name(format!(".{file_name}.tmp-{}", std::process::id()));
+    std::fs::write(&tmp, contents).map_err(err)?;
+    std::fs::rename(&tmp, path).map_err(|e| {
+        let _ = std::fs::remove_file(&tmp);
+        err(e)
     })
 }
 
@@ -178,6 +486,18 @@ mod tests {
             assert!(p.altitude_m.windows(2).all(|w| w[1] > w[0]));
             assert!(p.pressure_pa.windows(2).all(|w| w[1] < w[0]));
             assert!(p.gas("CO2").is_some() && p.gas("H2O").is_some());
+            p.validate().unwrap();
         }
+    }
+
+    #[test]
+    fn validate_names_the_broken_invariant() {
+        let mut p = StandardAtmosphere::UsStandard.profile();
+        p.pressure_pa[3] = p.pressure_pa[2];
+        let e = p.validate().unwrap_err().to_string();
+        assert!(e.contains("pressure is not strictly decreasing"), "{e}");
+        let mut p = StandardAtmosphere::UsStandard.profile();
+        p.gases[0].vmr[1] = -1e-6;
+        assert!(p.validate().is_err());
     }
 }

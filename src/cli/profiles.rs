@@ -1,10 +1,587 @@
-//! `lidarsim profiles` (not implemented yet).
+//! `lidarsim profiles`: generate perturbed profile ensembles, plot and inspect profile sets,
+//! convert the ECMWF/RFMIP files to the lidarsim profile-set format (docs/atmosphere.md).
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, bail};
+use plotters::prelude::*;
+
+use lidarsim::atmosphere::covariance::{Covariance, ErrorModel};
+use lidarsim::atmosphere::native::{read_ecmwf52, read_ecmwf83, read_rfmip};
+use lidarsim::atmosphere::{
+    EnsembleConfig, LatitudeClass, ProfileSet, SaturationOver, SetMember, StandardAtmosphere,
+    generate_ensemble, read_profile_set,
+};
+
+use super::plot::{FONT, init_font};
 
 /// Arguments of `lidarsim profiles`.
 #[derive(clap::Args, Debug)]
-pub struct Args {}
+pub struct Args {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(clap::Subcommand, Debug)]
+enum Command {
+    /// Generate a perturbed ensemble x = x̄ + L z around a mean profile and write a profile set.
+    Generate(Box<GenerateArgs>),
+    /// Plot temperature, humidity and CO2 against pressure, one column of panels per latitude class.
+    Plot(PlotArgs),
+    /// Convert ECMWF 83 / ECMWF 52 / RFMIP files as distributed to the lidarsim profile-set format.
+    Convert(ConvertArgs),
+    /// Print location, class, surface pressure and columns of each profile of a set or atmosphere.
+    Info(InfoArgs),
+}
+
+/// `lidarsim profiles generate`.
+#[derive(clap::Args, Debug)]
+struct GenerateArgs {
+    /// Number of members.
+    #[arg(long)]
+    n: usize,
+    /// Seed of the random generator (same seed, same file).
+    #[arg(long)]
+    seed: u64,
+    /// Output profile set (CSV).
+    #[arg(long)]
+    out: PathBuf,
+    /// Latitude class: with --set, the mean of that class of the set; alone, the mean of the AFGL
+    /// atmospheres of the class (tropical; mid-latitude summer+winter; sub-arctic summer+winter).
+    #[arg(long)]
+    class: Option<LatitudeClass>,
+    /// Mean profile: a built-in AFGL atmosphere (tropical, midlatitude_summer, ..., us_standard).
+    #[arg(long, conflicts_with_all = ["set", "mean_profile"])]
+    atmosphere: Option<StandardAtmosphere>,
+    /// Mean profile: the mean of this profile set (of --class if given).
+    #[arg(long, conflicts_with = "mean_profile")]
+    set: Option<PathBuf>,
+    /// Mean profile: a profile of this profile-set file (the only one, or --profile-id).
+    #[arg(long)]
+    mean_profile: Option<PathBuf>,
+    /// Which profile of --mean-profile.
+    #[arg(long, requires = "mean_profile")]
+    profile_id: Option<String>,
+    /// Rescale the mean's CO2 to this dry-air column average [ppm] (or set it, if it has none).
+    #[arg(long)]
+    co2_ppm: Option<f64>,
+    /// Covariance (a): a covariance file (docs/atmosphere.md), projected to the mean's levels.
+    #[arg(long, conflicts_with_all = ["error_model", "pairs"])]
+    covariance: Option<PathBuf>,
+    /// Covariance (b): a per-level error table (p_hPa, T_std_K, lnq_std[, CO2_std_ppmv]);
+    /// default: the embedded representative NWP forecast error (data/nwp_error).
+    #[arg(long, conflicts_with = "pairs")]
+    error_model: Option<PathBuf>,
+    /// Covariance (c): forecast and analysis profile sets (pairs matched by profile id).
+    #[arg(long, num_args = 2, value_names = ["FORECAST", "ANALYSIS"])]
+    pairs: Option<Vec<PathBuf>>,
+    /// Gaussian localization length (ln p) for the covariance from --pairs.
+    #[arg(long, requires = "pairs")]
+    localization_lnp: Option<f64>,
+    /// Error model: temperature correlation length (ln p) [default 0.35].
+    #[arg(long)]
+    t_corr_length: Option<f64>,
+    /// Error model: ln humidity correlation length (ln p) [default 0.25].
+    #[arg(long)]
+    q_corr_length: Option<f64>,
+    /// Error model: surface pressure standard deviation [hPa] [default 0.7].
+    #[arg(long)]
+    ps_std_hpa: Option<f64>,
+    /// Error model: CO2 standard deviation [ppm] at all levels [default 0: not perturbed].
+    #[arg(long)]
+    co2_std_ppm: Option<f64>,
+    /// Error model: CO2 correlation length (ln p) [default 0.35].
+    #[arg(long, default_value_t = 0.35)]
+    co2_corr_length: f64,
+    /// Error model: do not apply the class scaling of data/nwp_error (T ×0.8/1/1.2, lnq ×1/1/1.2).
+    #[arg(long)]
+    no_class_scaling: bool,
+    /// Repair a covariance that is not positive semi-definite beyond rounding (nearest PSD matrix).
+    #[arg(long)]
+    repair_covariance: bool,
+    /// Cap water vapour at this relative humidity [%].
+    #[arg(long, default_value_t = 100.0)]
+    max_rh_percent: f64,
+    /// Relative humidity over `water` (all temperatures) or `ice` (below 273.16 K).
+    #[arg(long, default_value = "water", value_parser = ["water", "ice"])]
+    rh_over: String,
+    /// Also write the covariance used (on the mean's levels) to this file.
+    #[arg(long)]
+    covariance_out: Option<PathBuf>,
+}
+
+/// `lidarsim profiles plot`.
+#[derive(clap::Args, Debug)]
+struct PlotArgs {
+    /// Profile set (lidarsim format).
+    set: PathBuf,
+    /// Output PNG.
+    #[arg(long)]
+    out: PathBuf,
+    /// Lowest pressure shown [hPa].
+    #[arg(long, default_value_t = 1.0)]
+    top_hpa: f64,
+}
+
+/// `lidarsim profiles convert`.
+#[derive(clap::Args, Debug)]
+struct ConvertArgs {
+    /// Source format.
+    #[arg(long, value_parser = ["ecmwf83", "ecmwf52", "rfmip"])]
+    format: String,
+    /// The level (or layer) file.
+    #[arg(long)]
+    levels: PathBuf,
+    /// The meta file.
+    #[arg(long)]
+    meta: PathBuf,
+    /// Output profile set.
+    #[arg(long)]
+    out: PathBuf,
+}
+
+/// `lidarsim profiles info`.
+#[derive(clap::Args, Debug)]
+struct InfoArgs {
+    /// Profile set (lidarsim format).
+    #[arg(required_unless_present = "atmosphere")]
+    set: Option<PathBuf>,
+    /// A built-in AFGL atmosphere instead of a set.
+    #[arg(long, conflicts_with = "set")]
+    atmosphere: Option<StandardAtmosphere>,
+}
 
 /// Run the subcommand.
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("`lidarsim profiles` is not implemented yet")
+pub fn run(args: Args) -> anyhow::Result<()> {
+    match args.command {
+        Command::Generate(a) => generate(*a),
+        Command::Plot(a) => plot(a),
+        Command::Convert(a) => convert(a),
+        Command::Info(a) => info(a),
+    }
+}
+
+fn read_set(path: &Path) -> anyhow::Result<ProfileSet> {
+    Ok(read_profile_set(path)?)
+}
+
+/// The mean profile and a description of where it comes from.
+fn mean_member(a: &GenerateArgs) -> anyhow::Result<(SetMember, String)> {
+    if let Some(atm) = a.atmosphere {
+        if a.class.is_some() {
+            bail!("give --atmosphere or --class without --set, not both");
+        }
+        return Ok((atm.member(), format!("AFGL {}", atm.name())));
+    }
+    if let Some(path) = &a.mean_profile {
+        let set = read_set(path)?;
+        let m = match &a.profile_id {
+            Some(id) => set
+                .members
+                .iter()
+                .find(|m| &m.meta.id == id)
+                .with_context(|| format!("{}: no profile `{id}`", path.display()))?
+                .clone(),
+            None if set.len() == 1 => set.members[0].clone(),
+            None => bail!(
+                "{} has {} profiles: choose one with --profile-id",
+                path.display(),
+                set.len()
+            ),
+        };
+        let d = format!("profile `{}` of {}", m.meta.id, path.display());
+        return Ok((m, d));
+    }
+    if let Some(path) = &a.set {
+        let set = read_set(path)?;
+        let (sub, d) = match a.class {
+            Some(c) => (
+                set.class(c),
+                format!("mean of class {c} of {}", path.display()),
+            ),
+            None => (set.clone(), format!("mean of {}", path.display())),
+        };
+        if sub.is_empty() {
+            bail!(
+                "{}: no profiles in class {:?}",
+                path.display(),
+                a.class.map(|c| c.name())
+            );
+        }
+        let n = sub.len();
+        return Ok((sub.mean_member()?, format!("{d} ({n} profiles)")));
+    }
+    if let Some(c) = a.class {
+        let set = ProfileSet {
+            name: format!("AFGL {c}"),
+            members: c.afgl_atmospheres().iter().map(|s| s.member()).collect(),
+            notes: vec![],
+        };
+        let names: Vec<_> = c.afgl_atmospheres().iter().map(|s| s.name()).collect();
+        return Ok((
+            set.mean_member()?,
+            format!("mean of AFGL {}", names.join(" + ")),
+        ));
+    }
+    bail!("no mean profile: give --class, --atmosphere, --set or --mean-profile")
+}
+
+fn generate(a: GenerateArgs) -> anyhow::Result<()> {
+    if a.n == 0 {
+        bail!("--n must be at least 1");
+    }
+    let (mut mean, source) = mean_member(&a)?;
+    let mut notes = vec![format!(
+        "generated by lidarsim profiles generate: {} members, seed {}",
+        a.n, a.seed
+    )];
+    notes.push(format!("mean profile: {source}"));
+    if let Some(ppm) = a.co2_ppm {
+        if !(ppm.is_finite() && ppm > 0.0) {
+            bail!("--co2-ppm {ppm} must be positive");
+        }
+        if mean.profile.gas("CO2").is_some() {
+            mean.profile.rescale_gas("CO2", ppm * 1e-6)?;
+            notes.push(format!(
+                "mean CO2 rescaled to a dry-air column average of {ppm} ppm"
+            ));
+        } else {
+            let h2o = mean.profile.gas("H2O").map(|v| v.to_vec());
+            let v = (0..mean.profile.len())
+                .map(|k| ppm * 1e-6 * (1.0 - h2o.as_ref().map_or(0.0, |h| h[k])))
+                .collect();
+            mean.profile.set_gas("CO2", v)?;
+            notes.push(format!(
+                "mean CO2 set to {ppm} ppm of dry air at all levels"
+            ));
+        }
+    }
+    let class = LatitudeClass::of_latitude_deg(mean.meta.latitude_deg);
+    let cov = if let Some(path) = &a.covariance {
+        Covariance::read(path)?.on_profile(&mean.profile)
+    } else if let Some(p) = &a.pairs {
+        let f = read_set(&p[0])?;
+        let an = read_set(&p[1])?;
+        let (c, bias) = Covariance::from_pairs(&f, &an, &mean.profile, a.localization_lnp)?;
+        let n = mean.profile.len();
+        let rms = |s: &[f64]| (s.iter().map(|x| x * x).sum::<f64>() / s.len() as f64).sqrt();
+        println!(
+            "forecast − analysis bias (removed): rms over levels T {:.3} K, ln q {:.3}, CO2 {:.3} ppm; p_s {:.3} hPa",
+            rms(&bias[..n]),
+            rms(&bias[n..2 * n]),
+            rms(&bias[2 * n..3 * n]),
+            bias[3 * n]
+        );
+        c
+    } else {
+        let mut m = match &a.error_model {
+            Some(path) => ErrorModel::read(path)?,
+            None => ErrorModel::representative(),
+        };
+        if let Some(v) = a.t_corr_length {
+            m.temperature_corr_length_lnp = v;
+        }
+        if let Some(v) = a.q_corr_length {
+            m.ln_h2o_corr_length_lnp = v;
+        }
+        if let Some(v) = a.ps_std_hpa {
+            m.surface_pressure_std_hpa = v;
+        }
+        if let Some(v) = a.co2_std_ppm {
+            m = m.with_co2(v, a.co2_corr_length);
+        }
+        if !a.no_class_scaling {
+            m = m.scaled_for_class(class);
+        }
+        m.covariance(&mean.profile)?
+    };
+    notes.extend(cov.notes.iter().cloned());
+    let saturation = match a.rh_over.as_str() {
+        "ice" => SaturationOver::IceBelowTriplePoint,
+        _ => SaturationOver::Water,
+    };
+    let cfg = EnsembleConfig {
+        n: a.n,
+        seed: a.seed,
+        max_relative_humidity: a.max_rh_percent / 100.0,
+        saturation,
+        id_prefix: format!("{}-", class.name()),
+        allow_repair: a.repair_covariance,
+    };
+    let (mut set, report) = generate_ensemble(&mean, &cov, &cfg)?;
+    if let Some(r) = &report.repair {
+        notes.push(r.to_string());
+        println!("note: {r}");
+    }
+    let cap = format!(
+        "water vapour capped at {} % relative humidity over {} (Murphy and Koop 2005): {} of {} values in {} of {} members",
+        a.max_rh_percent,
+        a.rh_over,
+        report.capped_values,
+        report.total_values,
+        report.capped_members,
+        a.n
+    );
+    println!("{cap}");
+    notes.push(cap);
+    if report.mean_levels_above_limit > 0 {
+        let w = format!(
+            "the mean profile itself exceeds {} % relative humidity at {} of {} levels (a mean over different climates?); members are capped there",
+            a.max_rh_percent,
+            report.mean_levels_above_limit,
+            mean.profile.len()
+        );
+        println!("warning: {w}");
+        notes.push(w);
+    }
+    for n in &cov.notes {
+        println!("covariance: {n}");
+    }
+    set.notes = notes;
+    set.write(&a.out)?;
+    if let Some(path) = &a.covariance_out {
+        lidarsim_write(path, cov.to_csv().as_bytes())?;
+    }
+    println!("wrote {} profiles to {}", set.len(), a.out.display());
+    Ok(())
+}
+
+fn lidarsim_write(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
+    let tmp = path.with_file_name(format!(
+        ".{}.tmp-{}",
+        path.file_name()
+            .context("output is not a file name")?
+            .to_string_lossy(),
+        std::process::id()
+    ));
+    std::fs::write(&tmp, bytes).with_context(|| format!("cannot write {}", tmp.display()))?;
+    std::fs::rename(&tmp, path).with_context(|| format!("cannot write {}", path.display()))?;
+    Ok(())
+}
+
+fn convert(a: ConvertArgs) -> anyhow::Result<()> {
+    let set = match a.format.as_str() {
+        "ecmwf83" => read_ecmwf83(&a.levels, &a.meta)?,
+        "ecmwf52" => read_ecmwf52(&a.levels, &a.meta)?,
+        _ => read_rfmip(&a.levels, &a.meta)?,
+    };
+    set.write(&a.out)?;
+    let [t, m, h] = set.class_counts();
+    println!(
+        "wrote {} profiles ({t} tropical, {m} mid, {h} high) to {}",
+        set.len(),
+        a.out.display()
+    );
+    Ok(())
+}
+
+fn info(a: InfoArgs) -> anyhow::Result<()> {
+    let set = match (&a.set, a.atmosphere) {
+        (_, Some(atm)) => ProfileSet {
+            name: atm.name().into(),
+            members: vec![atm.member()],
+            notes: vec![],
+        },
+        (Some(p), None) => read_set(p)?,
+        (None, None) => bail!("give a profile set or --atmosphere"),
+    };
+    println!(
+        "id,latitude_deg,class,levels,surface_p_hPa,top_altitude_km,air_column_per_cm2,precipitable_water_mm,xco2_ppm"
+    );
+    for m in &set.members {
+        let p = &m.profile;
+        let pw = p
+            .precipitable_water_kg_per_m2()
+            .map(|v| format!("{v:.3}"))
+            .unwrap_or_default();
+        let xco2 = p
+            .column_average_dry_vmr("CO2")
+            .map(|v| format!("{:.3}", v * 1e6))
+            .unwrap_or_default();
+        println!(
+            "{},{},{},{},{:.2},{:.2},{:.5e},{pw},{xco2}",
+            m.meta.id,
+            m.meta.latitude_deg,
+            m.meta.class(),
+            p.len(),
+            p.surface_pressure_pa() / 100.0,
+            p.altitude_m[p.len() - 1] / 1e3,
+            p.air_column_per_m2() * 1e-4
+        );
+    }
+    let [t, mi, h] = set.class_counts();
+    eprintln!("{} profiles: {t} tropical, {mi} mid, {h} high", set.len());
+    Ok(())
+}
+
+/// −log10(p/hPa): increases upward, so the surface is at the bottom of a panel.
+fn y_of(p_pa: f64) -> f64 {
+    -(p_pa / 100.0).log10()
+}
+
+fn plot(a: PlotArgs) -> anyhow::Result<()> {
+    let set = read_set(&a.set)?;
+    if a.top_hpa.is_nan() || a.top_hpa <= 0.0 {
+        bail!("--top-hpa must be positive");
+    }
+    let classes: Vec<LatitudeClass> = LatitudeClass::ALL
+        .into_iter()
+        .filter(|c| set.members.iter().any(|m| m.meta.class() == *c))
+        .collect();
+    let subsets: Vec<ProfileSet> = classes.iter().map(|c| set.class(*c)).collect();
+    let means: Vec<Option<SetMember>> = subsets.iter().map(|s| s.mean_member().ok()).collect();
+    init_font();
+    let (w, h) = (420 * classes.len() as u32 + 40, 1260);
+    let file_name = a
+        .out
+        .file_name()
+        .context("--out is not a file name")?
+        .to_string_lossy()
+        .into_owned();
+    let tmp = a
+        .out
+        .with_file_name(format!(".tmp-{}-{file_name}", std::process::id()));
+    if a.out.extension().and_then(|e| e.to_str()) != Some("png") {
+        bail!("--out must end in .png");
+    }
+    {
+        let root = BitMapBackend::new(&tmp, (w, h)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let title = format!(
+            "{} ({} profiles)",
+            a.set
+                .file_name()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default(),
+            set.len()
+        );
+        let root = root.titled(&title, (FONT, 26))?;
+        let panels = root.split_evenly((3, classes.len()));
+        let p_max = set
+            .members
+            .iter()
+            .map(|m| m.profile.surface_pressure_pa())
+            .fold(0.0, f64::max)
+            * 1.02;
+        let y_range = y_of(p_max)..y_of(a.top_hpa * 100.0);
+        let decades = (p_max / (a.top_hpa * 100.0)).log10().ceil().max(1.0) as usize;
+        let keep = |p: f64| p >= a.top_hpa * 100.0 * 0.999;
+        for (ci, (c, sub)) in classes.iter().zip(&subsets).enumerate() {
+            let color = match c {
+                LatitudeClass::Tropical => RGBColor(200, 60, 30),
+                LatitudeClass::Mid => RGBColor(30, 120, 60),
+                LatitudeClass::High => RGBColor(30, 70, 190),
+            };
+            for row in 0..3 {
+                let area = &panels[row * classes.len() + ci];
+                // x data per member.
+                let xs = |m: &SetMember| -> Option<Vec<(f64, f64)>> {
+                    let p = &m.profile;
+                    let v: Vec<f64> = match row {
+                        0 => p.temperature_k.clone(),
+                        1 => p.gas("H2O")?.iter().map(|x| x * 1e6).collect(),
+                        // CO2 per dry air: what a well-mixed gas keeps constant.
+                        _ => {
+                            let w = p.gas("H2O");
+                            p.gas("CO2")?
+                                .iter()
+                                .enumerate()
+                                .map(|(k, x)| x * 1e6 / (1.0 - w.map_or(0.0, |w| w[k])))
+                                .collect()
+                        }
+                    };
+                    Some(
+                        p.pressure_pa
+                            .iter()
+                            .zip(v)
+                            .filter(|(pp, _)| keep(**pp))
+                            .map(|(pp, x)| (x, y_of(*pp)))
+                            .collect(),
+                    )
+                };
+                let lines: Vec<Vec<(f64, f64)>> = sub.members.iter().filter_map(xs).collect();
+                let label = ["temperature [K]", "H2O [ppmv]", "CO2 [ppmv of dry air]"][row];
+                let caption = if row == 0 {
+                    format!("{c} (n = {})", sub.len())
+                } else {
+                    String::new()
+                };
+                if lines.is_empty() {
+                    area.draw(&Text::new(
+                        format!("no {}", ["T", "H2O", "CO2"][row]),
+                        (150, 200),
+                        (FONT, 20).into_font(),
+                    ))?;
+                    continue;
+                }
+                let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+                for l in &lines {
+                    for (x, _) in l {
+                        if *x > 0.0 || row != 1 {
+                            lo = lo.min(*x);
+                        }
+                        hi = hi.max(*x);
+                    }
+                }
+                let pad = match row {
+                    0 => 0.05 * (hi - lo).max(1.0),
+                    _ => 0.05 * (hi - lo).max(10.0),
+                };
+                let mut builder = ChartBuilder::on(area);
+                builder
+                    .margin(10)
+                    .x_label_area_size(45)
+                    .y_label_area_size(60)
+                    .caption(caption, (FONT, 22));
+                let y_fmt = |v: &f64| {
+                    let p = 10f64.powf(-v);
+                    if p >= 10.0 {
+                        format!("{p:.0}")
+                    } else {
+                        format!("{p:.2}")
+                    }
+                };
+                let style = ShapeStyle::from(&color.mix(0.25)).stroke_width(1);
+                let mean_line = means[ci].as_ref().and_then(xs);
+                macro_rules! draw_panel {
+                    ($chart:expr) => {{
+                        let mut chart = $chart;
+                        chart
+                            .configure_mesh()
+                            .x_desc(label)
+                            .y_desc("pressure [hPa]")
+                            .y_label_formatter(&y_fmt)
+                            .label_style((FONT, 15))
+                            .axis_desc_style((FONT, 17))
+                            .x_labels(6)
+                            .y_labels(decades + 1)
+                            .draw()?;
+                        for l in &lines {
+                            chart.draw_series(LineSeries::new(l.iter().copied(), style))?;
+                        }
+                        if let Some(l) = &mean_line {
+                            chart.draw_series(LineSeries::new(
+                                l.iter().copied(),
+                                ShapeStyle::from(&BLACK).stroke_width(2),
+                            ))?;
+                        }
+                    }};
+                }
+                if row == 1 {
+                    let lo = lo.max(1e-3) / 1.5;
+                    draw_panel!(
+                        builder.build_cartesian_2d((lo..hi * 1.5).log_scale(), y_range.clone())?
+                    );
+                } else {
+                    draw_panel!(
+                        builder.build_cartesian_2d((lo - pad)..(hi + pad), y_range.clone())?
+                    );
+                }
+            }
+        }
+        root.present()?;
+    }
+    std::fs::rename(&tmp, &a.out).with_context(|| format!("cannot write {}", a.out.display()))?;
+    println!("wrote {}", a.out.display());
+    Ok(())
 }
