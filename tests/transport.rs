@@ -1,1 +1,418 @@
-//! See tests.rs.
+//! Monte Carlo transport against independent truth: the analytic single-scatter lidar equation
+//! and hard-target equation, the exact two-way transmission of an absorber, conservation of
+//! energy, and itself at another thread count or with variance reduction off.
+//!
+//! Tolerances: a Monte Carlo bin agrees when |MC − truth| ≤ 4σ + 1 % of the truth (σ its batch
+//! standard error), and only bins with a relative standard error below 10 % are judged, where
+//! 100 batch means are close enough to normal for a 4σ test (with a handful of hits per gate the
+//! batch error itself is unreliable). Seeds are fixed.
+
+use std::path::Path;
+
+use lidarsim::lidar_eq;
+use lidarsim::optics::OpticalAtmosphere;
+use lidarsim::returns::{Order, Returns};
+use lidarsim::scene::Scene;
+use lidarsim::transport::{self, McResult, TransportOptions};
+
+use crate::util::project_root;
+
+const K_SIGMA: f64 = 4.0;
+const REL_SLACK: f64 = 0.01;
+const MAX_REL_SE: f64 = 0.10;
+
+fn run(scene: &Scene, photons: u64, configure: impl FnOnce(&mut TransportOptions)) -> McResult {
+    let atm = OpticalAtmosphere::build(scene).expect("optics");
+    let mut opts = TransportOptions::from_scene(scene);
+    opts.photons = photons;
+    configure(&mut opts);
+    transport::run(scene, &atm, &opts).expect("transport")
+}
+
+fn analytic(scene: &Scene) -> Returns {
+    lidar_eq::single_scatter(scene, &OpticalAtmosphere::build(scene).expect("optics"))
+}
+
+fn scene_text(text: &str) -> Scene {
+    Scene::from_toml(Path::new("test.toml"), text).expect("test scene")
+}
+
+/// Compare MC order 1 with the analytic equation in every judged bin; returns (judged, bins
+/// with signal). A bin has signal where the analytic energy exceeds 1e-4 of the largest
+/// atmospheric (non-surface) return of its channel and FOV.
+fn check_order1(name: &str, mc: &Returns, an: &Returns) -> (usize, usize) {
+    let (mut judged, mut with_signal) = (0, 0);
+    let mut failures = Vec::new();
+    for k in 0..an.channels.len() {
+        for f in 0..an.fov_full_angle_mrad.len() {
+            let values: Vec<f64> = (0..an.range_m.len())
+                .map(|g| an.energy(k, f, g, Order::Exactly(1)).unwrap())
+                .collect();
+            // The surface gate can outshine the atmosphere by orders of magnitude; leave the
+            // largest gate out when it is more than 100 times its neighbours' maximum.
+            let mut sorted = values.clone();
+            sorted.sort_by(|a, b| b.total_cmp(a));
+            let reference = if sorted.len() > 1 && sorted[0] > 100.0 * sorted[1] {
+                sorted[1]
+            } else {
+                sorted[0]
+            };
+            for (g, &a) in values.iter().enumerate() {
+                if a <= 1e-4 * reference {
+                    continue;
+                }
+                with_signal += 1;
+                let m = mc.energy(k, f, g, Order::Exactly(1)).unwrap();
+                let se = mc.stderr(k, f, g, Order::Exactly(1)).unwrap();
+                if !(se <= MAX_REL_SE * m.abs()) {
+                    continue;
+                }
+                judged += 1;
+                if (m - a).abs() > K_SIGMA * se + REL_SLACK * a {
+                    failures.push(format!(
+                        "{name}: channel {} FOV {} mrad gate {} m: MC {m:.5e} ± {se:.2e}, analytic {a:.5e} ({:+.2} σ)",
+                        an.channels[k],
+                        an.fov_full_angle_mrad[f],
+                        an.range_m[g],
+                        (m - a) / se
+                    ));
+                }
+            }
+        }
+    }
+    assert!(
+        failures.is_empty(),
+        "{} bins disagree:\n{}",
+        failures.len(),
+        failures.join("\n")
+    );
+    (judged, with_signal)
+}
+
+/// Every scene shipped in scenes/: MC single scattering equals the lidar equation.
+#[test]
+fn order1_matches_lidar_equation_for_every_shipped_scene() {
+    let dir = project_root().join("scenes");
+    let mut names: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+        .collect();
+    names.sort();
+    assert!(
+        names.len() >= 3,
+        "expected at least three scenes in {}",
+        dir.display()
+    );
+    for path in names {
+        let scene = Scene::read(&path).unwrap();
+        // Enough photons for the sparse gates of the space-borne and Rayleigh scenes (the
+        // space-borne one is then well sampled up to about 12 km), few enough for CI (one to
+        // three seconds each on two cores).
+        let mc = run(&scene, 1_000_000, |_| {});
+        let an = analytic(&scene);
+        let (judged, with_signal) = check_order1(&path.display().to_string(), &mc.returns, &an);
+        assert!(
+            judged * 2 >= with_signal && judged > 0,
+            "{}: only {judged} of {with_signal} gates with signal were sampled well enough",
+            path.display()
+        );
+    }
+}
+
+const HARD_TARGET: &str = r#"
+[lidar]
+altitude_m = 3000.0
+zenith_angle_deg = 160.0
+pulse_energy_j = 0.05
+beam_divergence_full_angle_mrad = 0.2
+telescope_diameter_m = 0.5
+optical_efficiency = 0.8
+fov_full_angle_mrad = [0.1, 0.4]
+[[channel]]
+name = "a"
+wavelength_nm = 1572.0
+[gates]
+start_m = 2000.0
+end_m = 3500.0
+width_m = 15.0
+[[layer]]
+name = "haze"
+base_m = 200.0
+top_m = 1800.0
+extinction_per_km = 0.3
+single_scattering_albedo = 0.9
+phase = { kind = "henyey_greenstein", g = 0.75 }
+absorption_per_m = 2e-5
+[surface]
+altitude_m = 0.0
+albedo = 0.25
+"#;
+
+/// The hard-target return of a Lambertian surface seen at 20° off nadir through an absorbing,
+/// scattering haze equals E₀ η A/R² · ρ cos θ/π · T² · overlap.
+#[test]
+fn surface_return_matches_hard_target_equation() {
+    let scene = scene_text(HARD_TARGET);
+    let mc = run(&scene, 200_000, |_| {});
+    let an = analytic(&scene);
+    let range = 3000.0 / (20.0f64).to_radians().cos();
+    let g = ((range - 2000.0) / 15.0) as usize;
+    for f in 0..2 {
+        let a = an.energy(0, f, g, Order::Exactly(1)).unwrap();
+        let m = mc.returns.energy(0, f, g, Order::Exactly(1)).unwrap();
+        let se = mc.returns.stderr(0, f, g, Order::Exactly(1)).unwrap();
+        assert!(a > 0.0);
+        assert!(
+            (m - a).abs() <= K_SIGMA * se + REL_SLACK * a,
+            "FOV {f}: MC {m:e} ± {se:e}, analytic {a:e}"
+        );
+    }
+    // The hard target dominates its gate: independent closed form for the 0.4 mrad FOV, which
+    // holds the whole 0.2 mrad beam. Two-way transmission through 1600 m of haze along the slant.
+    let tau = (0.3e-3 + 2e-5) * 1600.0 / (20.0f64).to_radians().cos();
+    let area = std::f64::consts::PI * 0.25 * 0.25;
+    let closed = 0.05 * 0.8 * area / (range * range) * 0.25 * (20.0f64).to_radians().cos()
+        / std::f64::consts::PI
+        * (-2.0 * tau).exp();
+    let a = an.energy(0, 1, g, Order::Exactly(1)).unwrap();
+    assert!(
+        (a / closed - 1.0).abs() < 0.02,
+        "{a:e} vs closed form {closed:e}"
+    );
+    check_order1("hard target", &mc.returns, &an);
+}
+
+const TWO_CHANNELS: &str = r#"
+[lidar]
+altitude_m = 0.0
+zenith_angle_deg = 0.0
+pulse_energy_j = 0.01
+beam_divergence_full_angle_mrad = 0.1
+telescope_diameter_m = 0.3
+optical_efficiency = 1.0
+fov_full_angle_mrad = 0.3
+[[channel]]
+name = "off"
+wavelength_nm = 1572.0
+[[channel]]
+name = "on"
+wavelength_nm = 1572.0
+[gates]
+start_m = 200.0
+end_m = 3000.0
+width_m = 20.0
+[atmosphere]
+standard = "us_standard"
+layer_thickness_m = 100.0
+[[layer]]
+name = "aerosol"
+base_m = 0.0
+top_m = 2000.0
+extinction_per_km = 0.2
+single_scattering_albedo = 0.95
+phase = { kind = "henyey_greenstein", g = 0.7 }
+[[layer]]
+name = "absorber"
+base_m = 0.0
+top_m = 2500.0
+absorption_per_m = [0.0, 3e-4]
+"#;
+
+/// One photon path carries both channels: the on/off ratio of the order-1 returns equals the
+/// analytic two-way transmission ratio exp(−2∫k dr) gate by gate, with almost no noise.
+#[test]
+fn absorbing_and_clear_channels_ratio_is_two_way_transmission() {
+    let scene = scene_text(TWO_CHANNELS);
+    let mc = run(&scene, 200_000, |_| {});
+    let an = analytic(&scene);
+    let mut judged = 0;
+    for g in 0..an.range_m.len() {
+        let (off, on) = (
+            mc.returns.energy(0, 0, g, Order::Exactly(1)).unwrap(),
+            mc.returns.energy(1, 0, g, Order::Exactly(1)).unwrap(),
+        );
+        let se = mc.returns.stderr(0, 0, g, Order::Exactly(1)).unwrap();
+        if !(se < MAX_REL_SE * off) {
+            continue;
+        }
+        judged += 1;
+        let ratio_an = an.energy(1, 0, g, Order::Exactly(1)).unwrap()
+            / an.energy(0, 0, g, Order::Exactly(1)).unwrap();
+        // Independent truth: for a gate [r, r+Δr] inside the absorber, T² varies by e^{−2kΔr}
+        // across it, so the gate ratio lies between the values at its ends.
+        let r0 = an.range_m[g] - 10.0;
+        let t2 = |r: f64| (-2.0 * 3e-4 * r.min(2500.0)).exp();
+        assert!(ratio_an <= t2(r0) * (1.0 + 1e-12) && ratio_an >= t2(r0 + 20.0) * (1.0 - 1e-12));
+        // Correlated sampling: the MC ratio differs from the analytic one only through the
+        // distribution of hits inside the gate, well below 0.5 % here.
+        assert!(
+            ((on / off) / ratio_an - 1.0).abs() < 5e-3,
+            "gate {} m: MC ratio {} vs analytic {}",
+            an.range_m[g],
+            on / off,
+            ratio_an
+        );
+    }
+    assert!(judged > 50, "only {judged} gates judged");
+    check_order1("two channels", &mc.returns, &an);
+}
+
+const SLAB: &str = r#"
+[lidar]
+altitude_m = 0.0
+zenith_angle_deg = 0.0
+pulse_energy_j = 1.0
+beam_divergence_full_angle_mrad = 0.0
+telescope_diameter_m = 1.0
+optical_efficiency = 1.0
+fov_full_angle_mrad = 1.0
+[[channel]]
+name = "a"
+wavelength_nm = 1064.0
+[gates]
+start_m = 1.0
+end_m = 10000001.0
+width_m = 10000000.0
+[[layer]]
+name = "slab"
+base_m = 1000.0
+top_m = 1500.0
+extinction_per_m = 4e-3
+single_scattering_albedo = SSA
+phase = { kind = "henyey_greenstein", g = 0.6 }
+[simulation]
+max_order = 3
+"#;
+
+/// Energy conservation in a flux tally: what leaves up, leaves down, is absorbed or is still
+/// travelling at the last gate adds up to what was emitted; a non-absorbing slab absorbs
+/// nothing. Slab optical depth 2, gates to 10 000 km so nothing is cut.
+#[test]
+fn slab_conserves_energy() {
+    for ssa in [1.0, 0.9] {
+        let scene = scene_text(&SLAB.replace("SSA", &ssa.to_string()));
+        let mc = run(&scene, 100_000, |o| o.flux_tally = true);
+        let (f, e) = (&mc.flux, &mc.flux_stderr);
+        let total = f.up[0] + f.down[0] + f.absorbed[0] + f.cut[0];
+        // The parts are anti-correlated, so this error bound is conservative.
+        let se =
+            (e.up[0].powi(2) + e.down[0].powi(2) + e.absorbed[0].powi(2) + e.cut[0].powi(2)).sqrt();
+        assert!(
+            (total - 1.0).abs() <= K_SIGMA * se + 1e-9,
+            "ϖ = {ssa}: {total} ± {se}"
+        );
+        assert!(f.cut[0] < 1e-6, "ϖ = {ssa}: cut {}", f.cut[0]);
+        if ssa == 1.0 {
+            assert_eq!(f.absorbed[0], 0.0);
+        } else {
+            assert!(
+                f.absorbed[0] > 0.05,
+                "ϖ = {ssa}: absorbed {}",
+                f.absorbed[0]
+            );
+        }
+        // The direct beam alone transmits e^{−2}: transmission must exceed it.
+        assert!(f.down[0] > (-2.0f64).exp(), "ϖ = {ssa}: down {}", f.down[0]);
+    }
+}
+
+/// Same scene and seed → the same numbers, bit for bit, at 1 and 2 threads.
+#[test]
+fn identical_results_at_one_and_two_threads() {
+    let scene = scene_text(TWO_CHANNELS);
+    let a = run(&scene, 20_000, |o| {
+        o.threads = 1;
+        o.flux_tally = true
+    });
+    let b = run(&scene, 20_000, |o| {
+        o.threads = 2;
+        o.flux_tally = true
+    });
+    assert_eq!(a.threads, 1);
+    assert_eq!(b.threads, 2);
+    assert_eq!(a.returns, b.returns);
+    assert_eq!(a.flux, b.flux);
+    assert_eq!(a.stats, b.stats);
+}
+
+const HG_CLOUD: &str = r#"
+[lidar]
+altitude_m = 0.0
+zenith_angle_deg = 0.0
+pulse_energy_j = 1.0
+beam_divergence_full_angle_mrad = 0.5
+telescope_diameter_m = 1.0
+optical_efficiency = 1.0
+fov_full_angle_mrad = [1.0, 5.0]
+[[channel]]
+name = "a"
+wavelength_nm = 1064.0
+[gates]
+start_m = 500.0
+end_m = 800.0
+width_m = 20.0
+[[layer]]
+name = "cloud"
+base_m = 500.0
+top_m = 700.0
+extinction_per_km = 10.0
+single_scattering_albedo = 0.99
+phase = { kind = "henyey_greenstein", g = 0.5 }
+[simulation]
+max_order = 3
+"#;
+
+/// Detector-directed importance sampling changes the variance, not the mean. With a mild
+/// forward peak (HG g = 0.5: P(0°)/P(180°) = 27, still above the DDIS threshold) plain sampling
+/// has no heavy tail and is trustworthy; both estimators of the multiply scattered returns agree
+/// within their combined errors. (With HG g = 0.8, P(0°)/P(180°) ≈ 700, plain sampling needs
+/// millions of photons before its batch errors can be believed: that is what DDIS is for.)
+#[test]
+fn ddis_is_unbiased() {
+    let scene = scene_text(HG_CLOUD);
+    let plain = run(&scene, 200_000, |o| o.ddis_epsilon = 0.0);
+    let ddis = run(&scene, 200_000, |o| {
+        o.ddis_epsilon = 0.3;
+        o.seed = 2
+    });
+    let r = &plain.returns;
+    let mut judged = 0;
+    let mut chi2 = 0.0;
+    for f in 0..2 {
+        for g in 0..r.range_m.len() {
+            for order in [
+                Order::Exactly(2),
+                Order::Exactly(3),
+                Order::AtLeast(4),
+                Order::Total,
+            ] {
+                let (a, sa) = (
+                    r.energy(0, f, g, order).unwrap(),
+                    r.stderr(0, f, g, order).unwrap(),
+                );
+                let (b, sb) = (
+                    ddis.returns.energy(0, f, g, order).unwrap(),
+                    ddis.returns.stderr(0, f, g, order).unwrap(),
+                );
+                if !(sa < MAX_REL_SE * a && sb < MAX_REL_SE * b) {
+                    continue;
+                }
+                let z = (a - b) / (sa * sa + sb * sb).sqrt();
+                judged += 1;
+                chi2 += z * z;
+                assert!(
+                    z.abs() < 4.5,
+                    "FOV {f} gate {g} {order:?}: {a:e} ± {sa:e} vs DDIS {b:e} ± {sb:e}"
+                );
+            }
+        }
+    }
+    assert!(judged > 20, "{judged}");
+    // The z are correlated across orders, so only a loose check of their spread.
+    assert!(
+        chi2 / (judged as f64) < 2.0,
+        "mean z² = {}",
+        chi2 / judged as f64
+    );
+}

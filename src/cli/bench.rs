@@ -33,6 +33,9 @@ pub struct Args {
     /// Random seed.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Probability of detector-directed importance sampling (0: off).
+    #[arg(long, default_value_t = lidarsim::transport::DDIS_EPSILON)]
+    pub ddis_epsilon: f64,
     /// Write the figures as JSON here as well.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -80,6 +83,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         for _ in 0..args.repeat.max(1) {
             let mut opts = TransportOptions::from_scene(&scene);
             opts.threads = threads;
+            opts.ddis_epsilon = args.ddis_epsilon;
             let r = transport::run(&scene, &atm, &opts)?;
             if best.as_ref().is_none_or(|b| r.wall_s < b.wall_s) {
                 best = Some(r);

@@ -28,7 +28,7 @@ pub use tally::Flux;
 use tally::{Accumulator, TallyShape};
 
 /// Default probability of detector-directed importance sampling.
-pub const DDIS_EPSILON: f64 = 0.1;
+pub const DDIS_EPSILON: f64 = 0.3;
 /// DDIS is used where the scattering point is seen from the receiver within the widest field
 /// of view plus this margin [rad]: further out, a photon sent toward the receiver stays outside
 /// the fields of view (the line to the receiver keeps its angle to the axis).
