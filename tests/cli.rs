@@ -1,1 +1,76 @@
-//! See tests.rs.
+//! The command line: `lidarsim run` writes exactly the contract columns, reports bad input with
+//! file, line and key and exit code 2, and writes nothing half-way.
+
+use std::process::Command;
+
+use crate::util::lidarsim_bin;
+
+const HEADER: &str = "source,channel,fov_full_angle_mrad,range_m,order,energy_j,stderr_j";
+
+#[test]
+fn run_default_scene_writes_contract_columns() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = Command::new(lidarsim_bin())
+        .args(["run", "--photons", "2000", "--seed", "3", "--threads", "1", "--out"])
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("transport: 2000 photons"), "{stdout}");
+    let csv = std::fs::read_to_string(dir.path().join("returns.csv")).unwrap();
+    let mut lines = csv.lines();
+    assert_eq!(lines.next(), Some(HEADER));
+    let (mut mc, mut analytic) = (0, 0);
+    for line in lines {
+        let f: Vec<&str> = line.split(',').collect();
+        assert_eq!(f.len(), 7, "{line}");
+        let energy: f64 = f[5].parse().unwrap();
+        let stderr: f64 = f[6].parse().unwrap();
+        let _: f64 = f[2].parse().unwrap();
+        let _: f64 = f[3].parse().unwrap();
+        assert!(energy >= 0.0 && energy.is_finite(), "{line}");
+        match f[0] {
+            "mc" => {
+                mc += 1;
+                assert!(f[4] == "total" || f[4].trim_end_matches('+').parse::<u32>().is_ok(), "{line}");
+            }
+            "analytic" => {
+                analytic += 1;
+                assert_eq!(f[4], "1", "{line}");
+                assert_eq!(stderr, 0.0, "{line}");
+            }
+            other => panic!("source {other}"),
+        }
+    }
+    // Default scene: 1 channel, 2 FOVs, 260 gates; MC orders total, 1..5, 6+.
+    assert_eq!(analytic, 2 * 260);
+    assert_eq!(mc, 2 * 260 * 7);
+    assert!(dir.path().join("summary.json").is_file());
+}
+
+#[test]
+fn bad_scene_exits_2_naming_file_line_and_key_and_writes_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("bad.toml");
+    let text = lidarsim::scene::DEFAULT_SCENE_TOML.replace("pulse_energy_j = 0.1", "pulse_energy_j = -1");
+    std::fs::write(&scene, text).unwrap();
+    let out_dir = dir.path().join("out");
+    let out = Command::new(lidarsim_bin()).arg("run").arg(&scene).arg("--out").arg(&out_dir).output().unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("bad.toml:"), "{stderr}");
+    assert!(stderr.contains("`lidar.pulse_energy_j`: -1 must be > 0"), "{stderr}");
+    assert!(!out_dir.exists(), "an output directory was created for a failed run");
+}
+
+#[test]
+fn bench_reports_figure_of_merit() {
+    let out = Command::new(lidarsim_bin())
+        .args(["bench", "--photons", "5000", "--repeat", "1", "--threads", "1"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("FOM"), "{stdout}");
+}

@@ -57,6 +57,9 @@ pub(super) struct GatesFile {
 #[serde(deny_unknown_fields)]
 pub(super) struct AtmosphereFile {
     pub standard: Option<String>,
+    pub profile_file: Option<String>,
+    pub profile_id: Option<String>,
+    pub co2_ppm: Option<f64>,
     pub altitude_m: Option<Vec<f64>>,
     pub air_number_density_per_m3: Option<Vec<f64>>,
     pub top_m: Option<f64>,

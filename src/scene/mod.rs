@@ -502,25 +502,42 @@ impl Validator<'_> {
         channels: &[Channel],
     ) -> Result<Atmosphere, InputError> {
         let sec = KeyPath::table("atmosphere");
-        let profile = match (&a.standard, &a.altitude_m, &a.air_number_density_per_m3) {
-            (Some(name), None, None) => name
-                .parse::<StandardAtmosphere>()
+        let explicit = a.altitude_m.is_some() || a.air_number_density_per_m3.is_some();
+        let sources = [a.standard.is_some(), a.profile_file.is_some(), explicit];
+        if sources.iter().filter(|x| **x).count() != 1 {
+            return Err(self.err(
+                &sec,
+                "needs exactly one of `standard` (an AFGL atmosphere), `profile_file` (a profile \
+                 set, with `profile_id`), or `altitude_m` with `air_number_density_per_m3`",
+            ));
+        }
+        let mut profile = if let Some(name) = &a.standard {
+            name.parse::<StandardAtmosphere>()
                 .map_err(|m| self.err(&sec.key("standard"), m))?
-                .profile(),
-            (None, Some(z), Some(n)) => self.density_profile(&sec, z, n)?,
-            (Some(_), _, _) => {
-                return Err(self.err(
-                    &sec.key("altitude_m"),
-                    "give `standard` or (`altitude_m`, `air_number_density_per_m3`), not both",
-                ));
-            }
-            _ => {
-                return Err(self.err(
-                    &sec,
-                    "needs `standard` (an AFGL atmosphere) or both `altitude_m` and `air_number_density_per_m3`",
-                ));
+                .profile()
+        } else if let Some(file) = &a.profile_file {
+            self.set_profile(&sec, file, a.profile_id.as_deref())?
+        } else {
+            match (&a.altitude_m, &a.air_number_density_per_m3) {
+                (Some(z), Some(n)) => self.density_profile(&sec, z, n)?,
+                _ => {
+                    return Err(self.err(
+                        &sec,
+                        "`altitude_m` and `air_number_density_per_m3` go together",
+                    ));
+                }
             }
         };
+        if a.profile_id.is_some() && a.profile_file.is_none() {
+            return Err(self.err(&sec.key("profile_id"), "goes with `profile_file`"));
+        }
+        if let Some(ppm) = a.co2_ppm {
+            let at = sec.key("co2_ppm");
+            self.positive(&at, ppm)?;
+            profile
+                .rescale_gas("CO2", ppm * 1e-6)
+                .map_err(|e| self.err(&at, e.to_string()))?;
+        }
         let z_top = *profile.altitude_m.last().unwrap_or(&0.0);
         let top_m = match a.top_m {
             Some(t) => {
@@ -583,6 +600,33 @@ impl Validator<'_> {
             rayleigh: rayleigh_on,
             depolarisation_factor,
         })
+    }
+
+    /// One profile of a profile-set file (lidarsim's set format, `docs/atmosphere.md`), the file
+    /// relative to the scene.
+    fn set_profile(&self, sec: &KeyPath, file: &str, id: Option<&str>) -> Result<Profile, InputError> {
+        let at = sec.key("profile_file");
+        let path = self.path.parent().unwrap_or(Path::new(".")).join(file);
+        let set = crate::atmosphere::read_profile_set(&path)
+            .map_err(|e| self.err(&at, format!("profile set: {e}")))?;
+        let member = match id {
+            Some(id) => set.member(id).ok_or_else(|| {
+                let ids: Vec<&str> = set.members.iter().take(10).map(|m| m.meta.id.as_str()).collect();
+                self.err(
+                    &sec.key("profile_id"),
+                    format!("no profile `{id}` in {} (ids: {}{})", path.display(), ids.join(", "),
+                        if set.len() > 10 { ", …" } else { "" }),
+                )
+            })?,
+            None if set.len() == 1 => &set.members[0],
+            None => {
+                return Err(self.err(
+                    &at,
+                    format!("{} holds {} profiles: say which with `profile_id`", path.display(), set.len()),
+                ));
+            }
+        };
+        Ok(member.profile.clone())
     }
 
     fn density_profile(&self, sec: &KeyPath, z: &[f64], n: &[f64]) -> Result<Profile, InputError> {
