@@ -106,7 +106,9 @@ impl Co2BandModel {
         let nu0 = self.band_origin_cm1;
         let mf = m as f64;
         let hw = 1.0 + poly(&self.herman_wallis, mf) * mf;
-        self.strength_cm_per_molecule * (nu / nu0) * mf.abs()
+        self.strength_cm_per_molecule
+            * (nu / nu0)
+            * mf.abs()
             * (-c2 * self.lower_energy_cm1(jl) / t).exp()
             * (1.0 - (-c2 * nu / t).exp())
             / (1.0 - (-c2 * nu0 / t).exp())
@@ -161,7 +163,11 @@ mod tests {
         let b = Co2BandModel::embedded();
         // Band origin of 30012←00001 (Rothman & Young 1981: 6347.85 cm⁻¹) and the ground-state
         // B″ of CO2 (0.39022 cm⁻¹; Herzberg).
-        assert!((b.band_origin_cm1 - 6347.85).abs() < 0.01, "{}", b.band_origin_cm1);
+        assert!(
+            (b.band_origin_cm1 - 6347.85).abs() < 0.01,
+            "{}",
+            b.band_origin_cm1
+        );
         assert!((b.b_lower_cm1 - 0.390_22).abs() < 1e-4, "{}", b.b_lower_cm1);
         let l = LineList::co2_30012_band_model();
         // P(60)…P(2) and R(0)…R(58): 30 + 30 lines.

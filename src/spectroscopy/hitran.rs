@@ -195,7 +195,9 @@ impl LineList {
             lines: self
                 .lines
                 .iter()
-                .filter(|l| filter.keeps_species(l.molecule_id, l.iso_id) && filter.keeps_nu(l.nu_cm1))
+                .filter(|l| {
+                    filter.keeps_species(l.molecule_id, l.iso_id) && filter.keeps_nu(l.nu_cm1)
+                })
                 .cloned()
                 .collect(),
         }
@@ -298,7 +300,12 @@ fn parse_record(
         if v.is_finite() {
             Ok(v)
         } else {
-            Err(InputError::at(path, line_no, name, format!("`{s}` is not finite")))
+            Err(InputError::at(
+                path,
+                line_no,
+                name,
+                format!("`{s}` is not finite"),
+            ))
         }
     };
     let nu_cm1 = num(F_NU)?;
@@ -339,7 +346,12 @@ fn parse_record(
                 path,
                 line_no,
                 name,
-                format!("`{}` (columns {}-{}) must not be negative", &rec[a..z], a + 1, z),
+                format!(
+                    "`{}` (columns {}-{}) must not be negative",
+                    &rec[a..z],
+                    a + 1,
+                    z
+                ),
             ));
         }
     }
@@ -401,7 +413,11 @@ mod tests {
             molecules: Some(vec![2]),
             ..Default::default()
         };
-        assert!(LineList::parse_par("f.par", &unknown, &only_co2).unwrap().is_empty());
+        assert!(
+            LineList::parse_par("f.par", &unknown, &only_co2)
+                .unwrap()
+                .is_empty()
+        );
     }
 
     #[test]
@@ -413,7 +429,10 @@ mod tests {
             isotopologues: Some(vec![(2, 2)]),
             ..Default::default()
         };
-        assert_eq!(LineList::parse_par("f", &text, &f).unwrap().lines[0].iso_id, 2);
+        assert_eq!(
+            LineList::parse_par("f", &text, &f).unwrap().lines[0].iso_id,
+            2
+        );
         let w = LineFilter::window(6360.0, 6400.0);
         assert!(LineList::parse_par("f", &text, &w).unwrap().is_empty());
     }

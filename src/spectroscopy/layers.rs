@@ -73,7 +73,12 @@ const GL8: [(f64, f64); 8] = [
 
 fn check_profile(profile: &Profile) -> Result<(), SpectroscopyError> {
     let n = profile.len();
-    let bad = |what: String| Err(SpectroscopyError::Gas(format!("profile `{}`: {what}", profile.name)));
+    let bad = |what: String| {
+        Err(SpectroscopyError::Gas(format!(
+            "profile `{}`: {what}",
+            profile.name
+        )))
+    };
     if n < 2 {
         return bad("needs at least two levels".into());
     }
@@ -86,8 +91,14 @@ fn check_profile(profile: &Profile) -> Result<(), SpectroscopyError> {
     if !profile.altitude_m.windows(2).all(|w| w[1] > w[0]) {
         return bad("altitudes must increase strictly".into());
     }
-    if profile.pressure_pa.iter().any(|&p| !(p > 0.0 && p.is_finite()))
-        || profile.temperature_k.iter().any(|&t| !(t > 0.0 && t.is_finite()))
+    if profile
+        .pressure_pa
+        .iter()
+        .any(|&p| !(p > 0.0 && p.is_finite()))
+        || profile
+            .temperature_k
+            .iter()
+            .any(|&t| !(t > 0.0 && t.is_finite()))
     {
         return bad("pressures and temperatures must be positive".into());
     }
@@ -102,7 +113,13 @@ fn check_profile(profile: &Profile) -> Result<(), SpectroscopyError> {
 }
 
 /// State at altitude z inside level interval i: (p, T, n_air, n_gas…).
-fn state_at(profile: &Profile, n_air: &[f64], i: usize, z: f64, gas_out: &mut [f64]) -> (f64, f64, f64) {
+fn state_at(
+    profile: &Profile,
+    n_air: &[f64],
+    i: usize,
+    z: f64,
+    gas_out: &mut [f64],
+) -> (f64, f64, f64) {
     let (z0, z1) = (profile.altitude_m[i], profile.altitude_m[i + 1]);
     let t = (z - z0) / (z1 - z0);
     let loglin = |a: f64, b: f64| {
@@ -113,7 +130,8 @@ fn state_at(profile: &Profile, n_air: &[f64], i: usize, z: f64, gas_out: &mut [f
         }
     };
     let p = loglin(profile.pressure_pa[i], profile.pressure_pa[i + 1]);
-    let temp = profile.temperature_k[i] + (profile.temperature_k[i + 1] - profile.temperature_k[i]) * t;
+    let temp =
+        profile.temperature_k[i] + (profile.temperature_k[i + 1] - profile.temperature_k[i]) * t;
     let n = loglin(n_air[i], n_air[i + 1]);
     for (g, out) in profile.gases.iter().zip(gas_out.iter_mut()) {
         *out = loglin(g.vmr[i] * n_air[i], g.vmr[i + 1] * n_air[i + 1]);
@@ -123,7 +141,10 @@ fn state_at(profile: &Profile, n_air: &[f64], i: usize, z: f64, gas_out: &mut [f
 
 /// Curtis-Godson layers between consecutive `edges_m` (strictly increasing, inside the
 /// profile), module docs.
-pub fn curtis_godson_layers(profile: &Profile, edges_m: &[f64]) -> Result<Vec<CgLayer>, SpectroscopyError> {
+pub fn curtis_godson_layers(
+    profile: &Profile,
+    edges_m: &[f64],
+) -> Result<Vec<CgLayer>, SpectroscopyError> {
     check_profile(profile)?;
     check_edges(profile, edges_m)?;
     let n_air = profile.air_number_density_per_m3();
@@ -136,11 +157,18 @@ pub fn curtis_godson_layers(profile: &Profile, edges_m: &[f64]) -> Result<Vec<Cg
         let (mut u_air, mut u_p, mut u_t) = (0.0, 0.0, 0.0);
         let mut u_gas = vec![0.0; ng];
         // Pieces between profile levels.
-        let first = z.partition_point(|&zi| zi <= zb).saturating_sub(1).min(z.len() - 2);
+        let first = z
+            .partition_point(|&zi| zi <= zb)
+            .saturating_sub(1)
+            .min(z.len() - 2);
         let mut i = first;
         let mut a = zb;
         while a < zt {
-            let b = if i + 1 < z.len() - 1 { z[i + 1].min(zt) } else { zt };
+            let b = if i + 1 < z.len() - 1 {
+                z[i + 1].min(zt)
+            } else {
+                zt
+            };
             let (mid, half) = (0.5 * (a + b), 0.5 * (b - a));
             for (x, wq) in GL8 {
                 let zz = mid + half * x;
@@ -195,7 +223,10 @@ fn check_edges(profile: &Profile, edges_m: &[f64]) -> Result<(), SpectroscopyErr
             return Err(SpectroscopyError::InvalidArgument {
                 name: "edges_m",
                 value: e,
-                reason: format!("layer edges must increase strictly (edge {i} ≤ edge {})", i - 1),
+                reason: format!(
+                    "layer edges must increase strictly (edge {i} ≤ edge {})",
+                    i - 1
+                ),
             });
         }
     }
@@ -204,7 +235,10 @@ fn check_edges(profile: &Profile, edges_m: &[f64]) -> Result<(), SpectroscopyErr
 
 /// For each molecule of the line list, its HITRAN number and its index in the profile's gases.
 /// A molecule the profile does not carry is an error.
-pub fn line_gases(profile: &Profile, lines: &LineList) -> Result<Vec<(u8, usize)>, SpectroscopyError> {
+pub fn line_gases(
+    profile: &Profile,
+    lines: &LineList,
+) -> Result<Vec<(u8, usize)>, SpectroscopyError> {
     lines
         .molecules()
         .into_iter()
@@ -278,16 +312,21 @@ impl LineOfSight {
             return Err(SpectroscopyError::InvalidArgument {
                 name: "sensor_altitude_m",
                 value: self.sensor_altitude_m,
-                reason: "the path is empty (a downward-looking sensor must be above the surface; an \
+                reason:
+                    "the path is empty (a downward-looking sensor must be above the surface; an \
                          upward-looking one below the top of the profile)"
-                    .into(),
+                        .into(),
             });
         }
         Ok((lo, hi))
     }
 
     /// Layer edges along the path, about `thickness_m` thick (the last one thinner).
-    pub fn layer_edges(&self, profile: &Profile, thickness_m: f64) -> Result<Vec<f64>, SpectroscopyError> {
+    pub fn layer_edges(
+        &self,
+        profile: &Profile,
+        thickness_m: f64,
+    ) -> Result<Vec<f64>, SpectroscopyError> {
         if !(thickness_m.is_finite() && thickness_m > 0.0) {
             return Err(SpectroscopyError::InvalidArgument {
                 name: "thickness_m",

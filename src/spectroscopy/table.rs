@@ -186,7 +186,10 @@ impl GasOpticalDepthTable {
     /// The usable wavenumber range [cm⁻¹] (6-point interpolation needs 3 grid points on each
     /// side; the first and last two steps are excluded, grid points themselves are exact).
     pub fn usable_range_cm1(&self) -> (f64, f64) {
-        (self.grid.at(2), self.grid.at(self.grid.len.saturating_sub(3)))
+        (
+            self.grid.at(2),
+            self.grid.at(self.grid.len.saturating_sub(3)),
+        )
     }
 
     /// Vertical optical depth of every layer at `wavenumber_cm1` (inside the grid),
@@ -209,7 +212,9 @@ impl GasOpticalDepthTable {
             t = u - i as f64;
         }
         if t.abs() < 1e-12 {
-            return Ok((0..self.n_layers()).map(|l| self.tau_at_grid(l, i)).collect());
+            return Ok((0..self.n_layers())
+                .map(|l| self.tau_at_grid(l, i))
+                .collect());
         }
         let mut w = [0.0; 6];
         for (s, ws) in w.iter_mut().enumerate() {
@@ -250,7 +255,10 @@ impl GasOpticalDepthTable {
             ));
         }
         let fine = self.layer_tau(wavenumber_cm1)?;
-        Ok(idx.windows(2).map(|w| fine[w[0]..w[1]].iter().sum()).collect())
+        Ok(idx
+            .windows(2)
+            .map(|w| fine[w[0]..w[1]].iter().sum())
+            .collect())
     }
 
     /// Slant optical depth of the whole path between `bottom_m` and `top_m` (which must be

@@ -100,7 +100,11 @@ mod tests {
         // the atmosphere) to 1e3 (pressure-broadened far beyond any lidar case).
         let mut worst = (0.0f64, 0.0, 0.0);
         for i in 0..=400 {
-            let x = if i == 0 { 0.0 } else { 10f64.powf(-2.0 + 7.0 * i as f64 / 400.0) };
+            let x = if i == 0 {
+                0.0
+            } else {
+                10f64.powf(-2.0 + 7.0 * i as f64 / 400.0)
+            };
             for j in 0..=200 {
                 let y = 10f64.powf(-6.0 + 9.0 * j as f64 / 200.0);
                 let (a, b) = (re_w(x, y), re_w_exact(x, y));

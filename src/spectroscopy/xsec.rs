@@ -516,7 +516,11 @@ fn multigrid_sum(prepared: &[Prepared], grid: &WavenumberGrid, opts: &LblOptions
         .iter()
         .filter(|p| p.nu_w >= lo && p.nu_w <= hi)
         .collect();
-    let zero = || (0..lv.n()).map(|k| vec![0.0; lv.len(k)]).collect::<Vec<_>>();
+    let zero = || {
+        (0..lv.n())
+            .map(|k| vec![0.0; lv.len(k)])
+            .collect::<Vec<_>>()
+    };
     let mut acc = zero();
     // Groups of chunks in parallel, each chunk sequential, chunks added in order.
     let chunks: Vec<&[&Prepared]> = active.chunks(CHUNK).collect();

@@ -56,4 +56,4 @@ with open("validation/hapi_tips/hapi_partition_sums.csv", "w") as f:
     for M, codes in AFGL.items():
         for I in range(1, len(codes) + 1):
             for T in [150.0, 187.3, 212.5, 250.0, 273.15, 296.0, 301.7, 333.3]:
-                f.write(f"{M},{I},{T!r},{hapi.partitionSum(M, I, T, version=2021)!r}\n")
+                f.write(f"{M},{I},{T!r},{float(hapi.partitionSum(M, I, T, version=2021))!r}\n")
