@@ -60,6 +60,14 @@ pub struct Args {
     /// Draw the result to this PNG.
     #[arg(long, value_name = "OUT.png")]
     plot: Option<PathBuf>,
+    /// Layer-mode options (boxed: keeps the subcommand enum small).
+    #[command(flatten)]
+    layer: Box<LayerArgs>,
+}
+
+/// Options of the layer mode of `lidarsim lbl`.
+#[derive(clap::Args, Debug)]
+pub struct LayerArgs {
     /// Layer mode: a built-in AFGL atmosphere (tropical, midlatitude_summer, midlatitude_winter,
     /// subarctic_summer, subarctic_winter, us_standard).
     #[arg(long, conflicts_with_all = ["profile", "pressure_atm", "temperature_k"])]
@@ -67,7 +75,8 @@ pub struct Args {
     /// Layer mode: a profile file in the AFGL table format (z_km, p_hPa, T_K, <GAS>_ppmv…).
     #[arg(long, value_name = "FILE", conflicts_with_all = ["pressure_atm", "temperature_k"])]
     profile: Option<PathBuf>,
-    /// Layer mode: rescale CO2 to this constant mixing ratio [ppmv] (AFGL tables carry 330).
+    /// Layer mode: scale the CO2 profile so that its surface value is this [ppmv] (AFGL tables
+    /// carry 330; the shape, which falls above 80 km, is kept).
     #[arg(long)]
     co2_ppmv: Option<f64>,
     /// Layer mode: sensor altitude [m].
@@ -111,7 +120,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         None => LineList::co2_30012_band_model(),
     };
-    let layer_mode = args.atmosphere.is_some() || args.profile.is_some();
+    let layer_mode = args.layer.atmosphere.is_some() || args.layer.profile.is_some();
     if layer_mode {
         run_layers(&args, &lines, &grid, &opts)
     } else {
@@ -195,7 +204,7 @@ fn run_cross_sections(
 }
 
 fn load_profile(args: &Args) -> anyhow::Result<Profile> {
-    let mut prof = match (&args.atmosphere, &args.profile) {
+    let mut prof = match (&args.layer.atmosphere, &args.layer.profile) {
         (Some(a), None) => a.profile(),
         (None, Some(p)) => {
             let text = std::fs::read_to_string(p)
@@ -204,8 +213,8 @@ fn load_profile(args: &Args) -> anyhow::Result<Profile> {
         }
         _ => bail!("give one of --atmosphere or --profile"),
     };
-    if let Some(ppmv) = args.co2_ppmv {
-        if !(ppmv.is_finite() && ppmv >= 0.0 && ppmv < 1e6) {
+    if let Some(ppmv) = args.layer.co2_ppmv {
+        if !(0.0..1e6).contains(&ppmv) {
             bail!("--co2-ppmv must be within [0, 1e6) (got {ppmv})");
         }
         let g = prof
@@ -213,7 +222,12 @@ fn load_profile(args: &Args) -> anyhow::Result<Profile> {
             .iter_mut()
             .find(|g| g.name == "CO2")
             .context("--co2-ppmv: the profile has no CO2 column")?;
-        g.vmr.iter_mut().for_each(|v| *v = ppmv * 1e-6);
+        let surface = g.vmr.first().copied().unwrap_or(0.0);
+        if !(surface > 0.0) {
+            bail!("--co2-ppmv: the profile's surface CO2 is zero, nothing to scale");
+        }
+        let f = ppmv * 1e-6 / surface;
+        g.vmr.iter_mut().for_each(|v| *v *= f);
     }
     Ok(prof)
 }
@@ -225,25 +239,25 @@ fn run_layers(
     opts: &LblOptions,
 ) -> anyhow::Result<()> {
     let prof = load_profile(args)?;
-    let (Some(sensor), Some(zenith)) = (args.sensor_altitude_m, args.zenith_deg) else {
+    let (Some(sensor), Some(zenith)) = (args.layer.sensor_altitude_m, args.layer.zenith_deg) else {
         bail!("layer mode needs --sensor-altitude-m and --zenith-deg");
     };
     let los = LineOfSight {
         sensor_altitude_m: sensor,
         zenith_angle_deg: zenith,
-        surface_altitude_m: args.surface_altitude_m,
+        surface_altitude_m: args.layer.surface_altitude_m,
     };
     let mu = los.mu()?;
-    let edges = los.layer_edges(&prof, args.layer_m)?;
+    let edges = los.layer_edges(&prof, args.layer.layer_m)?;
     let table = GasOpticalDepthTable::compute(&prof, lines, &edges, grid, opts)?;
-    if let Some(path) = &args.save_table {
+    if let Some(path) = &args.layer.save_table {
         table.save(path)?;
     }
     let mut text = format!(
         "# lidarsim lbl: gas absorption optical depth per layer (vertical, and slant = vertical/|cos zenith|, plane-parallel)\n\
          # lines: {}\n# profile: {}\n# sensor_altitude_m = {sensor}, zenith_deg = {zenith}, surface_altitude_m = {}, wing_cm1 = {}\n\
          wavenumber_cm1,bottom_m,top_m,pressure_pa,temperature_k,tau_vertical,tau_slant\n",
-        lines.source, prof.name, args.surface_altitude_m, opts.wing_cm1
+        lines.source, prof.name, args.layer.surface_altitude_m, opts.wing_cm1
     );
     let mut column_slant = vec![0.0; grid.len];
     for (i, col) in column_slant.iter_mut().enumerate() {
@@ -319,7 +333,7 @@ fn plot(
         .flat_map(|(_, v)| v.iter().copied())
         .filter(|v| *v > 0.0);
     let (lo, hi) = pos.fold((f64::INFINITY, 0.0f64), |(a, b), v| (a.min(v), b.max(v)));
-    if !(hi > 0.0) {
+    if hi.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
         bail!("nothing to plot: every value is zero");
     }
     let lo = lo.max(hi * 1e-8);
@@ -331,20 +345,21 @@ fn plot(
             .margin(12)
             .x_label_area_size(45)
             .y_label_area_size(80)
-            .build_cartesian_2d(x0..x1, (lo * 0.8..hi * 1.25).log_scale())?;
+            // log10 on a linear axis: plotters' log axis draws no labels for values ~1e-25.
+            .build_cartesian_2d(x0..x1, (lo.log10() - 0.1)..(hi.log10() + 0.1))?;
         chart
             .configure_mesh()
             .x_desc("wavenumber [cm⁻¹]")
             .y_desc(y_label)
             .label_style((FONT, 13))
-            .y_label_formatter(&|v| format!("{v:.1e}"))
+            .y_label_formatter(&|v| format!("{:.1e}", 10f64.powf(*v)))
             .draw()?;
         let colours = [BLUE, RED, GREEN, MAGENTA, CYAN, BLACK];
         for (k, (name, v)) in series.iter().enumerate() {
             let c = colours[k % colours.len()];
             chart
                 .draw_series(LineSeries::new(
-                    x.iter().zip(v).map(|(a, b)| (*a, b.max(lo))),
+                    x.iter().zip(v).map(|(a, b)| (*a, b.max(lo).log10())),
                     c.stroke_width(1),
                 ))?
                 .label(name.as_str())

@@ -430,8 +430,10 @@ const MG_M: f64 = 16.0;
 const MG_KAPPA: f64 = 8.0;
 /// Extra nodes kept on each side of every level (≥ what the 6-point stencils reach).
 const MARGIN: i64 = 6;
-/// Lines per work chunk (fixed, so that the summation order does not depend on threads).
-const CHUNK: usize = 128;
+/// The lines are split into at most MAX_CHUNKS chunks of at least MIN_CHUNK lines; the split
+/// depends on the number of lines only, so the summation order does not depend on threads.
+const MAX_CHUNKS: usize = 8;
+const MIN_CHUNK: usize = 64;
 
 /// Weights of 6-point Lagrange interpolation at t = p/RATIO between nodes −2..3.
 fn lagrange6_weights() -> [[f64; 6]; RATIO as usize] {
@@ -521,47 +523,61 @@ fn multigrid_sum(prepared: &[Prepared], grid: &WavenumberGrid, opts: &LblOptions
             .map(|k| vec![0.0; lv.len(k)])
             .collect::<Vec<_>>()
     };
-    let mut acc = zero();
-    // Groups of chunks in parallel, each chunk sequential, chunks added in order.
-    let chunks: Vec<&[&Prepared]> = active.chunks(CHUNK).collect();
-    for group in chunks.chunks(16) {
-        let parts: Vec<Vec<Vec<f64>>> = group
-            .par_iter()
-            .map(|chunk| {
-                let mut a = zero();
-                let mut buf = Vec::new();
-                for p in chunk.iter() {
-                    add_line(&lv, &mut a, &mut buf, p, opts);
-                }
-                a
-            })
-            .collect();
-        for part in parts {
-            for (acc_k, part_k) in acc.iter_mut().zip(part) {
-                for (x, y) in acc_k.iter_mut().zip(part_k) {
-                    *x += y;
-                }
+    // Chunks in parallel, each chunk sequential; the parts are added in chunk order.
+    let chunk = active.len().div_ceil(MAX_CHUNKS).max(MIN_CHUNK);
+    let chunks: Vec<&[&Prepared]> = active.chunks(chunk).collect();
+    let parts: Vec<Vec<Vec<f64>>> = chunks
+        .par_iter()
+        .map(|chunk| {
+            let mut a = zero();
+            let mut buf = Vec::new();
+            for p in chunk.iter() {
+                add_line(&lv, &mut a, &mut buf, p, opts);
             }
-        }
-    }
-    // Interpolate coarse to fine: R_k = A_k + I(R_{k+1}).
+            a
+        })
+        .collect();
+    const BLOCK: usize = 8192;
+    let mut acc: Vec<Vec<f64>> = (0..lv.n())
+        .map(|k| {
+            let mut v = vec![0.0; lv.len(k)];
+            v.par_chunks_mut(BLOCK).enumerate().for_each(|(b, out)| {
+                let (off, len) = (b * BLOCK, out.len());
+                for part in &parts {
+                    for (o, x) in out.iter_mut().zip(&part[k][off..off + len]) {
+                        *o += x;
+                    }
+                }
+            });
+            v
+        })
+        .collect();
+    // Interpolate coarse to fine: R_k = A_k + I(R_{k+1}) (each fine node independent).
     for k in (0..lv.n() - 1).rev() {
         let (fine, coarse) = acc.split_at_mut(k + 1);
         let (fine, coarse) = (&mut fine[k], &coarse[0]);
-        for j in -MARGIN..=lv.top[k] + MARGIN {
-            let q = j.div_euclid(RATIO);
-            let p = j.rem_euclid(RATIO) as usize;
-            let v = if p == 0 {
-                coarse[(q + MARGIN) as usize]
-            } else {
-                let base = (q - 2 + MARGIN) as usize;
-                let wts = &lv.weights[p];
-                (0..6).map(|s| wts[s] * coarse[base + s]).sum()
-            };
-            fine[(j + MARGIN) as usize] += v;
-        }
+        fine.par_chunks_mut(BLOCK).enumerate().for_each(|(b, out)| {
+            for (idx, o) in out.iter_mut().enumerate() {
+                let j = (b * BLOCK + idx) as i64 - MARGIN;
+                let q = j.div_euclid(RATIO);
+                let p = j.rem_euclid(RATIO) as usize;
+                *o += if p == 0 {
+                    coarse[(q + MARGIN) as usize]
+                } else {
+                    let base = (q - 2 + MARGIN) as usize;
+                    dot6(&lv.weights[p], &coarse[base..base + 6])
+                };
+            }
+        });
     }
     acc.swap_remove(0)[MARGIN as usize..MARGIN as usize + grid.len].to_vec()
+}
+
+/// Σ w_s v_s over the 6-point stencil (written out: this is the inner loop).
+#[inline]
+fn dot6(w: &[f64; 6], v: &[f64]) -> f64 {
+    let v: &[f64; 6] = v.try_into().unwrap_or(&[0.0; 6]);
+    (w[0] * v[0] + w[1] * v[1]) + (w[2] * v[2] + w[3] * v[3]) + (w[4] * v[4] + w[5] * v[5])
 }
 
 /// Add one line's contributions A_k to every level (module docs; `docs/spectroscopy.md`).
@@ -641,8 +657,7 @@ fn add_line(lv: &Levels, a: &mut [Vec<f64>], buf: &mut Vec<f64>, p: &Prepared, o
                     buf[(q - qa) as usize]
                 } else {
                     let base = (q - 2 - qa) as usize;
-                    let wts = &lv.weights[ph];
-                    (0..6).map(|s| wts[s] * buf[base + s]).sum()
+                    dot6(&lv.weights[ph], &buf[base..base + 6])
                 };
                 ak[(j + MARGIN) as usize] += target(k, lv.nu(k, j)) - interp;
             }
