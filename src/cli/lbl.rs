@@ -223,7 +223,7 @@ fn load_profile(args: &Args) -> anyhow::Result<Profile> {
             .find(|g| g.name == "CO2")
             .context("--co2-ppmv: the profile has no CO2 column")?;
         let surface = g.vmr.first().copied().unwrap_or(0.0);
-        if !(surface > 0.0) {
+        if surface <= 0.0 || surface.is_nan() {
             bail!("--co2-ppmv: the profile's surface CO2 is zero, nothing to scale");
         }
         let f = ppmv * 1e-6 / surface;
