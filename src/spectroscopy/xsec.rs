@@ -236,6 +236,8 @@ impl GasState {
 /// One line's parameters at a given state.
 #[derive(Debug, Clone, Copy)]
 struct Prepared {
+    /// Unshifted HITRAN centre ν₀ [cm⁻¹] (the list is sorted by it).
+    nu0: f64,
     /// Shifted centre [cm⁻¹].
     nu_c: f64,
     /// Centre of the cutoff window [cm⁻¹].
@@ -335,6 +337,7 @@ fn prepare(
             WingCentre::Shifted => nu_c,
         };
         out.push(Prepared {
+            nu0: l.nu_cm1,
             nu_c,
             nu_w,
             amp: s_t * SQRT_LN2_OVER_PI / gamma_d,
@@ -342,6 +345,10 @@ fn prepare(
             y: SQRT_LN2 * gamma_l / gamma_d,
             gamma_d,
         });
+    }
+    // `LineList::lines` is public: a hand-built list may be unsorted; the searches need ν₀ order.
+    if !out.windows(2).all(|w| w[0].nu0 <= w[1].nu0) {
+        out.sort_by(|a, b| a.nu0.total_cmp(&b.nu0));
     }
     Ok(out)
 }
@@ -362,18 +369,18 @@ pub fn cross_section_at(
     Ok(direct_sum(&prepared, wavenumbers_cm1, opts))
 }
 
-/// Direct sum at arbitrary wavenumbers; lines are sorted by ν₀ and every window centre lies
-/// within `max_offset` of ν₀, so a binary search bounds the lines that can reach ν.
+/// Direct sum at arbitrary wavenumbers, every line whose window contains ν, in line order.
 fn direct_sum(prepared: &[Prepared], wavenumbers_cm1: &[f64], opts: &LblOptions) -> Vec<f64> {
     let w = opts.wing_cm1;
     let exact = opts.voigt == VoigtMethod::Exact;
-    // Lines are in line-list (ν₀) order; ν_w differs from ν₀ by the shift only.
-    let keys: Vec<f64> = prepared.iter().map(|p| p.nu_w).collect();
-    let max_unsorted = keys
-        .windows(2)
-        .map(|k| (k[0] - k[1]).max(0.0))
-        .fold(0.0, f64::max);
-    let slack = 2.0 * max_unsorted + 1e-9;
+    // Lines are sorted by ν₀, and every ν_w lies within `slack` of its ν₀ (the shift), so a
+    // binary search on ν₀ bounds the lines whose window can contain ν.
+    let keys: Vec<f64> = prepared.iter().map(|p| p.nu0).collect();
+    let slack = prepared
+        .iter()
+        .map(|p| (p.nu_w - p.nu0).abs())
+        .fold(0.0, f64::max)
+        + 1e-9;
     wavenumbers_cm1
         .par_iter()
         .map(|&nu| {
@@ -725,17 +732,25 @@ mod tests {
         // the surface (Lorentz wings) to 1 hPa (Doppler cores).
         let lines = synthetic(30, 6320.0, 2.0);
         let grid = WavenumberGrid::new(6340.0, 6350.0, 0.001).unwrap();
-        for p_pa in [101_325.0, 20_000.0, 100.0] {
+        for (p_pa, centre) in [
+            (101_325.0, WingCentre::Unshifted),
+            (20_000.0, WingCentre::Shifted),
+            (100.0, WingCentre::Unshifted),
+        ] {
             let state = GasState {
                 pressure_pa: p_pa,
                 temperature_k: 250.0,
                 self_vmr: 0.0004,
             };
-            let mg = cross_section(&lines, 2, &state, &grid, &LblOptions::default()).unwrap();
+            let opts = LblOptions {
+                wing_centre: centre,
+                ..Default::default()
+            };
+            let mg = cross_section(&lines, 2, &state, &grid, &opts).unwrap();
             let exact_opts = LblOptions {
                 voigt: VoigtMethod::Exact,
                 multigrid: false,
-                ..Default::default()
+                ..opts
             };
             let ex = cross_section(&lines, 2, &state, &grid, &exact_opts).unwrap();
             let worst = mg
