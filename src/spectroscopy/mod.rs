@@ -33,7 +33,7 @@ pub use hitran::{Line, LineFilter, LineList};
 pub use layers::{CgLayer, LineOfSight};
 pub use table::GasOpticalDepthTable;
 pub use xsec::{
-    Conventions, LblOptions, VoigtMethod, WavenumberGrid, WingCentre, cross_section,
+    Conventions, GasState, LblOptions, VoigtMethod, WavenumberGrid, WingCentre, cross_section,
     cross_section_at, layer_optical_depths_at,
 };
 
