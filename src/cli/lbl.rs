@@ -1,10 +1,386 @@
-//! `lidarsim lbl` (not implemented yet).
+//! `lidarsim lbl`: line-by-line absorption cross-sections at one (p, T), or layer optical depths
+//! along a line of sight through a profile. Method and formats: `docs/spectroscopy.md`.
+//!
+//! Cross-sections (`--pressure-atm` and `--temperature-k`): columns `wavenumber_cm1` and
+//! `sigma_<MOLECULE>_cm2` per molecule of the line file [cm²/molecule], air-broadened.
+//! Layer optical depths (`--atmosphere` or `--profile`, with the path options): one row per
+//! wavenumber and layer with the Curtis-Godson p and T, the vertical and the slant optical
+//! depth (vertical / |cos θ|, plane-parallel).
+
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, bail};
+use plotters::prelude::*;
+
+use lidarsim::atmosphere::{Profile, StandardAtmosphere, parse_afgl};
+use lidarsim::spectroscopy::isotopologues::molecule_name;
+use lidarsim::spectroscopy::xsec::GasState;
+use lidarsim::spectroscopy::{
+    GasOpticalDepthTable, LblOptions, LineFilter, LineList, LineOfSight, VoigtMethod,
+    WavenumberGrid, WingCentre, cross_section,
+};
+
+use super::plot::{FONT, init_font};
 
 /// Arguments of `lidarsim lbl`.
 #[derive(clap::Args, Debug)]
-pub struct Args {}
+pub struct Args {
+    /// HITRAN 160-character line file (.par, or a HAPI .data table). Without it: the built-in
+    /// CO2 30012←00001 band model (approximate).
+    #[arg(long, value_name = "FILE")]
+    lines: Option<PathBuf>,
+    /// Pressure [atm] (cross-section mode).
+    #[arg(long)]
+    pressure_atm: Option<f64>,
+    /// Temperature [K] (cross-section mode).
+    #[arg(long)]
+    temperature_k: Option<f64>,
+    /// First wavenumber [cm⁻¹].
+    #[arg(long)]
+    start_cm1: f64,
+    /// Last wavenumber [cm⁻¹] (inclusive).
+    #[arg(long)]
+    end_cm1: f64,
+    /// Grid step [cm⁻¹].
+    #[arg(long)]
+    step_cm1: f64,
+    /// Output CSV.
+    #[arg(long, value_name = "OUT.csv")]
+    out: PathBuf,
+    /// Line wing cutoff [cm⁻¹], measured from the unshifted centre unless --shifted-wing.
+    #[arg(long, default_value_t = 25.0)]
+    wing_cm1: f64,
+    /// Centre the wing cutoff on the pressure-shifted line centre.
+    #[arg(long)]
+    shifted_wing: bool,
+    /// Exact Faddeeva function at every line and grid point (slow reference path).
+    #[arg(long)]
+    exact: bool,
+    /// Draw the result to this PNG.
+    #[arg(long, value_name = "OUT.png")]
+    plot: Option<PathBuf>,
+    /// Layer-mode options (boxed: keeps the subcommand enum small).
+    #[command(flatten)]
+    layer: Box<LayerArgs>,
+}
+
+/// Options of the layer mode of `lidarsim lbl`.
+#[derive(clap::Args, Debug)]
+pub struct LayerArgs {
+    /// Layer mode: a built-in AFGL atmosphere (tropical, midlatitude_summer, midlatitude_winter,
+    /// subarctic_summer, subarctic_winter, us_standard).
+    #[arg(long, conflicts_with_all = ["profile", "pressure_atm", "temperature_k"])]
+    atmosphere: Option<StandardAtmosphere>,
+    /// Layer mode: a profile file in the AFGL table format (z_km, p_hPa, T_K, <GAS>_ppmv…).
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["pressure_atm", "temperature_k"])]
+    profile: Option<PathBuf>,
+    /// Layer mode: scale the CO2 profile so that its surface value is this [ppmv] (AFGL tables
+    /// carry 330; the shape, which falls above 80 km, is kept).
+    #[arg(long)]
+    co2_ppmv: Option<f64>,
+    /// Layer mode: sensor altitude [m].
+    #[arg(long)]
+    sensor_altitude_m: Option<f64>,
+    /// Layer mode: zenith angle of the line of sight [deg] (0 up, 180 nadir).
+    #[arg(long)]
+    zenith_deg: Option<f64>,
+    /// Layer mode: surface altitude [m].
+    #[arg(long, default_value_t = 0.0)]
+    surface_altitude_m: f64,
+    /// Layer mode: layer thickness [m].
+    #[arg(long, default_value_t = 1000.0)]
+    layer_m: f64,
+    /// Layer mode: also save the optical-depth table (binary, reloadable) here.
+    #[arg(long, value_name = "FILE")]
+    save_table: Option<PathBuf>,
+}
 
 /// Run the subcommand.
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("`lidarsim lbl` is not implemented yet")
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let grid = WavenumberGrid::new(args.start_cm1, args.end_cm1, args.step_cm1)?;
+    let mut opts = LblOptions {
+        wing_cm1: args.wing_cm1,
+        ..Default::default()
+    };
+    if args.shifted_wing {
+        opts.wing_centre = WingCentre::Shifted;
+    }
+    if args.exact {
+        opts.voigt = VoigtMethod::Exact;
+        opts.multigrid = false;
+    }
+    let lines = match &args.lines {
+        Some(p) => {
+            let filter = LineFilter::window(
+                grid.start_cm1 - opts.wing_cm1 - 1.0,
+                grid.end_cm1() + opts.wing_cm1 + 1.0,
+            );
+            LineList::read_par(p, &filter)?
+        }
+        None => LineList::co2_30012_band_model(),
+    };
+    let layer_mode = args.layer.atmosphere.is_some() || args.layer.profile.is_some();
+    if layer_mode {
+        run_layers(&args, &lines, &grid, &opts)
+    } else {
+        let (Some(p_atm), Some(t_k)) = (args.pressure_atm, args.temperature_k) else {
+            bail!(
+                "give --pressure-atm and --temperature-k (cross-sections), or --atmosphere/--profile \
+                 with the path options (layer optical depths)"
+            );
+        };
+        run_cross_sections(&args, &lines, &grid, &opts, p_atm, t_k)
+    }
+}
+
+fn run_cross_sections(
+    args: &Args,
+    lines: &LineList,
+    grid: &WavenumberGrid,
+    opts: &LblOptions,
+    p_atm: f64,
+    t_k: f64,
+) -> anyhow::Result<()> {
+    if !(p_atm.is_finite() && p_atm >= 0.0) {
+        bail!("--pressure-atm must be finite and ≥ 0 (got {p_atm})");
+    }
+    let state = GasState {
+        pressure_pa: p_atm * lidarsim::constants::STANDARD_ATMOSPHERE_PA,
+        temperature_k: t_k,
+        self_vmr: 0.0,
+    };
+    let molecules = lines.molecules();
+    if molecules.is_empty() {
+        bail!(
+            "no lines of {} reach {}–{} cm⁻¹ (with the {} cm⁻¹ wing)",
+            lines.source,
+            grid.start_cm1,
+            grid.end_cm1(),
+            opts.wing_cm1
+        );
+    }
+    let mut columns = Vec::new();
+    for &m in &molecules {
+        let name = molecule_name(m).unwrap_or("?").to_string();
+        columns.push((name, cross_section(lines, m, &state, grid, opts)?));
+    }
+    let mut text = String::new();
+    text.push_str(&format!(
+        "# lidarsim lbl: absorption cross-sections [cm^2/molecule], air-broadened\n# lines: {}\n\
+         # pressure_atm = {p_atm}, temperature_k = {t_k}, wing_cm1 = {} around the {} centre, Voigt {}\n",
+        lines.source,
+        opts.wing_cm1,
+        if opts.wing_centre == WingCentre::Shifted { "shifted" } else { "unshifted" },
+        if args.exact { "exact" } else { "fast (multigrid)" },
+    ));
+    text.push_str("wavenumber_cm1");
+    for (name, _) in &columns {
+        text.push_str(&format!(",sigma_{name}_cm2"));
+    }
+    text.push('\n');
+    for i in 0..grid.len {
+        text.push_str(&format!("{:.6}", grid.at(i)));
+        for (_, s) in &columns {
+            text.push_str(&format!(",{:.12e}", s[i]));
+        }
+        text.push('\n');
+    }
+    write_text(&args.out, &text)?;
+    if let Some(png) = &args.plot {
+        let series: Vec<(String, Vec<f64>)> = columns
+            .iter()
+            .map(|(n, s)| (format!("σ {n}"), s.clone()))
+            .collect();
+        plot(
+            png,
+            &format!("{} at {p_atm} atm, {t_k} K", lines.source),
+            "cross-section [cm²/molecule]",
+            &grid.wavenumbers(),
+            &series,
+        )?;
+    }
+    Ok(())
+}
+
+fn load_profile(args: &Args) -> anyhow::Result<Profile> {
+    let mut prof = match (&args.layer.atmosphere, &args.layer.profile) {
+        (Some(a), None) => a.profile(),
+        (None, Some(p)) => {
+            let text = std::fs::read_to_string(p)
+                .with_context(|| format!("cannot read the profile {}", p.display()))?;
+            parse_afgl(&p.display().to_string(), &text)?
+        }
+        _ => bail!("give one of --atmosphere or --profile"),
+    };
+    if let Some(ppmv) = args.layer.co2_ppmv {
+        if !(0.0..1e6).contains(&ppmv) {
+            bail!("--co2-ppmv must be within [0, 1e6) (got {ppmv})");
+        }
+        let g = prof
+            .gases
+            .iter_mut()
+            .find(|g| g.name == "CO2")
+            .context("--co2-ppmv: the profile has no CO2 column")?;
+        let surface = g.vmr.first().copied().unwrap_or(0.0);
+        if surface <= 0.0 || surface.is_nan() {
+            bail!("--co2-ppmv: the profile's surface CO2 is zero, nothing to scale");
+        }
+        let f = ppmv * 1e-6 / surface;
+        g.vmr.iter_mut().for_each(|v| *v *= f);
+    }
+    Ok(prof)
+}
+
+fn run_layers(
+    args: &Args,
+    lines: &LineList,
+    grid: &WavenumberGrid,
+    opts: &LblOptions,
+) -> anyhow::Result<()> {
+    let prof = load_profile(args)?;
+    let (Some(sensor), Some(zenith)) = (args.layer.sensor_altitude_m, args.layer.zenith_deg) else {
+        bail!("layer mode needs --sensor-altitude-m and --zenith-deg");
+    };
+    let los = LineOfSight {
+        sensor_altitude_m: sensor,
+        zenith_angle_deg: zenith,
+        surface_altitude_m: args.layer.surface_altitude_m,
+    };
+    let mu = los.mu()?;
+    let edges = los.layer_edges(&prof, args.layer.layer_m)?;
+    let table = GasOpticalDepthTable::compute(&prof, lines, &edges, grid, opts)?;
+    if let Some(path) = &args.layer.save_table {
+        table.save(path)?;
+    }
+    let mut text = format!(
+        "# lidarsim lbl: gas absorption optical depth per layer (vertical, and slant = vertical/|cos zenith|, plane-parallel)\n\
+         # lines: {}\n# profile: {}\n# sensor_altitude_m = {sensor}, zenith_deg = {zenith}, surface_altitude_m = {}, wing_cm1 = {}\n\
+         wavenumber_cm1,bottom_m,top_m,pressure_pa,temperature_k,tau_vertical,tau_slant\n",
+        lines.source, prof.name, args.layer.surface_altitude_m, opts.wing_cm1
+    );
+    let mut column_slant = vec![0.0; grid.len];
+    for (i, col) in column_slant.iter_mut().enumerate() {
+        for (l, layer) in table.layers.iter().enumerate() {
+            let tau = table.tau_at_grid(l, i);
+            *col += tau / mu;
+            text.push_str(&format!(
+                "{:.6},{},{},{:.6e},{:.4},{:.12e},{:.12e}\n",
+                grid.at(i),
+                layer.bottom_m,
+                layer.top_m,
+                layer.pressure_pa,
+                layer.temperature_k,
+                tau,
+                tau / mu
+            ));
+        }
+    }
+    write_text(&args.out, &text)?;
+    if let Some(png) = &args.plot {
+        plot(
+            png,
+            &format!(
+                "{}, {} m to {} m",
+                prof.name,
+                edges[0],
+                edges[edges.len() - 1]
+            ),
+            "slant gas optical depth",
+            &grid.wavenumbers(),
+            &[("τ (whole path)".into(), column_slant)],
+        )?;
+    }
+    Ok(())
+}
+
+/// Write through a temporary file and a rename.
+fn write_text(path: &Path, text: &str) -> anyhow::Result<()> {
+    let tmp = tmp_sibling(path, "tmp");
+    let r = (|| -> std::io::Result<()> {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(text.as_bytes())?;
+        f.sync_all()?;
+        std::fs::rename(&tmp, path)
+    })();
+    if r.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    r.with_context(|| format!("cannot write {}", path.display()))
+}
+
+fn tmp_sibling(path: &Path, ext: &str) -> PathBuf {
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "out".into());
+    path.with_file_name(format!(".{name}.{}.{ext}", std::process::id()))
+}
+
+/// Line plot with a logarithmic y axis (positive values only).
+fn plot(
+    path: &Path,
+    title: &str,
+    y_label: &str,
+    x: &[f64],
+    series: &[(String, Vec<f64>)],
+) -> anyhow::Result<()> {
+    init_font();
+    let tmp = tmp_sibling(path, "png");
+    let (x0, x1) = (x[0], x[x.len() - 1].max(x[0] + 1e-9));
+    let pos = series
+        .iter()
+        .flat_map(|(_, v)| v.iter().copied())
+        .filter(|v| *v > 0.0);
+    let (lo, hi) = pos.fold((f64::INFINITY, 0.0f64), |(a, b), v| (a.min(v), b.max(v)));
+    if hi.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+        bail!("nothing to plot: every value is zero");
+    }
+    let lo = lo.max(hi * 1e-8);
+    let r = (|| -> Result<(), Box<dyn std::error::Error>> {
+        let root = BitMapBackend::new(&tmp, (1000, 600)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, (FONT, 18))
+            .margin(12)
+            .x_label_area_size(45)
+            .y_label_area_size(80)
+            // log10 on a linear axis: plotters' log axis draws no labels for values ~1e-25.
+            .build_cartesian_2d(x0..x1, (lo.log10() - 0.1)..(hi.log10() + 0.1))?;
+        chart
+            .configure_mesh()
+            .x_desc("wavenumber [cm⁻¹]")
+            .y_desc(y_label)
+            .label_style((FONT, 13))
+            .y_label_formatter(&|v| format!("{:.1e}", 10f64.powf(*v)))
+            .draw()?;
+        let colours = [BLUE, RED, GREEN, MAGENTA, CYAN, BLACK];
+        for (k, (name, v)) in series.iter().enumerate() {
+            let c = colours[k % colours.len()];
+            chart
+                .draw_series(LineSeries::new(
+                    x.iter().zip(v).map(|(a, b)| (*a, b.max(lo).log10())),
+                    c.stroke_width(1),
+                ))?
+                .label(name.as_str())
+                .legend(move |(px, py)| PathElement::new(vec![(px, py), (px + 20, py)], c));
+        }
+        chart
+            .configure_series_labels()
+            .label_font((FONT, 13))
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()?;
+        root.present()?;
+        Ok(())
+    })();
+    match r {
+        Ok(()) => {
+            std::fs::rename(&tmp, path).with_context(|| format!("cannot write {}", path.display()))
+        }
+        Err(e) => {
+            let _ = std::fs::remove_file(&tmp);
+            bail!("cannot draw {}: {e}", path.display())
+        }
+    }
 }
