@@ -33,6 +33,9 @@ pub enum OpticsError {
     /// Absorption table with the wrong shape.
     #[error("absorption optical depths: {0}")]
     Absorption(String),
+    /// Line-by-line gas absorption failed.
+    #[error("gas absorption: {0}")]
+    Gas(#[from] crate::spectroscopy::SpectroscopyError),
 }
 
 /// One scatterer species in a layer (molecules, or one particle layer).
@@ -68,6 +71,8 @@ pub struct OpticalAtmosphere {
     /// then only absorption differs between channels and the transport skips the ALIS
     /// scattering-ratio weights.
     pub grey_scattering: bool,
+    /// What the gas absorption came from (for the run summary), if the scene has gases.
+    pub gas_note: Option<String>,
 }
 
 impl OpticalAtmosphere {
@@ -174,8 +179,14 @@ impl OpticalAtmosphere {
             cum_tau_s: Vec::new(),
             cum_tau_a: Vec::new(),
             grey_scattering,
+            gas_note: None,
         };
         atm.accumulate();
+        if let (Some(gas), Some(a)) = (&scene.gas, &scene.atmosphere) {
+            let (tau, note) = gas_layer_tau(scene, a, gas, &atm.edges_m)?;
+            atm.add_absorption_tau(&tau)?;
+            atm.gas_note = Some(note);
+        }
         Ok(atm)
     }
 
@@ -341,21 +352,125 @@ impl OpticalAtmosphere {
     }
 }
 
+/// The molecular grid: from the profile bottom (or the surface) to the top in steps of the
+/// layer thickness.
+fn molecular_edges(scene: &Scene, a: &Atmosphere) -> Vec<f64> {
+    let mut bottom = a.profile.altitude_m[0];
+    if let Some(s) = &scene.surface {
+        bottom = bottom.max(s.altitude_m);
+    }
+    let n = ((a.top_m - bottom) / a.layer_thickness_m).ceil().max(1.0) as usize;
+    let mut edges: Vec<f64> = (0..n)
+        .map(|i| bottom + i as f64 * a.layer_thickness_m)
+        .collect();
+    edges.push(a.top_m);
+    edges
+}
+
+/// Vertical gas optical depth of every optical layer at every channel, `layer * nch + k`.
+///
+/// Line by line on the molecular grid (Curtis-Godson layers of the profile), so that the result
+/// and a cached table do not depend on particle layers, gates or geometry; an optical layer
+/// inside a molecular layer gets that layer's mean absorption coefficient times its thickness.
+fn gas_layer_tau(
+    scene: &Scene,
+    a: &Atmosphere,
+    gas: &crate::scene::GasAbsorption,
+    edges: &[f64],
+) -> Result<(Vec<f64>, String), OpticsError> {
+    use crate::spectroscopy::{GasOpticalDepthTable, WavenumberGrid, layer_optical_depths_at};
+    let nch = scene.channels.len();
+    let nu: Vec<f64> = scene.channels.iter().map(|c| c.wavenumber_cm1).collect();
+    let mol = molecular_edges(scene, a);
+    // τ per molecular layer per channel: [mol layer][channel].
+    let (tau_mol, note): (Vec<Vec<f64>>, String) = match &gas.table {
+        None => {
+            let t = layer_optical_depths_at(&a.profile, &gas.lines, &mol, &nu, &gas.options)?;
+            let note = format!(
+                "gas absorption: {} lines of {} line by line at {} channels in {} layers",
+                gas.lines.len(),
+                gas.lines.source,
+                nch,
+                mol.len() - 1
+            );
+            (t, note)
+        }
+        Some(spec) => {
+            let reusable = if spec.path.is_file() {
+                match GasOpticalDepthTable::load(&spec.path) {
+                    Ok(t) => t
+                        .check_matches(&a.profile, Some(&gas.lines), &mol, &t.grid, &gas.options)
+                        .ok()
+                        .filter(|_| {
+                            let (lo, hi) = t.usable_range_cm1();
+                            nu.iter().all(|v| *v >= lo && *v <= hi)
+                        })
+                        .map(|_| t),
+                    Err(_) => None,
+                }
+            } else {
+                None
+            };
+            let (table, note) = match reusable {
+                Some(t) => {
+                    let note = format!(
+                        "gas absorption: table {} reused (no line-by-line work)",
+                        spec.path.display()
+                    );
+                    (t, note)
+                }
+                None => {
+                    let grid = WavenumberGrid::new(spec.start_cm1, spec.end_cm1, spec.step_cm1)?;
+                    let t = GasOpticalDepthTable::compute(
+                        &a.profile,
+                        &gas.lines,
+                        &mol,
+                        &grid,
+                        &gas.options,
+                    )?;
+                    t.save(&spec.path)?;
+                    let note = format!(
+                        "gas absorption: table {} computed ({} layers × {} wavenumbers) and saved",
+                        spec.path.display(),
+                        mol.len() - 1,
+                        grid.len
+                    );
+                    (t, note)
+                }
+            };
+            // Interpolated columns per channel → [layer][channel].
+            let per_channel: Vec<Vec<f64>> = nu
+                .iter()
+                .map(|v| table.layer_tau(*v))
+                .collect::<Result<_, _>>()?;
+            let t = (0..mol.len() - 1)
+                .map(|l| per_channel.iter().map(|c| c[l]).collect())
+                .collect();
+            (t, note)
+        }
+    };
+    let mut tau = vec![0.0; (edges.len().saturating_sub(1)) * nch];
+    for l in 0..edges.len().saturating_sub(1) {
+        let mid = 0.5 * (edges[l] + edges[l + 1]);
+        if mid < mol[0] || mid > mol[mol.len() - 1] {
+            continue;
+        }
+        let m = (mol.partition_point(|e| *e <= mid).saturating_sub(1)).min(mol.len() - 2);
+        let scale = (edges[l + 1] - edges[l]) / (mol[m + 1] - mol[m]);
+        for k in 0..nch {
+            tau[l * nch + k] = tau_mol[m][k] * scale;
+        }
+    }
+    Ok((tau, note))
+}
+
 /// Layer edges: the molecular grid (from the profile bottom or the surface to the top, in steps
 /// of the layer thickness) merged with every particle-layer and surface boundary.
 fn layer_edges(scene: &Scene) -> Vec<f64> {
-    let mut edges: Vec<f64> = Vec::new();
-    if let Some(a) = &scene.atmosphere {
-        let mut bottom = a.profile.altitude_m[0];
-        if let Some(s) = &scene.surface {
-            bottom = bottom.max(s.altitude_m);
-        }
-        let n = ((a.top_m - bottom) / a.layer_thickness_m).ceil().max(1.0) as usize;
-        for i in 0..n {
-            edges.push(bottom + i as f64 * a.layer_thickness_m);
-        }
-        edges.push(a.top_m);
-    }
+    let mut edges: Vec<f64> = match &scene.atmosphere {
+        Some(a) => molecular_edges(scene, a),
+        None => Vec::new(),
+    };
     for l in &scene.layers {
         edges.push(l.base_m);
         edges.push(l.top_m);

@@ -11,11 +11,24 @@ const HEADER: &str = "source,channel,fov_full_angle_mrad,range_m,order,energy_j,
 fn run_default_scene_writes_contract_columns() {
     let dir = tempfile::tempdir().unwrap();
     let out = Command::new(lidarsim_bin())
-        .args(["run", "--photons", "2000", "--seed", "3", "--threads", "1", "--out"])
+        .args([
+            "run",
+            "--photons",
+            "2000",
+            "--seed",
+            "3",
+            "--threads",
+            "1",
+            "--out",
+        ])
         .arg(dir.path())
         .output()
         .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(stdout.contains("transport: 2000 photons"), "{stdout}");
     let csv = std::fs::read_to_string(dir.path().join("returns.csv")).unwrap();
@@ -33,7 +46,10 @@ fn run_default_scene_writes_contract_columns() {
         match f[0] {
             "mc" => {
                 mc += 1;
-                assert!(f[4] == "total" || f[4].trim_end_matches('+').parse::<u32>().is_ok(), "{line}");
+                assert!(
+                    f[4] == "total" || f[4].trim_end_matches('+').parse::<u32>().is_ok(),
+                    "{line}"
+                );
             }
             "analytic" => {
                 analytic += 1;
@@ -43,9 +59,9 @@ fn run_default_scene_writes_contract_columns() {
             other => panic!("source {other}"),
         }
     }
-    // Default scene: 1 channel, 2 FOVs, 260 gates; MC orders total, 1..5, 6+.
-    assert_eq!(analytic, 2 * 260);
-    assert_eq!(mc, 2 * 260 * 7);
+    // Default scene: 2 channels, 2 FOVs, 355 gates; MC orders total, 1..5, 6+.
+    assert_eq!(analytic, 2 * 2 * 355);
+    assert_eq!(mc, 2 * 2 * 355 * 7);
     assert!(dir.path().join("summary.json").is_file());
 }
 
@@ -53,24 +69,50 @@ fn run_default_scene_writes_contract_columns() {
 fn bad_scene_exits_2_naming_file_line_and_key_and_writes_nothing() {
     let dir = tempfile::tempdir().unwrap();
     let scene = dir.path().join("bad.toml");
-    let text = lidarsim::scene::DEFAULT_SCENE_TOML.replace("pulse_energy_j = 0.1", "pulse_energy_j = -1");
+    let good = lidarsim::scene::DEFAULT_SCENE_TOML;
+    let text = good.replacen("pulse_energy_j = 0.01", "pulse_energy_j = -1", 1);
+    assert_ne!(text, good, "the default scene changed: update this test");
     std::fs::write(&scene, text).unwrap();
     let out_dir = dir.path().join("out");
-    let out = Command::new(lidarsim_bin()).arg("run").arg(&scene).arg("--out").arg(&out_dir).output().unwrap();
+    let out = Command::new(lidarsim_bin())
+        .arg("run")
+        .arg(&scene)
+        .arg("--out")
+        .arg(&out_dir)
+        .output()
+        .unwrap();
     assert_eq!(out.status.code(), Some(2));
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(stderr.contains("bad.toml:"), "{stderr}");
-    assert!(stderr.contains("`lidar.pulse_energy_j`: -1 must be > 0"), "{stderr}");
-    assert!(!out_dir.exists(), "an output directory was created for a failed run");
+    assert!(
+        stderr.contains("`lidar.pulse_energy_j`: -1 must be > 0"),
+        "{stderr}"
+    );
+    assert!(
+        !out_dir.exists(),
+        "an output directory was created for a failed run"
+    );
 }
 
 #[test]
 fn bench_reports_figure_of_merit() {
     let out = Command::new(lidarsim_bin())
-        .args(["bench", "--photons", "5000", "--repeat", "1", "--threads", "1"])
+        .args([
+            "bench",
+            "--photons",
+            "5000",
+            "--repeat",
+            "1",
+            "--threads",
+            "1",
+        ])
         .output()
         .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(stdout.contains("FOM"), "{stdout}");
 }

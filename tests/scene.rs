@@ -50,29 +50,190 @@ fn parse(text: &str) -> Result<Scene, InputError> {
 
 /// (what, replace this, with this, expected line, expected field, words in the message)
 const CASES: &[(&str, &str, &str, usize, &str, &str)] = &[
-    ("TOML syntax", "pulse_energy_j = 0.1", "pulse_energy_j = = 0.1", 5, "pulse_energy_j", ""),
-    ("unknown key", "optical_efficiency = 0.5", "optical_efficiency = 0.5\npulse_energy = 1", 9, "pulse_energy", "unknown field"),
-    ("unknown section", "[simulation]", "[simulations]", 32, "simulations", "unknown field"),
-    ("missing key", "pulse_energy_j = 0.1\n", "", 2, "pulse_energy_j", "missing field"),
-    ("wrong type", "telescope_diameter_m = 0.3", "telescope_diameter_m = \"0.3\"", 7, "telescope_diameter_m", "invalid type"),
-    ("negative energy", "pulse_energy_j = 0.1", "pulse_energy_j = -0.1", 5, "lidar.pulse_energy_j", "must be > 0"),
-    ("zenith out of range", "zenith_angle_deg = 0.0", "zenith_angle_deg = 190.0", 4, "lidar.zenith_angle_deg", "must lie in [0, 180]"),
-    ("both altitude keys", "altitude_m = 0.0\nzenith", "altitude_m = 0.0\naltitude_km = 0.0\nzenith", 4, "lidar.altitude_km", "not both"),
-    ("no wavelength", "wavelength_nm = 1572.0\n", "", 10, "channel", "needs `wavelength_nm` or `wavenumber_cm1`"),
-    ("duplicate channel", "name = \"off\"", "name = \"on\"", 14, "channel.name", "given twice"),
-    ("duplicate FOV", "[0.5, 1.0]", "[0.5, 0.5]", 9, "lidar.fov_full_angle_mrad", "given twice"),
-    ("per-channel list length", "[0.1, 0.1]", "[0.1, 0.1, 0.1]", 26, "layer.extinction_per_km", "one per channel (2)"),
-    ("albedo above 1", "albedo = 0.2", "albedo = 1.2", 31, "surface.albedo", "must lie in [0, 1]"),
-    ("gates not whole", "end_m = 5000.0", "end_m = 5005.0", 18, "gates.end_m", "whole number"),
-    ("gates start at 0", "start_m = 100.0", "start_m = 0.0", 17, "gates.start_m", "must be > 0"),
-    ("layer upside down", "top_m = 1500.0", "top_m = -5.0", 25, "layer.top_m", "above `base_m`"),
-    ("unknown atmosphere", "standard = \"us_standard\"", "standard = \"martian\"", 21, "atmosphere.standard", "unknown standard atmosphere"),
-    ("HG g out of range", "g = 0.7", "g = 1.0", 28, "layer.phase", "-1 < g < 1"),
-    ("unknown phase kind", "kind = \"henyey_greenstein\", g = 0.7", "kind = \"mie\"", 28, "mie", "unknown variant"),
-    ("missing table file", "kind = \"henyey_greenstein\", g = 0.7", "kind = \"table\", file = \"nope.txt\"", 28, "layer.phase", "nope.txt"),
-    ("surface above lidar", "altitude_m = 0.0\nalbedo", "altitude_m = 10.0\nalbedo", 30, "surface.altitude_m", "below the surface"),
-    ("layer without particles or absorption", "extinction_per_km = [0.1, 0.1]\nsingle_scattering_albedo = 0.95\nphase = { kind = \"henyey_greenstein\", g = 0.7 }\n", "", 22, "layer", "needs particles"),
-    ("too few photons", "photons = 1000", "photons = 10", 33, "simulation.photons", "at least the number of batches"),
+    (
+        "TOML syntax",
+        "pulse_energy_j = 0.1",
+        "pulse_energy_j = = 0.1",
+        5,
+        "pulse_energy_j",
+        "",
+    ),
+    (
+        "unknown key",
+        "optical_efficiency = 0.5",
+        "optical_efficiency = 0.5\npulse_energy = 1",
+        9,
+        "pulse_energy",
+        "unknown field",
+    ),
+    (
+        "unknown section",
+        "[simulation]",
+        "[simulations]",
+        32,
+        "simulations",
+        "unknown field",
+    ),
+    (
+        "missing key",
+        "pulse_energy_j = 0.1\n",
+        "",
+        2,
+        "pulse_energy_j",
+        "missing field",
+    ),
+    (
+        "wrong type",
+        "telescope_diameter_m = 0.3",
+        "telescope_diameter_m = \"0.3\"",
+        7,
+        "telescope_diameter_m",
+        "invalid type",
+    ),
+    (
+        "negative energy",
+        "pulse_energy_j = 0.1",
+        "pulse_energy_j = -0.1",
+        5,
+        "lidar.pulse_energy_j",
+        "must be > 0",
+    ),
+    (
+        "zenith out of range",
+        "zenith_angle_deg = 0.0",
+        "zenith_angle_deg = 190.0",
+        4,
+        "lidar.zenith_angle_deg",
+        "must lie in [0, 180]",
+    ),
+    (
+        "both altitude keys",
+        "altitude_m = 0.0\nzenith",
+        "altitude_m = 0.0\naltitude_km = 0.0\nzenith",
+        4,
+        "lidar.altitude_km",
+        "not both",
+    ),
+    (
+        "no wavelength",
+        "wavelength_nm = 1572.0\n",
+        "",
+        10,
+        "channel",
+        "needs `wavelength_nm` or `wavenumber_cm1`",
+    ),
+    (
+        "duplicate channel",
+        "name = \"off\"",
+        "name = \"on\"",
+        14,
+        "channel.name",
+        "given twice",
+    ),
+    (
+        "duplicate FOV",
+        "[0.5, 1.0]",
+        "[0.5, 0.5]",
+        9,
+        "lidar.fov_full_angle_mrad",
+        "given twice",
+    ),
+    (
+        "per-channel list length",
+        "[0.1, 0.1]",
+        "[0.1, 0.1, 0.1]",
+        26,
+        "layer.extinction_per_km",
+        "one per channel (2)",
+    ),
+    (
+        "albedo above 1",
+        "albedo = 0.2",
+        "albedo = 1.2",
+        31,
+        "surface.albedo",
+        "must lie in [0, 1]",
+    ),
+    (
+        "gates not whole",
+        "end_m = 5000.0",
+        "end_m = 5005.0",
+        18,
+        "gates.end_m",
+        "whole number",
+    ),
+    (
+        "gates start at 0",
+        "start_m = 100.0",
+        "start_m = 0.0",
+        17,
+        "gates.start_m",
+        "must be > 0",
+    ),
+    (
+        "layer upside down",
+        "top_m = 1500.0",
+        "top_m = -5.0",
+        25,
+        "layer.top_m",
+        "above `base_m`",
+    ),
+    (
+        "unknown atmosphere",
+        "standard = \"us_standard\"",
+        "standard = \"martian\"",
+        21,
+        "atmosphere.standard",
+        "unknown standard atmosphere",
+    ),
+    (
+        "HG g out of range",
+        "g = 0.7",
+        "g = 1.0",
+        28,
+        "layer.phase",
+        "-1 < g < 1",
+    ),
+    (
+        "unknown phase kind",
+        "kind = \"henyey_greenstein\", g = 0.7",
+        "kind = \"mie\"",
+        28,
+        "mie",
+        "unknown variant",
+    ),
+    (
+        "missing table file",
+        "kind = \"henyey_greenstein\", g = 0.7",
+        "kind = \"table\", file = \"nope.txt\"",
+        28,
+        "layer.phase",
+        "nope.txt",
+    ),
+    (
+        "surface above lidar",
+        "altitude_m = 0.0\nalbedo",
+        "altitude_m = 10.0\nalbedo",
+        30,
+        "surface.altitude_m",
+        "below the surface",
+    ),
+    (
+        "layer without particles or absorption",
+        "extinction_per_km = [0.1, 0.1]\nsingle_scattering_albedo = 0.95\nphase = { kind = \"henyey_greenstein\", g = 0.7 }\n",
+        "",
+        22,
+        "layer",
+        "needs particles",
+    ),
+    (
+        "too few photons",
+        "photons = 1000",
+        "photons = 10",
+        33,
+        "simulation.photons",
+        "at least the number of batches",
+    ),
 ];
 
 #[test]
@@ -87,7 +248,10 @@ fn base_scene_is_valid() {
 fn each_malformed_scene_gives_its_documented_error() {
     let mut failures = Vec::new();
     for (what, from, to, line, field, words) in CASES {
-        assert!(BASE.contains(from), "{what}: `{from}` not in the base scene");
+        assert!(
+            BASE.contains(from),
+            "{what}: `{from}` not in the base scene"
+        );
         let text = BASE.replacen(from, to, 1);
         match parse(&text) {
             Ok(_) => failures.push(format!("{what}: accepted")),
@@ -99,7 +263,10 @@ fn each_malformed_scene_gives_its_documented_error() {
                     && shown.contains(words)
                     && shown.starts_with(&format!("bad.toml:{line}: `{field}`"));
                 if !ok {
-                    failures.push(format!("{what}: got `{shown}` (line {:?}, field {:?})", e.line, e.field));
+                    failures.push(format!(
+                        "{what}: got `{shown}` (line {:?}, field {:?})",
+                        e.line, e.field
+                    ));
                 }
             }
         }
@@ -112,13 +279,20 @@ fn malformed_phase_table_names_the_table_file_and_line() {
     let dir = tempfile::tempdir().unwrap();
     let table = "# wavelength_nm = 1064\n# refractive_index = none\n# distribution = none\ntheta_deg,phase_4pi\n0,1\n90,x\n180,1\n";
     std::fs::write(dir.path().join("t.txt"), table).unwrap();
-    let scene = BASE.replacen("kind = \"henyey_greenstein\", g = 0.7", "kind = \"table\", file = \"t.txt\"", 1);
+    let scene = BASE.replacen(
+        "kind = \"henyey_greenstein\", g = 0.7",
+        "kind = \"table\", file = \"t.txt\"",
+        1,
+    );
     let path = dir.path().join("s.toml");
     std::fs::write(&path, &scene).unwrap();
     let e = Scene::read(&path).unwrap_err();
     let shown = e.to_string();
     assert_eq!(e.line, Some(28), "{shown}");
-    assert!(shown.contains("t.txt:6: `phase_4pi`: `x` is not a number"), "{shown}");
+    assert!(
+        shown.contains("t.txt:6: `phase_4pi`: `x` is not a number"),
+        "{shown}"
+    );
 }
 
 #[test]
@@ -144,10 +318,17 @@ fn scene_takes_its_atmosphere_from_a_profile_set() {
     trop.meta.id = "trop".into();
     let mut sub = StandardAtmosphere::SubarcticWinter.member();
     sub.meta.id = "saw".into();
-    let set = ProfileSet { name: "two".into(), members: vec![trop, sub], notes: vec![] };
+    let set = ProfileSet {
+        name: "two".into(),
+        members: vec![trop, sub],
+        notes: vec![],
+    };
     set.write(&dir.path().join("set.csv")).unwrap();
-    let text = BASE
-        .replacen("standard = \"us_standard\"", "profile_file = \"set.csv\"\nprofile_id = \"saw\"\nco2_ppm = 420.0", 1);
+    let text = BASE.replacen(
+        "standard = \"us_standard\"",
+        "profile_file = \"set.csv\"\nprofile_id = \"saw\"\nco2_ppm = 420.0",
+        1,
+    );
     let path = dir.path().join("s.toml");
     std::fs::write(&path, &text).unwrap();
     let scene = Scene::read(&path).unwrap();
@@ -155,7 +336,11 @@ fn scene_takes_its_atmosphere_from_a_profile_set() {
     let xco2 = profile.column_average_dry_vmr("CO2").unwrap();
     assert!((xco2 / 420e-6 - 1.0).abs() < 1e-9, "{xco2}");
     // Subarctic winter, not the tropical profile: surface temperature 257.2 K.
-    assert!((profile.temperature_k[0] - 257.2).abs() < 0.5, "{}", profile.temperature_k[0]);
+    assert!(
+        (profile.temperature_k[0] - 257.2).abs() < 0.5,
+        "{}",
+        profile.temperature_k[0]
+    );
 
     // Molecular optical depth from the optics (minus the aerosol layer) against σ N_col.
     let atm = OpticalAtmosphere::build(&scene).unwrap();
@@ -169,7 +354,11 @@ fn scene_takes_its_atmosphere_from_a_profile_set() {
         column += (z[i + 1] - z[i]) * (a - b) / (a / b).ln();
     }
     let sigma = lidarsim::particles::rayleigh::cross_section_m2(1572.0).unwrap();
-    assert!((tau_mol / (sigma * column) - 1.0).abs() < 1e-6, "{tau_mol} vs {}", sigma * column);
+    assert!(
+        (tau_mol / (sigma * column) - 1.0).abs() < 1e-6,
+        "{tau_mol} vs {}",
+        sigma * column
+    );
 
     // Asking for a profile the set does not have names the file, line and key.
     let bad = text.replace("profile_id = \"saw\"", "profile_id = \"x\"");

@@ -36,6 +36,9 @@ pub struct Args {
     /// Probability of detector-directed importance sampling (0: off).
     #[arg(long, default_value_t = lidarsim::transport::DDIS_EPSILON)]
     pub ddis_epsilon: f64,
+    /// Probability of drawing the first collision uniformly in range (0: off).
+    #[arg(long, default_value_t = lidarsim::transport::RANGE_STRATIFICATION)]
+    pub range_stratification: f64,
     /// Write the figures as JSON here as well.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -84,6 +87,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             let mut opts = TransportOptions::from_scene(&scene);
             opts.threads = threads;
             opts.ddis_epsilon = args.ddis_epsilon;
+            opts.range_stratification = args.range_stratification;
             let r = transport::run(&scene, &atm, &opts)?;
             if best.as_ref().is_none_or(|b| r.wall_s < b.wall_s) {
                 best = Some(r);

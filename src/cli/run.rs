@@ -66,6 +66,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
     let mut out = std::io::stdout().lock();
     print_summary(&mut out, &scene, &mc, &analytic)?;
+    if let Some(note) = &atm.gas_note {
+        writeln!(out, "{note}")?;
+    }
     writeln!(out, "wrote {} and {}", csv.display(), summary.display())?;
     Ok(())
 }

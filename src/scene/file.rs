@@ -19,7 +19,20 @@ pub(super) struct SceneFile {
     #[serde(default)]
     pub layer: Vec<LayerFile>,
     pub surface: Option<SurfaceFile>,
+    pub gas_absorption: Option<GasAbsorptionFile>,
     pub simulation: Option<SimulationFile>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct GasAbsorptionFile {
+    pub lines: Option<String>,
+    pub molecules: Option<Vec<String>>,
+    pub wing_cm1: Option<f64>,
+    pub table: Option<String>,
+    pub table_start_cm1: Option<f64>,
+    pub table_end_cm1: Option<f64>,
+    pub table_step_cm1: Option<f64>,
 }
 
 #[derive(Debug, Deserialize)]

@@ -20,11 +20,12 @@ use crate::input::InputError;
 use crate::particles::phase::{HenyeyGreenstein, PhaseFunction, RayleighPhase, TabulatedPhase};
 use crate::particles::table::PhaseTable;
 use crate::particles::{builtin_table, rayleigh};
+use crate::spectroscopy::{LblOptions, LineFilter, LineList, isotopologues};
 
 use file::{KeyPath, PerChannel, PhaseSpecFile, SceneFile};
 
 /// The scene run when `lidarsim run` gets no file.
-pub const DEFAULT_SCENE_TOML: &str = include_str!("../../scenes/default.toml");
+pub const DEFAULT_SCENE_TOML: &str = include_str!("../../scenes/airborne_co2_dial.toml");
 /// Pseudo-path of the embedded default scene in messages.
 pub const DEFAULT_SCENE_NAME: &str = "<embedded default scene>";
 
@@ -47,8 +48,36 @@ pub struct Scene {
     pub layers: Vec<Layer>,
     /// Lambertian surface, if any.
     pub surface: Option<Surface>,
+    /// Line-by-line gas absorption, if any.
+    pub gas: Option<GasAbsorption>,
     /// Monte Carlo settings.
     pub simulation: Simulation,
+}
+
+/// Gas absorption line by line, from the atmosphere's gas profiles.
+#[derive(Debug, Clone)]
+pub struct GasAbsorption {
+    /// The lines (a HITRAN file or the built-in CO2 30012 band model), already cut to the
+    /// channels' window plus the wing.
+    pub lines: Arc<LineList>,
+    /// Line-by-line options (wing cutoff etc.).
+    pub options: LblOptions,
+    /// Cache of layer optical depths on a wavenumber grid: reused when it matches, else
+    /// computed and written.
+    pub table: Option<GasTable>,
+}
+
+/// Where and on which grid to cache layer optical depths.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GasTable {
+    /// The table file.
+    pub path: PathBuf,
+    /// Grid for a new table [cm⁻¹].
+    pub start_cm1: f64,
+    /// End of the grid [cm⁻¹].
+    pub end_cm1: f64,
+    /// Step [cm⁻¹].
+    pub step_cm1: f64,
 }
 
 /// Beam divergence profile.
@@ -342,6 +371,10 @@ impl Validator<'_> {
                 }
             }
         }
+        let gas = match &raw.gas_absorption {
+            Some(g) => Some(self.gas(g, &channels, atmosphere.as_ref())?),
+            None => None,
+        };
         let simulation = self.simulation(&raw)?;
         Ok(Scene {
             path: self.path.to_path_buf(),
@@ -352,7 +385,122 @@ impl Validator<'_> {
             atmosphere,
             layers,
             surface,
+            gas,
             simulation,
+        })
+    }
+
+    fn gas(
+        &self,
+        g: &file::GasAbsorptionFile,
+        channels: &[Channel],
+        atmosphere: Option<&Atmosphere>,
+    ) -> Result<GasAbsorption, InputError> {
+        let sec = KeyPath::table("gas_absorption");
+        let atm = atmosphere.ok_or_else(|| {
+            self.err(
+                &sec,
+                "needs an [atmosphere] with gas profiles (`standard` or `profile_file`)",
+            )
+        })?;
+        let mut options = LblOptions::default();
+        if let Some(w) = g.wing_cm1 {
+            options.wing_cm1 = self.positive(&sec.key("wing_cm1"), w)?;
+        }
+        let lo = channels
+            .iter()
+            .map(|c| c.wavenumber_cm1)
+            .fold(f64::INFINITY, f64::min);
+        let hi = channels
+            .iter()
+            .map(|c| c.wavenumber_cm1)
+            .fold(f64::NEG_INFINITY, f64::max);
+        let molecules = match &g.molecules {
+            Some(names) => {
+                let at = sec.key("molecules");
+                let mut ids = Vec::new();
+                for n in names {
+                    ids.push(isotopologues::molecule_id(n).ok_or_else(|| {
+                        self.err(
+                            &at,
+                            format!("`{n}` is not a HITRAN molecule lidarsim knows"),
+                        )
+                    })?);
+                    if atm.profile.gas(n).is_none() {
+                        return Err(self.err(&at, format!("the atmosphere has no `{n}` profile")));
+                    }
+                }
+                Some(ids)
+            }
+            None => None,
+        };
+        let filter = LineFilter {
+            molecules,
+            isotopologues: None,
+            min_cm1: Some(lo - options.wing_cm1),
+            max_cm1: Some(hi + options.wing_cm1),
+        };
+        let lines = match &g.lines {
+            Some(f) => {
+                let path = self.path.parent().unwrap_or(Path::new(".")).join(f);
+                LineList::read_par(&path, &filter)
+                    .map_err(|e| self.err(&sec.key("lines"), format!("line file: {e}")))?
+            }
+            // The built-in approximate CO2 band (docs/spectroscopy.md), cut like a file.
+            None => LineList::co2_30012_band_model().filtered(&filter),
+        };
+        for id in lines.molecules() {
+            let name = isotopologues::molecule_name(id).unwrap_or("?");
+            if atm.profile.gas(name).is_none() {
+                return Err(self.err(
+                    &sec.key("lines"),
+                    format!("the lines include {name}, which the atmosphere profile does not carry (restrict `molecules`)"),
+                ));
+            }
+        }
+        let table = match &g.table {
+            Some(f) => {
+                let start = g.table_start_cm1.unwrap_or(lo - 1.0);
+                let end = g.table_end_cm1.unwrap_or(hi + 1.0);
+                let step =
+                    self.positive(&sec.key("table_step_cm1"), g.table_step_cm1.unwrap_or(5e-4))?;
+                if !(start < lo && end > hi) {
+                    return Err(self.err(
+                        &sec.key("table_start_cm1"),
+                        format!("the table grid {start}–{end} cm⁻¹ must contain every channel ({lo}–{hi} cm⁻¹) with room to interpolate"),
+                    ));
+                }
+                if (end - start) / step > 5e7 {
+                    return Err(self.err(
+                        &sec.key("table_step_cm1"),
+                        "makes more than 5e7 grid points",
+                    ));
+                }
+                Some(GasTable {
+                    path: self.path.parent().unwrap_or(Path::new(".")).join(f),
+                    start_cm1: start,
+                    end_cm1: end,
+                    step_cm1: step,
+                })
+            }
+            None => {
+                for k in ["table_start_cm1", "table_end_cm1", "table_step_cm1"] {
+                    let given = match k {
+                        "table_start_cm1" => g.table_start_cm1.is_some(),
+                        "table_end_cm1" => g.table_end_cm1.is_some(),
+                        _ => g.table_step_cm1.is_some(),
+                    };
+                    if given {
+                        return Err(self.err(&sec.key(k), "goes with `table`"));
+                    }
+                }
+                None
+            }
+        };
+        Ok(GasAbsorption {
+            lines: Arc::new(lines),
+            options,
+            table,
         })
     }
 
@@ -604,25 +752,43 @@ impl Validator<'_> {
 
     /// One profile of a profile-set file (lidarsim's set format, `docs/atmosphere.md`), the file
     /// relative to the scene.
-    fn set_profile(&self, sec: &KeyPath, file: &str, id: Option<&str>) -> Result<Profile, InputError> {
+    fn set_profile(
+        &self,
+        sec: &KeyPath,
+        file: &str,
+        id: Option<&str>,
+    ) -> Result<Profile, InputError> {
         let at = sec.key("profile_file");
         let path = self.path.parent().unwrap_or(Path::new(".")).join(file);
         let set = crate::atmosphere::read_profile_set(&path)
             .map_err(|e| self.err(&at, format!("profile set: {e}")))?;
         let member = match id {
             Some(id) => set.member(id).ok_or_else(|| {
-                let ids: Vec<&str> = set.members.iter().take(10).map(|m| m.meta.id.as_str()).collect();
+                let ids: Vec<&str> = set
+                    .members
+                    .iter()
+                    .take(10)
+                    .map(|m| m.meta.id.as_str())
+                    .collect();
                 self.err(
                     &sec.key("profile_id"),
-                    format!("no profile `{id}` in {} (ids: {}{})", path.display(), ids.join(", "),
-                        if set.len() > 10 { ", …" } else { "" }),
+                    format!(
+                        "no profile `{id}` in {} (ids: {}{})",
+                        path.display(),
+                        ids.join(", "),
+                        if set.len() > 10 { ", …" } else { "" }
+                    ),
                 )
             })?,
             None if set.len() == 1 => &set.members[0],
             None => {
                 return Err(self.err(
                     &at,
-                    format!("{} holds {} profiles: say which with `profile_id`", path.display(), set.len()),
+                    format!(
+                        "{} holds {} profiles: say which with `profile_id`",
+                        path.display(),
+                        set.len()
+                    ),
                 ));
             }
         };

@@ -29,6 +29,8 @@ use tally::{Accumulator, TallyShape};
 
 /// Default probability of detector-directed importance sampling.
 pub const DDIS_EPSILON: f64 = 0.3;
+/// Default probability of drawing the first collision uniformly in range.
+pub const RANGE_STRATIFICATION: f64 = 0.5;
 /// DDIS is used where the scattering point is seen from the receiver within the widest field
 /// of view plus this margin [rad]: further out, a photon sent toward the receiver stays outside
 /// the fields of view (the line to the receiver keeps its angle to the axis).
@@ -88,6 +90,9 @@ pub struct TransportOptions {
     /// Probability ε of detector-directed importance sampling at a scattering near the
     /// receiver's line of sight (0 turns it off).
     pub ddis_epsilon: f64,
+    /// Probability β of drawing the first collision uniformly in range over the gated window
+    /// instead of from the exponential (0 turns it off).
+    pub range_stratification: f64,
 }
 
 impl TransportOptions {
@@ -103,6 +108,7 @@ impl TransportOptions {
             flux_tally: false,
             progress: false,
             ddis_epsilon: DDIS_EPSILON,
+            range_stratification: RANGE_STRATIFICATION,
         }
     }
 }
@@ -173,6 +179,8 @@ pub(crate) struct Setup<'a> {
     ddis_epsilon: f64,
     ddis_cos: f64,
     forward_peaked: Vec<bool>,
+    /// Probability β of drawing the first collision uniformly in range over the gates.
+    stratify: f64,
 }
 
 impl Setup<'_> {
@@ -336,6 +344,7 @@ pub fn run(
             .min(std::f64::consts::PI)
             .cos(),
         forward_peaked: vec![false; n_layers],
+        stratify: opts.range_stratification,
     };
     // Which layers get DDIS: a forward-peaked scatterer mixture.
     let mut setup = setup;

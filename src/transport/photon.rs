@@ -242,14 +242,57 @@ impl<'a> Tracer<'a> {
                 collide_factor = p_collide;
             }
 
-            // Sample the collision: τ* from the exponential truncated to [0, τ_ref).
-            let tau_star = -(-rng.random::<f64>() * p_collide).ln_1p();
-            let (s_coll, layer) = if horizontal {
-                (tau_star / s.sigma_ref[layer0], layer0)
+            // Sample the collision: τ* from the exponential truncated to [0, τ_ref). On the
+            // first flight, whose distances are ranges, the collision is instead drawn uniformly
+            // in range over the gated window with probability β (range stratification), the two
+            // densities combined by the balance heuristic: every gate then gets first
+            // collisions, however thin its air compared with, say, a boundary layer below.
+            let window = if order == 0 && s.stratify > 0.0 {
+                let (a, b) = (s.gate_start_m, s.r_end_m.min(s_end));
+                if b > a { Some((a, b)) } else { None }
             } else {
-                let (z, l) = s.altitude_at_tau(self.ts[0], mu, tau_star);
-                (((z - pos.z) / mu).clamp(0.0, s_end), l)
+                None
             };
+            let uniform = window.is_some() && rng.random::<f64>() < s.stratify;
+            let (s_coll, layer, tau_star) = if let (true, Some((a, b))) = (uniform, window) {
+                let s_u = a + rng.random::<f64>() * (b - a);
+                let z = pos.z + mu * s_u;
+                let tau = if horizontal {
+                    s.sigma_ref[layer0] * s_u
+                } else {
+                    (s.ref_tau_at(z) - self.ts[0]).abs() / mu.abs()
+                };
+                (s_u, if horizontal { layer0 } else { atm.layer_of(z) }, tau)
+            } else {
+                let tau_star = -(-rng.random::<f64>() * p_collide).ln_1p();
+                if horizontal {
+                    (tau_star / s.sigma_ref[layer0], layer0, tau_star)
+                } else {
+                    let (z, l) = s.altitude_at_tau(self.ts[0], mu, tau_star);
+                    (((z - pos.z) / mu).clamp(0.0, s_end), l, tau_star)
+                }
+            };
+            let mut collide_factor = collide_factor;
+            if let Some((a, b)) = window {
+                // Physical density of the truncated exponential at s, and the mixture density.
+                let inside = s.has_layers && {
+                    let z = pos.z + mu * s_coll;
+                    z >= s.bottom_m && z <= s.top_m
+                };
+                let sigma = if inside { s.sigma_ref[layer] } else { 0.0 };
+                let p_phys = sigma * (-tau_star).exp() / p_collide;
+                let p_unif = if s_coll >= a && s_coll <= b {
+                    1.0 / (b - a)
+                } else {
+                    0.0
+                };
+                let g = (1.0 - s.stratify) * p_phys + s.stratify * p_unif;
+                if !(p_phys > 0.0) || !(g > 0.0) {
+                    self.stats.roulette_kills += 1;
+                    return;
+                }
+                collide_factor *= p_phys / g;
+            }
             pos += dir * s_coll;
             path += s_coll;
             order += 1;
@@ -259,7 +302,7 @@ impl<'a> Tracer<'a> {
             // where channels scatter differently (for channel 0 that factor is 1).
             let i = layer * nch;
             let dts_ref = if horizontal {
-                tau_star
+                s.sigma_ref[layer] * s_coll
             } else {
                 (s.ref_tau_at(pos.z) - self.ts[0]).abs() / mu.abs()
             };
