@@ -367,3 +367,56 @@ fn scene_takes_its_atmosphere_from_a_profile_set() {
     assert_eq!(e.field.as_deref(), Some("atmosphere.profile_id"), "{e}");
     assert!(e.to_string().contains("no profile `x`"), "{e}");
 }
+
+/// A particle layer given by size distribution and refractive index gets its optics from Mie
+/// theory: the Deirmendjian C.1 cloud at 1064 nm has single-scattering albedo 0.9999076 and
+/// lidar ratio 19.59 sr (shared/reference/c1_summary.csv, miepython), here through the scene's
+/// extinction, albedo and phase function at 180°.
+#[test]
+fn mie_layer_from_size_distribution_matches_reference_c1() {
+    use lidarsim::optics::OpticalAtmosphere;
+    let scene_text = r#"
+[lidar]
+altitude_m = 0.0
+zenith_angle_deg = 0.0
+pulse_energy_j = 1.0
+beam_divergence_full_angle_mrad = 0.0
+telescope_diameter_m = 1.0
+optical_efficiency = 1.0
+fov_full_angle_mrad = 1.0
+[[channel]]
+name = "1064"
+wavelength_nm = 1064.0
+[gates]
+start_m = 1000.0
+end_m = 1400.0
+width_m = 10.0
+[[layer]]
+name = "C.1"
+base_m = 1000.0
+top_m = 1300.0
+extinction_per_km = 17.23
+particles = { distribution = "modified_gamma", alpha = 6.0, b = 1.5, gamma = 1.0, refractive_index = "1.3205+1.28e-6i" }
+"#;
+    let scene = Scene::from_toml(Path::new("c1.toml"), scene_text).unwrap();
+    let layer = &scene.layers[0];
+    assert!((layer.extinction_per_m[0] - 17.23e-3).abs() < 1e-12);
+    assert!((layer.single_scattering_albedo[0] / 0.9999076 - 1.0).abs() < 1e-6);
+    let atm = OpticalAtmosphere::build(&scene).unwrap();
+    let p180 = layer.phase[0].backscatter();
+    let lidar_ratio = 4.0 * std::f64::consts::PI / (layer.single_scattering_albedo[0] * p180);
+    assert!(
+        (lidar_ratio / 19.590 - 1.0).abs() < 5e-3,
+        "lidar ratio {lidar_ratio}"
+    );
+    assert!((layer.phase[0].asymmetry() / 0.837121 - 1.0).abs() < 5e-3);
+    assert!(atm.grey_scattering);
+
+    // Without an amount the layer is refused, naming the key.
+    let e = Scene::from_toml(
+        Path::new("c1.toml"),
+        &scene_text.replace("extinction_per_km = 17.23\n", ""),
+    )
+    .unwrap_err();
+    assert_eq!(e.field.as_deref(), Some("layer.particles"), "{e}");
+}

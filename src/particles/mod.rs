@@ -4,6 +4,7 @@
 //! distributions with a refractive index); produces scattering coefficients, single-scattering
 //! albedos and [`phase::PhaseFunction`]s that the transport can evaluate and sample.
 
+pub mod cache;
 pub mod distribution;
 pub mod mie;
 pub mod phase;

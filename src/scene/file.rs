@@ -92,6 +92,22 @@ pub(super) struct LayerFile {
     pub single_scattering_albedo: Option<PerChannel>,
     pub phase: Option<OneOrMany<PhaseSpecFile>>,
     pub absorption_per_m: Option<PerChannel>,
+    pub number_density_per_cm3: Option<f64>,
+    pub particles: Option<ParticlesFile>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct ParticlesFile {
+    pub distribution: String,
+    pub median_radius_um: Option<f64>,
+    pub sigma_g: Option<f64>,
+    pub alpha: Option<f64>,
+    pub b: Option<f64>,
+    pub gamma: Option<f64>,
+    pub r_min_um: Option<f64>,
+    pub r_max_um: Option<f64>,
+    pub refractive_index: OneOrMany<String>,
 }
 
 #[derive(Debug, Deserialize, PartialEq)]
@@ -130,6 +146,7 @@ pub(super) struct SimulationFile {
     pub max_order: Option<u32>,
     pub threads: Option<usize>,
     pub batches: Option<usize>,
+    pub cache_dir: Option<String>,
 }
 
 /// One number for every channel, or a list with one number per channel.

@@ -220,6 +220,8 @@ pub struct Simulation {
     pub threads: usize,
     /// Independent batches for the standard errors.
     pub batches: usize,
+    /// Directory for cached Mie optics (relative paths are relative to the scene), if any.
+    pub cache_dir: Option<PathBuf>,
 }
 
 impl Scene {
@@ -319,6 +321,11 @@ impl Validator<'_> {
         }
     }
 
+    fn cache_dir(&self, raw: &SceneFile) -> Option<PathBuf> {
+        let d = raw.simulation.as_ref()?.cache_dir.as_ref()?;
+        Some(self.path.parent().unwrap_or(Path::new(".")).join(d))
+    }
+
     fn scene(&self, raw: SceneFile) -> Result<Scene, InputError> {
         let lidar = self.lidar(&raw)?;
         let channels = self.channels(&raw)?;
@@ -329,8 +336,9 @@ impl Validator<'_> {
             None => None,
         };
         let mut layers = Vec::new();
+        let cache_dir = self.cache_dir(&raw);
         for (i, l) in raw.layer.iter().enumerate() {
-            layers.push(self.layer(i, l, &channels)?);
+            layers.push(self.layer(i, l, &channels, cache_dir.as_deref())?);
         }
         let surface = match &raw.surface {
             Some(s) => {
@@ -827,12 +835,19 @@ impl Validator<'_> {
         i: usize,
         l: &file::LayerFile,
         channels: &[Channel],
+        cache_dir: Option<&Path>,
     ) -> Result<Layer, InputError> {
         let nch = channels.len();
         let sec = KeyPath::array("layer", i);
         let name = l.name.clone().unwrap_or_else(|| format!("layer {}", i + 1));
         if !(l.top_m > l.base_m) {
             return Err(self.err(&sec.key("top_m"), "must be above `base_m`"));
+        }
+        if let Some(p) = &l.particles {
+            return self.mie_layer(&sec, name, l, p, channels, cache_dir);
+        }
+        if l.number_density_per_cm3.is_some() {
+            return Err(self.err(&sec.key("number_density_per_cm3"), "goes with `particles`"));
         }
         let ext = match (&l.extinction_per_m, &l.extinction_per_km) {
             (Some(v), None) => Some((sec.key("extinction_per_m"), v, 1.0)),
@@ -909,17 +924,7 @@ impl Validator<'_> {
                 )
             }
         };
-        let absorption_per_m = match &l.absorption_per_m {
-            Some(v) => {
-                let at = sec.key("absorption_per_m");
-                let a = self.per_channel(&at, v, nch)?;
-                for x in &a {
-                    self.non_negative(&at, *x)?;
-                }
-                a
-            }
-            None => vec![0.0; nch],
-        };
+        let absorption_per_m = self.absorption(&sec, l, nch)?;
         if !has_particles && l.absorption_per_m.is_none() {
             return Err(self.err(
                 &sec,
@@ -932,6 +937,156 @@ impl Validator<'_> {
             top_m: l.top_m,
             extinction_per_m,
             single_scattering_albedo,
+            phase,
+            absorption_per_m,
+        })
+    }
+
+    /// Extra (non-particle) absorption per channel of a layer, zero if not given.
+    fn absorption(
+        &self,
+        sec: &KeyPath,
+        l: &file::LayerFile,
+        nch: usize,
+    ) -> Result<Vec<f64>, InputError> {
+        let Some(v) = &l.absorption_per_m else {
+            return Ok(vec![0.0; nch]);
+        };
+        let at = sec.key("absorption_per_m");
+        let a = self.per_channel(&at, v, nch)?;
+        for x in &a {
+            self.non_negative(&at, *x)?;
+        }
+        Ok(a)
+    }
+
+    /// A layer of particles given by a size distribution and refractive index: extinction,
+    /// single-scattering albedo and phase function per channel by Mie theory (cached).
+    fn mie_layer(
+        &self,
+        sec: &KeyPath,
+        name: String,
+        l: &file::LayerFile,
+        p: &file::ParticlesFile,
+        channels: &[Channel],
+        cache_dir: Option<&Path>,
+    ) -> Result<Layer, InputError> {
+        use crate::particles::cache::layer_optics;
+        use crate::particles::distribution::{BulkOptions, Component, SizeDistribution};
+        let nch = channels.len();
+        let at = sec.key("particles");
+        if l.single_scattering_albedo.is_some() || l.phase.is_some() {
+            return Err(self.err(
+                &at,
+                "a layer of `particles` gets its single-scattering albedo and phase function from Mie theory: remove `single_scattering_albedo` and `phase`",
+            ));
+        }
+        let need = |v: Option<f64>, key: &str| {
+            v.ok_or_else(|| self.err(&at, format!("`{}` needs `{key}`", p.distribution)))
+        };
+        let mie_err = |e: String| self.err(&at, e);
+        let mut dist = match p.distribution.as_str() {
+            "lognormal" => SizeDistribution::lognormal(
+                1.0,
+                need(p.median_radius_um, "median_radius_um")?,
+                need(p.sigma_g, "sigma_g")?,
+            ),
+            "modified_gamma" => SizeDistribution::modified_gamma(
+                1.0,
+                need(p.alpha, "alpha")?,
+                need(p.b, "b")?,
+                need(p.gamma, "gamma")?,
+            ),
+            other => {
+                return Err(self.err(
+                    &at,
+                    format!("distribution `{other}` is not one of: lognormal, modified_gamma"),
+                ));
+            }
+        }
+        .map_err(|e| mie_err(e.to_string()))?;
+        match (p.r_min_um, p.r_max_um) {
+            (Some(a), Some(b)) => {
+                dist = dist.truncated(a, b).map_err(|e| mie_err(e.to_string()))?
+            }
+            (None, None) => {}
+            _ => return Err(self.err(&at, "`r_min_um` and `r_max_um` go together")),
+        }
+        let m_text: Vec<&String> = match &p.refractive_index {
+            file::OneOrMany::One(m) => vec![m; nch],
+            file::OneOrMany::Many(v) if v.len() == nch => v.iter().collect(),
+            file::OneOrMany::Many(v) => {
+                return Err(self.err(
+                    &at,
+                    format!(
+                        "refractive_index has {} entries; give one or one per channel ({nch})",
+                        v.len()
+                    ),
+                ));
+            }
+        };
+        let mut optics = Vec::with_capacity(nch);
+        for (k, c) in channels.iter().enumerate() {
+            let m = crate::particles::mie::parse_refractive_index(m_text[k])
+                .map_err(|e| self.err(&at, format!("refractive_index: {e}")))?;
+            let comp = Component {
+                name: name.clone(),
+                distribution: dist.clone(),
+                refractive_index: m,
+            };
+            let (o, _) = layer_optics(
+                &[comp],
+                c.wavelength_nm() * 1e-9,
+                &BulkOptions::default(),
+                cache_dir,
+            )
+            .map_err(mie_err)?;
+            optics.push(o);
+        }
+        // The amount: a number density, or an extinction at the first channel.
+        let ext0 = match (&l.extinction_per_m, &l.extinction_per_km) {
+            (Some(PerChannel::One(e)), None) => Some((sec.key("extinction_per_m"), *e)),
+            (None, Some(PerChannel::One(e))) => Some((sec.key("extinction_per_km"), e * 1e-3)),
+            (None, None) => None,
+            _ => {
+                return Err(self.err(
+                    &at,
+                    "give one extinction (at the first channel), `extinction_per_m` or `_per_km`; Mie theory gives the others",
+                ));
+            }
+        };
+        let number_density_per_m3 = match (l.number_density_per_cm3, ext0) {
+            (Some(n), None) => self.positive(&sec.key("number_density_per_cm3"), n)? * 1e6,
+            (None, Some((key, e))) => {
+                self.positive(&key, e)? / optics[0].extinction_cross_section_m2
+            }
+            _ => {
+                return Err(self.err(
+                    &at,
+                    "give the amount as `number_density_per_cm3` or as an extinction at the first channel (one of them)",
+                ));
+            }
+        };
+        let mut phase: Vec<Arc<PhaseFunction>> = Vec::with_capacity(nch);
+        for (k, o) in optics.iter().enumerate() {
+            if let Some(j) = (0..k).find(|&j| Arc::ptr_eq(&optics[j], o)) {
+                phase.push(phase[j].clone());
+            } else {
+                phase.push(Arc::new(PhaseFunction::Tabulated(Box::new(
+                    TabulatedPhase::from_table(&o.phase).map_err(|e| mie_err(e.to_string()))?,
+                ))));
+            }
+        }
+        let absorption_per_m = self.absorption(sec, l, nch)?;
+        Ok(Layer {
+            name,
+            base_m: l.base_m,
+            top_m: l.top_m,
+            extinction_per_m: optics
+                .iter()
+                .map(|o| number_density_per_m3 * o.extinction_cross_section_m2)
+                .collect(),
+            single_scattering_albedo: optics.iter().map(|o| o.single_scattering_albedo).collect(),
             phase,
             absorption_per_m,
         })
@@ -994,6 +1149,7 @@ impl Validator<'_> {
             max_order: s.max_order.unwrap_or(5),
             threads: s.threads.unwrap_or(0),
             batches: s.batches.unwrap_or(100),
+            cache_dir: self.cache_dir(raw),
         };
         if sim.max_order < 1 || sim.max_order > 1000 {
             return Err(self.err(&sec.key("max_order"), "must lie in 1..=1000"));

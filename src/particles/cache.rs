@@ -1,0 +1,159 @@
+//! Mie bulk optics computed on the fly for scenes, cached in memory for the life of the process
+//! and, when a cache directory is given, on disk as phase-function tables.
+//!
+//! The key is the full text fingerprint of the inputs ([`fingerprint`]: components, wavelength,
+//! size-integration options, solver version). A disk entry is `mie-<hash>.txt` in the
+//! `phase_functions/` format with the fingerprint and the bulk numbers in its metadata; an entry
+//! whose fingerprint text differs (a hash collision, or a file edited by hand) is recomputed and
+//! replaced, never trusted.
+
+use std::collections::HashMap;
+use std::path::Path;
+use std::sync::{Arc, Mutex, OnceLock};
+
+use super::distribution::{
+    BulkOptions, Component, bulk_optics_mixture, fingerprint, fingerprint_hash,
+};
+use super::table::PhaseTable;
+use crate::input::parse_f64;
+
+/// What a scene needs of a particle population at one wavelength.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LayerOptics {
+    /// Mean extinction cross-section per particle [m²].
+    pub extinction_cross_section_m2: f64,
+    /// Single-scattering albedo.
+    pub single_scattering_albedo: f64,
+    /// Phase function table (normalised to 4π).
+    pub phase: PhaseTable,
+}
+
+/// Where a result came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CacheUse {
+    /// Computed now.
+    Computed,
+    /// Found in this process's memory.
+    Memory,
+    /// Read from the disk cache.
+    Disk,
+}
+
+fn memory() -> &'static Mutex<HashMap<String, Arc<LayerOptics>>> {
+    static CACHE: OnceLock<Mutex<HashMap<String, Arc<LayerOptics>>>> = OnceLock::new();
+    CACHE.get_or_init(|| Mutex::new(HashMap::new()))
+}
+
+/// Bulk optics of an external mixture at one wavelength, from the caches when possible. Errors
+/// (invalid distributions or refractive indices) come back as the Mie stage's message.
+pub fn layer_optics(
+    components: &[Component],
+    wavelength_m: f64,
+    opts: &BulkOptions,
+    cache_dir: Option<&Path>,
+) -> Result<(Arc<LayerOptics>, CacheUse), String> {
+    let key = fingerprint(components, wavelength_m, opts);
+    if let Some(hit) = memory().lock().ok().and_then(|m| m.get(&key).cloned()) {
+        return Ok((hit, CacheUse::Memory));
+    }
+    let file = cache_dir.map(|d| {
+        d.join(format!(
+            "mie-{}.txt",
+            fingerprint_hash(components, wavelength_m, opts)
+        ))
+    });
+    if let Some(hit) = file.as_deref().and_then(|f| read_entry(f, &key)) {
+        let hit = Arc::new(hit);
+        if let Ok(mut m) = memory().lock() {
+            m.insert(key, hit.clone());
+        }
+        return Ok((hit, CacheUse::Disk));
+    }
+    let bulk = bulk_optics_mixture(components, wavelength_m, opts).map_err(|e| e.to_string())?;
+    // Pass the table through its text form, as a disk entry would, so that a run gives the
+    // same numbers whether or not it found the entry.
+    let phase = PhaseTable::parse(Path::new("<mie>"), &bulk.phase.to_text())
+        .map_err(|e| format!("Mie phase table: {e}"))?;
+    let optics = Arc::new(LayerOptics {
+        extinction_cross_section_m2: bulk.extinction_cross_section_m2,
+        single_scattering_albedo: bulk.single_scattering_albedo,
+        phase,
+    });
+    if let (Some(dir), Some(f)) = (cache_dir, &file) {
+        // A cache that cannot be written only costs time next run; the result stands.
+        let _ = std::fs::create_dir_all(dir).and_then(|_| write_entry(f, &key, &optics));
+    }
+    if let Ok(mut m) = memory().lock() {
+        m.insert(key, optics.clone());
+    }
+    Ok((optics, CacheUse::Computed))
+}
+
+fn write_entry(path: &Path, key: &str, o: &LayerOptics) -> std::io::Result<()> {
+    let mut t = o.phase.clone();
+    t.meta.retain(|(k, _)| {
+        !matches!(
+            k.as_str(),
+            "fingerprint" | "cache_extinction_cross_section_m2" | "cache_single_scattering_albedo"
+        )
+    });
+    t.meta.push(("fingerprint".into(), key.to_string()));
+    t.meta.push((
+        "cache_extinction_cross_section_m2".into(),
+        format!("{:e}", o.extinction_cross_section_m2),
+    ));
+    t.meta.push((
+        "cache_single_scattering_albedo".into(),
+        format!("{:e}", o.single_scattering_albedo),
+    ));
+    t.write(path)
+}
+
+fn read_entry(path: &Path, key: &str) -> Option<LayerOptics> {
+    let t = PhaseTable::read(path).ok()?;
+    if t.meta("fingerprint")? != key {
+        return None;
+    }
+    let num = |k: &str| t.meta(k).and_then(|v| parse_f64(path, 0, k, v).ok());
+    Some(LayerOptics {
+        extinction_cross_section_m2: num("cache_extinction_cross_section_m2")?,
+        single_scattering_albedo: num("cache_single_scattering_albedo")?,
+        phase: t,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::particles::distribution::SizeDistribution;
+    use num_complex::Complex64;
+
+    #[test]
+    fn disk_cache_round_trips_and_rejects_other_inputs() {
+        let dir = tempfile::tempdir().unwrap();
+        let comp = |m: f64| Component {
+            name: "p".into(),
+            distribution: SizeDistribution::lognormal(1.0, 0.3, 1.6).unwrap(),
+            refractive_index: Complex64::new(m, 1e-3),
+        };
+        let opts = BulkOptions {
+            angles_deg: Some((0..=180).map(f64::from).collect()),
+            ..Default::default()
+        };
+        let (a, how) = layer_optics(&[comp(1.5)], 1.064e-6, &opts, Some(dir.path())).unwrap();
+        assert_eq!(how, CacheUse::Computed);
+        let file = std::fs::read_dir(dir.path())
+            .unwrap()
+            .next()
+            .unwrap()
+            .unwrap()
+            .path();
+        let back = read_entry(&file, &fingerprint(&[comp(1.5)], 1.064e-6, &opts)).unwrap();
+        assert_eq!(
+            back.extinction_cross_section_m2,
+            a.extinction_cross_section_m2
+        );
+        assert_eq!(back.single_scattering_albedo, a.single_scattering_albedo);
+        assert!(read_entry(&file, &fingerprint(&[comp(1.51)], 1.064e-6, &opts)).is_none());
+    }
+}
