@@ -6,6 +6,7 @@
 
 pub mod distribution;
 pub mod mie;
+pub mod opac;
 pub mod phase;
 pub mod rayleigh;
 pub mod table;
