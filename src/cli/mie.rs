@@ -9,6 +9,7 @@ use lidarsim::particles::distribution::{
     BulkOptions, SizeDistribution, bulk_optics, format_refractive_index,
 };
 use lidarsim::particles::mie::{MieCoefficients, parse_refractive_index};
+use lidarsim::particles::opac::{OpacComponent, OpacType};
 use serde_json::json;
 
 /// Kind of size distribution.
@@ -20,6 +21,9 @@ pub enum Distribution {
     ModifiedGamma,
     /// Deirmendjian's C.1 cloud (modified gamma a=2.373, alpha=6, b=1.5, gamma=1).
     C1,
+    /// OPAC aerosol (Hess et al. 1998), dry: --aerosol-type TYPE (a mixture) or --opac-component
+    /// NAME (one component, --number-density-per-cm3); refractive indices from OPAC's table.
+    Opac,
 }
 
 /// Arguments of `lidarsim mie`.
@@ -30,12 +34,16 @@ pub enum Distribution {
 /// A size distribution: `lidarsim mie --distribution c1 --refractive-index 1.3205+1.28e-6i
 /// --wavelength-nm 1064 --out table.txt` writes a phase-function table and prints the bulk
 /// properties (per-particle cross-sections, single-scattering albedo, g, lidar ratio) as JSON.
+///
+/// An OPAC aerosol type (dry components, refractive indices built in): `lidarsim mie
+/// --distribution opac --aerosol-type continental-average --wavelength-nm 532 --out table.txt`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// Complex refractive index relative to the medium, n+ki: 1.33, 1.33+0.0i, 1.5+1e-3i. A
     /// POSITIVE imaginary part means ABSORPTION (MIEV0 and miepython write the same as n-ki).
+    /// Not used with --distribution opac (OPAC's own indices are built in).
     #[arg(long, allow_hyphen_values = true)]
-    refractive_index: String,
+    refractive_index: Option<String>,
     /// Size parameter x = 2 pi r / lambda of a single sphere.
     #[arg(long, conflicts_with = "distribution")]
     size_parameter: Option<f64>,
@@ -48,9 +56,16 @@ pub struct Args {
     /// Wavelength in the medium [nm] (distributions).
     #[arg(long)]
     wavelength_nm: Option<f64>,
-    /// Log-normal total number density [cm^-3].
+    /// Log-normal (or single OPAC component) total number density [cm^-3].
     #[arg(long, default_value_t = 1.0)]
     number_density_per_cm3: f64,
+    /// OPAC aerosol type (dry components): continental-clean, continental-average,
+    /// continental-polluted, urban, maritime-clean, maritime-polluted, maritime-tropical, arctic.
+    #[arg(long, conflicts_with = "opac_component")]
+    aerosol_type: Option<String>,
+    /// One OPAC component (dry): inso, waso, soot, ssam, sscm.
+    #[arg(long)]
+    opac_component: Option<String>,
     /// Log-normal median (number mode) radius [um].
     #[arg(long)]
     median_radius_um: Option<f64>,
@@ -114,7 +129,16 @@ fn parse_mode(text: &str) -> anyhow::Result<SizeDistribution> {
 
 /// Run the subcommand.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let m = parse_refractive_index(&args.refractive_index)
+    if args.distribution == Some(Distribution::Opac) {
+        return run_opac(&args);
+    }
+    if args.aerosol_type.is_some() || args.opac_component.is_some() {
+        bail!("--aerosol-type and --opac-component need --distribution opac");
+    }
+    let Some(m_text) = &args.refractive_index else {
+        bail!("--refractive-index is required (except with --distribution opac)");
+    };
+    let m = parse_refractive_index(m_text)
         .map_err(anyhow::Error::msg)
         .context("--refractive-index")?;
     if let Some(x) = args.size_parameter {
@@ -156,6 +180,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     let wavelength_nm = need(args.wavelength_nm, "--wavelength-nm")?;
     let mut dist = match kind {
+        Distribution::Opac => unreachable!("handled by run_opac"),
         Distribution::C1 => SizeDistribution::deirmendjian_c1(),
         Distribution::ModifiedGamma => SizeDistribution::modified_gamma(
             need(args.a, "--a")?,
@@ -191,7 +216,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             args.r_max_um.unwrap_or(f64::INFINITY),
         )?;
     }
-    let opts = BulkOptions {
+    let opts = bulk_opts(&args);
+    let mut b = bulk_optics(&dist, m, wavelength_nm * 1e-9, &opts)?;
+    add_meta(&mut b, &args.meta)?;
+    finish(
+        &b,
+        &args,
+        wavelength_nm,
+        json!(format_refractive_index(m)),
+        dist.to_string(),
+    )
+}
+
+fn bulk_opts(args: &Args) -> BulkOptions {
+    BulkOptions {
         tail_fraction: args.tail_fraction,
         rel_tol: args.rel_tol,
         angles_deg: if args.out.is_some() {
@@ -200,9 +238,73 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             Some(Vec::new())
         },
         ..BulkOptions::default()
+    }
+}
+
+/// `--distribution opac`: an OPAC type or one component, with OPAC's refractive indices.
+fn run_opac(args: &Args) -> anyhow::Result<()> {
+    if args.refractive_index.is_some() {
+        bail!(
+            "--distribution opac uses OPAC's own refractive indices: drop --refractive-index \
+             (or describe the particles with --distribution lognormal)"
+        );
+    }
+    if args.size_parameter.is_some() {
+        bail!("--size-parameter and --distribution are exclusive");
+    }
+    let wavelength_nm = need(args.wavelength_nm, "--wavelength-nm")?;
+    let wavelength_m = wavelength_nm * 1e-9;
+    let opts = bulk_opts(args);
+    let (mut b, indices, description) = match (&args.aerosol_type, &args.opac_component) {
+        (Some(t), None) => {
+            let t = OpacType::from_name(t).with_context(|| {
+                format!(
+                    "--aerosol-type `{t}`: unknown OPAC type (known: {})",
+                    OpacType::ALL.map(|t| t.name()).join(", ")
+                )
+            })?;
+            let comps = t.components(wavelength_m).context("--wavelength-nm")?;
+            let b = t.bulk_optics(wavelength_m, &opts)?;
+            let indices: serde_json::Map<String, serde_json::Value> = comps
+                .iter()
+                .map(|c| {
+                    (
+                        c.name.clone(),
+                        json!(format_refractive_index(c.refractive_index)),
+                    )
+                })
+                .collect();
+            let desc = b.phase.meta("distribution").unwrap_or_default().to_string();
+            (b, serde_json::Value::Object(indices), desc)
+        }
+        (None, Some(c)) => {
+            let c = OpacComponent::from_name(c).with_context(|| {
+                format!(
+                    "--opac-component `{c}`: unknown OPAC component (known: {})",
+                    OpacComponent::ALL.map(|c| c.name()).join(", ")
+                )
+            })?;
+            let m = c
+                .refractive_index(wavelength_m)
+                .context("--wavelength-nm")?;
+            let b = c.bulk_optics(args.number_density_per_cm3, wavelength_m, &opts)?;
+            let desc = c
+                .size_distribution(args.number_density_per_cm3)?
+                .to_string();
+            (b, json!(format_refractive_index(m)), desc)
+        }
+        _ => bail!("--distribution opac needs --aerosol-type TYPE or --opac-component NAME"),
     };
-    let mut b = bulk_optics(&dist, m, wavelength_nm * 1e-9, &opts)?;
-    for kv in &args.meta {
+    add_meta(&mut b, &args.meta)?;
+    finish(&b, args, wavelength_nm, indices, description)
+}
+
+/// Add the --meta KEY=VALUE lines before the final `source` line.
+fn add_meta(
+    b: &mut lidarsim::particles::distribution::BulkOptics,
+    meta: &[String],
+) -> anyhow::Result<()> {
+    for kv in meta {
         let Some((k, v)) = kv.split_once('=') else {
             bail!("--meta `{kv}`: expected KEY=VALUE");
         };
@@ -219,6 +321,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .meta
             .insert(at, (k.to_string(), v.trim().to_string()));
     }
+    Ok(())
+}
+
+/// Write the table (if --out) and print the bulk properties as JSON.
+fn finish(
+    b: &lidarsim::particles::distribution::BulkOptics,
+    args: &Args,
+    wavelength_nm: f64,
+    refractive_index: serde_json::Value,
+    distribution: String,
+) -> anyhow::Result<()> {
     if let Some(path) = &args.out {
         b.phase
             .write(path)
@@ -226,8 +339,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let out = json!({
         "wavelength_nm": wavelength_nm,
-        "refractive_index": format_refractive_index(m),
-        "distribution": dist.to_string(),
+        "refractive_index": refractive_index,
+        "distribution": distribution,
         "number_density_per_cm3": b.number_density_per_m3 * 1e-6,
         "extinction_cross_section_um2": b.extinction_cross_section_m2 * 1e12,
         "scattering_cross_section_um2": b.scattering_cross_section_m2 * 1e12,
@@ -239,6 +352,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "phase_180": b.phase_180(),
         "effective_radius_um": b.effective_radius_um,
         "size_grid": b.convergence.iter().map(|c| json!({
+            "component": c.component,
             "r_min_um": c.r_range_um.0, "r_max_um": c.r_range_um.1, "step_x": c.step_x,
             "points": c.points, "last_rel_change": c.last_rel_change, "converged": c.converged,
         })).collect::<Vec<_>>(),

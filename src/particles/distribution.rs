@@ -1011,7 +1011,8 @@ pub fn bulk_optics_mixture(
     let mut meta = vec![
         (
             "wavelength_nm".to_string(),
-            format!("{}", wavelength_m * 1e9),
+            // Rounded to 1e-9 nm so 1572e-9 m prints as 1572, not 1572.0000000000002.
+            format!("{}", (wavelength_m * 1e18).round() / 1e9),
         ),
         ("refractive_index".to_string(), refr),
         ("distribution".to_string(), distribution),
