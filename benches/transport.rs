@@ -19,10 +19,22 @@ use rand_xoshiro::Xoshiro256PlusPlus;
 fn phase(c: &mut Criterion) {
     let c1 = builtin_table("bissonnette_c1_1064nm").unwrap();
     let cases = [
-        ("rayleigh", PhaseFunction::Rayleigh(RayleighPhase::from_depolarisation(0.0279).unwrap())),
-        ("hg_0.85", PhaseFunction::HenyeyGreenstein(HenyeyGreenstein::new(0.85).unwrap())),
-        ("double_hg", PhaseFunction::double_hg(0.9, 0.8, -0.4).unwrap()),
-        ("table_c1_1391", PhaseFunction::Tabulated(Box::new(TabulatedPhase::from_table(&c1).unwrap()))),
+        (
+            "rayleigh",
+            PhaseFunction::Rayleigh(RayleighPhase::from_depolarisation(0.0279).unwrap()),
+        ),
+        (
+            "hg_0.85",
+            PhaseFunction::HenyeyGreenstein(HenyeyGreenstein::new(0.85).unwrap()),
+        ),
+        (
+            "double_hg",
+            PhaseFunction::double_hg(0.9, 0.8, -0.4).unwrap(),
+        ),
+        (
+            "table_c1_1391",
+            PhaseFunction::Tabulated(Box::new(TabulatedPhase::from_table(&c1).unwrap())),
+        ),
     ];
     const N: usize = 1024;
     let mut g = c.benchmark_group("phase");
@@ -42,7 +54,9 @@ fn phase(c: &mut Criterion) {
             b.iter_batched(
                 || {
                     let mut rng = Xoshiro256PlusPlus::seed_from_u64(2);
-                    (0..N).map(|_| 2.0 * rng.random::<f64>() - 1.0).collect::<Vec<f64>>()
+                    (0..N)
+                        .map(|_| 2.0 * rng.random::<f64>() - 1.0)
+                        .collect::<Vec<f64>>()
                 },
                 |mus| mus.iter().map(|m| pf.eval(black_box(*m))).sum::<f64>(),
                 BatchSize::SmallInput,

@@ -598,8 +598,10 @@ fn every_shipped_table_is_a_builtin() {
         })
         .collect();
     on_disk.sort();
-    let mut builtin: Vec<String> =
-        lidarsim::particles::builtin_table_names().iter().map(|s| s.to_string()).collect();
+    let mut builtin: Vec<String> = lidarsim::particles::builtin_table_names()
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
     builtin.sort();
     assert_eq!(on_disk, builtin);
     for name in &builtin {

@@ -19,16 +19,46 @@ use table::PhaseTable;
 /// The tables shipped in `phase_functions/`, compiled into the binary so scenes (and the
 /// embedded default scene) can name them with `builtin = "..."` without a path.
 const BUILTIN_TABLES: &[(&str, &str)] = &[
-    ("bissonnette_c1_1064nm", include_str!("../../phase_functions/bissonnette_c1_1064nm.txt")),
-    ("c1_cloud_532nm", include_str!("../../phase_functions/c1_cloud_532nm.txt")),
-    ("c1_cloud_1064nm", include_str!("../../phase_functions/c1_cloud_1064nm.txt")),
-    ("c1_cloud_1572nm", include_str!("../../phase_functions/c1_cloud_1572nm.txt")),
-    ("continental_average_532nm", include_str!("../../phase_functions/continental_average_532nm.txt")),
-    ("continental_average_1064nm", include_str!("../../phase_functions/continental_average_1064nm.txt")),
-    ("continental_average_1572nm", include_str!("../../phase_functions/continental_average_1572nm.txt")),
-    ("maritime_clean_532nm", include_str!("../../phase_functions/maritime_clean_532nm.txt")),
-    ("maritime_clean_1064nm", include_str!("../../phase_functions/maritime_clean_1064nm.txt")),
-    ("maritime_clean_1572nm", include_str!("../../phase_functions/maritime_clean_1572nm.txt")),
+    (
+        "bissonnette_c1_1064nm",
+        include_str!("../../phase_functions/bissonnette_c1_1064nm.txt"),
+    ),
+    (
+        "c1_cloud_532nm",
+        include_str!("../../phase_functions/c1_cloud_532nm.txt"),
+    ),
+    (
+        "c1_cloud_1064nm",
+        include_str!("../../phase_functions/c1_cloud_1064nm.txt"),
+    ),
+    (
+        "c1_cloud_1572nm",
+        include_str!("../../phase_functions/c1_cloud_1572nm.txt"),
+    ),
+    (
+        "continental_average_532nm",
+        include_str!("../../phase_functions/continental_average_532nm.txt"),
+    ),
+    (
+        "continental_average_1064nm",
+        include_str!("../../phase_functions/continental_average_1064nm.txt"),
+    ),
+    (
+        "continental_average_1572nm",
+        include_str!("../../phase_functions/continental_average_1572nm.txt"),
+    ),
+    (
+        "maritime_clean_532nm",
+        include_str!("../../phase_functions/maritime_clean_532nm.txt"),
+    ),
+    (
+        "maritime_clean_1064nm",
+        include_str!("../../phase_functions/maritime_clean_1064nm.txt"),
+    ),
+    (
+        "maritime_clean_1572nm",
+        include_str!("../../phase_functions/maritime_clean_1572nm.txt"),
+    ),
 ];
 
 /// Names of the built-in tables.

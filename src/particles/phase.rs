@@ -544,9 +544,17 @@ mod tests {
         let tab = TabulatedPhase::from_table(&t).unwrap();
         let scale = 1.0 / t.normalisation();
         for (th, p) in t.theta_deg.iter().zip(&t.phase_4pi) {
-            let mu = if *th == 180.0 { -1.0 } else { th.to_radians().cos() };
+            let mu = if *th == 180.0 {
+                -1.0
+            } else {
+                th.to_radians().cos()
+            };
             let e = tab.eval(mu);
-            assert!((e / (p * scale) - 1.0).abs() < 1e-9, "θ = {th}: {e} vs {}", p * scale);
+            assert!(
+                (e / (p * scale) - 1.0).abs() < 1e-9,
+                "θ = {th}: {e} vs {}",
+                p * scale
+            );
         }
         assert!((tab.eval(-1.0) - 0.64154 * scale).abs() < 1e-4);
     }
@@ -604,10 +612,17 @@ mod tests {
     /// CDF of a table, linear in μ between its nodes, integrated here from the table's own
     /// numbers (not from `TabulatedPhase`).
     fn table_cdf(t: &PhaseTable) -> impl Fn(f64) -> f64 {
-        let mut nodes: Vec<(f64, f64)> =
-            t.theta_deg.iter().zip(&t.phase_4pi).map(|(a, p)| (a.to_radians().cos(), *p)).collect();
+        let mut nodes: Vec<(f64, f64)> = t
+            .theta_deg
+            .iter()
+            .zip(&t.phase_4pi)
+            .map(|(a, p)| (a.to_radians().cos(), *p))
+            .collect();
         nodes.reverse();
-        let total: f64 = nodes.windows(2).map(|w| 0.5 * (w[0].1 + w[1].1) * (w[1].0 - w[0].0)).sum();
+        let total: f64 = nodes
+            .windows(2)
+            .map(|w| 0.5 * (w[0].1 + w[1].1) * (w[1].0 - w[0].0))
+            .sum();
         move |mu: f64| {
             let mut acc = 0.0;
             for w in nodes.windows(2) {
@@ -634,14 +649,26 @@ mod tests {
         let c1 = crate::particles::builtin_table("bissonnette_c1_1064nm").unwrap();
         let c1_cdf = table_cdf(&c1);
         let cases: Vec<(&str, PhaseFunction, Box<dyn Fn(f64) -> f64>)> = vec![
-            ("isotropic", PhaseFunction::Isotropic, Box::new(|m| 0.5 * (m + 1.0))),
+            (
+                "isotropic",
+                PhaseFunction::Isotropic,
+                Box::new(|m| 0.5 * (m + 1.0)),
+            ),
             (
                 "rayleigh",
                 PhaseFunction::Rayleigh(RayleighPhase::from_depolarisation(rho).unwrap()),
                 Box::new(move |m| rayleigh_cdf(gamma, m)),
             ),
-            ("hg 0.85", PhaseFunction::HenyeyGreenstein(HenyeyGreenstein::new(0.85).unwrap()), Box::new(|m| hg_cdf(0.85, m))),
-            ("hg -0.5", PhaseFunction::HenyeyGreenstein(HenyeyGreenstein::new(-0.5).unwrap()), Box::new(|m| hg_cdf(-0.5, m))),
+            (
+                "hg 0.85",
+                PhaseFunction::HenyeyGreenstein(HenyeyGreenstein::new(0.85).unwrap()),
+                Box::new(|m| hg_cdf(0.85, m)),
+            ),
+            (
+                "hg -0.5",
+                PhaseFunction::HenyeyGreenstein(HenyeyGreenstein::new(-0.5).unwrap()),
+                Box::new(|m| hg_cdf(-0.5, m)),
+            ),
             (
                 "double hg",
                 PhaseFunction::double_hg(0.9, 0.8, -0.4).unwrap(),
@@ -657,7 +684,11 @@ mod tests {
         let mut edges_deg: Vec<f64> = (0..20).map(|i| 0.05 * i as f64).collect();
         edges_deg.extend((0..18).map(|i| 1.0 + 0.5 * i as f64));
         edges_deg.extend((0..=85).map(|i| 10.0 + 2.0 * i as f64));
-        let edges_mu: Vec<f64> = edges_deg.iter().rev().map(|d| d.to_radians().cos()).collect();
+        let edges_mu: Vec<f64> = edges_deg
+            .iter()
+            .rev()
+            .map(|d| d.to_radians().cos())
+            .collect();
         let n = 1_000_000usize;
         for (name, pf, cdf) in &cases {
             let mut rng = Xoshiro256PlusPlus::seed_from_u64(11);
@@ -667,24 +698,40 @@ mod tests {
                 let mu = pf.sample(rng.random());
                 sum += mu;
                 sum2 += mu * mu;
-                let b = edges_mu.partition_point(|e| *e <= mu).clamp(1, edges_mu.len() - 1) - 1;
+                let b = edges_mu
+                    .partition_point(|e| *e <= mu)
+                    .clamp(1, edges_mu.len() - 1)
+                    - 1;
                 counts[b] += 1;
             }
             let mut chi2 = 0.0;
             let mut dof = 0usize;
             for (b, c) in counts.iter().enumerate() {
                 let expected = n as f64 * (cdf(edges_mu[b + 1]) - cdf(edges_mu[b]));
-                assert!(expected > 0.0 || *c == 0, "{name}: bin {b} has samples and no probability");
+                assert!(
+                    expected > 0.0 || *c == 0,
+                    "{name}: bin {b} has samples and no probability"
+                );
                 if expected > 0.0 {
                     chi2 += (*c as f64 - expected).powi(2) / expected;
                     dof += 1;
                 }
             }
-            let critical = ChiSquared::new((dof - 1) as f64).unwrap().inverse_cdf(0.999);
-            assert!(chi2 < critical, "{name}: χ² = {chi2:.1} ≥ {critical:.1} ({} dof)", dof - 1);
+            let critical = ChiSquared::new((dof - 1) as f64)
+                .unwrap()
+                .inverse_cdf(0.999);
+            assert!(
+                chi2 < critical,
+                "{name}: χ² = {chi2:.1} ≥ {critical:.1} ({} dof)",
+                dof - 1
+            );
             let mean = sum / n as f64;
             let se = ((sum2 / n as f64 - mean * mean) / n as f64).sqrt();
-            assert!((mean - pf.asymmetry()).abs() < 4.0 * se, "{name}: ⟨μ⟩ = {mean} vs g = {}", pf.asymmetry());
+            assert!(
+                (mean - pf.asymmetry()).abs() < 4.0 * se,
+                "{name}: ⟨μ⟩ = {mean} vs g = {}",
+                pf.asymmetry()
+            );
         }
     }
 }

@@ -3,7 +3,8 @@
 //! A batch scores into FOV *annuli* (each local estimate lands in the narrowest field of view
 //! that contains it) and exact-order bins, the cheapest scoring; when the batch ends its buffer
 //! is turned into the reported bins — cumulative fields of view, orders 1…N, N+1 and more, and
-//! the total — and the sum and sum of squares of every reported bin grow by that batch's values.
+//! the total — and the running mean and M2 of every reported bin take that batch's values
+//! ([`stats::welford_add`]).
 //! Folding happens in batch order, so results do not depend on the number of threads.
 
 use crate::returns::{Order, Returns, Source};
@@ -69,15 +70,15 @@ impl Flux {
     }
 }
 
-/// Running sums over batches for the returns and the flux.
+/// Running means and M2 over batches for the returns and the flux.
 pub(crate) struct Accumulator {
     shape: TallyShape,
     n_batches: usize,
     /// Reported bins: [channel][fov][gate][order: total, 1..=N, N+].
-    sum: Vec<f64>,
-    sum_sq: Vec<f64>,
-    flux_sum: Flux,
-    flux_sum_sq: Flux,
+    mean: Vec<f64>,
+    m2: Vec<f64>,
+    flux_mean: Flux,
+    flux_m2: Flux,
     /// Annulus a ↔ scene FOV index.
     fov_of_annulus: Vec<usize>,
     scratch: Vec<f64>,
@@ -89,10 +90,10 @@ impl Accumulator {
         Accumulator {
             shape,
             n_batches: 0,
-            sum: vec![0.0; reported],
-            sum_sq: vec![0.0; reported],
-            flux_sum: Flux::zeros(shape.n_channels),
-            flux_sum_sq: Flux::zeros(shape.n_channels),
+            mean: vec![0.0; reported],
+            m2: vec![0.0; reported],
+            flux_mean: Flux::zeros(shape.n_channels),
+            flux_m2: Flux::zeros(shape.n_channels),
             fov_of_annulus,
             scratch: vec![0.0; reported],
         }
@@ -104,7 +105,7 @@ impl Accumulator {
         ((k * s.n_fov + fov) * s.n_gates + gate) * (s.n_order_bins + 1) + order
     }
 
-    /// Fold one batch (already normalised to energy per pulse) into the sums.
+    /// Fold one batch (already normalised to energy per pulse) into the running moments.
     pub fn add_batch(&mut self, bins: &[f64], flux: &Flux) {
         let s = self.shape;
         let n_rep = s.n_order_bins + 1;
@@ -127,19 +128,18 @@ impl Accumulator {
             }
         }
         debug_assert_eq!(self.scratch.len() % n_rep, 0);
+        let n = self.n_batches + 1;
         for (i, v) in self.scratch.iter().enumerate() {
-            self.sum[i] += v;
-            self.sum_sq[i] += v * v;
+            stats::welford_add(&mut self.mean[i], &mut self.m2[i], n, *v);
         }
         for (dst, (dst2, src)) in self
-            .flux_sum
+            .flux_mean
             .parts_mut()
             .into_iter()
-            .zip(self.flux_sum_sq.parts_mut().into_iter().zip(flux.parts()))
+            .zip(self.flux_m2.parts_mut().into_iter().zip(flux.parts()))
         {
             for k in 0..src.len() {
-                dst[k] += src[k];
-                dst2[k] += src[k] * src[k];
+                stats::welford_add(&mut dst[k], &mut dst2[k], n, src[k]);
             }
         }
         self.n_batches += 1;
@@ -164,21 +164,15 @@ impl Accumulator {
             orders,
         );
         let n = self.n_batches;
-        for i in 0..self.sum.len() {
-            r.energy_j[i] = stats::mean(self.sum[i], n);
-            r.stderr_j[i] = stats::std_error(self.sum[i], self.sum_sq[i], n);
+        r.energy_j.copy_from_slice(&self.mean);
+        for i in 0..self.m2.len() {
+            r.stderr_j[i] = stats::std_error(self.m2[i], n);
         }
-        let mut mean = Flux::zeros(self.shape.n_channels);
+        let mean = self.flux_mean.clone();
         let mut err = Flux::zeros(self.shape.n_channels);
-        for ((m, e), (s, s2)) in mean.parts_mut().into_iter().zip(err.parts_mut()).zip(
-            self.flux_sum
-                .parts()
-                .into_iter()
-                .zip(self.flux_sum_sq.parts()),
-        ) {
-            for k in 0..s.len() {
-                m[k] = stats::mean(s[k], n);
-                e[k] = stats::std_error(s[k], s2[k], n);
+        for (e, m2) in err.parts_mut().into_iter().zip(self.flux_m2.parts()) {
+            for k in 0..m2.len() {
+                e[k] = stats::std_error(m2[k], n);
             }
         }
         (r, mean, err)
