@@ -420,3 +420,38 @@ particles = { distribution = "modified_gamma", alpha = 6.0, b = 1.5, gamma = 1.0
     .unwrap_err();
     assert_eq!(e.field.as_deref(), Some("layer.particles"), "{e}");
 }
+
+/// An OPAC aerosol type named in a scene: its extinction is the layer's total number density
+/// times the mixture's mean extinction cross-section, with the single-scattering albedo and
+/// asymmetry of the shipped table for the same type and wavelength (written by `lidarsim mie`
+/// and checked against OPAC's own component optics in tests/particles.rs).
+#[test]
+fn opac_aerosol_layer_in_a_scene() {
+    let text = BASE
+        .replacen("extinction_per_km = [0.1, 0.1]\nsingle_scattering_albedo = 0.95\nphase = { kind = \"henyey_greenstein\", g = 0.7 }", "number_density_per_cm3 = 15300.4\nparticles = { distribution = \"opac\", aerosol_type = \"continental_average\" }", 1)
+        .replacen("wavenumber_cm1 = 6361.0", "wavelength_nm = 1572.0", 1);
+    let scene = Scene::from_toml(Path::new("opac.toml"), &text).unwrap();
+    let table = lidarsim::particles::builtin_table("continental_average_1572nm").unwrap();
+    let meta = |k: &str| table.meta(k).unwrap().parse::<f64>().unwrap();
+    let l = &scene.layers[0];
+    let ext = 15300.4e6 * meta("extinction_cross_section_um2") * 1e-12;
+    for k in 0..2 {
+        assert!(
+            (l.extinction_per_m[k] / ext - 1.0).abs() < 1e-6,
+            "{} vs {ext}",
+            l.extinction_per_m[k]
+        );
+        assert!((l.single_scattering_albedo[k] - meta("single_scattering_albedo")).abs() < 1e-6);
+        assert!((l.phase[k].asymmetry() - meta("asymmetry")).abs() < 1e-4);
+    }
+    let e = Scene::from_toml(
+        Path::new("opac.toml"),
+        &text.replace("continental_average", "volcanic"),
+    )
+    .unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("unknown OPAC aerosol type `volcanic`"),
+        "{e}"
+    );
+}

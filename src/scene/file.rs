@@ -107,7 +107,8 @@ pub(super) struct ParticlesFile {
     pub gamma: Option<f64>,
     pub r_min_um: Option<f64>,
     pub r_max_um: Option<f64>,
-    pub refractive_index: OneOrMany<String>,
+    pub aerosol_type: Option<String>,
+    pub refractive_index: Option<OneOrMany<String>>,
 }
 
 #[derive(Debug, Deserialize, PartialEq)]

@@ -985,57 +985,102 @@ impl Validator<'_> {
             v.ok_or_else(|| self.err(&at, format!("`{}` needs `{key}`", p.distribution)))
         };
         let mie_err = |e: String| self.err(&at, e);
-        let mut dist = match p.distribution.as_str() {
-            "lognormal" => SizeDistribution::lognormal(
-                1.0,
-                need(p.median_radius_um, "median_radius_um")?,
-                need(p.sigma_g, "sigma_g")?,
-            ),
-            "modified_gamma" => SizeDistribution::modified_gamma(
-                1.0,
-                need(p.alpha, "alpha")?,
-                need(p.b, "b")?,
-                need(p.gamma, "gamma")?,
-            ),
-            other => {
-                return Err(self.err(
-                    &at,
-                    format!("distribution `{other}` is not one of: lognormal, modified_gamma"),
-                ));
+        // Per channel, the components of the population (one, or an OPAC mixture).
+        let components: Vec<Vec<Component>> = if p.distribution == "opac" {
+            use crate::particles::opac::OpacType;
+            if p.refractive_index.is_some() {
+                return Err(self.err(&at, "OPAC aerosol types carry their own refractive indices: remove `refractive_index`"));
             }
-        }
-        .map_err(|e| mie_err(e.to_string()))?;
-        match (p.r_min_um, p.r_max_um) {
-            (Some(a), Some(b)) => {
-                dist = dist.truncated(a, b).map_err(|e| mie_err(e.to_string()))?
-            }
-            (None, None) => {}
-            _ => return Err(self.err(&at, "`r_min_um` and `r_max_um` go together")),
-        }
-        let m_text: Vec<&String> = match &p.refractive_index {
-            file::OneOrMany::One(m) => vec![m; nch],
-            file::OneOrMany::Many(v) if v.len() == nch => v.iter().collect(),
-            file::OneOrMany::Many(v) => {
-                return Err(self.err(
+            let name = p
+                .aerosol_type
+                .as_deref()
+                .ok_or_else(|| self.err(&at, "`opac` needs `aerosol_type`"))?;
+            let t = OpacType::from_name(name).ok_or_else(|| {
+                let known: Vec<&str> = OpacType::ALL.iter().map(|t| t.name()).collect();
+                self.err(
                     &at,
                     format!(
-                        "refractive_index has {} entries; give one or one per channel ({nch})",
-                        v.len()
+                        "unknown OPAC aerosol type `{name}` (known: {})",
+                        known.join(", ")
                     ),
-                ));
+                )
+            })?;
+            channels
+                .iter()
+                .map(|c| {
+                    t.components(c.wavelength_nm() * 1e-9)
+                        .map_err(|e| mie_err(e.to_string()))
+                })
+                .collect::<Result<_, _>>()?
+        } else {
+            if p.aerosol_type.is_some() {
+                return Err(self.err(&at, "`aerosol_type` goes with distribution = \"opac\""));
             }
+            let mut dist = match p.distribution.as_str() {
+                "lognormal" => SizeDistribution::lognormal(
+                    1.0,
+                    need(p.median_radius_um, "median_radius_um")?,
+                    need(p.sigma_g, "sigma_g")?,
+                ),
+                "modified_gamma" => SizeDistribution::modified_gamma(
+                    1.0,
+                    need(p.alpha, "alpha")?,
+                    need(p.b, "b")?,
+                    need(p.gamma, "gamma")?,
+                ),
+                other => {
+                    return Err(self.err(
+                        &at,
+                        format!(
+                            "distribution `{other}` is not one of: lognormal, modified_gamma, opac"
+                        ),
+                    ));
+                }
+            }
+            .map_err(|e| mie_err(e.to_string()))?;
+            match (p.r_min_um, p.r_max_um) {
+                (Some(a), Some(b)) => {
+                    dist = dist.truncated(a, b).map_err(|e| mie_err(e.to_string()))?
+                }
+                (None, None) => {}
+                _ => return Err(self.err(&at, "`r_min_um` and `r_max_um` go together")),
+            }
+            let m_text: Vec<&String> = match &p.refractive_index {
+                None => {
+                    return Err(self.err(
+                        &at,
+                        format!("`{}` needs `refractive_index`", p.distribution),
+                    ));
+                }
+                Some(file::OneOrMany::One(m)) => vec![m; nch],
+                Some(file::OneOrMany::Many(v)) if v.len() == nch => v.iter().collect(),
+                Some(file::OneOrMany::Many(v)) => {
+                    return Err(self.err(
+                        &at,
+                        format!(
+                            "refractive_index has {} entries; give one or one per channel ({nch})",
+                            v.len()
+                        ),
+                    ));
+                }
+            };
+            m_text
+                .iter()
+                .map(|m| {
+                    let m = crate::particles::mie::parse_refractive_index(m)
+                        .map_err(|e| self.err(&at, format!("refractive_index: {e}")))?;
+                    Ok(vec![Component {
+                        name: name.clone(),
+                        distribution: dist.clone(),
+                        refractive_index: m,
+                    }])
+                })
+                .collect::<Result<_, InputError>>()?
         };
         let mut optics = Vec::with_capacity(nch);
-        for (k, c) in channels.iter().enumerate() {
-            let m = crate::particles::mie::parse_refractive_index(m_text[k])
-                .map_err(|e| self.err(&at, format!("refractive_index: {e}")))?;
-            let comp = Component {
-                name: name.clone(),
-                distribution: dist.clone(),
-                refractive_index: m,
-            };
+        for (c, comps) in channels.iter().zip(&components) {
             let (o, _) = layer_optics(
-                &[comp],
+                comps,
                 c.wavelength_nm() * 1e-9,
                 &BulkOptions::default(),
                 cache_dir,
