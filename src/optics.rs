@@ -73,6 +73,19 @@ pub struct OpticalAtmosphere {
     pub grey_scattering: bool,
     /// What the gas absorption came from (for the run summary), if the scene has gases.
     pub gas_note: Option<String>,
+    /// How the gas absorption was obtained, if the scene has gases.
+    pub gas_source: Option<GasSource>,
+}
+
+/// How the line-by-line gas absorption of a scene was obtained.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum GasSource {
+    /// Computed line by line at the channel wavenumbers (no table asked for).
+    Direct,
+    /// A cached table was computed line by line and written.
+    TableComputed,
+    /// A cached table was read and interpolated: no line-by-line work.
+    TableReused,
 }
 
 impl OpticalAtmosphere {
@@ -180,12 +193,14 @@ impl OpticalAtmosphere {
             cum_tau_a: Vec::new(),
             grey_scattering,
             gas_note: None,
+            gas_source: None,
         };
         atm.accumulate();
         if let (Some(gas), Some(a)) = (&scene.gas, &scene.atmosphere) {
-            let (tau, note) = gas_layer_tau(scene, a, gas, &atm.edges_m)?;
+            let (tau, note, source) = gas_layer_tau(scene, a, gas, &atm.edges_m)?;
             atm.add_absorption_tau(&tau)?;
             atm.gas_note = Some(note);
+            atm.gas_source = Some(source);
         }
         Ok(atm)
     }
@@ -377,13 +392,13 @@ fn gas_layer_tau(
     a: &Atmosphere,
     gas: &crate::scene::GasAbsorption,
     edges: &[f64],
-) -> Result<(Vec<f64>, String), OpticsError> {
+) -> Result<(Vec<f64>, String, GasSource), OpticsError> {
     use crate::spectroscopy::{GasOpticalDepthTable, WavenumberGrid, layer_optical_depths_at};
     let nch = scene.channels.len();
     let nu: Vec<f64> = scene.channels.iter().map(|c| c.wavenumber_cm1).collect();
     let mol = molecular_edges(scene, a);
     // τ per molecular layer per channel: [mol layer][channel].
-    let (tau_mol, note): (Vec<Vec<f64>>, String) = match &gas.table {
+    let (tau_mol, note, source): (Vec<Vec<f64>>, String, GasSource) = match &gas.table {
         None => {
             let t = layer_optical_depths_at(&a.profile, &gas.lines, &mol, &nu, &gas.options)?;
             let note = format!(
@@ -393,7 +408,7 @@ fn gas_layer_tau(
                 nch,
                 mol.len() - 1
             );
-            (t, note)
+            (t, note, GasSource::Direct)
         }
         Some(spec) => {
             let reusable = if spec.path.is_file() {
@@ -411,13 +426,13 @@ fn gas_layer_tau(
             } else {
                 None
             };
-            let (table, note) = match reusable {
+            let (table, note, source) = match reusable {
                 Some(t) => {
                     let note = format!(
                         "gas absorption: table {} reused (no line-by-line work)",
                         spec.path.display()
                     );
-                    (t, note)
+                    (t, note, GasSource::TableReused)
                 }
                 None => {
                     let grid = WavenumberGrid::new(spec.start_cm1, spec.end_cm1, spec.step_cm1)?;
@@ -435,7 +450,7 @@ fn gas_layer_tau(
                         mol.len() - 1,
                         grid.len
                     );
-                    (t, note)
+                    (t, note, GasSource::TableComputed)
                 }
             };
             // Interpolated columns per channel → [layer][channel].
@@ -446,7 +461,7 @@ fn gas_layer_tau(
             let t = (0..mol.len() - 1)
                 .map(|l| per_channel.iter().map(|c| c[l]).collect())
                 .collect();
-            (t, note)
+            (t, note, source)
         }
     };
     let mut tau = vec![0.0; (edges.len().saturating_sub(1)) * nch];
@@ -461,7 +476,7 @@ fn gas_layer_tau(
             tau[l * nch + k] = tau_mol[m][k] * scale;
         }
     }
-    Ok((tau, note))
+    Ok((tau, note, source))
 }
 
 /// Layer edges: the molecular grid (from the profile bottom or the surface to the top, in steps

@@ -489,3 +489,54 @@ fn co2_dial_on_off_ratio_equals_differential_transmission() {
     }
     assert!(judged > 50, "{judged} gates judged");
 }
+
+/// With a cached gas table, the second run computes no line-by-line absorption although its
+/// gates, geometry and channels (inside the table's grid) changed, and its optical depths equal
+/// those of a direct line-by-line computation to the table's interpolation accuracy.
+#[test]
+fn cached_gas_table_is_reused_when_gates_geometry_and_channels_change() {
+    use lidarsim::optics::GasSource;
+    let dir = tempfile::tempdir().unwrap();
+    let base = lidarsim::scene::DEFAULT_SCENE_TOML.replacen(
+        "molecules = [\"CO2\"]",
+        "molecules = [\"CO2\"]\ntable = \"co2.tau\"\ntable_start_cm1 = 6358.0\ntable_end_cm1 = 6363.0",
+        1,
+    );
+    assert_ne!(base, lidarsim::scene::DEFAULT_SCENE_TOML);
+    let path = dir.path().join("dial.toml");
+    let build = |text: &str| {
+        std::fs::write(&path, text).unwrap();
+        let scene = Scene::read(&path).unwrap();
+        (OpticalAtmosphere::build(&scene).unwrap(), scene)
+    };
+    let (first, _) = build(&base);
+    assert_eq!(first.gas_source, Some(GasSource::TableComputed));
+    // New gates, a slant view from another altitude, and a new on-line inside the grid.
+    let changed = base
+        .replacen("end_m = 8100.0", "end_m = 7100.0", 1)
+        .replacen("zenith_angle_deg = 180.0", "zenith_angle_deg = 160.0", 1)
+        .replacen("altitude_m = 8000.0", "altitude_m = 7000.0", 1)
+        .replacen("wavenumber_cm1 = 6359.967", "wavenumber_cm1 = 6359.95", 1);
+    let (second, scene) = build(&changed);
+    assert_eq!(second.gas_source, Some(GasSource::TableReused));
+    // Against the direct line-by-line path (no table) for the changed scene.
+    let direct = lidarsim::scene::Scene::from_toml(
+        &path,
+        &changed.replacen(
+            "table = \"co2.tau\"\ntable_start_cm1 = 6358.0\ntable_end_cm1 = 6363.0",
+            "",
+            1,
+        ),
+    )
+    .unwrap();
+    let direct = OpticalAtmosphere::build(&direct).unwrap();
+    assert_eq!(direct.gas_source, Some(GasSource::Direct));
+    for k in 0..scene.channels.len() {
+        let (_, a_table) = second.cumulative_tau(1e9, k);
+        let (_, a_direct) = direct.cumulative_tau(1e9, k);
+        assert!(
+            (a_table / a_direct - 1.0).abs() < 1e-4,
+            "channel {k}: {a_table} vs {a_direct}"
+        );
+    }
+}

@@ -345,6 +345,12 @@ impl<'a> Tracer<'a> {
             // function centred on the direction to the receiver instead; every channel is then
             // weighted by P_k(Θ)/[(1 − ε) P_0(Θ) + ε P_0(Θ_rx)] (balance heuristic), which is
             // unbiased and caps the local-estimate spikes of the forward peak.
+            // A collision can only land in a layer with scatterers; rounding at a layer edge
+            // must not make it pick from none.
+            if atm.components[layer].is_empty() {
+                self.stats.roulette_kills += 1;
+                return;
+            }
             let to_rx = s.receiver - pos;
             let d_rx = to_rx.length();
             let omega_rx = to_rx / d_rx;
