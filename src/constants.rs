@@ -8,13 +8,13 @@ pub const BOLTZMANN_J_PER_K: f64 = 1.380_649e-23;
 pub const AVOGADRO_PER_MOL: f64 = 6.022_140_76e23;
 /// Planck constant [J s].
 pub const PLANCK_J_S: f64 = 6.626_070_15e-34;
-/// Atomic mass constant [kg].
+/// Atomic mass constant \[kg\].
 pub const ATOMIC_MASS_KG: f64 = 1.660_539_066_60e-27;
 /// Second radiation constant c2 = h c / k [cm K], as HITRAN uses it.
 pub const C2_CM_K: f64 = 1.438_776_877;
 /// Standard gravity [m/s²].
 pub const STANDARD_GRAVITY_M_PER_S2: f64 = 9.806_65;
-/// One standard atmosphere [Pa].
+/// One standard atmosphere \[Pa\].
 pub const STANDARD_ATMOSPHERE_PA: f64 = 101_325.0;
 /// Molar mass of dry air [kg/mol] (US Standard Atmosphere 1976).
 pub const MOLAR_MASS_DRY_AIR_KG_PER_MOL: f64 = 0.028_964_4;

@@ -50,7 +50,7 @@ pub struct Component {
 /// Layers × channels of scattering and absorption; see the module documentation.
 #[derive(Debug, Clone)]
 pub struct OpticalAtmosphere {
-    /// Layer edges [m], strictly increasing; layer l spans edges_m[l]..edges_m[l+1]. Below the
+    /// Layer edges \[m\], strictly increasing; layer l spans edges_m\[l\]..edges_m[l+1]. Below the
     /// first and above the last edge is vacuum.
     pub edges_m: Vec<f64>,
     /// Number of channels.
@@ -251,12 +251,12 @@ impl OpticalAtmosphere {
         self.edges_m.len().saturating_sub(1)
     }
 
-    /// Bottom edge [m] (−∞ for an empty atmosphere).
+    /// Bottom edge \[m\] (−∞ for an empty atmosphere).
     pub fn bottom_m(&self) -> f64 {
         self.edges_m.first().copied().unwrap_or(f64::NEG_INFINITY)
     }
 
-    /// Top edge [m].
+    /// Top edge \[m\].
     pub fn top_m(&self) -> f64 {
         self.edges_m.last().copied().unwrap_or(f64::NEG_INFINITY)
     }
@@ -269,7 +269,7 @@ impl OpticalAtmosphere {
     }
 
     /// Cumulative vertical optical depth (scattering, absorption) of channel k at altitude z:
-    /// T(z) = cum[l] + (z − edge_l) σ_l, constant outside the atmosphere.
+    /// T(z) = cum\[l\] + (z − edge_l) σ_l, constant outside the atmosphere.
     #[inline]
     pub fn cumulative_tau(&self, z: f64, k: usize) -> (f64, f64) {
         if self.n_layers() == 0 {

@@ -56,15 +56,15 @@ pub struct Returns {
     pub source: Source,
     /// Channel names, in scene order.
     pub channels: Vec<String>,
-    /// Receiver fields of view (full angles) [mrad], in scene order.
+    /// Receiver fields of view (full angles) \[mrad\], in scene order.
     pub fov_full_angle_mrad: Vec<f64>,
-    /// Gate centres [m].
+    /// Gate centres \[m\].
     pub range_m: Vec<f64>,
     /// Order bins.
     pub orders: Vec<Order>,
-    /// Expected received energy per pulse [J], index [`Returns::index`].
+    /// Expected received energy per pulse \[J\], index [`Returns::index`].
     pub energy_j: Vec<f64>,
-    /// Standard error of `energy_j` [J] (0 for analytic returns).
+    /// Standard error of `energy_j` \[J\] (0 for analytic returns).
     pub stderr_j: Vec<f64>,
 }
 

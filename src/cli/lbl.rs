@@ -33,7 +33,7 @@ pub struct Args {
     /// Pressure [atm] (cross-section mode).
     #[arg(long)]
     pressure_atm: Option<f64>,
-    /// Temperature [K] (cross-section mode).
+    /// Temperature \[K\] (cross-section mode).
     #[arg(long)]
     temperature_k: Option<f64>,
     /// First wavenumber [cm⁻¹].
@@ -79,16 +79,16 @@ pub struct LayerArgs {
     /// carry 330; the shape, which falls above 80 km, is kept).
     #[arg(long)]
     co2_ppmv: Option<f64>,
-    /// Layer mode: sensor altitude [m].
+    /// Layer mode: sensor altitude \[m\].
     #[arg(long)]
     sensor_altitude_m: Option<f64>,
-    /// Layer mode: zenith angle of the line of sight [deg] (0 up, 180 nadir).
+    /// Layer mode: zenith angle of the line of sight \[deg\] (0 up, 180 nadir).
     #[arg(long)]
     zenith_deg: Option<f64>,
-    /// Layer mode: surface altitude [m].
+    /// Layer mode: surface altitude \[m\].
     #[arg(long, default_value_t = 0.0)]
     surface_altitude_m: f64,
-    /// Layer mode: layer thickness [m].
+    /// Layer mode: layer thickness \[m\].
     #[arg(long, default_value_t = 1000.0)]
     layer_m: f64,
     /// Layer mode: also save the optical-depth table (binary, reloadable) here.

@@ -47,13 +47,13 @@ pub struct Args {
     /// Size parameter x = 2 pi r / lambda of a single sphere.
     #[arg(long, conflicts_with = "distribution")]
     size_parameter: Option<f64>,
-    /// Scattering angles [deg] at which to print S1, S2 for a single sphere (comma-separated).
+    /// Scattering angles \[deg\] at which to print S1, S2 for a single sphere (comma-separated).
     #[arg(long, value_delimiter = ',', requires = "size_parameter")]
     angles_deg: Vec<f64>,
     /// Size distribution (instead of --size-parameter).
     #[arg(long, value_enum)]
     distribution: Option<Distribution>,
-    /// Wavelength in the medium [nm] (distributions).
+    /// Wavelength in the medium \[nm\] (distributions).
     #[arg(long)]
     wavelength_nm: Option<f64>,
     /// Log-normal (or single OPAC component) total number density [cm^-3].

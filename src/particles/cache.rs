@@ -20,7 +20,7 @@ use crate::input::parse_f64;
 /// What a scene needs of a particle population at one wavelength.
 #[derive(Debug, Clone, PartialEq)]
 pub struct LayerOptics {
-    /// Mean extinction cross-section per particle [m²].
+    /// Mean extinction cross-section per particle \[m²\].
     pub extinction_cross_section_m2: f64,
     /// Single-scattering albedo.
     pub single_scattering_albedo: f64,

@@ -73,7 +73,7 @@ pub struct LogNormal {
 }
 
 impl LogNormal {
-    /// A log-normal mode with total number density `N` [cm⁻³] > 0, median radius `r_g` [µm] > 0
+    /// A log-normal mode with total number density `N` [cm⁻³] > 0, median radius `r_g` \[µm\] > 0
     /// and geometric standard deviation `σ_g` in (1, 10].
     pub fn new(
         number_density_per_cm3: f64,
@@ -110,7 +110,7 @@ impl LogNormal {
     pub fn number_density_per_cm3(&self) -> f64 {
         self.number_density_per_cm3
     }
-    /// Median radius r_g [µm].
+    /// Median radius r_g \[µm\].
     pub fn median_radius_um(&self) -> f64 {
         self.median_radius_um
     }
@@ -318,7 +318,7 @@ impl SizeDistribution {
         }
     }
 
-    /// Effective radius `r_eff = ⟨r³⟩/⟨r²⟩` [µm] (Hansen & Travis 1974, Eq. 2.53), untruncated.
+    /// Effective radius `r_eff = ⟨r³⟩/⟨r²⟩` \[µm\] (Hansen & Travis 1974, Eq. 2.53), untruncated.
     pub fn effective_radius_um(&self) -> f64 {
         self.moment(3.0) / self.moment(2.0)
     }
@@ -351,7 +351,7 @@ impl SizeDistribution {
         }
     }
 
-    /// Radius [µm] below which the fraction `p` of the geometric cross-section lies.
+    /// Radius \[µm\] below which the fraction `p` of the geometric cross-section lies.
     fn area_quantile(&self, p: f64) -> f64 {
         // Bisection in ln r over 1e-7 … 1e7 µm.
         let (mut lo, mut hi) = ((1e-7f64).ln(), (1e7f64).ln());
@@ -442,7 +442,7 @@ pub struct BulkOptions {
     pub min_step_x: f64,
     /// Most grid points per mode. Default 2²⁰.
     pub max_points: usize,
-    /// Scattering angles [deg] of the phase function (0 … 180, increasing); `None` chooses
+    /// Scattering angles \[deg\] of the phase function (0 … 180, increasing); `None` chooses
     /// [`default_angle_grid`]. An empty vector skips the phase function.
     pub angles_deg: Option<Vec<f64>>,
 }
@@ -464,7 +464,7 @@ impl Default for BulkOptions {
 pub struct ModeConvergence {
     /// Component name.
     pub component: String,
-    /// Radius range integrated [µm].
+    /// Radius range integrated \[µm\].
     pub r_range_um: (f64, f64),
     /// Final size-parameter step.
     pub step_x: f64,
@@ -479,24 +479,24 @@ pub struct ModeConvergence {
 /// Bulk optical properties of a size distribution (per particle, number-weighted).
 #[derive(Debug, Clone, PartialEq)]
 pub struct BulkOptics {
-    /// Wavelength [m].
+    /// Wavelength \[m\].
     pub wavelength_m: f64,
-    /// Mean extinction cross-section per particle ⟨Cext⟩ [m²]: a layer's extinction
+    /// Mean extinction cross-section per particle ⟨Cext⟩ \[m²\]: a layer's extinction
     /// coefficient [1/m] is its number density [1/m³] times this.
     pub extinction_cross_section_m2: f64,
-    /// Mean scattering cross-section per particle ⟨Csca⟩ [m²].
+    /// Mean scattering cross-section per particle ⟨Csca⟩ \[m²\].
     pub scattering_cross_section_m2: f64,
-    /// Mean backscatter ("radar") cross-section ⟨Cback⟩ = 4π ⟨dCsca/dΩ(180°)⟩ [m²].
+    /// Mean backscatter ("radar") cross-section ⟨Cback⟩ = 4π ⟨dCsca/dΩ(180°)⟩ \[m²\].
     pub backscatter_cross_section_m2: f64,
     /// ⟨Csca⟩/⟨Cext⟩.
     pub single_scattering_albedo: f64,
     /// Asymmetry parameter ⟨g Csca⟩/⟨Csca⟩.
     pub asymmetry: f64,
-    /// Extinction-to-backscatter ratio 4π⟨Cext⟩/⟨Cback⟩ [sr].
+    /// Extinction-to-backscatter ratio 4π⟨Cext⟩/⟨Cback⟩ \[sr\].
     pub lidar_ratio_sr: f64,
     /// Number density of the distribution as given [1/m³].
     pub number_density_per_m3: f64,
-    /// Effective radius ∫r³n/∫r²n over the integrated range [µm] (all components).
+    /// Effective radius ∫r³n/∫r²n over the integrated range \[µm\] (all components).
     pub effective_radius_um: f64,
     /// Phase function (normalised to 4π) with metadata; empty angles if none was asked for.
     pub phase: PhaseTable,
@@ -521,7 +521,7 @@ impl BulkOptics {
     }
 }
 
-/// The default angle grid [deg] for a distribution whose largest effective size parameter is
+/// The default angle grid \[deg\] for a distribution whose largest effective size parameter is
 /// `x_eff`: the 1391-angle grid of the reference files (0.01° to 1°, 0.05° to 5°, 0.1° to 20°,
 /// 0.25° to 160°, 0.1° to 175°, 0.02° to 178°, 0.01° to 180°), with the forward step reduced
 /// below 0.01° when the diffraction peak (width ≈ 1/x_eff rad) is narrower than 0.2°, so that it

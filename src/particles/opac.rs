@@ -5,7 +5,7 @@
 //! the five components the continental, urban, maritime and Arctic types are made of, in their
 //! **dry (0 % relative humidity)** state, and the number densities of those types:
 //!
-//! | component | meaning | σ_g | r_mod [µm] | r_min…r_max [µm] |
+//! | component | meaning | σ_g | r_mod \[µm\] | r_min…r_max \[µm\] |
 //! |---|---|---|---|---|
 //! | `inso` | water-insoluble (soil particles, organic material) | 2.51 | 0.471 | 0.005…20 |
 //! | `waso` | water-soluble (sulfates, nitrates, organics) | 2.24 | 0.0212 | 0.005…20 |
@@ -74,11 +74,11 @@ pub enum OpacComponent {
 pub struct OpacLognormal {
     /// Geometric standard deviation σ_g.
     pub sigma_g: f64,
-    /// Number mode (median) radius r_modN [µm].
+    /// Number mode (median) radius r_modN \[µm\].
     pub mode_radius_um: f64,
-    /// Smallest radius of the distribution [µm].
+    /// Smallest radius of the distribution \[µm\].
     pub r_min_um: f64,
-    /// Largest radius of the distribution [µm].
+    /// Largest radius of the distribution \[µm\].
     pub r_max_um: f64,
 }
 
@@ -404,7 +404,7 @@ fn insert_meta(b: &mut BulkOptics, kv: &[(&str, String)]) {
     }
 }
 
-/// Per component (in [`OpacComponent::ALL`] order): (wavelength [µm], n, k) rows, increasing.
+/// Per component (in [`OpacComponent::ALL`] order): (wavelength \[µm\], n, k) rows, increasing.
 type IndexTable = [Vec<(f64, f64, f64)>; 5];
 
 fn refractive_index_table() -> &'static IndexTable {

@@ -648,7 +648,8 @@ mod tests {
         let gamma = rho / (2.0 - rho);
         let c1 = crate::particles::builtin_table("bissonnette_c1_1064nm").unwrap();
         let c1_cdf = table_cdf(&c1);
-        let cases: Vec<(&str, PhaseFunction, Box<dyn Fn(f64) -> f64>)> = vec![
+        type Cdf = Box<dyn Fn(f64) -> f64>;
+        let cases: Vec<(&str, PhaseFunction, Cdf)> = vec![
             (
                 "isotropic",
                 PhaseFunction::Isotropic,

@@ -14,7 +14,7 @@ use thiserror::Error;
 /// (Bucholtz 1995, after Eq. 2: N_s = 2.54743e19 cm⁻³).
 pub const STANDARD_AIR_NUMBER_DENSITY_PER_M3: f64 = 2.547_43e25;
 
-/// Bucholtz (1995) Table 1: wavelength [µm] and depolarisation factor ρ_n [%].
+/// Bucholtz (1995) Table 1: wavelength \[µm\] and depolarisation factor ρ_n [%].
 const DEPOLARISATION_TABLE: [(f64, f64); 36] = [
     (0.200, 4.545),
     (0.205, 4.384),
@@ -72,7 +72,7 @@ fn check(wavelength_nm: f64, min_nm: f64) -> Result<f64, RayleighError> {
 }
 
 /// n_s − 1 of standard air (15 °C, 101325 Pa, 300 ppm CO2), Peck & Reeder (1972), Eq. 2:
-/// 10⁸ (n_s − 1) = 8060.51 + 2480990/(132.274 − ν²) + 17455.7/(39.32957 − ν²), ν = 1/λ[µm].
+/// 10⁸ (n_s − 1) = 8060.51 + 2480990/(132.274 − ν²) + 17455.7/(39.32957 − ν²), ν = 1/λ\[µm\].
 pub fn refractivity_standard_air(wavelength_nm: f64) -> Result<f64, RayleighError> {
     let lam_um = check(wavelength_nm, 230.0)?;
     let nu2 = 1.0 / (lam_um * lam_um);
@@ -96,7 +96,7 @@ pub fn depolarisation_factor(wavelength_nm: f64) -> Result<f64, RayleighError> {
     Ok(percent * 1e-2)
 }
 
-/// Total Rayleigh scattering cross-section per molecule of air [m²] (Bucholtz 1995, Eq. 2).
+/// Total Rayleigh scattering cross-section per molecule of air \[m²\] (Bucholtz 1995, Eq. 2).
 pub fn cross_section_m2(wavelength_nm: f64) -> Result<f64, RayleighError> {
     let lam_m = check(wavelength_nm, 230.0)? * 1e-6;
     let n = 1.0 + refractivity_standard_air(wavelength_nm)?;
@@ -112,7 +112,7 @@ pub fn cross_section_m2(wavelength_nm: f64) -> Result<f64, RayleighError> {
 mod tests {
     use super::*;
 
-    /// λ [nm], n_s − 1, ρ_n, σ [cm²] from shared/data/rayleigh/rayleigh_bucholtz.csv: the same
+    /// λ \[nm\], n_s − 1, ρ_n, σ [cm²] from shared/data/rayleigh/rayleigh_bucholtz.csv: the same
     /// formulas evaluated independently (Python), so agreement checks the transcription.
     const REFERENCE: [(f64, f64, f64, f64); 4] = [
         (355.0, 0.000285698, 0.0301, 2.75515e-26),

@@ -39,7 +39,7 @@ pub const REQUIRED_KEYS: [&str; 3] = ["wavelength_nm", "refractive_index", "dist
 pub struct PhaseTable {
     /// `# key = value` metadata, in file order.
     pub meta: Vec<(String, String)>,
-    /// Scattering angles [deg], strictly increasing from 0 to 180.
+    /// Scattering angles \[deg\], strictly increasing from 0 to 180.
     pub theta_deg: Vec<f64>,
     /// Phase function normalised to 4π over the sphere.
     pub phase_4pi: Vec<f64>,

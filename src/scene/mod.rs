@@ -92,28 +92,28 @@ pub enum BeamProfile {
 /// A monostatic, coaxial lidar.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Lidar {
-    /// Altitude of the lidar above the scene's zero [m].
+    /// Altitude of the lidar above the scene's zero \[m\].
     pub altitude_m: f64,
-    /// Pointing: angle from the upward vertical [deg] (0 looks up, 180 looks down).
+    /// Pointing: angle from the upward vertical \[deg\] (0 looks up, 180 looks down).
     pub zenith_angle_deg: f64,
-    /// Pointing azimuth [deg] (matters only for the direction of a slant path).
+    /// Pointing azimuth \[deg\] (matters only for the direction of a slant path).
     pub azimuth_deg: f64,
-    /// Pulse energy [J].
+    /// Pulse energy \[J\].
     pub pulse_energy_j: f64,
-    /// Full divergence angle of the beam [mrad] (0: pencil beam).
+    /// Full divergence angle of the beam \[mrad\] (0: pencil beam).
     pub beam_divergence_full_angle_mrad: f64,
     /// Shape of the divergence.
     pub beam_profile: BeamProfile,
-    /// Telescope diameter [m].
+    /// Telescope diameter \[m\].
     pub telescope_diameter_m: f64,
     /// Receiver optical efficiency (0–1].
     pub optical_efficiency: f64,
-    /// Receiver fields of view, full angles [mrad], all tallied in one run.
+    /// Receiver fields of view, full angles \[mrad\], all tallied in one run.
     pub fov_full_angle_mrad: Vec<f64>,
 }
 
 impl Lidar {
-    /// Telescope collecting area [m²].
+    /// Telescope collecting area \[m²\].
     pub fn telescope_area_m2(&self) -> f64 {
         std::f64::consts::PI * 0.25 * self.telescope_diameter_m * self.telescope_diameter_m
     }
@@ -136,7 +136,7 @@ pub struct Channel {
 }
 
 impl Channel {
-    /// Vacuum wavelength [nm].
+    /// Vacuum wavelength \[nm\].
     pub fn wavelength_nm(&self) -> f64 {
         1e7 / self.wavenumber_cm1
     }
@@ -145,20 +145,20 @@ impl Channel {
 /// Range gates [start, start + count·width).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Gates {
-    /// Start of the first gate [m].
+    /// Start of the first gate \[m\].
     pub start_m: f64,
-    /// Gate width [m].
+    /// Gate width \[m\].
     pub width_m: f64,
     /// Number of gates.
     pub count: usize,
 }
 
 impl Gates {
-    /// End of the last gate [m].
+    /// End of the last gate \[m\].
     pub fn end_m(&self) -> f64 {
         self.start_m + self.width_m * self.count as f64
     }
-    /// Centre of gate i [m].
+    /// Centre of gate i \[m\].
     pub fn centre_m(&self, i: usize) -> f64 {
         self.start_m + (i as f64 + 0.5) * self.width_m
     }
@@ -169,9 +169,9 @@ impl Gates {
 pub struct Atmosphere {
     /// The profile (altitudes in the scene's frame).
     pub profile: Profile,
-    /// Thickness of the optical layers the molecular atmosphere is cut into [m].
+    /// Thickness of the optical layers the molecular atmosphere is cut into \[m\].
     pub layer_thickness_m: f64,
-    /// Top of the model atmosphere [m].
+    /// Top of the model atmosphere \[m\].
     pub top_m: f64,
     /// Rayleigh scattering on or off.
     pub rayleigh: bool,
@@ -184,9 +184,9 @@ pub struct Atmosphere {
 pub struct Layer {
     /// Name for messages.
     pub name: String,
-    /// Base altitude [m].
+    /// Base altitude \[m\].
     pub base_m: f64,
-    /// Top altitude [m].
+    /// Top altitude \[m\].
     pub top_m: f64,
     /// Particle extinction coefficient per channel [1/m].
     pub extinction_per_m: Vec<f64>,
@@ -201,7 +201,7 @@ pub struct Layer {
 /// A Lambertian surface.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Surface {
-    /// Altitude [m].
+    /// Altitude \[m\].
     pub altitude_m: f64,
     /// Albedo per channel.
     pub albedo: Vec<f64>,

@@ -27,13 +27,13 @@ use crate::atmosphere::Profile;
 /// One Curtis-Godson layer.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct CgLayer {
-    /// Bottom altitude [m].
+    /// Bottom altitude \[m\].
     pub bottom_m: f64,
-    /// Top altitude [m].
+    /// Top altitude \[m\].
     pub top_m: f64,
-    /// Curtis-Godson pressure p̄ [Pa].
+    /// Curtis-Godson pressure p̄ \[Pa\].
     pub pressure_pa: f64,
-    /// Curtis-Godson temperature T̄ [K].
+    /// Curtis-Godson temperature T̄ \[K\].
     pub temperature_k: f64,
     /// Vertical air column [molecules/cm²].
     pub air_column_per_cm2: f64,
@@ -262,12 +262,12 @@ pub fn line_gases(
 /// A lidar's line of sight in plane-parallel geometry.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct LineOfSight {
-    /// Sensor altitude [m].
+    /// Sensor altitude \[m\].
     pub sensor_altitude_m: f64,
-    /// Zenith angle of the pointing [deg]: 0 looks straight up, 180 straight down (nadir);
+    /// Zenith angle of the pointing \[deg\]: 0 looks straight up, 180 straight down (nadir);
     /// 90 (horizontal) is not plane-parallel and is rejected.
     pub zenith_angle_deg: f64,
-    /// Surface altitude [m] (where a downward path ends).
+    /// Surface altitude \[m\] (where a downward path ends).
     pub surface_altitude_m: f64,
 }
 
@@ -287,7 +287,7 @@ impl LineOfSight {
         Ok(mu)
     }
 
-    /// Bottom and top altitude of the path through `profile` [m]: sensor to profile top when
+    /// Bottom and top altitude of the path through `profile` \[m\]: sensor to profile top when
     /// looking up, surface to sensor when looking down.
     pub fn vertical_extent(&self, profile: &Profile) -> Result<(f64, f64), SpectroscopyError> {
         self.mu()?;

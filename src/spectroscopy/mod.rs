@@ -56,7 +56,7 @@ pub enum SpectroscopyError {
         molecule_id: u8,
         /// HITRAN local isotopologue number.
         iso_id: u8,
-        /// Requested temperature [K].
+        /// Requested temperature \[K\].
         temperature_k: f64,
         /// Why.
         reason: String,
@@ -86,13 +86,13 @@ pub enum SpectroscopyError {
     /// An altitude outside the profile.
     #[error("altitude {altitude_m} m is outside the profile `{profile}` ({bottom_m} to {top_m} m)")]
     OutsideProfile {
-        /// Requested altitude [m].
+        /// Requested altitude \[m\].
         altitude_m: f64,
         /// Profile name.
         profile: String,
-        /// Lowest level [m].
+        /// Lowest level \[m\].
         bottom_m: f64,
-        /// Highest level [m].
+        /// Highest level \[m\].
         top_m: f64,
     },
     /// A saved table that does not match what it is asked for.

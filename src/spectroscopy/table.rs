@@ -115,7 +115,7 @@ const MAGIC: &[u8; 16] = b"LIDARSIM-GASTAU1";
 /// Vertical gas absorption optical depth per layer on a wavenumber grid (module docs).
 #[derive(Debug, Clone, PartialEq)]
 pub struct GasOpticalDepthTable {
-    /// Layer edges [m], increasing; layer l is [edges_m[l], edges_m[l+1]].
+    /// Layer edges \[m\], increasing; layer l is [edges_m\[l\], edges_m[l+1]].
     pub edges_m: Vec<f64>,
     /// The wavenumber grid.
     pub grid: WavenumberGrid,

@@ -22,7 +22,7 @@ const EMBEDDED_NAME: &str = "<embedded data/tips/tips2021_q.csv>";
 /// The TIPS grid of one isotopologue.
 #[derive(Debug, Clone)]
 pub struct TipsGrid {
-    /// Temperatures [K], strictly increasing.
+    /// Temperatures \[K\], strictly increasing.
     pub temperature_k: Vec<f64>,
     /// Q at those temperatures.
     pub q: Vec<f64>,

@@ -41,7 +41,7 @@ pub struct Conventions {
     pub c2_cm_k: f64,
     /// Boltzmann constant [J/K] (Doppler width).
     pub boltzmann_j_per_k: f64,
-    /// Atomic mass constant [kg] (Doppler width).
+    /// Atomic mass constant \[kg\] (Doppler width).
     pub atomic_mass_kg: f64,
     /// Speed of light [m/s] (Doppler width).
     pub speed_of_light_m_per_s: f64,
@@ -203,9 +203,9 @@ impl WavenumberGrid {
 /// The state of the gas mixture at which cross-sections are evaluated.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct GasState {
-    /// Total pressure [Pa].
+    /// Total pressure \[Pa\].
     pub pressure_pa: f64,
-    /// Temperature [K].
+    /// Temperature \[K\].
     pub temperature_k: f64,
     /// Volume mixing ratio of the absorbing molecule itself (self broadening), [mol/mol].
     pub self_vmr: f64,

@@ -137,7 +137,7 @@ pub struct McResult {
     pub flux_stderr: Flux,
     /// Counters.
     pub stats: RunStats,
-    /// Wall-clock time of the transport [s].
+    /// Wall-clock time of the transport \[s\].
     pub wall_s: f64,
     /// Photons actually traced.
     pub photons: u64,
