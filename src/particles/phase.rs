@@ -648,7 +648,7 @@ mod tests {
         let gamma = rho / (2.0 - rho);
         let c1 = crate::particles::builtin_table("bissonnette_c1_1064nm").unwrap();
         let c1_cdf = table_cdf(&c1);
-        type Cdf = Box<dyn Fn(f64) -> f64>;
+        type Cdf<'a> = Box<dyn Fn(f64) -> f64 + 'a>;
         let cases: Vec<(&str, PhaseFunction, Cdf)> = vec![
             (
                 "isotropic",
