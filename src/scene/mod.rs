@@ -721,6 +721,9 @@ impl Validator<'_> {
                 "makes more than a million layers",
             ));
         }
+        let rayleigh_on = a.rayleigh.unwrap_or(true);
+        // Bucholtz's depolarisation and cross-section are needed only with Rayleigh scattering
+        // on; a channel outside their range is an error then, and only then.
         let depolarisation_factor = match &a.depolarization_factor {
             Some(v) => {
                 let at = sec.key("depolarization_factor");
@@ -730,19 +733,13 @@ impl Validator<'_> {
                 }
                 d
             }
-            None => {
-                let mut d = Vec::new();
-                for c in channels {
-                    d.push(
-                        rayleigh::depolarisation_factor(c.wavelength_nm()).map_err(|e| {
-                            self.err(&KeyPath::table("atmosphere").key("rayleigh"), e.to_string())
-                        })?,
-                    );
-                }
-                d
-            }
+            None if rayleigh_on => channels
+                .iter()
+                .map(|c| rayleigh::depolarisation_factor(c.wavelength_nm()))
+                .collect::<Result<_, _>>()
+                .map_err(|e| self.err(&sec.key("rayleigh"), e.to_string()))?,
+            None => vec![0.0; channels.len()],
         };
-        let rayleigh_on = a.rayleigh.unwrap_or(true);
         if rayleigh_on {
             for (i, c) in channels.iter().enumerate() {
                 rayleigh::cross_section_m2(c.wavelength_nm())
