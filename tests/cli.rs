@@ -116,3 +116,24 @@ fn bench_reports_figure_of_merit() {
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(stdout.contains("FOM"), "{stdout}");
 }
+
+#[test]
+fn zero_photons_runs_the_analytic_equation_only() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = Command::new(lidarsim_bin())
+        .args(["run", "--photons", "0", "--out"])
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let csv = std::fs::read_to_string(dir.path().join("returns.csv")).unwrap();
+    let mut lines = csv.lines();
+    assert_eq!(lines.next(), Some(HEADER));
+    let rows: Vec<&str> = lines.collect();
+    assert_eq!(rows.len(), 2 * 2 * 355);
+    assert!(rows.iter().all(|r| r.starts_with("analytic,")));
+}

@@ -19,7 +19,8 @@ pub struct Args {
     /// Output directory (created if needed); receives returns.csv and summary.json.
     #[arg(long, default_value = "out")]
     pub out: PathBuf,
-    /// Photon packets (overrides the scene's `simulation.photons`).
+    /// Photon packets (overrides the scene's `simulation.photons`); 0 runs only the analytic
+    /// single-scatter lidar equation.
     #[arg(long)]
     pub photons: Option<u64>,
     /// Random seed (overrides `simulation.seed`).
@@ -53,19 +54,24 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         args.ddis_epsilon
     );
     opts.ddis_epsilon = args.ddis_epsilon;
-    let mc = transport::run(&scene, &atm, &opts)?;
+    // Skip what the scene does not need: 0 photons is the analytic equation alone.
+    let mc = if opts.photons > 0 {
+        Some(transport::run(&scene, &atm, &opts)?)
+    } else {
+        None
+    };
 
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create the output directory {}", args.out.display()))?;
     let csv = args.out.join("returns.csv");
-    returns::write_csv(&csv, &[&mc.returns, &analytic])
-        .with_context(|| format!("cannot write {}", csv.display()))?;
+    let sets: Vec<&Returns> = mc.iter().map(|m| &m.returns).chain([&analytic]).collect();
+    returns::write_csv(&csv, &sets).with_context(|| format!("cannot write {}", csv.display()))?;
     let summary = args.out.join("summary.json");
-    write_summary(&summary, &scene, &mc)
+    write_summary(&summary, &scene, mc.as_ref())
         .with_context(|| format!("cannot write {}", summary.display()))?;
 
     let mut out = std::io::stdout().lock();
-    print_summary(&mut out, &scene, &mc, &analytic)?;
+    print_summary(&mut out, &scene, mc.as_ref(), &analytic)?;
     if let Some(note) = &atm.gas_note {
         writeln!(out, "{note}")?;
     }
@@ -76,7 +82,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 fn print_summary(
     out: &mut impl Write,
     scene: &Scene,
-    mc: &McResult,
+    mc: Option<&McResult>,
     analytic: &Returns,
 ) -> std::io::Result<()> {
     let name = if scene.description.is_empty() {
@@ -85,6 +91,18 @@ fn print_summary(
         scene.description.clone()
     };
     writeln!(out, "scene: {name}")?;
+    let Some(mc) = mc else {
+        writeln!(out, "analytic single scattering only (0 photons)")?;
+        for (k, ch) in analytic.channels.iter().enumerate() {
+            for (f, fov) in analytic.fov_full_angle_mrad.iter().enumerate() {
+                let an: f64 = (0..analytic.range_m.len())
+                    .map(|g| analytic.energy(k, f, g, Order::Exactly(1)).unwrap_or(0.0))
+                    .sum();
+                writeln!(out, "  channel {ch}, FOV {fov} mrad: all gates {an:.4e} J")?;
+            }
+        }
+        return Ok(());
+    };
     writeln!(
         out,
         "transport: {} photons, {} scattering events in {:.2} s on {} threads ({:.2} M events/s)",
@@ -121,7 +139,19 @@ fn print_summary(
     Ok(())
 }
 
-fn write_summary(path: &std::path::Path, scene: &Scene, mc: &McResult) -> std::io::Result<()> {
+fn write_summary(
+    path: &std::path::Path,
+    scene: &Scene,
+    mc: Option<&McResult>,
+) -> std::io::Result<()> {
+    let Some(mc) = mc else {
+        let json = serde_json::json!({
+            "scene": scene.path.display().to_string(),
+            "description": scene.description,
+            "photons": 0,
+        });
+        return write_json(path, &json);
+    };
     let s = &mc.stats;
     let json = serde_json::json!({
         "scene": scene.path.display().to_string(),
@@ -140,6 +170,11 @@ fn write_summary(path: &std::path::Path, scene: &Scene, mc: &McResult) -> std::i
             "escaped": s.escaped,
         },
     });
+    write_json(path, &json)
+}
+
+/// Write JSON through a temporary file and a rename.
+fn write_json(path: &std::path::Path, json: &serde_json::Value) -> std::io::Result<()> {
     let tmp = path.with_extension("json.tmp");
     std::fs::write(
         &tmp,

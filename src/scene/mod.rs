@@ -210,7 +210,7 @@ pub struct Surface {
 /// Monte Carlo settings.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Simulation {
-    /// Number of photon packets.
+    /// Number of photon packets (0: analytic single scattering only, no Monte Carlo).
     pub photons: u64,
     /// Random seed.
     pub seed: u64,
@@ -1202,10 +1202,11 @@ impl Validator<'_> {
                 "needs at least 2 batches for error bars",
             ));
         }
-        if sim.photons < sim.batches as u64 {
+        // 0 photons: the analytic lidar equation only.
+        if sim.photons != 0 && sim.photons < sim.batches as u64 {
             return Err(self.err(
                 &sec.key("photons"),
-                "must be at least the number of batches",
+                "must be 0 (analytic only) or at least the number of batches",
             ));
         }
         Ok(sim)
@@ -1221,9 +1222,9 @@ impl Scene {
         threads: Option<usize>,
     ) -> Result<(), String> {
         if let Some(p) = photons {
-            if p < self.simulation.batches as u64 {
+            if p != 0 && p < self.simulation.batches as u64 {
                 return Err(format!(
-                    "--photons {p} is fewer than the {} batches",
+                    "--photons {p} is fewer than the {} batches (0 runs the analytic equation only)",
                     self.simulation.batches
                 ));
             }
