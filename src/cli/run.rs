@@ -168,6 +168,7 @@ fn write_summary(
             "roulette_kills": s.roulette_kills,
             "cut": s.cut,
             "escaped": s.escaped,
+            "zero_weight": s.zero_weight,
         },
     });
     write_json(path, &json)

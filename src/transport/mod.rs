@@ -55,6 +55,8 @@ pub struct RunStats {
     pub cut: u64,
     /// Photons that left the atmosphere.
     pub escaped: u64,
+    /// Photons ended with zero weight (a range-stratified collision where nothing scatters).
+    pub zero_weight: u64,
 }
 
 impl RunStats {
@@ -66,6 +68,7 @@ impl RunStats {
         self.roulette_kills += o.roulette_kills;
         self.cut += o.cut;
         self.escaped += o.escaped;
+        self.zero_weight += o.zero_weight;
     }
 }
 

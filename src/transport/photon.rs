@@ -288,7 +288,8 @@ impl<'a> Tracer<'a> {
                 };
                 let g = (1.0 - s.stratify) * p_phys + s.stratify * p_unif;
                 if !(p_phys > 0.0) || !(g > 0.0) {
-                    self.stats.roulette_kills += 1;
+                    // A range-stratified collision in air that cannot scatter has zero weight.
+                    self.stats.zero_weight += 1;
                     return;
                 }
                 collide_factor *= p_phys / g;
@@ -348,7 +349,7 @@ impl<'a> Tracer<'a> {
             // A collision can only land in a layer with scatterers; rounding at a layer edge
             // must not make it pick from none.
             if atm.components[layer].is_empty() {
-                self.stats.roulette_kills += 1;
+                self.stats.zero_weight += 1;
                 return;
             }
             let to_rx = s.receiver - pos;
