@@ -398,6 +398,56 @@ impl Validator<'_> {
         })
     }
 
+    /// The cache table of a `[gas_absorption]` section, if one is asked for.
+    fn gas_table(
+        &self,
+        sec: &KeyPath,
+        g: &file::GasAbsorptionFile,
+        lo: f64,
+        hi: f64,
+    ) -> Result<Option<GasTable>, InputError> {
+        Ok(match &g.table {
+            Some(f) => {
+                let start = g.table_start_cm1.unwrap_or(lo - 1.0);
+                let end = g.table_end_cm1.unwrap_or(hi + 1.0);
+                let step =
+                    self.positive(&sec.key("table_step_cm1"), g.table_step_cm1.unwrap_or(5e-4))?;
+                // The table interpolates with 6 points: 3 grid steps of room beyond each channel.
+                if !(start <= lo - 3.0 * step && end >= hi + 3.0 * step) {
+                    return Err(self.err(
+                        &sec.key("table_start_cm1"),
+                        format!("the table grid {start}–{end} cm⁻¹ must contain every channel ({lo}–{hi} cm⁻¹) with 3 steps of room to interpolate"),
+                    ));
+                }
+                if (end - start) / step > 5e7 {
+                    return Err(self.err(
+                        &sec.key("table_step_cm1"),
+                        "makes more than 5e7 grid points",
+                    ));
+                }
+                Some(GasTable {
+                    path: self.path.parent().unwrap_or(Path::new(".")).join(f),
+                    start_cm1: start,
+                    end_cm1: end,
+                    step_cm1: step,
+                })
+            }
+            None => {
+                for k in ["table_start_cm1", "table_end_cm1", "table_step_cm1"] {
+                    let given = match k {
+                        "table_start_cm1" => g.table_start_cm1.is_some(),
+                        "table_end_cm1" => g.table_end_cm1.is_some(),
+                        _ => g.table_step_cm1.is_some(),
+                    };
+                    if given {
+                        return Err(self.err(&sec.key(k), "goes with `table`"));
+                    }
+                }
+                None
+            }
+        })
+    }
+
     fn gas(
         &self,
         g: &file::GasAbsorptionFile,
@@ -442,11 +492,18 @@ impl Validator<'_> {
             }
             None => None,
         };
+        let table = self.gas_table(&sec, g, lo, hi)?;
+        // Every line that reaches a channel, or any point of a table's grid (a later run may
+        // take channels anywhere inside it).
+        let (w_lo, w_hi) = match &table {
+            Some(t) => (lo.min(t.start_cm1), hi.max(t.end_cm1)),
+            None => (lo, hi),
+        };
         let filter = LineFilter {
             molecules,
             isotopologues: None,
-            min_cm1: Some(lo - options.wing_cm1),
-            max_cm1: Some(hi + options.wing_cm1),
+            min_cm1: Some(w_lo - options.wing_cm1),
+            max_cm1: Some(w_hi + options.wing_cm1),
         };
         let lines = match &g.lines {
             Some(f) => {
@@ -466,45 +523,6 @@ impl Validator<'_> {
                 ));
             }
         }
-        let table = match &g.table {
-            Some(f) => {
-                let start = g.table_start_cm1.unwrap_or(lo - 1.0);
-                let end = g.table_end_cm1.unwrap_or(hi + 1.0);
-                let step =
-                    self.positive(&sec.key("table_step_cm1"), g.table_step_cm1.unwrap_or(5e-4))?;
-                if !(start < lo && end > hi) {
-                    return Err(self.err(
-                        &sec.key("table_start_cm1"),
-                        format!("the table grid {start}–{end} cm⁻¹ must contain every channel ({lo}–{hi} cm⁻¹) with room to interpolate"),
-                    ));
-                }
-                if (end - start) / step > 5e7 {
-                    return Err(self.err(
-                        &sec.key("table_step_cm1"),
-                        "makes more than 5e7 grid points",
-                    ));
-                }
-                Some(GasTable {
-                    path: self.path.parent().unwrap_or(Path::new(".")).join(f),
-                    start_cm1: start,
-                    end_cm1: end,
-                    step_cm1: step,
-                })
-            }
-            None => {
-                for k in ["table_start_cm1", "table_end_cm1", "table_step_cm1"] {
-                    let given = match k {
-                        "table_start_cm1" => g.table_start_cm1.is_some(),
-                        "table_end_cm1" => g.table_end_cm1.is_some(),
-                        _ => g.table_step_cm1.is_some(),
-                    };
-                    if given {
-                        return Err(self.err(&sec.key(k), "goes with `table`"));
-                    }
-                }
-                None
-            }
-        };
         Ok(GasAbsorption {
             lines: Arc::new(lines),
             options,
