@@ -1,35 +1,25 @@
 //! The command line: `lidarsim run` writes exactly the contract columns, reports bad input with
 //! file, line and key and exit code 2, and writes nothing half-way.
 
-use std::process::Command;
-
-use crate::util::lidarsim_bin;
+use crate::util::{lidarsim, lidarsim_ok};
 
 const HEADER: &str = "source,channel,fov_full_angle_mrad,range_m,order,energy_j,stderr_j";
 
 #[test]
 fn run_default_scene_writes_contract_columns() {
     let dir = tempfile::tempdir().unwrap();
-    let out = Command::new(lidarsim_bin())
-        .args([
-            "run",
-            "--photons",
-            "2000",
-            "--seed",
-            "3",
-            "--threads",
-            "1",
-            "--out",
-        ])
-        .arg(dir.path())
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let stdout = String::from_utf8_lossy(&out.stdout);
+    let out_dir = dir.path().to_string_lossy().into_owned();
+    let stdout = lidarsim_ok([
+        "run",
+        "--photons",
+        "2000",
+        "--seed",
+        "3",
+        "--threads",
+        "1",
+        "--out",
+        &out_dir,
+    ]);
     assert!(stdout.contains("transport: 2000 photons"), "{stdout}");
     let csv = std::fs::read_to_string(dir.path().join("returns.csv")).unwrap();
     let mut lines = csv.lines();
@@ -74,13 +64,12 @@ fn bad_scene_exits_2_naming_file_line_and_key_and_writes_nothing() {
     assert_ne!(text, good, "the default scene changed: update this test");
     std::fs::write(&scene, text).unwrap();
     let out_dir = dir.path().join("out");
-    let out = Command::new(lidarsim_bin())
-        .arg("run")
-        .arg(&scene)
-        .arg("--out")
-        .arg(&out_dir)
-        .output()
-        .unwrap();
+    let out = lidarsim([
+        "run".as_ref(),
+        scene.as_os_str(),
+        "--out".as_ref(),
+        out_dir.as_os_str(),
+    ]);
     assert_eq!(out.status.code(), Some(2));
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(stderr.contains("bad.toml:"), "{stderr}");
@@ -96,40 +85,23 @@ fn bad_scene_exits_2_naming_file_line_and_key_and_writes_nothing() {
 
 #[test]
 fn bench_reports_figure_of_merit() {
-    let out = Command::new(lidarsim_bin())
-        .args([
-            "bench",
-            "--photons",
-            "5000",
-            "--repeat",
-            "1",
-            "--threads",
-            "1",
-        ])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stdout = lidarsim_ok([
+        "bench",
+        "--photons",
+        "5000",
+        "--repeat",
+        "1",
+        "--threads",
+        "1",
+    ]);
     assert!(stdout.contains("FOM"), "{stdout}");
 }
 
 #[test]
 fn zero_photons_runs_the_analytic_equation_only() {
     let dir = tempfile::tempdir().unwrap();
-    let out = Command::new(lidarsim_bin())
-        .args(["run", "--photons", "0", "--out"])
-        .arg(dir.path())
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let out_dir = dir.path().to_string_lossy().into_owned();
+    lidarsim_ok(["run", "--photons", "0", "--out", &out_dir]);
     let csv = std::fs::read_to_string(dir.path().join("returns.csv")).unwrap();
     let mut lines = csv.lines();
     assert_eq!(lines.next(), Some(HEADER));

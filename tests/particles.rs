@@ -396,22 +396,14 @@ fn c1_bulk_optics_match_miepython() {
 /// 1e-9 relative); a negative imaginary part and a malformed index are refused with exit code 2.
 #[test]
 fn cli_mie_single_sphere_json() {
-    let out = std::process::Command::new(crate::util::lidarsim_bin())
-        .args([
-            "mie",
-            "--refractive-index",
-            "1.33+0.0i",
-            "--size-parameter",
-            "10",
-        ])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let stdout = crate::util::lidarsim_ok([
+        "mie",
+        "--refractive-index",
+        "1.33+0.0i",
+        "--size-parameter",
+        "10",
+    ]);
+    let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
     for (k, want) in [
         ("qext", 2.206548710184618),
         ("qsca", 2.206548710184618),
@@ -422,10 +414,8 @@ fn cli_mie_single_sphere_json() {
         assert!(((got - want) / want).abs() < 1e-9, "{k}: {got} vs {want}");
     }
     for bad in ["1.33-0.1i", "1.33+xi"] {
-        let out = std::process::Command::new(crate::util::lidarsim_bin())
-            .args(["mie", "--refractive-index", bad, "--size-parameter", "10"])
-            .output()
-            .unwrap();
+        let out =
+            crate::util::lidarsim(["mie", "--refractive-index", bad, "--size-parameter", "10"]);
         assert_eq!(out.status.code(), Some(2));
         assert!(String::from_utf8_lossy(&out.stderr).contains("refractive"));
     }

@@ -27,3 +27,30 @@ pub fn shared_file(relative: &str) -> Option<PathBuf> {
 pub fn lidarsim_bin() -> &'static Path {
     Path::new(env!("CARGO_BIN_EXE_lidarsim"))
 }
+
+/// Run `lidarsim` with arguments and return its output.
+pub fn lidarsim<I, S>(args: I) -> std::process::Output
+where
+    I: IntoIterator<Item = S>,
+    S: AsRef<std::ffi::OsStr>,
+{
+    std::process::Command::new(lidarsim_bin())
+        .args(args)
+        .output()
+        .expect("lidarsim runs")
+}
+
+/// Run `lidarsim`, require success (showing its stderr otherwise) and return its stdout.
+pub fn lidarsim_ok<I, S>(args: I) -> String
+where
+    I: IntoIterator<Item = S>,
+    S: AsRef<std::ffi::OsStr>,
+{
+    let out = lidarsim(args);
+    assert!(
+        out.status.success(),
+        "lidarsim failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
