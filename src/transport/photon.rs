@@ -352,12 +352,15 @@ impl<'a> Tracer<'a> {
                 self.stats.zero_weight += 1;
                 return;
             }
-            let to_rx = s.receiver - pos;
-            let d_rx = to_rx.length();
-            let omega_rx = to_rx / d_rx;
-            let ddis = s.ddis_epsilon > 0.0
-                && s.forward_peaked[layer]
-                && -omega_rx.dot(s.axis) >= s.ddis_cos;
+            // The direction to the receiver only where DDIS can apply (not in Rayleigh air).
+            let ddis_layer = s.ddis_epsilon > 0.0 && s.forward_peaked[layer];
+            let omega_rx = if ddis_layer {
+                let to_rx = s.receiver - pos;
+                to_rx / to_rx.length()
+            } else {
+                DVec3::ZERO
+            };
+            let ddis = ddis_layer && -omega_rx.dot(s.axis) >= s.ddis_cos;
             let towards_rx = ddis && rng.random::<f64>() < s.ddis_epsilon;
             let c = pick_component(&atm.components[layer], s.sigma_ref[layer], rng);
             let mu_sampled =
