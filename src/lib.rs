@@ -22,6 +22,7 @@
 pub mod atmosphere;
 pub mod constants;
 pub mod input;
+pub mod instrument;
 pub mod lidar_eq;
 pub mod optics;
 pub mod particles;
