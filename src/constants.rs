@@ -8,6 +8,8 @@ pub const BOLTZMANN_J_PER_K: f64 = 1.380_649e-23;
 pub const AVOGADRO_PER_MOL: f64 = 6.022_140_76e23;
 /// Planck constant [J s].
 pub const PLANCK_J_S: f64 = 6.626_070_15e-34;
+/// Elementary charge \[C\] (exact in the 2019 SI).
+pub const ELEMENTARY_CHARGE_C: f64 = 1.602_176_634e-19;
 /// Atomic mass constant \[kg\].
 pub const ATOMIC_MASS_KG: f64 = 1.660_539_066_60e-27;
 /// Second radiation constant c2 = h c / k [cm K], as HITRAN uses it.

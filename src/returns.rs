@@ -66,6 +66,29 @@ pub struct Returns {
     pub energy_j: Vec<f64>,
     /// Standard error of `energy_j` \[J\] (0 for analytic returns).
     pub stderr_j: Vec<f64>,
+    /// Covariances between the means of channel pairs, where the producer knows them (Monte
+    /// Carlo channels share photon paths, so on- and off-line errors are strongly correlated).
+    pub covariance: Option<Covariance>,
+}
+
+/// A linear combination of channels, Σ cᵢ · channelᵢ: a laser line's return from those of its
+/// line-shape quadrature nodes, or a derivative with respect to frequency by finite differences.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Combination {
+    /// Name of the combined channel.
+    pub name: String,
+    /// (channel index, coefficient) pairs.
+    pub terms: Vec<(usize, f64)>,
+}
+
+/// Covariances of the means of channel pairs, bin by bin.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Covariance {
+    /// Channel pairs (a, b), a < b.
+    pub pairs: Vec<(usize, usize)>,
+    /// Covariance of the two means \[J²\], index `pair * bins + bin`, where `bin` is
+    /// [`Returns::index`] of channel 0 and `bins` the number of bins per channel.
+    pub cov_j2: Vec<f64>,
 }
 
 impl Returns {
@@ -86,7 +109,118 @@ impl Returns {
             orders,
             energy_j: vec![0.0; n],
             stderr_j: vec![0.0; n],
+            covariance: None,
         }
+    }
+
+    /// Number of bins of one channel (FOV × gate × order).
+    pub fn bins_per_channel(&self) -> usize {
+        self.fov_full_angle_mrad.len() * self.range_m.len() * self.orders.len()
+    }
+
+    /// Covariance of the means of channels a and b in one bin \[J²\]: the variance when a = b;
+    /// 0 when both have zero error (analytic returns); `None` where it is not known.
+    pub fn covariance_j2(
+        &self,
+        a: usize,
+        b: usize,
+        fov: usize,
+        gate: usize,
+        order: usize,
+    ) -> Option<f64> {
+        let (ia, ib) = (
+            self.index(a, fov, gate, order),
+            self.index(b, fov, gate, order),
+        );
+        if a == b {
+            return Some(self.stderr_j[ia].powi(2));
+        }
+        if self.stderr_j[ia] == 0.0 && self.stderr_j[ib] == 0.0 {
+            return Some(0.0);
+        }
+        let c = self.covariance.as_ref()?;
+        let key = (a.min(b), a.max(b));
+        let p = c.pairs.iter().position(|q| *q == key)?;
+        Some(c.cov_j2[p * self.bins_per_channel() + self.index(0, fov, gate, order)])
+    }
+
+    /// The returns of some channels only, in the given order (with their covariances).
+    pub fn channel_subset(&self, channels: &[usize]) -> Returns {
+        let bins = self.bins_per_channel();
+        let mut out = Returns::zeros(
+            self.source,
+            channels.iter().map(|k| self.channels[*k].clone()).collect(),
+            self.fov_full_angle_mrad.clone(),
+            self.range_m.clone(),
+            self.orders.clone(),
+        );
+        for (j, k) in channels.iter().enumerate() {
+            out.energy_j[j * bins..(j + 1) * bins]
+                .copy_from_slice(&self.energy_j[k * bins..(k + 1) * bins]);
+            out.stderr_j[j * bins..(j + 1) * bins]
+                .copy_from_slice(&self.stderr_j[k * bins..(k + 1) * bins]);
+        }
+        out.covariance = self.covariance.as_ref().map(|c| {
+            let mut pairs = Vec::new();
+            let mut cov_j2 = Vec::new();
+            for a in 0..channels.len() {
+                for b in a + 1..channels.len() {
+                    let key = (channels[a].min(channels[b]), channels[a].max(channels[b]));
+                    if let Some(p) = c.pairs.iter().position(|q| *q == key) {
+                        pairs.push((a, b));
+                        cov_j2.extend_from_slice(&c.cov_j2[p * bins..(p + 1) * bins]);
+                    }
+                }
+            }
+            Covariance { pairs, cov_j2 }
+        });
+        out
+    }
+
+    /// Channel index by name.
+    pub fn channel_index(&self, name: &str) -> Option<usize> {
+        self.channels.iter().position(|c| c == name)
+    }
+
+    /// The returns of linear combinations of channels (deterministic combination, bin by bin).
+    ///
+    /// Energies combine exactly. Standard errors combine through the covariances where they are
+    /// known (σ² = Σ_ab c_a c_b cov_ab); they are 0 where every term has zero error and NaN where
+    /// a needed covariance is unknown. A Monte Carlo run that should report combined channels
+    /// with proper errors combines batch by batch instead (`TransportOptions::combinations`).
+    pub fn combine(&self, combos: &[Combination]) -> Returns {
+        let mut out = Returns::zeros(
+            self.source,
+            combos.iter().map(|c| c.name.clone()).collect(),
+            self.fov_full_angle_mrad.clone(),
+            self.range_m.clone(),
+            self.orders.clone(),
+        );
+        for (j, c) in combos.iter().enumerate() {
+            for f in 0..self.fov_full_angle_mrad.len() {
+                for g in 0..self.range_m.len() {
+                    for o in 0..self.orders.len() {
+                        let mut e = 0.0;
+                        let mut var = 0.0;
+                        for (a, ca) in &c.terms {
+                            e += ca * self.energy_j[self.index(*a, f, g, o)];
+                            for (b, cb) in &c.terms {
+                                var += ca
+                                    * cb
+                                    * self.covariance_j2(*a, *b, f, g, o).unwrap_or(f64::NAN);
+                            }
+                        }
+                        let i = out.index(j, f, g, o);
+                        out.energy_j[i] = e;
+                        out.stderr_j[i] = var.max(0.0).sqrt();
+                        if var.is_nan() {
+                            out.stderr_j[i] = f64::NAN;
+                        }
+                    }
+                }
+            }
+        }
+        out
     }
 
     /// Flat index of (channel, fov, gate, order bin).

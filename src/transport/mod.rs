@@ -20,7 +20,7 @@ use rayon::prelude::*;
 use thiserror::Error;
 
 use crate::optics::OpticalAtmosphere;
-use crate::returns::Returns;
+use crate::returns::{Combination, Returns};
 use crate::rng::{self, Stream};
 use crate::scene::{BeamProfile, Scene};
 
@@ -96,6 +96,9 @@ pub struct TransportOptions {
     /// Probability β of drawing the first collision uniformly in range over the gated window
     /// instead of from the exponential (0 turns it off).
     pub range_stratification: f64,
+    /// Linear combinations of channels to report as well (laser lines from their quadrature
+    /// nodes), folded batch by batch so that their standard errors and covariances are right.
+    pub combinations: Vec<Combination>,
 }
 
 impl TransportOptions {
@@ -112,6 +115,7 @@ impl TransportOptions {
             progress: false,
             ddis_epsilon: DDIS_EPSILON,
             range_stratification: RANGE_STRATIFICATION,
+            combinations: Vec::new(),
         }
     }
 }
@@ -133,6 +137,9 @@ pub enum TransportError {
 pub struct McResult {
     /// Received energy by channel, FOV, gate and order, with standard errors.
     pub returns: Returns,
+    /// The combined channels of [`TransportOptions::combinations`], with standard errors and the
+    /// covariance of every pair (`None` without combinations).
+    pub combined: Option<Returns>,
     /// Energy leaving the scene per channel, as a fraction of the emitted energy (zero unless
     /// the flux tally was on).
     pub flux: Flux,
@@ -287,6 +294,16 @@ pub fn run(
     }
     let lidar = &scene.lidar;
     let nch = scene.channels.len();
+    if let Some(c) = opts
+        .combinations
+        .iter()
+        .find(|c| c.terms.iter().any(|(k, w)| *k >= nch || !w.is_finite()))
+    {
+        return Err(TransportError::Options(format!(
+            "combination `{}` refers to a channel beyond the {nch} channels or has a non-finite coefficient",
+            c.name
+        )));
+    }
     let axis = lidar.axis();
     let (axis_e1, axis_e2) = axis.any_orthonormal_pair();
     let receiver = DVec3::new(0.0, 0.0, lidar.altitude_m);
@@ -372,7 +389,7 @@ pub fn run(
         .map_err(|e| TransportError::Threads(opts.threads, e.to_string()))?;
     let threads = pool.current_num_threads();
 
-    let mut acc = Accumulator::new(shape, fov_order);
+    let mut acc = Accumulator::new(shape, fov_order).with_combinations(opts.combinations.clone());
     let mut stats = RunStats::default();
     let started = Instant::now();
     let bar = indicatif::ProgressBar::hidden();
@@ -428,13 +445,14 @@ pub fn run(
     let range_m = (0..scene.gates.count)
         .map(|i| scene.gates.centre_m(i))
         .collect();
-    let (returns, flux, flux_stderr) = acc.finish(
+    let (returns, flux, flux_stderr, combined) = acc.finish(
         scene.channels.iter().map(|c| c.name.clone()).collect(),
         lidar.fov_full_angle_mrad.clone(),
         range_m,
     );
     Ok(McResult {
         returns,
+        combined,
         flux,
         flux_stderr,
         stats,

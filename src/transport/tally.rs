@@ -7,7 +7,7 @@
 //! ([`stats::welford_add`]).
 //! Folding happens in batch order, so results do not depend on the number of threads.
 
-use crate::returns::{Order, Returns, Source};
+use crate::returns::{Combination, Covariance, Order, Returns, Source};
 use crate::stats;
 
 /// Shape of a batch buffer: gate × order bin × FOV annulus × channel (channel fastest, so that
@@ -82,6 +82,23 @@ pub(crate) struct Accumulator {
     /// Annulus a ↔ scene FOV index.
     fov_of_annulus: Vec<usize>,
     scratch: Vec<f64>,
+    /// Combined channels, folded batch by batch so that their errors and covariances are right.
+    combined: Option<Combined>,
+}
+
+/// Running moments of combined channels and of every pair of them.
+struct Combined {
+    combos: Vec<Combination>,
+    /// Bins per channel in the reported layout.
+    bins: usize,
+    mean: Vec<f64>,
+    m2: Vec<f64>,
+    /// Pairs (a, b), a < b, and their running co-moments Σ (x_a − x̄_a)(x_b − x̄_b).
+    pairs: Vec<(usize, usize)>,
+    c2: Vec<f64>,
+    /// This batch's values and their deviations from the old means.
+    values: Vec<f64>,
+    delta: Vec<f64>,
 }
 
 impl Accumulator {
@@ -96,7 +113,32 @@ impl Accumulator {
             flux_m2: Flux::zeros(shape.n_channels),
             fov_of_annulus,
             scratch: vec![0.0; reported],
+            combined: None,
         }
+    }
+
+    /// Also fold these combinations of channels (`terms` index the transport's channels).
+    pub fn with_combinations(mut self, combos: Vec<Combination>) -> Self {
+        if combos.is_empty() {
+            return self;
+        }
+        let s = self.shape;
+        let bins = s.n_fov * s.n_gates * (s.n_order_bins + 1);
+        let n = combos.len();
+        let pairs: Vec<(usize, usize)> = (0..n)
+            .flat_map(|a| (a + 1..n).map(move |b| (a, b)))
+            .collect();
+        self.combined = Some(Combined {
+            combos,
+            bins,
+            mean: vec![0.0; n * bins],
+            m2: vec![0.0; n * bins],
+            c2: vec![0.0; pairs.len() * bins],
+            pairs,
+            values: vec![0.0; n * bins],
+            delta: vec![0.0; n * bins],
+        });
+        self
     }
 
     #[inline]
@@ -132,6 +174,9 @@ impl Accumulator {
         for (i, v) in self.scratch.iter().enumerate() {
             stats::welford_add(&mut self.mean[i], &mut self.m2[i], n, *v);
         }
+        if let Some(c) = &mut self.combined {
+            c.add_batch(&self.scratch, n);
+        }
         for (dst, (dst2, src)) in self
             .flux_mean
             .parts_mut()
@@ -151,7 +196,7 @@ impl Accumulator {
         channels: Vec<String>,
         fov_full_angle_mrad: Vec<f64>,
         range_m: Vec<f64>,
-    ) -> (Returns, Flux, Flux) {
+    ) -> (Returns, Flux, Flux, Option<Returns>) {
         let n_exact = self.shape.n_order_bins as u32 - 1;
         let mut orders = vec![Order::Total];
         orders.extend((1..=n_exact).map(Order::Exactly));
@@ -168,6 +213,31 @@ impl Accumulator {
         for i in 0..self.m2.len() {
             r.stderr_j[i] = stats::std_error(self.m2[i], n);
         }
+        let combined = self.combined.as_ref().map(|c| {
+            let mut r = Returns::zeros(
+                Source::MonteCarlo,
+                c.combos.iter().map(|x| x.name.clone()).collect(),
+                r.fov_full_angle_mrad.clone(),
+                r.range_m.clone(),
+                r.orders.clone(),
+            );
+            r.energy_j.copy_from_slice(&c.mean);
+            for i in 0..c.m2.len() {
+                r.stderr_j[i] = stats::std_error(c.m2[i], n);
+            }
+            // Covariance of the means: co-moment / (n (n − 1)), as the standard error.
+            let nf = n as f64;
+            let scale = if n >= 2 {
+                1.0 / (nf * (nf - 1.0))
+            } else {
+                f64::NAN
+            };
+            r.covariance = Some(Covariance {
+                pairs: c.pairs.clone(),
+                cov_j2: c.c2.iter().map(|v| v * scale).collect(),
+            });
+            r
+        });
         let mean = self.flux_mean.clone();
         let mut err = Flux::zeros(self.shape.n_channels);
         for (e, m2) in err.parts_mut().into_iter().zip(self.flux_m2.parts()) {
@@ -175,6 +245,36 @@ impl Accumulator {
                 e[k] = stats::std_error(m2[k], n);
             }
         }
-        (r, mean, err)
+        (r, mean, err, combined)
+    }
+}
+
+impl Combined {
+    /// Fold one batch: `reported` holds the batch's values in the reported layout
+    /// [channel][fov][gate][order]; `n` counts batches including this one. Co-moments follow
+    /// Welford's update for covariances: C += (x_a − x̄_a,old)(x_b − x̄_b,new).
+    fn add_batch(&mut self, reported: &[f64], n: usize) {
+        let bins = self.bins;
+        self.values.iter_mut().for_each(|v| *v = 0.0);
+        for (j, c) in self.combos.iter().enumerate() {
+            let dst = &mut self.values[j * bins..(j + 1) * bins];
+            for (k, coef) in &c.terms {
+                let src = &reported[k * bins..(k + 1) * bins];
+                for (d, s) in dst.iter_mut().zip(src) {
+                    *d += coef * s;
+                }
+            }
+        }
+        for i in 0..self.values.len() {
+            self.delta[i] = self.values[i] - self.mean[i];
+            stats::welford_add(&mut self.mean[i], &mut self.m2[i], n, self.values[i]);
+        }
+        for (p, (a, b)) in self.pairs.iter().enumerate() {
+            for i in 0..bins {
+                let ib = b * bins + i;
+                self.c2[p * bins + i] +=
+                    self.delta[a * bins + i] * (self.values[ib] - self.mean[ib]);
+            }
+        }
     }
 }
