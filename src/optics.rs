@@ -367,21 +367,6 @@ impl OpticalAtmosphere {
     }
 }
 
-/// The molecular grid: from the profile bottom (or the surface) to the top in steps of the
-/// layer thickness.
-fn molecular_edges(scene: &Scene, a: &Atmosphere) -> Vec<f64> {
-    let mut bottom = a.profile.altitude_m[0];
-    if let Some(s) = &scene.surface {
-        bottom = bottom.max(s.altitude_m);
-    }
-    let n = ((a.top_m - bottom) / a.layer_thickness_m).ceil().max(1.0) as usize;
-    let mut edges: Vec<f64> = (0..n)
-        .map(|i| bottom + i as f64 * a.layer_thickness_m)
-        .collect();
-    edges.push(a.top_m);
-    edges
-}
-
 /// Vertical gas optical depth of every optical layer at every channel, `layer * nch + k`.
 ///
 /// Line by line on the molecular grid (Curtis-Godson layers of the profile), so that the result
@@ -396,7 +381,7 @@ fn gas_layer_tau(
     use crate::spectroscopy::{GasOpticalDepthTable, WavenumberGrid, layer_optical_depths_at};
     let nch = scene.channels.len();
     let nu: Vec<f64> = scene.channels.iter().map(|c| c.wavenumber_cm1).collect();
-    let mol = molecular_edges(scene, a);
+    let mol = scene.molecular_edges().unwrap_or_default();
     // τ per molecular layer per channel: [mol layer][channel].
     let (tau_mol, note, source): (Vec<Vec<f64>>, String, GasSource) = match &gas.table {
         None => {
@@ -483,7 +468,7 @@ fn gas_layer_tau(
 /// of the layer thickness) merged with every particle-layer and surface boundary.
 fn layer_edges(scene: &Scene) -> Vec<f64> {
     let mut edges: Vec<f64> = match &scene.atmosphere {
-        Some(a) => molecular_edges(scene, a),
+        Some(_) => scene.molecular_edges().unwrap_or_default(),
         None => Vec::new(),
     };
     for l in &scene.layers {

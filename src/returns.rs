@@ -281,7 +281,5 @@ pub fn write_csv(path: &Path, sets: &[&Returns]) -> io::Result<()> {
     for r in sets {
         r.csv_rows(&mut s);
     }
-    let tmp = path.with_extension("csv.tmp");
-    std::fs::write(&tmp, s)?;
-    std::fs::rename(&tmp, path)
+    crate::output::write_atomically(path, s.as_bytes())
 }

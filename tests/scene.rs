@@ -79,8 +79,8 @@ const CASES: &[(&str, &str, &str, usize, &str, &str)] = &[
         "pulse_energy_j = 0.1\n",
         "",
         2,
-        "pulse_energy_j",
-        "missing field",
+        "lidar.pulse_energy_j",
+        "missing: the lidar needs `pulse_energy_j`",
     ),
     (
         "wrong type",

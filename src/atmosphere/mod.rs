@@ -448,29 +448,14 @@ pub fn parse_afgl(path: &str, text: &str) -> Result<Profile, InputError> {
     Ok(profile)
 }
 
-/// Write `contents` to `path` through a temporary file in the same folder and a rename, so that
-/// a failure never leaves a half-written file.
+/// Write `contents` to `path` whole or not at all ([`crate::output::write_atomically`]).
 pub(crate) fn write_atomically(
     path: &std::path::Path,
     contents: &[u8],
 ) -> Result<(), AtmosphereError> {
-    let err = |e: std::io::Error| AtmosphereError::Write {
+    crate::output::write_atomically(path, contents).map_err(|e| AtmosphereError::Write {
         path: path.to_path_buf(),
         message: e.to_string(),
-    };
-    let file_name = path
-        .file_name()
-        .ok_or_else(|| AtmosphereError::Write {
-            path: path.to_path_buf(),
-            message: "not a file name".into(),
-        })?
-        .to_string_lossy()
-        .into_owned();
-    let tmp = path.with_file_name(format!(".{file_name}.tmp-{}", std::process::id()));
-    std::fs::write(&tmp, contents).map_err(err)?;
-    std::fs::rename(&tmp, path).map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        err(e)
     })
 }
 

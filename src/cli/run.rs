@@ -1,22 +1,25 @@
-//! `lidarsim run [SCENE] [--out DIR] [--photons N] [--seed S] [--threads T]`
+//! `lidarsim run [SCENE] [--out DIR] [--photons N] [--seed S] [--threads T] [--no-plots]`
 
 use std::io::Write;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 
-use lidarsim::lidar_eq;
-use lidarsim::optics::OpticalAtmosphere;
-use lidarsim::returns::{self, Order, Returns};
+use lidarsim::instrument::signals;
+use lidarsim::output::write_atomically;
+use lidarsim::pipeline::{self, RunOutput};
+use lidarsim::retrieval::{self, Method, Product, Quantity};
+use lidarsim::returns::{self, Order, Returns, Source};
 use lidarsim::scene::Scene;
-use lidarsim::transport::{self, McResult, TransportOptions};
+use lidarsim::transport::TransportOptions;
 
 /// Arguments of `lidarsim run`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// Scene file (TOML). Without it the embedded default scene runs.
     pub scene: Option<PathBuf>,
-    /// Output directory (created if needed); receives returns.csv and summary.json.
+    /// Output directory (created if needed); receives returns.csv, summary.json and, with a
+    /// receiver and a retrieval, signals.csv, retrieval.csv and figures.
     #[arg(long, default_value = "out")]
     pub out: PathBuf,
     /// Photon packets (overrides the scene's `simulation.photons`); 0 runs only the analytic
@@ -33,6 +36,9 @@ pub struct Args {
     /// this variance reduction off; results are unbiased either way).
     #[arg(long, default_value_t = lidarsim::transport::DDIS_EPSILON)]
     pub ddis_epsilon: f64,
+    /// Do not draw the figures (returns.png, dial.png).
+    #[arg(long)]
+    pub no_plots: bool,
 }
 
 /// Run the subcommand.
@@ -44,75 +50,110 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     scene
         .override_simulation(args.photons, args.seed, args.threads)
         .map_err(anyhow::Error::msg)?;
-    let atm = OpticalAtmosphere::build(&scene)?;
-    let analytic = lidar_eq::single_scatter(&scene, &atm);
-    let mut opts = TransportOptions::from_scene(&scene);
-    opts.progress = true;
     anyhow::ensure!(
         (0.0..1.0).contains(&args.ddis_epsilon),
         "--ddis-epsilon {} must lie in [0, 1)",
         args.ddis_epsilon
     );
+    let mut opts = TransportOptions::from_scene(&scene);
+    opts.progress = true;
     opts.ddis_epsilon = args.ddis_epsilon;
-    // Skip what the scene does not need: 0 photons is the analytic equation alone.
-    let mc = if opts.photons > 0 {
-        Some(transport::run(&scene, &atm, &opts)?)
-    } else {
-        None
-    };
+    let run = pipeline::run(&scene, &opts)?;
 
+    // Everything is computed; now write, each file whole or not at all.
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create the output directory {}", args.out.display()))?;
+    let mut written = Vec::new();
     let csv = args.out.join("returns.csv");
-    let sets: Vec<&Returns> = mc.iter().map(|m| &m.returns).chain([&analytic]).collect();
+    let sets: Vec<&Returns> = run
+        .mc_lines
+        .iter()
+        .map(|m| &m.mean)
+        .chain([&run.analytic_lines.mean])
+        .collect();
     returns::write_csv(&csv, &sets).with_context(|| format!("cannot write {}", csv.display()))?;
+    written.push(csv);
+    if !run.signals.is_empty() {
+        let mut s = String::from(signals::CSV_HEADER);
+        s.push('\n');
+        for sig in &run.signals {
+            sig.csv_rows(&mut s);
+        }
+        written.push(write(&args.out.join("signals.csv"), s.as_bytes())?);
+    }
+    if !run.products.is_empty() {
+        let mut s = String::from(retrieval::products::CSV_HEADER);
+        s.push('\n');
+        for p in &run.products {
+            s.push_str(&p.csv_row());
+            s.push('\n');
+        }
+        written.push(write(&args.out.join("retrieval.csv"), s.as_bytes())?);
+    }
+    if !args.no_plots && scene.retrieval.is_some() {
+        written.extend(super::figures::draw(&args.out, &scene, &run)?);
+    }
     let summary = args.out.join("summary.json");
-    write_summary(&summary, &scene, mc.as_ref())
-        .with_context(|| format!("cannot write {}", summary.display()))?;
+    write(&summary, summary_json(&scene, &run).as_bytes())?;
+    written.push(summary);
 
     let mut out = std::io::stdout().lock();
-    print_summary(&mut out, &scene, mc.as_ref(), &analytic)?;
-    if let Some(note) = &atm.gas_note {
+    print_summary(&mut out, &scene, &run)?;
+    if let Some(note) = &run.atmosphere.gas_note {
         writeln!(out, "{note}")?;
     }
-    writeln!(out, "wrote {} and {}", csv.display(), summary.display())?;
+    let names: Vec<String> = written.iter().map(|p| p.display().to_string()).collect();
+    writeln!(out, "wrote {}", names.join(", "))?;
     Ok(())
 }
 
-fn print_summary(
-    out: &mut impl Write,
-    scene: &Scene,
-    mc: Option<&McResult>,
-    analytic: &Returns,
-) -> std::io::Result<()> {
+fn write(path: &Path, bytes: &[u8]) -> anyhow::Result<PathBuf> {
+    write_atomically(path, bytes).with_context(|| format!("cannot write {}", path.display()))?;
+    Ok(path.to_path_buf())
+}
+
+fn print_summary(out: &mut impl Write, scene: &Scene, run: &RunOutput) -> std::io::Result<()> {
     let name = if scene.description.is_empty() {
         scene.path.display().to_string()
     } else {
         scene.description.clone()
     };
     writeln!(out, "scene: {name}")?;
-    let Some(mc) = mc else {
-        writeln!(out, "analytic single scattering only (0 photons)")?;
-        for (k, ch) in analytic.channels.iter().enumerate() {
-            for (f, fov) in analytic.fov_full_angle_mrad.iter().enumerate() {
-                let an: f64 = (0..analytic.range_m.len())
-                    .map(|g| analytic.energy(k, f, g, Order::Exactly(1)).unwrap_or(0.0))
-                    .sum();
-                writeln!(out, "  channel {ch}, FOV {fov} mrad: all gates {an:.4e} J")?;
+    let analytic = &run.analytic_lines.mean;
+    match (&run.mc, &run.mc_lines) {
+        (Some(mc), Some(lines)) => {
+            writeln!(
+                out,
+                "transport: {} photons, {} scattering events in {:.2} s on {} threads ({:.2} M events/s), {} channels for {} lines",
+                mc.photons,
+                mc.stats.collisions,
+                mc.wall_s,
+                mc.threads,
+                mc.stats.collisions as f64 / mc.wall_s.max(1e-9) * 1e-6,
+                scene.channels.len(),
+                scene.lines.len()
+            )?;
+            print_returns(out, &lines.mean, analytic)?;
+        }
+        _ => {
+            writeln!(out, "analytic single scattering only (0 photons)")?;
+            for (k, ch) in analytic.channels.iter().enumerate() {
+                for (f, fov) in analytic.fov_full_angle_mrad.iter().enumerate() {
+                    let an: f64 = (0..analytic.range_m.len())
+                        .map(|g| analytic.energy(k, f, g, Order::Exactly(1)).unwrap_or(0.0))
+                        .sum();
+                    writeln!(out, "  channel {ch}, FOV {fov} mrad: all gates {an:.4e} J")?;
+                }
             }
         }
-        return Ok(());
-    };
-    writeln!(
-        out,
-        "transport: {} photons, {} scattering events in {:.2} s on {} threads ({:.2} M events/s)",
-        mc.photons,
-        mc.stats.collisions,
-        mc.wall_s,
-        mc.threads,
-        mc.stats.collisions as f64 / mc.wall_s.max(1e-9) * 1e-6
-    )?;
-    let r = &mc.returns;
+    }
+    if let Some(r) = &run.retrieval {
+        print_retrieval(out, r, &run.products)?;
+    }
+    Ok(())
+}
+
+fn print_returns(out: &mut impl Write, r: &Returns, analytic: &Returns) -> std::io::Result<()> {
     for (k, ch) in r.channels.iter().enumerate() {
         for (f, fov) in r.fov_full_angle_mrad.iter().enumerate() {
             let (mut total, mut single, mut single_var, mut an) = (0.0, 0.0, 0.0, 0.0);
@@ -139,29 +180,111 @@ fn print_summary(
     Ok(())
 }
 
-fn write_summary(
-    path: &std::path::Path,
-    scene: &Scene,
-    mc: Option<&McResult>,
+fn source_label(p: &Product) -> &'static str {
+    match (p.source, p.order) {
+        (Source::Analytic, _) => "analytic single scattering",
+        (Source::MonteCarlo, Order::Exactly(1)) => "MC single scattering",
+        _ => "MC all orders",
+    }
+}
+
+fn print_retrieval(
+    out: &mut impl Write,
+    r: &retrieval::Retrieval,
+    products: &[Product],
 ) -> std::io::Result<()> {
-    let Some(mc) = mc else {
-        let json = serde_json::json!({
-            "scene": scene.path.display().to_string(),
-            "description": scene.description,
-            "photons": 0,
-        });
-        return write_json(path, &json);
-    };
-    let s = &mc.stats;
-    let json = serde_json::json!({
+    let c = &r.config;
+    writeln!(
+        out,
+        "retrieval of {} from {}: reference state = the scene's own profile; averaging {}; {} noisy realisations",
+        c.gas, r.pair, c.averaging_label, c.realisations
+    )?;
+    let ipda: Vec<&Product> = products
+        .iter()
+        .filter(|p| p.method == Method::Ipda)
+        .collect();
+    if let (Some(first), Some(t)) = (ipda.first(), &c.target) {
+        let what = match &t.kind {
+            retrieval::TargetKind::Surface => "the surface".to_string(),
+            retrieval::TargetKind::Layer { name, .. } => format!("the top of `{name}`"),
+        };
+        writeln!(
+            out,
+            "  IPDA to {what} at {:.0} m: truth X{} = {:.4} ppm (dry-air column {:.0}–{:.0} m)",
+            t.range_m, c.gas, first.truth, first.altitude_m.0, first.altitude_m.1
+        )?;
+        for p in &ipda {
+            writeln!(
+                out,
+                "    FOV {} mrad, {}: retrieved {:.4} ppm, bias {:+.4} ppm (MC ± {:.1e}, {:.1e} if on/off were traced apart); random error {:.3} ppm per shot pair (simulated {:.3}), {:.4} ppm averaged (simulated {:.4})",
+                p.fov_full_angle_mrad,
+                source_label(p),
+                p.retrieved,
+                p.bias(),
+                p.mc_stderr,
+                p.mc_stderr_independent,
+                p.random_error_per_shot_pair,
+                p.simulated_error_per_shot_pair,
+                p.random_error_averaged,
+                p.simulated_error_averaged
+            )?;
+        }
+    }
+    let dial: Vec<&Product> = products
+        .iter()
+        .filter(|p| p.method == Method::Dial && p.quantity == Quantity::MixingRatio)
+        .collect();
+    if let Some(d) = &c.dial {
+        writeln!(
+            out,
+            "  DIAL: {} cells of {} m (mixing ratio per cell; all cells in retrieval.csv)",
+            d.cells, d.cell_m
+        )?;
+        let mut keys: Vec<(Source, Order, f64)> = Vec::new();
+        for p in &dial {
+            if !keys.contains(&(p.source, p.order, p.fov_full_angle_mrad)) {
+                keys.push((p.source, p.order, p.fov_full_angle_mrad));
+            }
+        }
+        for (s, o, f) in keys {
+            let set: Vec<&&Product> = dial
+                .iter()
+                .filter(|p| p.source == s && p.order == o && p.fov_full_angle_mrad == f)
+                .collect();
+            let rms_bias =
+                (set.iter().map(|p| p.bias().powi(2)).sum::<f64>() / set.len() as f64).sqrt();
+            let mut errs: Vec<f64> = set.iter().map(|p| p.random_error_averaged).collect();
+            errs.sort_by(f64::total_cmp);
+            writeln!(
+                out,
+                "    FOV {f} mrad, {}: rms bias {:.4} ppm; random error averaged {:.3}–{:.3} ppm (median {:.3})",
+                source_label(set[0]),
+                rms_bias,
+                errs[0],
+                errs[errs.len() - 1],
+                errs[errs.len() / 2]
+            )?;
+        }
+    }
+    Ok(())
+}
+
+fn summary_json(scene: &Scene, run: &RunOutput) -> String {
+    let mut json = serde_json::json!({
         "scene": scene.path.display().to_string(),
         "description": scene.description,
-        "photons": mc.photons,
-        "batches": scene.simulation.batches,
-        "seed": scene.simulation.seed,
-        "threads": mc.threads,
-        "wall_s": mc.wall_s,
-        "counters": {
+        "channels": scene.channels.iter().map(|c| serde_json::json!({
+            "name": c.name, "wavenumber_cm1": c.wavenumber_cm1,
+        })).collect::<Vec<_>>(),
+        "photons": run.mc.as_ref().map_or(0, |m| m.photons),
+    });
+    if let Some(mc) = &run.mc {
+        let s = &mc.stats;
+        json["batches"] = scene.simulation.batches.into();
+        json["seed"] = scene.simulation.seed.into();
+        json["threads"] = mc.threads.into();
+        json["wall_s"] = mc.wall_s.into();
+        json["counters"] = serde_json::json!({
             "collisions": s.collisions,
             "surface_reflections": s.surface_reflections,
             "local_estimates": s.local_estimates,
@@ -169,17 +292,26 @@ fn write_summary(
             "cut": s.cut,
             "escaped": s.escaped,
             "zero_weight": s.zero_weight,
-        },
-    });
-    write_json(path, &json)
-}
-
-/// Write JSON through a temporary file and a rename.
-fn write_json(path: &std::path::Path, json: &serde_json::Value) -> std::io::Result<()> {
-    let tmp = path.with_extension("json.tmp");
-    std::fs::write(
-        &tmp,
-        serde_json::to_string_pretty(&json).unwrap_or_default(),
-    )?;
-    std::fs::rename(&tmp, path)
+        });
+    }
+    if let Some(r) = &run.retrieval {
+        json["retrieval"] = serde_json::json!({
+            "gas": r.config.gas,
+            "channel_pair": r.pair,
+            "shots_averaged": r.config.averaging_shots,
+            "averaging": r.config.averaging_label,
+            "ipda": run.products.iter().filter(|p| p.method == Method::Ipda).map(|p| serde_json::json!({
+                "source": p.source.label(),
+                "order": p.order.label(),
+                "fov_full_angle_mrad": p.fov_full_angle_mrad,
+                "truth_ppm": p.truth,
+                "retrieved_ppm": p.retrieved,
+                "bias_ppm": p.bias(),
+                "mc_stderr_ppm": p.mc_stderr,
+                "random_error_per_shot_pair_ppm": p.random_error_per_shot_pair,
+                "random_error_averaged_ppm": p.random_error_averaged,
+            })).collect::<Vec<_>>(),
+        });
+    }
+    serde_json::to_string_pretty(&json).unwrap_or_default()
 }

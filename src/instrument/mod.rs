@@ -8,4 +8,9 @@
 //! | step | module | entry point |
 //! |---|---|---|
 //! | laser line shapes and their quadrature | [`line_shape`] | [`line_shape::LineShape::nodes`] |
+//! | lines, channels and their combinations | [`laser`] | [`laser::SpectralSampling::new`] |
 //! | photo-detection and noise | [`detector`] | [`detector::Detector::gate`] |
+pub mod detector;
+pub mod laser;
+pub mod line_shape;
+pub mod signals;

@@ -21,6 +21,70 @@ pub(super) struct SceneFile {
     pub surface: Option<SurfaceFile>,
     pub gas_absorption: Option<GasAbsorptionFile>,
     pub simulation: Option<SimulationFile>,
+    pub laser: Option<LaserFile>,
+    pub receiver: Option<ReceiverFile>,
+    pub background: Option<BackgroundFile>,
+    pub retrieval: Option<RetrievalFile>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct LaserFile {
+    pub pulse_energy_j: PerChannel,
+    pub repetition_rate_hz: f64,
+    pub line_shape: Option<String>,
+    pub linewidth_fwhm_mhz: Option<f64>,
+    pub line_shape_file: Option<String>,
+    pub line_shape_nodes: Option<usize>,
+    pub frequency_offset_mhz: Option<PerChannel>,
+    pub frequency_jitter_rms_mhz: Option<f64>,
+    pub spectral_purity: Option<f64>,
+    pub impurity_wavenumber_cm1: Option<PerChannel>,
+    pub pulse_energy_jitter_fraction: Option<f64>,
+    pub energy_monitor_error_fraction: Option<f64>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct ReceiverFile {
+    pub filter_bandwidth_nm: Option<f64>,
+    pub filter_bandwidth_ghz: Option<f64>,
+    pub filter_transmission: Option<f64>,
+    pub quantum_efficiency: f64,
+    pub gain: Option<f64>,
+    pub excess_noise_factor: Option<f64>,
+    pub ionization_ratio: Option<f64>,
+    pub dark_current_a: Option<f64>,
+    pub nep_w_per_sqrt_hz: Option<f64>,
+    pub amplifier_noise_a_per_sqrt_hz: Option<f64>,
+    pub readout_noise_electrons: Option<f64>,
+    pub bandwidth_mhz: Option<f64>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct BackgroundFile {
+    pub radiance_w_per_m2_sr_um: Option<f64>,
+    pub solar_irradiance_w_per_m2_um: Option<f64>,
+    pub solar_zenith_angle_deg: Option<f64>,
+    pub reflectance: Option<f64>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct RetrievalFile {
+    pub gas: Option<String>,
+    pub on: Option<String>,
+    pub off: Option<String>,
+    pub target: Option<String>,
+    pub target_window_m: Option<f64>,
+    pub dial_cell_m: Option<f64>,
+    pub dial_start_m: Option<f64>,
+    pub dial_end_m: Option<f64>,
+    pub averaging_shots: Option<u64>,
+    pub averaging_length_km: Option<f64>,
+    pub platform_speed_m_per_s: Option<f64>,
+    pub realisations: Option<usize>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -42,7 +106,7 @@ pub(super) struct LidarFile {
     pub altitude_km: Option<f64>,
     pub zenith_angle_deg: f64,
     pub azimuth_deg: Option<f64>,
-    pub pulse_energy_j: f64,
+    pub pulse_energy_j: Option<f64>,
     pub beam_divergence_full_angle_mrad: f64,
     pub beam_profile: Option<String>,
     pub telescope_diameter_m: f64,

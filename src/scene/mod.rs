@@ -11,15 +11,19 @@
 //! order) and reports each problem at the line of the key it concerns.
 
 mod file;
+mod instrument;
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use crate::atmosphere::{Profile, StandardAtmosphere};
 use crate::input::InputError;
+use crate::instrument::laser::{Filter, Laser, Line, SpectralSampling};
+use crate::instrument::signals::Receiver;
 use crate::particles::phase::{HenyeyGreenstein, PhaseFunction, RayleighPhase, TabulatedPhase};
 use crate::particles::table::PhaseTable;
 use crate::particles::{builtin_table, rayleigh};
+use crate::retrieval::RetrievalConfig;
 use crate::spectroscopy::{LblOptions, LineFilter, LineList, isotopologues};
 
 use file::{KeyPath, PerChannel, PhaseSpecFile, SceneFile};
@@ -38,8 +42,21 @@ pub struct Scene {
     pub description: String,
     /// The lidar: platform, pointing, emitter, receiver.
     pub lidar: Lidar,
-    /// Channels, in file order; channel 0 is the reference channel of the transport.
+    /// The laser lines as the scene names them (`[[channel]]`), in file order.
+    pub lines: Vec<Channel>,
+    /// The monochromatic channels of the transport: the lines themselves, or with a `[laser]`
+    /// their line-shape nodes, jitter stencil and impurity ([`SpectralSampling`]). Channel 0 is
+    /// the reference channel of the transport. Per-channel values of layers, surface and
+    /// atmosphere are those of each channel's line.
     pub channels: Vec<Channel>,
+    /// The laser (an ideal monochromatic one when the scene has no `[laser]`).
+    pub laser: Laser,
+    /// How the channels sample the lines, and the combinations that make line returns.
+    pub sampling: SpectralSampling,
+    /// The receiver's filter, detector and background (`[receiver]`, `[background]`), if any.
+    pub receiver: Option<Receiver>,
+    /// What to retrieve (`[retrieval]`), if anything.
+    pub retrieval: Option<RetrievalConfig>,
     /// Range gates.
     pub gates: Gates,
     /// Molecular atmosphere, if any.
@@ -52,6 +69,8 @@ pub struct Scene {
     pub gas: Option<GasAbsorption>,
     /// Monte Carlo settings.
     pub simulation: Simulation,
+    /// The scene text, to name the line of a key in errors found after parsing.
+    text: Arc<str>,
 }
 
 /// Gas absorption line by line, from the atmosphere's gas profiles.
@@ -327,9 +346,13 @@ impl Validator<'_> {
     }
 
     fn scene(&self, raw: SceneFile) -> Result<Scene, InputError> {
-        let lidar = self.lidar(&raw)?;
+        let (mut lidar, lidar_pulse_energy_j) = self.lidar(&raw)?;
+        // Until the channels are expanded at the end, every per-channel value is per line.
         let channels = self.channels(&raw)?;
         let nch = channels.len();
+        let laser = self.laser(&raw, &channels, lidar_pulse_energy_j)?;
+        // The transport runs with the first line's energy; combinations scale the others.
+        lidar.pulse_energy_j = laser.pulse_energy_j[0];
         let gates = self.gates(&raw)?;
         let atmosphere = match &raw.atmosphere {
             Some(a) => Some(self.atmosphere(a, &channels)?),
@@ -379,23 +402,70 @@ impl Validator<'_> {
                 }
             }
         }
+        let receiver = self.receiver(&raw, &channels, surface.as_ref().map(|s| s.albedo[0]))?;
+        let lines: Vec<Line> = channels
+            .iter()
+            .map(|c| Line {
+                name: c.name.clone(),
+                wavenumber_cm1: c.wavenumber_cm1,
+            })
+            .collect();
+        let filter = receiver
+            .as_ref()
+            .map(|r| r.filter)
+            .unwrap_or(Filter::none());
+        let sampling = SpectralSampling::new(&laser, &lines, &filter);
+        let sampled: Vec<Channel> = sampling
+            .channels
+            .iter()
+            .map(|c| Channel {
+                name: c.name.clone(),
+                wavenumber_cm1: c.wavenumber_cm1,
+            })
+            .collect();
+        if let Some(c) = sampled.iter().find(|c| !(c.wavenumber_cm1 > 0.0)) {
+            return Err(self.err(
+                &KeyPath::table("laser").key("frequency_offset_mhz"),
+                format!("channel `{}` falls at {} cm⁻¹", c.name, c.wavenumber_cm1),
+            ));
+        }
         let gas = match &raw.gas_absorption {
-            Some(g) => Some(self.gas(g, &channels, atmosphere.as_ref())?),
+            Some(g) => Some(self.gas(g, &sampled, atmosphere.as_ref())?),
             None => None,
         };
         let simulation = self.simulation(&raw)?;
-        Ok(Scene {
+        let retrieval = self.retrieval(
+            &raw,
+            &channels,
+            &lidar,
+            &laser,
+            &gates,
+            surface.as_ref(),
+            &layers,
+            atmosphere.as_ref(),
+            gas.as_ref(),
+            receiver.is_some(),
+        )?;
+        let mut scene = Scene {
             path: self.path.to_path_buf(),
             description: raw.description.clone().unwrap_or_default(),
             lidar,
-            channels,
+            lines: channels,
+            channels: sampled,
+            laser,
+            sampling,
+            receiver,
+            retrieval,
             gates,
             atmosphere,
             layers,
             surface,
             gas,
             simulation,
-        })
+            text: Arc::from(self.text),
+        };
+        scene.expand_per_channel_values();
+        Ok(scene)
     }
 
     /// The cache table of a `[gas_absorption]` section, if one is asked for.
@@ -530,7 +600,8 @@ impl Validator<'_> {
         })
     }
 
-    fn lidar(&self, raw: &SceneFile) -> Result<Lidar, InputError> {
+    /// The lidar, and the pulse energy if `[lidar]` gives one (it may come from `[laser]`).
+    fn lidar(&self, raw: &SceneFile) -> Result<(Lidar, Option<f64>), InputError> {
         let l = &raw.lidar;
         let sec = KeyPath::table("lidar");
         let (_, altitude_m) = self.one_of(
@@ -541,7 +612,10 @@ impl Validator<'_> {
         let zenith_angle_deg =
             self.in_range(&sec.key("zenith_angle_deg"), l.zenith_angle_deg, 0.0, 180.0)?;
         let azimuth_deg = l.azimuth_deg.unwrap_or(0.0);
-        let pulse_energy_j = self.positive(&sec.key("pulse_energy_j"), l.pulse_energy_j)?;
+        let pulse_energy_j = match l.pulse_energy_j {
+            Some(e) => Some(self.positive(&sec.key("pulse_energy_j"), e)?),
+            None => None,
+        };
         let div = self.non_negative(
             &sec.key("beam_divergence_full_angle_mrad"),
             l.beam_divergence_full_angle_mrad,
@@ -586,17 +660,21 @@ impl Validator<'_> {
                 return Err(self.err(&fov_at, format!("{f} mrad is given twice")));
             }
         }
-        Ok(Lidar {
-            altitude_m,
-            zenith_angle_deg,
-            azimuth_deg,
+        Ok((
+            Lidar {
+                altitude_m,
+                zenith_angle_deg,
+                azimuth_deg,
+                // Set from the laser once it is known.
+                pulse_energy_j: f64::NAN,
+                beam_divergence_full_angle_mrad: div,
+                beam_profile,
+                telescope_diameter_m,
+                optical_efficiency,
+                fov_full_angle_mrad,
+            },
             pulse_energy_j,
-            beam_divergence_full_angle_mrad: div,
-            beam_profile,
-            telescope_diameter_m,
-            optical_efficiency,
-            fov_full_angle_mrad,
-        })
+        ))
     }
 
     fn channels(&self, raw: &SceneFile) -> Result<Vec<Channel>, InputError> {
@@ -1232,6 +1310,63 @@ impl Validator<'_> {
 }
 
 impl Scene {
+    /// Replace every per-line value (layer optics, albedo, depolarisation) by one value per
+    /// channel, each channel taking its line's: particle optics do not change over the few GHz
+    /// a line's channels span (an impurity channel far from its line is approximated so too).
+    fn expand_per_channel_values(&mut self) {
+        let parent: Vec<usize> = self.sampling.channels.iter().map(|c| c.line).collect();
+        if parent.iter().enumerate().all(|(i, p)| i == *p) && parent.len() == self.lines.len() {
+            return;
+        }
+        fn expand<T: Clone>(v: &mut Vec<T>, parent: &[usize]) {
+            *v = parent.iter().map(|p| v[*p].clone()).collect();
+        }
+        if let Some(a) = &mut self.atmosphere {
+            expand(&mut a.depolarisation_factor, &parent);
+        }
+        for l in &mut self.layers {
+            expand(&mut l.extinction_per_m, &parent);
+            expand(&mut l.single_scattering_albedo, &parent);
+            expand(&mut l.phase, &parent);
+            expand(&mut l.absorption_per_m, &parent);
+        }
+        if let Some(s) = &mut self.surface {
+            expand(&mut s.albedo, &parent);
+        }
+    }
+
+    /// The molecular grid: layer edges from the profile bottom (or the surface) to the top of
+    /// the atmosphere in steps of its layer thickness (the last layer may be thinner). Gas
+    /// optical depths are computed on it (Curtis-Godson layers), for the truth and for a
+    /// retrieval's reference state alike. `None` without an atmosphere.
+    pub fn molecular_edges(&self) -> Option<Vec<f64>> {
+        let a = self.atmosphere.as_ref()?;
+        let mut bottom = a.profile.altitude_m[0];
+        if let Some(s) = &self.surface {
+            bottom = bottom.max(s.altitude_m);
+        }
+        let n = ((a.top_m - bottom) / a.layer_thickness_m).ceil().max(1.0) as usize;
+        let mut edges: Vec<f64> = (0..n)
+            .map(|i| bottom + i as f64 * a.layer_thickness_m)
+            .collect();
+        edges.push(a.top_m);
+        Some(edges)
+    }
+
+    /// An error at a key of this scene, with the key's line (for problems found after parsing,
+    /// such as a retrieval that cannot be done). `section` is `retrieval`, `laser`, …; `key`
+    /// may be empty to name the section.
+    pub fn input_error(&self, section: &str, key: &str, message: impl Into<String>) -> InputError {
+        let sec = KeyPath::table(section);
+        let at = if key.is_empty() { sec } else { sec.key(key) };
+        InputError {
+            path: self.path.clone(),
+            line: Some(at.line(&self.text)),
+            field: Some(at.dotted()),
+            message: message.into(),
+        }
+    }
+
     /// Override the Monte Carlo settings from the command line (validated like the file).
     pub fn override_simulation(
         &mut self,

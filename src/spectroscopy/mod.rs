@@ -111,35 +111,13 @@ pub enum SpectroscopyError {
     },
 }
 
-/// Write `bytes` to `path` through a temporary file in the same directory and a rename, so that
-/// a failure never leaves a half-written file behind.
+/// Write `bytes` to `path` whole or not at all ([`crate::output::write_atomically`]).
 pub(crate) fn write_atomically(
     path: &std::path::Path,
     bytes: &[u8],
 ) -> Result<(), SpectroscopyError> {
-    use std::io::Write;
-    let err = |source| SpectroscopyError::Write {
+    crate::output::write_atomically(path, bytes).map_err(|source| SpectroscopyError::Write {
         path: path.to_path_buf(),
         source,
-    };
-    let dir = path
-        .parent()
-        .filter(|d| !d.as_os_str().is_empty())
-        .unwrap_or(std::path::Path::new("."));
-    let file_name = path.file_name().map(|n| n.to_string_lossy().into_owned());
-    let tmp = dir.join(format!(
-        ".{}.tmp{}",
-        file_name.unwrap_or_else(|| "out".into()),
-        std::process::id()
-    ));
-    let result = (|| {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
-        std::fs::rename(&tmp, path)
-    })();
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result.map_err(err)
+    })
 }

@@ -1,0 +1,247 @@
+//! Figures of a run: on/off returns against range (`returns.png`) and, with a DIAL retrieval,
+//! the retrieved mixing-ratio profile with its error bars against the truth (`dial.png`).
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use plotters::prelude::*;
+
+use super::plot::{FONT, init_font};
+use lidarsim::output::write_via;
+use lidarsim::pipeline::RunOutput;
+use lidarsim::retrieval::{Method, Product, Quantity};
+use lidarsim::returns::{Order, Returns, Source};
+use lidarsim::scene::Scene;
+
+type DrawResult = Result<(), Box<dyn std::error::Error>>;
+
+/// Draw every figure the run has data for; returns the files written.
+pub fn draw(dir: &Path, scene: &Scene, run: &RunOutput) -> anyhow::Result<Vec<PathBuf>> {
+    init_font();
+    let mut written = Vec::new();
+    let path = dir.join("returns.png");
+    let mc = run.mc_lines.as_ref().map(|m| &m.mean);
+    write_via(&path, |tmp| {
+        returns_figure(tmp, scene, &run.analytic_lines.mean, mc)
+            .map_err(|e| std::io::Error::other(e.to_string()))
+    })
+    .with_context(|| format!("cannot draw {}", path.display()))?;
+    written.push(path);
+    let dial: Vec<&Product> = run
+        .products
+        .iter()
+        .filter(|p| p.method == Method::Dial && p.quantity == Quantity::MixingRatio)
+        .collect();
+    if !dial.is_empty() {
+        let path = dir.join("dial.png");
+        write_via(&path, |tmp| {
+            dial_figure(tmp, &dial).map_err(|e| std::io::Error::other(e.to_string()))
+        })
+        .with_context(|| format!("cannot draw {}", path.display()))?;
+        written.push(path);
+    }
+    Ok(written)
+}
+
+/// log10 of the returns of the first field of view: analytic order 1 as lines, Monte Carlo
+/// (all orders) as points, every line.
+fn returns_figure(
+    path: &Path,
+    scene: &Scene,
+    analytic: &Returns,
+    mc: Option<&Returns>,
+) -> DrawResult {
+    let root = BitMapBackend::new(path, (1000, 650)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let series = |r: &Returns, k: usize, order: Order| -> Vec<(f64, f64)> {
+        (0..r.range_m.len())
+            .filter_map(|g| {
+                let e = r.energy(k, 0, g, order)?;
+                (e > 0.0).then(|| (r.range_m[g], e.log10()))
+            })
+            .collect()
+    };
+    let mut all: Vec<(f64, f64)> = Vec::new();
+    for k in 0..analytic.channels.len() {
+        all.extend(series(analytic, k, Order::Exactly(1)));
+        if let Some(m) = mc {
+            all.extend(series(m, k, Order::Total));
+        }
+    }
+    if all.is_empty() {
+        return Err("no positive return to draw".into());
+    }
+    let (x0, x1) = (scene.gates.start_m, scene.gates.end_m());
+    let (lo, hi) = all
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| {
+            (a.min(p.1), b.max(p.1))
+        });
+    // Atmospheric returns span decades below a hard target; keep 8 of them.
+    let lo = lo.max(hi - 8.0);
+    let mut chart = ChartBuilder::on(&root)
+        .caption(
+            format!(
+                "returns per pulse, FOV {} mrad",
+                analytic.fov_full_angle_mrad[0]
+            ),
+            (FONT, 18),
+        )
+        .margin(12)
+        .x_label_area_size(45)
+        .y_label_area_size(80)
+        .build_cartesian_2d(x0..x1, (lo - 0.2)..(hi + 0.2))?;
+    chart
+        .configure_mesh()
+        .x_desc("range [m]")
+        .y_desc("energy per gate [J]")
+        .label_style((FONT, 13))
+        .y_label_formatter(&|v| format!("{:.0e}", 10f64.powf(*v)))
+        .draw()?;
+    let colours = [BLUE, RED, GREEN, MAGENTA, CYAN, BLACK];
+    for k in 0..analytic.channels.len() {
+        let c = colours[k % colours.len()];
+        let name = &analytic.channels[k];
+        chart
+            .draw_series(LineSeries::new(
+                series(analytic, k, Order::Exactly(1))
+                    .into_iter()
+                    .filter(|p| p.1 >= lo),
+                c.stroke_width(1),
+            ))?
+            .label(format!("{name}, analytic single scattering"))
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c));
+        if let Some(m) = mc {
+            chart
+                .draw_series(
+                    series(m, k, Order::Total)
+                        .into_iter()
+                        .filter(|p| p.1 >= lo)
+                        .map(|p| Circle::new(p, 2, c.filled())),
+                )?
+                .label(format!("{name}, Monte Carlo, all orders"))
+                .legend(move |(x, y)| Circle::new((x + 10, y), 3, c.filled()));
+        }
+    }
+    chart
+        .configure_series_labels()
+        .label_font((FONT, 13))
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()?;
+    root.present()?;
+    Ok(())
+}
+
+/// Retrieved mixing ratio per DIAL cell against altitude, with the averaged random error
+/// (analytic) as error bars, next to the truth, for each set of returns of the first FOV.
+fn dial_figure(path: &Path, products: &[&Product]) -> DrawResult {
+    let root = BitMapBackend::new(path, (800, 800)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let fov = products[0].fov_full_angle_mrad;
+    let set: Vec<&&Product> = products
+        .iter()
+        .filter(|p| p.fov_full_angle_mrad == fov)
+        .collect();
+    let z = |p: &Product| 0.5 * (p.altitude_m.0 + p.altitude_m.1);
+    let mut x_lo = f64::INFINITY;
+    let mut x_hi = f64::NEG_INFINITY;
+    for p in &set {
+        for v in [
+            p.truth,
+            p.retrieved - p.random_error_averaged,
+            p.retrieved + p.random_error_averaged,
+        ] {
+            if v.is_finite() {
+                x_lo = x_lo.min(v);
+                x_hi = x_hi.max(v);
+            }
+        }
+    }
+    if x_hi.partial_cmp(&x_lo) != Some(std::cmp::Ordering::Greater) {
+        x_lo -= 1.0;
+        x_hi += 1.0;
+    }
+    let pad = 0.05 * (x_hi - x_lo);
+    let (z_lo, z_hi) = set
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| {
+            (a.min(p.altitude_m.0), b.max(p.altitude_m.1))
+        });
+    let mut chart = ChartBuilder::on(&root)
+        .caption(
+            format!(
+                "DIAL {}, FOV {fov} mrad, {} shot pairs",
+                set[0].channel_pair, set[0].shots_averaged
+            ),
+            (FONT, 18),
+        )
+        .margin(12)
+        .x_label_area_size(45)
+        .y_label_area_size(70)
+        .build_cartesian_2d((x_lo - pad)..(x_hi + pad), z_lo..z_hi)?;
+    chart
+        .configure_mesh()
+        .x_desc("dry-air mixing ratio [ppm]")
+        .y_desc("altitude [m]")
+        .label_style((FONT, 13))
+        .draw()?;
+    let truth: Vec<(f64, f64)> = set
+        .iter()
+        .filter(|p| p.source == Source::Analytic)
+        .flat_map(|p| [(p.truth, p.altitude_m.0), (p.truth, p.altitude_m.1)])
+        .collect();
+    chart
+        .draw_series(LineSeries::new(truth, BLACK.stroke_width(2)))?
+        .label("truth (cell averages)")
+        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK));
+    let kinds = [
+        (
+            Source::Analytic,
+            Order::Exactly(1),
+            BLUE,
+            "analytic single scattering",
+        ),
+        (
+            Source::MonteCarlo,
+            Order::Total,
+            RED,
+            "Monte Carlo, all orders",
+        ),
+    ];
+    for (src, order, c, name) in kinds {
+        let pts: Vec<&&&Product> = set
+            .iter()
+            .filter(|p| p.source == src && p.order == order && p.retrieved.is_finite())
+            .collect();
+        if pts.is_empty() {
+            continue;
+        }
+        chart.draw_series(pts.iter().map(|p| {
+            let e = if p.random_error_averaged.is_finite() {
+                p.random_error_averaged
+            } else {
+                0.0
+            };
+            PathElement::new(
+                vec![(p.retrieved - e, z(p)), (p.retrieved + e, z(p))],
+                c.stroke_width(1),
+            )
+        }))?;
+        chart
+            .draw_series(
+                pts.iter()
+                    .map(|p| Circle::new((p.retrieved, z(p)), 3, c.filled())),
+            )?
+            .label(format!("{name} ± random error"))
+            .legend(move |(x, y)| Circle::new((x + 10, y), 3, c.filled()));
+    }
+    chart
+        .configure_series_labels()
+        .label_font((FONT, 13))
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()?;
+    root.present()?;
+    Ok(())
+}

@@ -1,0 +1,359 @@
+//! Signals: the receiver (filter, detector, background) and the photo-electrons and noise it
+//! makes of line returns, per gate and per pulse, analytically and as noisy realisations of
+//! shot-averaged measurements.
+//!
+//! Per gate of duration τ = 2Δr/c and per pulse of line ℓ ([`super::detector`] has the noise
+//! formula): the signal is the line's return through the filter (energies in
+//! [`LineReturns`](super::laser::LineReturns) already carry the filter and the optical
+//! efficiency), the background power is P_b = L Δλ Ω A η_opt T_f at the line's wavelength.
+//!
+//! A measurement averages N shot pairs. Shot s of line ℓ has energy e_s = E_ℓ(1 + ε_E z) and
+//! frequency c + δ_s, δ_s ~ N(0, σ_j²); its expected return in a gate is
+//! (e_s/E_ℓ)[P̄ − ½Cσ_j² + Sδ_s + ½Cδ_s²] ([`super::laser`]), and the energy monitor reads
+//! e_s(1 + ε_M z'). Summed over the shots, the photo-electrons of a gate are drawn once
+//! ([`Detector::sample_sum`]); the laser state (energies, frequencies, monitor readings) is
+//! drawn shot by shot and shared by every gate of that line, as in the instrument.
+
+use std::ops::Range;
+
+use rand_distr::{Distribution, StandardNormal};
+
+use super::detector::{self, Detector, GateNoise};
+use super::laser::{Filter, Laser, Line, LineReturns};
+use crate::constants::SPEED_OF_LIGHT_M_PER_S;
+use crate::returns::{Order, Returns, Source};
+use crate::rng::Rng;
+
+/// The receiver behind the telescope (whose area, efficiency and fields of view are the
+/// lidar's).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Receiver {
+    /// The spectral filter (also bounds the background).
+    pub filter: Filter,
+    /// The photo-detector and its electronics.
+    pub detector: Detector,
+    /// Radiance of the scene seen by the telescope (sunlit surface or cloud)
+    /// \[W m⁻² sr⁻¹ µm⁻¹\]; 0 at night.
+    pub background_radiance_w_per_m2_sr_um: f64,
+}
+
+/// The telescope's share of the receiver: collecting area and optical efficiency.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Telescope {
+    /// Collecting area \[m²\].
+    pub area_m2: f64,
+    /// Optical efficiency of the receiver optics before the filter (0, 1].
+    pub optical_efficiency: f64,
+}
+
+/// Mean photo-electrons and noise per pulse, by line, field of view and gate, for one set of
+/// returns (a source and a scattering order).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Signals {
+    /// Where the returns came from.
+    pub source: Source,
+    /// Which scattering order they hold.
+    pub order: Order,
+    /// The lines.
+    pub lines: Vec<Line>,
+    /// Fields of view (full angles) \[mrad\].
+    pub fov_full_angle_mrad: Vec<f64>,
+    /// Gate centres \[m\].
+    pub range_m: Vec<f64>,
+    /// Duration of one gate \[s\].
+    pub gate_duration_s: f64,
+    /// The detector.
+    pub detector: Detector,
+    /// Background power at the detector per line and FOV \[W\], index `line * n_fov + fov`.
+    pub background_power_w: Vec<f64>,
+    /// Mean received energy per pulse \[J\], index [`Signals::index`].
+    pub energy_j: Vec<f64>,
+    /// ∂E/∂ν \[J/MHz\] and ∂²E/∂ν² \[J/MHz²\] per gate (zero without frequency jitter).
+    pub slope_j_per_mhz: Vec<f64>,
+    /// See `slope_j_per_mhz`.
+    pub curvature_j_per_mhz2: Vec<f64>,
+    /// Photo-electrons and noise per pulse, same index.
+    pub noise: Vec<GateNoise>,
+}
+
+impl Signals {
+    /// Signals of the line returns `lines` (order `order`) through `receiver`.
+    pub fn new(
+        returns: &LineReturns,
+        order: Order,
+        laser_lines: &[Line],
+        receiver: &Receiver,
+        telescope: Telescope,
+        gate_width_m: f64,
+    ) -> Option<Signals> {
+        let mean = &returns.mean;
+        let o = mean.order_index(order)?;
+        let n_fov = mean.fov_full_angle_mrad.len();
+        let n_gates = mean.range_m.len();
+        let tau = 2.0 * gate_width_m / SPEED_OF_LIGHT_M_PER_S;
+        let mut background_power_w = Vec::new();
+        for l in laser_lines {
+            // Δλ [µm] = Δν λ² = Δν / ν² · 1e4 with ν in cm⁻¹.
+            let dl_um = receiver.filter.bandwidth_cm1 / (l.wavenumber_cm1 * l.wavenumber_cm1) * 1e4;
+            for fov in &mean.fov_full_angle_mrad {
+                background_power_w.push(if receiver.background_radiance_w_per_m2_sr_um > 0.0 {
+                    detector::background_power_w(
+                        receiver.background_radiance_w_per_m2_sr_um,
+                        dl_um,
+                        *fov,
+                        telescope.area_m2,
+                        telescope.optical_efficiency,
+                        receiver.filter.transmission,
+                    )
+                } else {
+                    0.0
+                });
+            }
+        }
+        let n = laser_lines.len() * n_fov * n_gates;
+        let (mut energy_j, mut slope, mut curvature, mut noise) = (
+            Vec::with_capacity(n),
+            Vec::with_capacity(n),
+            Vec::with_capacity(n),
+            Vec::with_capacity(n),
+        );
+        let deriv = |r: &Returns, l: usize, f: usize, g: usize| r.energy_j[r.index(l, f, g, o)];
+        for (l, line) in laser_lines.iter().enumerate() {
+            for f in 0..n_fov {
+                for g in 0..n_gates {
+                    let e = mean.energy_j[mean.index(l, f, g, o)].max(0.0);
+                    energy_j.push(e);
+                    let (s, c) = match &returns.derivatives {
+                        Some((s, c)) => (deriv(s, l, f, g), deriv(c, l, f, g)),
+                        None => (0.0, 0.0),
+                    };
+                    slope.push(s);
+                    curvature.push(c);
+                    noise.push(receiver.detector.gate(
+                        e,
+                        background_power_w[l * n_fov + f],
+                        line.wavenumber_cm1,
+                        tau,
+                    ));
+                }
+            }
+        }
+        Some(Signals {
+            source: mean.source,
+            order,
+            lines: laser_lines.to_vec(),
+            fov_full_angle_mrad: mean.fov_full_angle_mrad.clone(),
+            range_m: mean.range_m.clone(),
+            gate_duration_s: tau,
+            detector: receiver.detector.clone(),
+            background_power_w,
+            energy_j,
+            slope_j_per_mhz: slope,
+            curvature_j_per_mhz2: curvature,
+            noise,
+        })
+    }
+
+    /// Flat index of (line, fov, gate).
+    pub fn index(&self, line: usize, fov: usize, gate: usize) -> usize {
+        (line * self.fov_full_angle_mrad.len() + fov) * self.range_m.len() + gate
+    }
+
+    /// Photo-electrons and noise of one gate per pulse.
+    pub fn gate(&self, line: usize, fov: usize, gate: usize) -> &GateNoise {
+        &self.noise[self.index(line, fov, gate)]
+    }
+
+    /// Mean energy, slope and curvature of the echo summed over `gates`.
+    pub fn window_energy(&self, line: usize, fov: usize, gates: Range<usize>) -> (f64, f64, f64) {
+        gates.fold((0.0, 0.0, 0.0), |(e, s, c), g| {
+            let i = self.index(line, fov, g);
+            (
+                e + self.energy_j[i],
+                s + self.slope_j_per_mhz[i],
+                c + self.curvature_j_per_mhz2[i],
+            )
+        })
+    }
+
+    /// Photo-electrons and noise per pulse of the echo summed over `gates` (a hard target's
+    /// window): one integration of their joint duration.
+    pub fn window(&self, line: usize, fov: usize, gates: Range<usize>) -> GateNoise {
+        let n = gates.len() as f64;
+        let (e, _, _) = self.window_energy(line, fov, gates);
+        self.detector.gate(
+            e,
+            self.background_power_w[line * self.fov_full_angle_mrad.len() + fov],
+            self.lines[line].wavenumber_cm1,
+            n * self.gate_duration_s,
+        )
+    }
+
+    /// Relative signal change per shot caused by the frequency jitter, σ_j S/P̄ (signed), of
+    /// the echo summed over `gates`.
+    pub fn jitter_relative(
+        &self,
+        laser: &Laser,
+        line: usize,
+        fov: usize,
+        gates: Range<usize>,
+    ) -> f64 {
+        let (e, s, _) = self.window_energy(line, fov, gates);
+        if e > 0.0 {
+            laser.frequency_jitter_rms_mhz * s / e
+        } else {
+            0.0
+        }
+    }
+
+    /// One noisy measurement of line `line` in field of view `fov`, averaged over `shots`
+    /// pulses: the background-subtracted photo-electrons summed over the shots in each window
+    /// of `windows`, and the energy monitor's reading summed over the shots, in units of the
+    /// nominal pulse energy (module docs).
+    pub fn realise(
+        &self,
+        laser: &Laser,
+        line: usize,
+        fov: usize,
+        windows: &[Range<usize>],
+        shots: u64,
+        rng: &mut Rng,
+    ) -> (Vec<f64>, f64) {
+        let shot = draw_shots(laser, shots, rng);
+        let var = laser.frequency_jitter_rms_mhz.powi(2);
+        let counts = windows
+            .iter()
+            .map(|w| {
+                let per_shot = self.window(line, fov, w.clone());
+                let (e, s, c) = self.window_energy(line, fov, w.clone());
+                let energy_sum = shot.energy * (e - 0.5 * c * var)
+                    + s * shot.energy_delta
+                    + 0.5 * c * shot.energy_delta2;
+                let pe_per_j = if e > 0.0 { per_shot.signal_pe / e } else { 0.0 };
+                self.detector
+                    .sample_sum((energy_sum * pe_per_j).max(0.0), &per_shot, shots, rng)
+            })
+            .collect();
+        (counts, shot.monitored_energy)
+    }
+}
+
+/// Header of `signals.csv`: per pulse, by source, order, line, field of view and gate.
+pub const CSV_HEADER: &str = "source,order,channel,fov_full_angle_mrad,range_m,signal_photoelectrons,background_photoelectrons,dark_electrons,noise_std_photoelectrons,snr";
+
+impl Signals {
+    /// The CSV rows (no header), ordered by line, field of view, gate.
+    pub fn csv_rows(&self, out: &mut String) {
+        use std::fmt::Write as _;
+        let (src, order) = (self.source.label(), self.order.label());
+        for (l, line) in self.lines.iter().enumerate() {
+            for (f, fov) in self.fov_full_angle_mrad.iter().enumerate() {
+                for (g, r) in self.range_m.iter().enumerate() {
+                    let n = self.gate(l, f, g);
+                    let _ = writeln!(
+                        out,
+                        "{src},{order},{},{fov},{r},{:.9e},{:.9e},{:.9e},{:.9e},{:.9e}",
+                        line.name,
+                        n.signal_pe,
+                        n.background_pe,
+                        n.dark_pe,
+                        n.std_pe(),
+                        n.snr()
+                    );
+                }
+            }
+        }
+    }
+}
+
+/// Sums over the shots of one line of a measurement (energies relative to the nominal one).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ShotSums {
+    /// Σ e_s/E.
+    pub energy: f64,
+    /// Σ (e_s/E) δ_s \[MHz\].
+    pub energy_delta: f64,
+    /// Σ (e_s/E) δ_s² \[MHz²\].
+    pub energy_delta2: f64,
+    /// Σ (e_s/E)(1 + ε_M z'_s): what the energy monitor reads.
+    pub monitored_energy: f64,
+}
+
+/// Draw the laser state of `shots` pulses (module docs). A perfect laser draws nothing.
+pub fn draw_shots(laser: &Laser, shots: u64, rng: &mut Rng) -> ShotSums {
+    let n = shots as f64;
+    let (ee, sj, em) = (
+        laser.pulse_energy_jitter_fraction,
+        laser.frequency_jitter_rms_mhz,
+        laser.energy_monitor_error_fraction,
+    );
+    if ee == 0.0 && sj == 0.0 && em == 0.0 {
+        return ShotSums {
+            energy: n,
+            energy_delta: 0.0,
+            energy_delta2: 0.0,
+            monitored_energy: n,
+        };
+    }
+    let mut s = ShotSums {
+        energy: 0.0,
+        energy_delta: 0.0,
+        energy_delta2: 0.0,
+        monitored_energy: 0.0,
+    };
+    let mut normal = || -> f64 { StandardNormal.sample(rng) };
+    for _ in 0..shots {
+        // A pulse cannot have negative energy (relevant only for absurd jitters).
+        let e = if ee > 0.0 {
+            (1.0 + ee * normal()).max(0.0)
+        } else {
+            1.0
+        };
+        let d = if sj > 0.0 { sj * normal() } else { 0.0 };
+        let m = if em > 0.0 { 1.0 + em * normal() } else { 1.0 };
+        s.energy += e;
+        s.energy_delta += e * d;
+        s.energy_delta2 += e * d * d;
+        s.monitored_energy += e * m;
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::{Stream, streams};
+
+    #[test]
+    fn shot_sums_have_the_stated_moments() {
+        // E[Σe] = N, Var(Σe) = N ε²; E[Σ e δ²] = N σ²; E[Σ e δ] = 0.
+        let mut laser = Laser::ideal(1.0, 1);
+        laser.pulse_energy_jitter_fraction = 0.05;
+        laser.frequency_jitter_rms_mhz = 0.3;
+        let mut rng = streams(5, Stream::Instrument, 1).remove(0);
+        let (n, reps) = (50u64, 4000);
+        let (mut m, mut m2, mut d2) = (0.0, 0.0, 0.0);
+        for _ in 0..reps {
+            let s = draw_shots(&laser, n, &mut rng);
+            m += s.energy;
+            m2 += s.energy * s.energy;
+            d2 += s.energy_delta2;
+        }
+        let r = reps as f64;
+        let mean = m / r;
+        let var = m2 / r - mean * mean;
+        let nf = n as f64;
+        // Standard errors: √(N ε²/reps) for the mean; ~√(2/reps) relative for the variance.
+        assert!((mean - nf).abs() < 4.0 * (nf * 0.0025 / r).sqrt(), "{mean}");
+        assert!(
+            (var / (nf * 0.0025) - 1.0).abs() < 4.0 * (2.0 / r).sqrt(),
+            "{var}"
+        );
+        // Σ e δ² has relative standard deviation ≈ √(2/N) per draw.
+        assert!(
+            (d2 / r / (nf * 0.09) - 1.0).abs() < 4.0 * (2.0 / (nf * r)).sqrt(),
+            "{}",
+            d2 / r
+        );
+    }
+}

@@ -1,0 +1,196 @@
+//! A scene from end to end: the stages of DESIGN §1 in order, as `lidarsim run` calls them.
+//!
+//! optics → analytic lidar equation → (retrieval set-up: fails before any photon is traced) →
+//! Monte Carlo → line returns → signals → retrievals. Each step is a plain call of its stage;
+//! a batch over many profiles can call the same stages directly.
+
+use thiserror::Error;
+
+use crate::input::InputError;
+use crate::instrument::laser::LineReturns;
+use crate::instrument::signals::{Signals, Telescope};
+use crate::lidar_eq;
+use crate::optics::{OpticalAtmosphere, OpticsError};
+use crate::retrieval::{LayerColumns, Product, ReferenceState, Retrieval, RetrievalError};
+use crate::returns::{Order, Returns};
+use crate::scene::Scene;
+use crate::transport::{self, McResult, TransportError, TransportOptions};
+
+/// Everything a run of a scene produces.
+#[derive(Debug, Clone)]
+pub struct RunOutput {
+    /// The optical atmosphere.
+    pub atmosphere: OpticalAtmosphere,
+    /// Analytic single scattering of every monochromatic channel.
+    pub analytic: Returns,
+    /// The same combined into line returns.
+    pub analytic_lines: LineReturns,
+    /// The Monte Carlo run, if photons were asked for (channels, and lines in `combined`).
+    pub mc: Option<McResult>,
+    /// Monte Carlo line returns.
+    pub mc_lines: Option<LineReturns>,
+    /// Signals of each set of returns (analytic order 1; Monte Carlo order 1 and all orders),
+    /// if the scene has a receiver.
+    pub signals: Vec<Signals>,
+    /// The retrieval set-up, if the scene asks for one.
+    pub retrieval: Option<Retrieval>,
+    /// Retrieved products, for every set of signals and field of view.
+    pub products: Vec<Product>,
+}
+
+/// Why a run failed.
+#[derive(Debug, Error)]
+#[non_exhaustive]
+pub enum RunError {
+    /// Building the optical atmosphere failed.
+    #[error(transparent)]
+    Optics(#[from] OpticsError),
+    /// The transport failed.
+    #[error(transparent)]
+    Transport(#[from] TransportError),
+    /// A problem with the scene found while running (named by file, line and key).
+    #[error(transparent)]
+    Input(#[from] InputError),
+}
+
+/// Run every stage of `scene`; `transport` says how to run the Monte Carlo (0 photons: the
+/// analytic lidar equation only). Its `combinations` are set here from the scene's laser.
+pub fn run(scene: &Scene, transport: &TransportOptions) -> Result<RunOutput, RunError> {
+    let atmosphere = OpticalAtmosphere::build(scene)?;
+    let analytic = lidar_eq::single_scatter(scene, &atmosphere);
+    let analytic_lines = scene.sampling.combine(&analytic);
+    let retrieval = match &scene.retrieval {
+        Some(_) => Some(retrieval_setup(scene).map_err(|e| retrieval_error(scene, e))?),
+        None => None,
+    };
+    let mut signals = Vec::new();
+    let mut products = Vec::new();
+    // The analytic returns first: a retrieval that cannot be done fails before the Monte Carlo.
+    collect(
+        scene,
+        retrieval.as_ref(),
+        &analytic_lines,
+        Order::Exactly(1),
+        &mut signals,
+        &mut products,
+    )?;
+    let (mc, mc_lines) = if transport.photons > 0 {
+        let mut opts = transport.clone();
+        opts.combinations = scene.sampling.combinations();
+        let mc = transport::run(scene, &atmosphere, &opts)?;
+        let lines = mc.combined.as_ref().map(|c| scene.sampling.split(c));
+        (Some(mc), lines)
+    } else {
+        (None, None)
+    };
+    if let Some(lines) = &mc_lines {
+        for order in [Order::Exactly(1), Order::Total] {
+            collect(
+                scene,
+                retrieval.as_ref(),
+                lines,
+                order,
+                &mut signals,
+                &mut products,
+            )?;
+        }
+    }
+    Ok(RunOutput {
+        atmosphere,
+        analytic,
+        analytic_lines,
+        mc,
+        mc_lines,
+        signals,
+        retrieval,
+        products,
+    })
+}
+
+/// Signals of one set of line returns, and the retrievals from them.
+fn collect(
+    scene: &Scene,
+    retrieval: Option<&Retrieval>,
+    lines: &LineReturns,
+    order: Order,
+    signals: &mut Vec<Signals>,
+    products: &mut Vec<Product>,
+) -> Result<(), RunError> {
+    let Some(receiver) = &scene.receiver else {
+        return Ok(());
+    };
+    let telescope = Telescope {
+        area_m2: scene.lidar.telescope_area_m2(),
+        optical_efficiency: scene.lidar.optical_efficiency,
+    };
+    let Some(s) = Signals::new(
+        lines,
+        order,
+        &scene.sampling.lines,
+        receiver,
+        telescope,
+        scene.gates.width_m,
+    ) else {
+        return Ok(());
+    };
+    if let Some(r) = retrieval {
+        for fov in 0..s.fov_full_angle_mrad.len() {
+            products.extend(
+                r.retrieve(lines, &s, fov)
+                    .map_err(|e| retrieval_error(scene, e))?,
+            );
+        }
+    }
+    signals.push(s);
+    Ok(())
+}
+
+/// The retrieval of a scene: its own profile as the reference state and as the truth, on the
+/// molecular grid its gas absorption was computed on.
+pub fn retrieval_setup(scene: &Scene) -> Result<Retrieval, RetrievalError> {
+    let config = scene
+        .retrieval
+        .clone()
+        .ok_or_else(|| RetrievalError::Gas("the scene has no [retrieval]".into()))?;
+    let (Some(atm), Some(gas), Some(edges)) =
+        (&scene.atmosphere, &scene.gas, scene.molecular_edges())
+    else {
+        return Err(RetrievalError::Gas(
+            "a retrieval needs an atmosphere with gas absorption".into(),
+        ));
+    };
+    let reference = ReferenceState::new(
+        &atm.profile,
+        &edges,
+        &config.gas,
+        &gas.lines,
+        &gas.options,
+        &scene.laser,
+        &scene.sampling.lines,
+    )?;
+    let truth = LayerColumns::new(&atm.profile, &edges, &config.gas)?;
+    let pair = format!(
+        "{}/{}",
+        scene.sampling.lines[config.on].name, scene.sampling.lines[config.off].name
+    );
+    let range_m = (0..scene.gates.count)
+        .map(|g| scene.gates.centre_m(g))
+        .collect();
+    Retrieval::new(
+        config,
+        scene.laser.clone(),
+        reference,
+        truth,
+        scene.lidar.altitude_m,
+        scene.lidar.axis().z,
+        range_m,
+        pair,
+        scene.simulation.seed,
+    )
+}
+
+/// A retrieval problem as an error at the scene key a user should change.
+fn retrieval_error(scene: &Scene, e: RetrievalError) -> RunError {
+    let (section, key) = e.scene_key();
+    RunError::Input(scene.input_error(section, key, e.to_string()))
+}

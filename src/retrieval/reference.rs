@@ -1,0 +1,268 @@
+//! The state a retrieval assumes, and the truth it is compared with.
+//!
+//! Both live on the scene's molecular grid (Curtis-Godson layers, [`crate::spectroscopy::layers`]),
+//! the grid on which the truth's gas optical depths were computed: a path that ends inside a
+//! layer takes the share of that layer's column or optical depth proportional to the share of
+//! its thickness, as the optical atmosphere does.
+//!
+//! The forward model of the retrieval (Ehret et al. 2008, Appl. Phys. B 90, 593, Eqs. 1–4, in
+//! the form of DESIGN §3) is the one-way differential absorption optical depth from the lidar to
+//! altitude z for a reference profile whose target gas is scaled by s,
+//!
+//! ```text
+//! D(z; s) = ½ ln( T̄²_off(z; s) / T̄²_on(z; s) ),   T̄²_ℓ = Σᵢ wᵢ exp(−2 (s τ_t,ℓ,i + τ_o,ℓ,i)/|μ|)
+//! ```
+//!
+//! with τ_t and τ_o the vertical optical depths of the target gas and of the other gases between
+//! the lidar and z, at the nominal quadrature nodes νᵢ of each line (the retrieval assumes the
+//! nominal laser: no frequency offset, no jitter, full spectral purity). For a monochromatic
+//! laser D is linear in s and the IPDA retrieval below is the weighting-function form
+//! X = DAOD/IWF; for a finite line width it is solved for s exactly.
+
+use super::RetrievalError;
+use crate::atmosphere::Profile;
+use crate::instrument::laser::{Laser, Line};
+use crate::instrument::line_shape::MHZ_PER_CM1;
+use crate::spectroscopy::{
+    LblOptions, LineFilter, LineList, isotopologues, layer_optical_depths_at, layers,
+};
+
+/// Dry-air and gas columns of a profile on a layer grid.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LayerColumns {
+    /// Layer edges \[m\], strictly increasing.
+    pub edges_m: Vec<f64>,
+    /// Dry-air column of each layer [molecules/m²].
+    pub dry_air_per_m2: Vec<f64>,
+    /// Target-gas column of each layer [molecules/m²].
+    pub gas_per_m2: Vec<f64>,
+}
+
+impl LayerColumns {
+    /// Columns of `gas` in `profile` on `edges_m` (Curtis-Godson integration).
+    pub fn new(profile: &Profile, edges_m: &[f64], gas: &str) -> Result<Self, RetrievalError> {
+        let cg = layers::curtis_godson_layers(profile, edges_m)?;
+        let index = |name: &str| profile.gases.iter().position(|g| g.name == name);
+        let gi = index(gas).ok_or_else(|| {
+            RetrievalError::Gas(format!("the profile `{}` has no {gas}", profile.name))
+        })?;
+        let h2o = index("H2O");
+        let mut dry = Vec::with_capacity(cg.len());
+        let mut g = Vec::with_capacity(cg.len());
+        for l in &cg {
+            let w = h2o.map(|i| l.gas_columns_per_cm2[i]).unwrap_or(0.0);
+            dry.push((l.air_column_per_cm2 - w) * 1e4);
+            g.push(l.gas_columns_per_cm2[gi] * 1e4);
+        }
+        Ok(LayerColumns {
+            edges_m: edges_m.to_vec(),
+            dry_air_per_m2: dry,
+            gas_per_m2: g,
+        })
+    }
+
+    /// Vertical gas and dry-air columns between two altitudes (either order) [molecules/m²].
+    pub fn between(&self, z_a: f64, z_b: f64) -> (f64, f64) {
+        let mut gas = 0.0;
+        let mut dry = 0.0;
+        for (l, f) in layer_fractions(&self.edges_m, z_a, z_b) {
+            gas += f * self.gas_per_m2[l];
+            dry += f * self.dry_air_per_m2[l];
+        }
+        (gas, dry)
+    }
+}
+
+/// (layer, fraction of its thickness) for every layer overlapping [min(z_a, z_b), max(z_a, z_b)].
+pub fn layer_fractions(edges_m: &[f64], z_a: f64, z_b: f64) -> Vec<(usize, f64)> {
+    let (lo, hi) = (z_a.min(z_b), z_a.max(z_b));
+    let mut out = Vec::new();
+    for l in 0..edges_m.len().saturating_sub(1) {
+        let (a, b) = (edges_m[l], edges_m[l + 1]);
+        let overlap = hi.min(b) - lo.max(a);
+        if overlap > 0.0 {
+            out.push((l, overlap / (b - a)));
+        }
+    }
+    out
+}
+
+/// The reference state: columns and layer optical depths at the nominal quadrature nodes of
+/// each line, split into the target gas and the others.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ReferenceState {
+    /// Columns of the reference profile.
+    pub columns: LayerColumns,
+    /// Quadrature weights of each line's nominal line shape (sum 1).
+    pub weights: Vec<Vec<f64>>,
+    /// Vertical optical depth of the target gas, `[layer][line][node]`.
+    pub target_tau: Vec<Vec<Vec<f64>>>,
+    /// Vertical optical depth of every other gas with lines, `[layer][line][node]`.
+    pub other_tau: Vec<Vec<Vec<f64>>>,
+}
+
+/// Slant optical depths from the lidar to one altitude, `[line][node]`: the target gas in a
+/// part held at the reference and a part scaled by s, and the other gases.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PathDepths {
+    /// Target gas, held fixed.
+    pub target_fixed: Vec<Vec<f64>>,
+    /// Target gas, scaled by s.
+    pub target_scaled: Vec<Vec<f64>>,
+    /// Other gases.
+    pub other: Vec<Vec<f64>>,
+}
+
+impl PathDepths {
+    /// The path to `far` with only the part beyond `near` scaled: a DIAL range cell.
+    pub fn cell(near: &PathDepths, far: &PathDepths) -> PathDepths {
+        let diff = |a: &Vec<Vec<f64>>, b: &Vec<Vec<f64>>| -> Vec<Vec<f64>> {
+            a.iter()
+                .zip(b)
+                .map(|(x, y)| x.iter().zip(y).map(|(u, v)| v - u).collect())
+                .collect()
+        };
+        PathDepths {
+            target_fixed: near.target_scaled.clone(),
+            target_scaled: diff(&near.target_scaled, &far.target_scaled),
+            other: far.other.clone(),
+        }
+    }
+}
+
+impl ReferenceState {
+    /// Line by line for `profile` on `edges_m`, at the nominal nodes of `laser`'s line shape
+    /// around each line.
+    pub fn new(
+        profile: &Profile,
+        edges_m: &[f64],
+        gas: &str,
+        lines: &LineList,
+        options: &LblOptions,
+        laser: &Laser,
+        laser_lines: &[Line],
+    ) -> Result<Self, RetrievalError> {
+        let id = isotopologues::molecule_id(gas)
+            .ok_or_else(|| RetrievalError::Gas(format!("`{gas}` is not a HITRAN molecule")))?;
+        let others: Vec<u8> = lines.molecules().into_iter().filter(|m| *m != id).collect();
+        let pick = |ms: Vec<u8>| {
+            lines.filtered(&LineFilter {
+                molecules: Some(ms),
+                ..Default::default()
+            })
+        };
+        let target_lines = pick(vec![id]);
+        if target_lines.is_empty() {
+            return Err(RetrievalError::Gas(format!(
+                "no {gas} lines near the laser lines"
+            )));
+        }
+        let nodes = laser.nominal().line_shape.nodes(laser.nodes);
+        let nus: Vec<f64> = laser_lines
+            .iter()
+            .flat_map(|l| {
+                nodes
+                    .iter()
+                    .map(move |q| l.wavenumber_cm1 + q.offset_mhz / MHZ_PER_CM1)
+            })
+            .collect();
+        let per_layer = |ls: &LineList| -> Result<Vec<Vec<Vec<f64>>>, RetrievalError> {
+            let t = if ls.is_empty() {
+                vec![vec![0.0; nus.len()]; edges_m.len() - 1]
+            } else {
+                layer_optical_depths_at(profile, ls, edges_m, &nus, options)?
+            };
+            Ok(t.into_iter()
+                .map(|row| row.chunks(nodes.len()).map(|c| c.to_vec()).collect())
+                .collect())
+        };
+        Ok(ReferenceState {
+            columns: LayerColumns::new(profile, edges_m, gas)?,
+            weights: vec![nodes.iter().map(|q| q.weight).collect(); laser_lines.len()],
+            target_tau: per_layer(&target_lines)?,
+            other_tau: per_layer(&pick(others))?,
+        })
+    }
+
+    /// Slant optical depths along a path from altitude `z_lidar` to `z` with direction cosine μ.
+    pub fn path(&self, z_lidar: f64, z: f64, mu: f64) -> PathDepths {
+        let n_lines = self.weights.len();
+        let n_nodes = self.weights.first().map_or(0, Vec::len);
+        let mut t = vec![vec![0.0; n_nodes]; n_lines];
+        let mut o = vec![vec![0.0; n_nodes]; n_lines];
+        for (l, f) in layer_fractions(&self.columns.edges_m, z_lidar, z) {
+            for k in 0..n_lines {
+                for i in 0..n_nodes {
+                    t[k][i] += f * self.target_tau[l][k][i] / mu.abs();
+                    o[k][i] += f * self.other_tau[l][k][i] / mu.abs();
+                }
+            }
+        }
+        PathDepths {
+            target_fixed: vec![vec![0.0; n_nodes]; n_lines],
+            target_scaled: t,
+            other: o,
+        }
+    }
+
+    /// Two-way transmission T̄²(s) of line `line` over a path, and its derivative in s.
+    pub fn transmission2(&self, p: &PathDepths, line: usize, s: f64) -> (f64, f64) {
+        let mut t = 0.0;
+        let mut dt = 0.0;
+        for (i, w) in self.weights[line].iter().enumerate() {
+            let tau = p.target_fixed[line][i] + s * p.target_scaled[line][i] + p.other[line][i];
+            let e = w * (-2.0 * tau).exp();
+            t += e;
+            dt += -2.0 * p.target_scaled[line][i] * e;
+        }
+        (t, dt)
+    }
+
+    /// D(s) and dD/ds for the on- and off-line over a path (module docs).
+    pub fn daod(&self, p: &PathDepths, on: usize, off: usize, s: f64) -> (f64, f64) {
+        let (t_on, dt_on) = self.transmission2(p, on, s);
+        let (t_off, dt_off) = self.transmission2(p, off, s);
+        (
+            0.5 * (t_off / t_on).ln(),
+            0.5 * (dt_off / t_off - dt_on / t_on),
+        )
+    }
+
+    /// The scale s of the scaled part of the target gas for which D(s) = `daod` (Newton's
+    /// method, D being nearly linear in s); NaN if `daod` is not finite or there is no solution.
+    pub fn solve_scale(&self, p: &PathDepths, on: usize, off: usize, daod: f64) -> f64 {
+        let (d1, g1) = self.daod(p, on, off, 1.0);
+        if !daod.is_finite() || !(g1 > 0.0) {
+            return f64::NAN;
+        }
+        let mut s = 1.0 + (daod - d1) / g1;
+        for _ in 0..50 {
+            let (d, g) = self.daod(p, on, off, s);
+            if !(g > 0.0) {
+                return f64::NAN;
+            }
+            let step = (d - daod) / g;
+            s -= step;
+            if step.abs() <= 1e-14 * s.abs().max(1.0) {
+                return s;
+            }
+        }
+        s
+    }
+
+    /// Virtual absorption cross-section of a line over a path (the seed paper's
+    /// σ = −ln T_gas/(2N)): the target gas's two-way line-shape-averaged transmission and its
+    /// slant column N [m²/molecule].
+    pub fn virtual_cross_section_m2(
+        &self,
+        p: &PathDepths,
+        line: usize,
+        slant_column_per_m2: f64,
+    ) -> f64 {
+        let mut t = 0.0;
+        for (i, w) in self.weights[line].iter().enumerate() {
+            t += w * (-2.0 * (p.target_fixed[line][i] + p.target_scaled[line][i])).exp();
+        }
+        -t.ln() / (2.0 * slant_column_per_m2)
+    }
+}
