@@ -49,9 +49,9 @@ fn run_default_scene_writes_contract_columns() {
             other => panic!("source {other}"),
         }
     }
-    // Default scene: 2 channels, 2 FOVs, 355 gates; MC orders total, 1..5, 6+.
-    assert_eq!(analytic, 2 * 2 * 355);
-    assert_eq!(mc, 2 * 2 * 355 * 7);
+    // Default scene: 2 lines, 2 FOVs, 201 gates; MC orders total, 1..5, 6+.
+    assert_eq!(analytic, 2 * 2 * 201);
+    assert_eq!(mc, 2 * 2 * 201 * 7);
     assert!(dir.path().join("summary.json").is_file());
 }
 
@@ -60,7 +60,7 @@ fn bad_scene_exits_2_naming_file_line_and_key_and_writes_nothing() {
     let dir = tempfile::tempdir().unwrap();
     let scene = dir.path().join("bad.toml");
     let good = lidarsim::scene::DEFAULT_SCENE_TOML;
-    let text = good.replacen("pulse_energy_j = 0.01", "pulse_energy_j = -1", 1);
+    let text = good.replacen("pulse_energy_j = 0.03", "pulse_energy_j = -1", 1);
     assert_ne!(text, good, "the default scene changed: update this test");
     std::fs::write(&scene, text).unwrap();
     let out_dir = dir.path().join("out");
@@ -74,7 +74,7 @@ fn bad_scene_exits_2_naming_file_line_and_key_and_writes_nothing() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(stderr.contains("bad.toml:"), "{stderr}");
     assert!(
-        stderr.contains("`lidar.pulse_energy_j`: -1 must be > 0"),
+        stderr.contains("`laser.pulse_energy_j`: -1 must be > 0"),
         "{stderr}"
     );
     assert!(
@@ -106,6 +106,6 @@ fn zero_photons_runs_the_analytic_equation_only() {
     let mut lines = csv.lines();
     assert_eq!(lines.next(), Some(HEADER));
     let rows: Vec<&str> = lines.collect();
-    assert_eq!(rows.len(), 2 * 2 * 355);
+    assert_eq!(rows.len(), 2 * 2 * 201);
     assert!(rows.iter().all(|r| r.starts_with("analytic,")));
 }

@@ -417,19 +417,20 @@ fn ddis_is_unbiased() {
     );
 }
 
-/// A CO2 DIAL scene (the default scene: built-in band model, on-line on R16e, off-line in the
-/// trough) takes its absorption from the line-by-line stage, and the Monte Carlo on/off ratio
+/// A CO2 DIAL scene (scenes/airborne_co2_dial.toml: built-in band model, on-line on R16e,
+/// off-line in the trough) takes its absorption from the line-by-line stage, and the Monte Carlo on/off ratio
 /// equals the two-way differential transmission exp(−2∫(k_on − k_off) dr). The truth is computed
 /// here independently of the optics and transport: Curtis-Godson layers of 10 m straight from the
 /// scene's profile (the optics use 100 m layers).
 #[test]
 fn co2_dial_on_off_ratio_equals_differential_transmission() {
     use lidarsim::spectroscopy::layer_optical_depths_at;
-    let scene = Scene::default_scene().unwrap();
+    let scene =
+        Scene::read(&crate::util::project_root().join("scenes/airborne_co2_dial.toml")).unwrap();
     let gas = scene
         .gas
         .as_ref()
-        .expect("the default scene has gas absorption");
+        .expect("the airborne scene has gas absorption");
     let profile = &scene.atmosphere.as_ref().unwrap().profile;
     let nu: Vec<f64> = scene.channels.iter().map(|c| c.wavenumber_cm1).collect();
     let z_lidar = scene.lidar.altitude_m;
@@ -497,12 +498,15 @@ fn co2_dial_on_off_ratio_equals_differential_transmission() {
 fn cached_gas_table_is_reused_when_gates_geometry_and_channels_change() {
     use lidarsim::optics::GasSource;
     let dir = tempfile::tempdir().unwrap();
-    let base = lidarsim::scene::DEFAULT_SCENE_TOML.replacen(
+    let airborne =
+        std::fs::read_to_string(crate::util::project_root().join("scenes/airborne_co2_dial.toml"))
+            .unwrap();
+    let base = airborne.replacen(
         "molecules = [\"CO2\"]",
         "molecules = [\"CO2\"]\ntable = \"co2.tau\"\ntable_start_cm1 = 6358.0\ntable_end_cm1 = 6363.0",
         1,
     );
-    assert_ne!(base, lidarsim::scene::DEFAULT_SCENE_TOML);
+    assert_ne!(base, airborne);
     let path = dir.path().join("dial.toml");
     let build = |text: &str| {
         std::fs::write(&path, text).unwrap();
@@ -516,7 +520,9 @@ fn cached_gas_table_is_reused_when_gates_geometry_and_channels_change() {
         .replacen("end_m = 8100.0", "end_m = 7100.0", 1)
         .replacen("zenith_angle_deg = 180.0", "zenith_angle_deg = 160.0", 1)
         .replacen("altitude_m = 8000.0", "altitude_m = 7000.0", 1)
-        .replacen("wavenumber_cm1 = 6359.967", "wavenumber_cm1 = 6359.95", 1);
+        .replacen("wavenumber_cm1 = 6359.967", "wavenumber_cm1 = 6359.95", 1)
+        // The surface leaves the gates: no IPDA target any more (DIAL only).
+        .replacen("target = \"surface\"\n", "", 1);
     let (second, scene) = build(&changed);
     assert_eq!(second.gas_source, Some(GasSource::TableReused));
     // Against the direct line-by-line path (no table) for the changed scene.

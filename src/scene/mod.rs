@@ -29,7 +29,7 @@ use crate::spectroscopy::{LblOptions, LineFilter, LineList, isotopologues};
 use file::{KeyPath, PerChannel, PhaseSpecFile, SceneFile};
 
 /// The scene run when `lidarsim run` gets no file.
-pub const DEFAULT_SCENE_TOML: &str = include_str!("../../scenes/airborne_co2_dial.toml");
+pub const DEFAULT_SCENE_TOML: &str = include_str!("../../scenes/spaceborne_co2_ipda.toml");
 /// Pseudo-path of the embedded default scene in messages.
 pub const DEFAULT_SCENE_NAME: &str = "<embedded default scene>";
 
