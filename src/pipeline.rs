@@ -167,6 +167,11 @@ pub fn retrieval_setup(scene: &Scene) -> Result<Retrieval, RetrievalError> {
         &gas.options,
         &scene.laser,
         &scene.sampling.lines,
+        &scene
+            .receiver
+            .as_ref()
+            .map(|r| r.filter)
+            .unwrap_or(crate::instrument::laser::Filter::none()),
     )?;
     let truth = LayerColumns::new(&atm.profile, &edges, &config.gas)?;
     let pair = format!(

@@ -9,6 +9,8 @@ mod atmosphere;
 mod cli;
 /// Particles: Mie, size distributions, phase-function tables and sampling.
 mod particles;
+/// Instrument and retrieval: line shapes, noise, retrievals against the truth.
+mod retrieval;
 /// Scenes: parsing, validation and their documented errors.
 mod scene;
 /// Line-by-line gas absorption against HAPI.

@@ -8,7 +8,8 @@
 //! shot to shot with rms σ_j. The transport and the lidar equation are monochromatic, so each
 //! line becomes a few *channels* riding on the same photon paths (DESIGN §1):
 //!
-//! * the n quadrature nodes of g ([`LineShape::nodes`]), P̄ = Σᵢ wᵢ P(c + xᵢ);
+//! * the n quadrature nodes of g over the filter's pass band ([`LineShape::nodes_within`]),
+//!   P̄ = Σᵢ wᵢ P(c + xᵢ), the energy outside the band being blocked;
 //! * with jitter, a three-point stencil c − h, c, c + h (h = max(2σ_j, 1 MHz)) giving the slope
 //!   S = ∂P/∂ν and curvature C = ∂²P/∂ν² of the return with respect to the laser frequency;
 //!   a shot at c + δ returns P̄ + S δ + ½ C δ², so the mean over shots is P̄ + ½ C σ_j². The
@@ -122,6 +123,17 @@ impl Filter {
         }
     }
 
+    /// The quadrature nodes of line `line` of `laser` that pass this filter: the line shape
+    /// integrated over the pass band only ([`LineShape::nodes_within`]), offsets relative to
+    /// the line's actual centre, weights summing to the share of its energy inside the band.
+    pub fn line_nodes(&self, laser: &Laser, line: usize) -> Vec<super::line_shape::QuadratureNode> {
+        let half_mhz = 0.5 * self.bandwidth_cm1 * MHZ_PER_CM1;
+        let off = laser.frequency_offset_mhz[line];
+        laser
+            .line_shape
+            .nodes_within(laser.nodes, -half_mhz - off, half_mhz - off)
+    }
+
     /// Transmission at `wavenumber_cm1` of the filter centred on `centre_cm1`.
     pub fn transmission_at(&self, wavenumber_cm1: f64, centre_cm1: f64) -> f64 {
         if (wavenumber_cm1 - centre_cm1).abs() <= 0.5 * self.bandwidth_cm1 {
@@ -225,7 +237,6 @@ impl SpectralSampling {
             });
             channels.len() - 1
         };
-        let nodes = laser.line_shape.nodes(laser.nodes);
         let jitter = laser.frequency_jitter_rms_mhz > 0.0;
         let h = laser.jitter_step_mhz();
         let p = laser.spectral_purity;
@@ -236,6 +247,7 @@ impl SpectralSampling {
             let scale = laser.pulse_energy_j[l] / e0;
             let centre = line.wavenumber_cm1 + laser.frequency_offset_mhz[l] / MHZ_PER_CM1;
             let tf = |nu: f64| filter.transmission_at(nu, line.wavenumber_cm1);
+            let nodes = filter.line_nodes(laser, l);
             let mut terms: Vec<(usize, f64)> = Vec::new();
             let mut centre_channel = None;
             for (i, q) in nodes.iter().enumerate() {

@@ -279,7 +279,19 @@ pub struct ShotSums {
     pub monitored_energy: f64,
 }
 
+/// Above this many shots the sums are drawn from their joint normal distribution (central
+/// limit theorem) instead of shot by shot, so that an average over 10⁹ shots costs no more
+/// than one over 10³.
+pub const SHOTS_DRAWN_ONE_BY_ONE: u64 = 256;
+
 /// Draw the laser state of `shots` pulses (module docs). A perfect laser draws nothing.
+///
+/// Per shot, with e = 1 + ε_E z₁ (relative energy), δ = σ_j z₂ and m = 1 + ε_M z₃:
+/// E[e] = 1, E[eδ] = 0, E[eδ²] = σ², E[em] = 1, and the covariances of (e, eδ², em):
+/// Var e = ε², Var eδ² = (1 + ε²) 3σ⁴ − σ⁴, Var em = ε² + ε_M²(1 + ε²),
+/// Cov(e, eδ²) = Cov(eδ², em) = ε²σ², Cov(e, em) = ε²; eδ is uncorrelated with the others,
+/// Var eδ = (1 + ε²)σ². Above [`SHOTS_DRAWN_ONE_BY_ONE`] shots the sums are drawn from the
+/// normal distribution with N times these moments (Cholesky factor of the 3 × 3 block).
 pub fn draw_shots(laser: &Laser, shots: u64, rng: &mut Rng) -> ShotSums {
     let n = shots as f64;
     let (ee, sj, em) = (
@@ -295,13 +307,32 @@ pub fn draw_shots(laser: &Laser, shots: u64, rng: &mut Rng) -> ShotSums {
             monitored_energy: n,
         };
     }
+    let mut normal = || -> f64 { StandardNormal.sample(rng) };
+    if shots > SHOTS_DRAWN_ONE_BY_ONE {
+        let (e2, s2) = (ee * ee, sj * sj);
+        // Covariance of (e, eδ², em) per shot, and its Cholesky factor L (lower).
+        let c = [
+            [e2, e2 * s2, e2],
+            [e2 * s2, (1.0 + e2) * 3.0 * s2 * s2 - s2 * s2, e2 * s2],
+            [e2, e2 * s2, e2 + em * em * (1.0 + e2)],
+        ];
+        let l = cholesky3(&c);
+        let z = [normal(), normal(), normal()];
+        let sq = n.sqrt();
+        let dev = |i: usize| sq * (0..=i).map(|j| l[i][j] * z[j]).sum::<f64>();
+        return ShotSums {
+            energy: n + dev(0),
+            energy_delta: sq * ((1.0 + e2) * s2).sqrt() * normal(),
+            energy_delta2: n * s2 + dev(1),
+            monitored_energy: n + dev(2),
+        };
+    }
     let mut s = ShotSums {
         energy: 0.0,
         energy_delta: 0.0,
         energy_delta2: 0.0,
         monitored_energy: 0.0,
     };
-    let mut normal = || -> f64 { StandardNormal.sample(rng) };
     for _ in 0..shots {
         // A pulse cannot have negative energy (relevant only for absurd jitters).
         let e = if ee > 0.0 {
@@ -317,6 +348,23 @@ pub fn draw_shots(laser: &Laser, shots: u64, rng: &mut Rng) -> ShotSums {
         s.monitored_energy += e * m;
     }
     s
+}
+
+/// Cholesky factor of a 3 × 3 covariance matrix; rows of zeros where it is singular (a
+/// quantity that does not fluctuate).
+fn cholesky3(c: &[[f64; 3]; 3]) -> [[f64; 3]; 3] {
+    let mut l = [[0.0; 3]; 3];
+    for i in 0..3 {
+        for j in 0..=i {
+            let s: f64 = (0..j).map(|k| l[i][k] * l[j][k]).sum();
+            if i == j {
+                l[i][i] = (c[i][i] - s).max(0.0).sqrt();
+            } else if l[j][j] > 0.0 {
+                l[i][j] = (c[i][j] - s) / l[j][j];
+            }
+        }
+    }
+    l
 }
 
 #[cfg(test)]

@@ -374,10 +374,26 @@ impl Retrieval {
         let targets = self.targets();
         let n_avg = self.config.averaging_shots;
         let reals = self.config.realisations;
-        // Common random numbers: every source, order and FOV sees the same noise draws.
-        let streams = rng::streams(self.seed, Stream::Instrument, 2 * reals);
+        // Every window any product is measured on, once.
+        let mut windows: Vec<Range<usize>> = Vec::new();
+        let window_ids: Vec<Vec<usize>> = targets
+            .iter()
+            .map(|t| {
+                t.windows
+                    .iter()
+                    .map(|w| match windows.iter().position(|x| x == w) {
+                        Some(i) => i,
+                        None => {
+                            windows.push(w.clone());
+                            windows.len() - 1
+                        }
+                    })
+                    .collect()
+            })
+            .collect();
+        let sims = self.simulate(signals, fov, &windows, reals);
         let mut products = Vec::with_capacity(targets.len());
-        for t in &targets {
+        for (t, ids) in targets.iter().zip(&window_ids) {
             // Expected signals: D, its Monte Carlo variance (and as if independent).
             let window = |line: usize, w: &Range<usize>| -> (f64, f64) {
                 w.clone().fold((0.0, 0.0), |(e, v), g| {
@@ -390,13 +406,9 @@ impl Retrieval {
                     .map(|g| mean.covariance_j2(on, off, fov, g, o).unwrap_or(0.0))
                     .sum()
             };
-            let sign = |k: usize| {
-                if k == 0 && t.windows.len() == 2 {
-                    -1.0
-                } else {
-                    1.0
-                }
-            };
+            // D of a cell is the far end's minus the near end's; an IPDA window stands alone.
+            let ipda = t.windows.len() == 1;
+            let sign = |k: usize| if k == 0 && !ipda { -1.0 } else { 1.0 };
             let (mut d, mut var_mc, mut var_ind) = (0.0, 0.0, 0.0);
             let mut no_signal = None;
             for (k, w) in t.windows.iter().enumerate() {
@@ -405,11 +417,7 @@ impl Retrieval {
                 if !(p_on > 0.0 && p_off > 0.0) {
                     no_signal = Some(w.clone());
                 }
-                let energy = if t.windows.len() == 1 {
-                    (e_on / e_off).ln()
-                } else {
-                    0.0
-                };
+                let energy = if ipda { (e_on / e_off).ln() } else { 0.0 };
                 d += sign(k) * 0.5 * ((p_off / p_on).ln() + energy);
                 let ind = v_on / (p_on * p_on) + v_off / (p_off * p_off);
                 var_ind += 0.25 * ind;
@@ -422,11 +430,7 @@ impl Retrieval {
                     dial: t.method == Method::Dial,
                     message: format!(
                         "no {} signal in the gates around {:.0} m: SNR ≤ 0",
-                        if t.method == Method::Dial {
-                            "atmospheric"
-                        } else {
-                            "hard-target"
-                        },
+                        if ipda { "hard-target" } else { "atmospheric" },
                         self.range_m[w.start]
                     ),
                 });
@@ -437,8 +441,7 @@ impl Retrieval {
             for line in [on, off] {
                 let mut jitter = 0.0;
                 for (k, w) in t.windows.iter().enumerate() {
-                    let g = signals.window(line, fov, w.clone());
-                    let snr = g.snr();
+                    let snr = signals.window(line, fov, w.clone()).snr();
                     var_shot += if snr > 0.0 {
                         1.0 / (snr * snr)
                     } else {
@@ -447,47 +450,28 @@ impl Retrieval {
                     jitter += sign(k) * signals.jitter_relative(&self.laser, line, fov, w.clone());
                 }
                 var_shot += jitter * jitter;
-                if t.windows.len() == 1 {
+                if ipda {
                     var_shot += self.laser.energy_monitor_error_fraction.powi(2);
                 }
             }
             let sd_shot = 0.5 * var_shot.sqrt() * slope.abs();
-            // Simulated: realisations of 1 and of N shot pairs.
-            let mut single = Vec::with_capacity(reals);
-            let mut averaged = Vec::with_capacity(reals);
-            for (r, stream) in streams.iter().enumerate() {
-                let mut rng = stream.clone();
-                let shots = if r < reals { n_avg } else { 1 };
+            // Simulated: the same retrieval of every noisy measurement, of N and of 1 shot pair.
+            let retrieve_sim = |m: &Measurement| -> f64 {
                 let mut d_meas = 0.0;
-                for line in [on, off] {
-                    let (counts, monitored) =
-                        signals.realise(&self.laser, line, fov, &t.windows, shots, &mut rng);
-                    let j_per_pe = photon_energy_j(signals.lines[line].wavenumber_cm1)
-                        / signals.detector.quantum_efficiency;
-                    let e_line = self.laser.pulse_energy_j[line];
-                    for (k, c) in counts.iter().enumerate() {
-                        // Normalised signal per unit emitted energy (IPDA) or per gate (DIAL).
-                        let p = if t.windows.len() == 1 {
-                            c * j_per_pe / (monitored * e_line)
-                        } else {
-                            c * j_per_pe
-                        };
-                        let l = if p > 0.0 { p.ln() } else { f64::NAN };
-                        let sgn = if line == on { -1.0 } else { 1.0 };
-                        d_meas += sign(k) * sgn * 0.5 * l;
-                    }
+                for (k, id) in ids.iter().enumerate() {
+                    d_meas += sign(k) * 0.5 * (m.ln_signal[1][*id] - m.ln_signal[0][*id]);
                 }
-                let v = if d_meas.is_finite() {
+                if ipda {
+                    d_meas -= 0.5 * (m.ln_energy[1] - m.ln_energy[0]);
+                }
+                if d_meas.is_finite() {
                     self.value(t, d_meas).0
                 } else {
                     f64::NAN
-                };
-                if r < reals {
-                    averaged.push(v);
-                } else {
-                    single.push(v);
                 }
-            }
+            };
+            let averaged: Vec<f64> = sims[..reals].iter().map(retrieve_sim).collect();
+            let single: Vec<f64> = sims[reals..].iter().map(retrieve_sim).collect();
             let (sim_mean, sim_sd) = mean_sd(&averaged);
             let (_, sim_single) = mean_sd(&single);
             products.push(Product {
@@ -513,6 +497,62 @@ impl Retrieval {
         }
         Ok(products)
     }
+
+    /// Noisy measurements: `reals` of N shot pairs, then `reals` of one shot pair. Each draws the
+    /// shots of the on- and the off-line once and measures every window with them, as the
+    /// instrument does. Streams are tied to the realisation (common random numbers: every
+    /// source, order and field of view sees the same draws).
+    fn simulate(
+        &self,
+        signals: &Signals,
+        fov: usize,
+        windows: &[Range<usize>],
+        reals: usize,
+    ) -> Vec<Measurement> {
+        let streams = rng::streams(self.seed, Stream::Instrument, 2 * reals);
+        let lines = [self.config.on, self.config.off];
+        streams
+            .into_iter()
+            .enumerate()
+            .map(|(r, mut rng)| {
+                let shots = if r < reals {
+                    self.config.averaging_shots
+                } else {
+                    1
+                };
+                let mut m = Measurement {
+                    ln_signal: [Vec::new(), Vec::new()],
+                    ln_energy: [0.0; 2],
+                };
+                for (i, line) in lines.iter().enumerate() {
+                    let (counts, monitored) =
+                        signals.realise(&self.laser, *line, fov, windows, shots, &mut rng);
+                    // Photo-electrons back to energy: the lines' photon energies differ by 1e-4.
+                    let j_per_pe = photon_energy_j(signals.lines[*line].wavenumber_cm1)
+                        / signals.detector.quantum_efficiency;
+                    m.ln_signal[i] = counts
+                        .iter()
+                        .map(|c| {
+                            if *c > 0.0 {
+                                (c * j_per_pe).ln()
+                            } else {
+                                f64::NAN
+                            }
+                        })
+                        .collect();
+                    m.ln_energy[i] = (monitored * self.laser.pulse_energy_j[*line]).ln();
+                }
+                m
+            })
+            .collect()
+    }
+}
+
+/// One noisy measurement: ln of the summed signal energy in each window and ln of the monitored
+/// emitted energy, for the on- (index 0) and the off-line (1).
+struct Measurement {
+    ln_signal: [Vec<f64>; 2],
+    ln_energy: [f64; 2],
 }
 
 /// Mean and standard deviation of the finite values, NaN if fewer than

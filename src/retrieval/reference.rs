@@ -21,7 +21,7 @@
 
 use super::RetrievalError;
 use crate::atmosphere::Profile;
-use crate::instrument::laser::{Laser, Line};
+use crate::instrument::laser::{Filter, Laser, Line};
 use crate::instrument::line_shape::MHZ_PER_CM1;
 use crate::spectroscopy::{
     LblOptions, LineFilter, LineList, isotopologues, layer_optical_depths_at, layers,
@@ -141,6 +141,7 @@ impl ReferenceState {
         options: &LblOptions,
         laser: &Laser,
         laser_lines: &[Line],
+        filter: &Filter,
     ) -> Result<Self, RetrievalError> {
         let id = isotopologues::molecule_id(gas)
             .ok_or_else(|| RetrievalError::Gas(format!("`{gas}` is not a HITRAN molecule")))?;
@@ -157,7 +158,16 @@ impl ReferenceState {
                 "no {gas} lines near the laser lines"
             )));
         }
-        let nodes = laser.nominal().line_shape.nodes(laser.nodes);
+        // The nominal laser's nodes through the filter, weights normalised (a constant share of
+        // energy cancels in the on/off ratio).
+        let nominal = laser.nominal();
+        let nodes = filter.line_nodes(&nominal, 0);
+        let total: f64 = nodes.iter().map(|q| q.weight).sum();
+        if !(total > 0.0) {
+            return Err(RetrievalError::Gas(
+                "the filter blocks the whole laser line".into(),
+            ));
+        }
         let nus: Vec<f64> = laser_lines
             .iter()
             .flat_map(|l| {
@@ -178,7 +188,7 @@ impl ReferenceState {
         };
         Ok(ReferenceState {
             columns: LayerColumns::new(profile, edges_m, gas)?,
-            weights: vec![nodes.iter().map(|q| q.weight).collect(); laser_lines.len()],
+            weights: vec![nodes.iter().map(|q| q.weight / total).collect(); laser_lines.len()],
             target_tau: per_layer(&target_lines)?,
             other_tau: per_layer(&pick(others))?,
         })
