@@ -11,7 +11,9 @@ use crate::instrument::laser::LineReturns;
 use crate::instrument::signals::{Signals, Telescope};
 use crate::lidar_eq;
 use crate::optics::{OpticalAtmosphere, OpticsError};
-use crate::retrieval::{LayerColumns, Product, ReferenceState, Retrieval, RetrievalError};
+use crate::retrieval::{
+    AssumedInstrument, LayerColumns, Product, ReferenceState, Retrieval, RetrievalError,
+};
 use crate::returns::{Order, Returns};
 use crate::scene::Scene;
 use crate::transport::{self, McResult, TransportError, TransportOptions};
@@ -159,19 +161,22 @@ pub fn retrieval_setup(scene: &Scene) -> Result<Retrieval, RetrievalError> {
             "a retrieval needs an atmosphere with gas absorption".into(),
         ));
     };
+    let filter = scene
+        .receiver
+        .as_ref()
+        .map(|r| r.filter)
+        .unwrap_or(crate::instrument::laser::Filter::none());
     let reference = ReferenceState::new(
         &atm.profile,
         &edges,
         &config.gas,
         &gas.lines,
         &gas.options,
-        &scene.laser,
-        &scene.sampling.lines,
-        &scene
-            .receiver
-            .as_ref()
-            .map(|r| r.filter)
-            .unwrap_or(crate::instrument::laser::Filter::none()),
+        AssumedInstrument {
+            laser: &scene.laser,
+            lines: &scene.sampling.lines,
+            filter: &filter,
+        },
     )?;
     let truth = LayerColumns::new(&atm.profile, &edges, &config.gas)?;
     let pair = format!(

@@ -81,14 +81,14 @@ fn run(s: &Scene, photons: u64) -> RunOutput {
     pipeline::run(s, &opts).expect("run")
 }
 
-fn products<'a>(
-    run: &'a RunOutput,
+fn products(
+    run: &RunOutput,
     method: Method,
     quantity: Quantity,
     source: Source,
     order: Order,
     fov: f64,
-) -> Vec<&'a Product> {
+) -> Vec<&Product> {
     run.products
         .iter()
         .filter(|p| {
@@ -266,9 +266,10 @@ fn noisy_measurements_have_the_variance_of_the_formula() {
             );
             let reals = 10_000;
             let mut rngs = streams(3, Stream::Instrument, 1);
+            let window = std::slice::from_ref(&(g..g + 1));
             let xs: Vec<f64> = (0..reals)
                 .map(|_| {
-                    sig.realise(&s.laser, line, fov, &[g..g + 1], shots, &mut rngs[0])
+                    sig.realise(&s.laser, line, fov, window, shots, &mut rngs[0])
                         .0[0]
                 })
                 .collect();

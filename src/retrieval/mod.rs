@@ -12,7 +12,7 @@ pub mod products;
 pub mod reference;
 
 pub use products::{Method, Product, Quantity, Retrieval};
-pub use reference::{LayerColumns, PathDepths, ReferenceState};
+pub use reference::{AssumedInstrument, LayerColumns, PathDepths, ReferenceState};
 
 /// Why a retrieval cannot be done.
 #[derive(Debug, thiserror::Error)]

@@ -130,19 +130,34 @@ impl PathDepths {
     }
 }
 
+/// The instrument as a retrieval assumes it: the laser's lines, its line shape and the
+/// receiver's filter, without the laser's imperfections ([`Laser::nominal`]).
+#[derive(Debug, Clone, Copy)]
+pub struct AssumedInstrument<'a> {
+    /// The laser (its nominal form is used).
+    pub laser: &'a Laser,
+    /// Its lines.
+    pub lines: &'a [Line],
+    /// The receiver's filter.
+    pub filter: &'a Filter,
+}
+
 impl ReferenceState {
-    /// Line by line for `profile` on `edges_m`, at the nominal nodes of `laser`'s line shape
-    /// around each line.
+    /// Line by line for `profile` on `edges_m` with `lines` and `options`, at the nominal nodes
+    /// of the instrument's line shape around each of its lines.
     pub fn new(
         profile: &Profile,
         edges_m: &[f64],
         gas: &str,
         lines: &LineList,
         options: &LblOptions,
-        laser: &Laser,
-        laser_lines: &[Line],
-        filter: &Filter,
+        instrument: AssumedInstrument,
     ) -> Result<Self, RetrievalError> {
+        let AssumedInstrument {
+            laser,
+            lines: laser_lines,
+            filter,
+        } = instrument;
         let id = isotopologues::molecule_id(gas)
             .ok_or_else(|| RetrievalError::Gas(format!("`{gas}` is not a HITRAN molecule")))?;
         let others: Vec<u8> = lines.molecules().into_iter().filter(|m| *m != id).collect();
