@@ -266,7 +266,8 @@ fn noisy_measurements_have_the_variance_of_the_formula() {
             );
             let reals = 10_000;
             let mut rngs = streams(3, Stream::Instrument, 1);
-            let window = std::slice::from_ref(&(g..g + 1));
+            let gate_range = g..g + 1;
+            let window = std::slice::from_ref(&gate_range);
             let xs: Vec<f64> = (0..reals)
                 .map(|_| {
                     sig.realise(&s.laser, line, fov, window, shots, &mut rngs[0])
