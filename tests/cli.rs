@@ -109,3 +109,100 @@ fn zero_photons_runs_the_analytic_equation_only() {
     assert_eq!(rows.len(), 2 * 2 * 201);
     assert!(rows.iter().all(|r| r.starts_with("analytic,")));
 }
+
+/// The default scene (space-borne IPDA) prints the truth, the retrieved XCO2, its bias and the
+/// random error per shot pair and per averaging length, and writes signals.csv, retrieval.csv
+/// (documented columns, one row per product) and the figures beside returns.csv.
+#[test]
+fn default_scene_retrieves_xco2_and_writes_signals_retrieval_and_figures() {
+    let dir = tempfile::tempdir().unwrap();
+    let out_dir = dir.path().to_string_lossy().into_owned();
+    let stdout = lidarsim_ok([
+        "run",
+        "--photons",
+        "2000",
+        "--threads",
+        "1",
+        "--out",
+        &out_dir,
+    ]);
+    for words in [
+        "truth XCO2 = ",
+        "retrieved ",
+        "bias ",
+        "ppm per shot pair",
+        "ppm averaged",
+        "50 km along track (347 shot pairs)",
+    ] {
+        assert!(stdout.contains(words), "`{words}` missing from:\n{stdout}");
+    }
+    let signals = std::fs::read_to_string(dir.path().join("signals.csv")).unwrap();
+    let mut lines = signals.lines();
+    assert_eq!(
+        lines.next(),
+        Some(lidarsim::instrument::signals::CSV_HEADER)
+    );
+    // analytic order 1, MC order 1 and all orders × 2 lines × 2 FOVs × 201 gates.
+    assert_eq!(lines.count(), 3 * 2 * 2 * 201);
+    let retrieval = std::fs::read_to_string(dir.path().join("retrieval.csv")).unwrap();
+    let mut lines = retrieval.lines();
+    let header = lines.next().unwrap();
+    assert_eq!(header, lidarsim::retrieval::products::CSV_HEADER);
+    let columns: Vec<&str> = header.split(',').collect();
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    // IPDA mixing ratio and slant column × 3 sets of returns × 2 FOVs.
+    assert_eq!(rows.len(), 2 * 3 * 2);
+    let col = |name: &str| columns.iter().position(|c| *c == name).unwrap();
+    for r in &rows {
+        assert_eq!(r.len(), columns.len());
+        let truth: f64 = r[col("truth")].parse().unwrap();
+        let retrieved: f64 = r[col("retrieved")].parse().unwrap();
+        let bias: f64 = r[col("bias")].parse().unwrap();
+        assert!((retrieved - truth - bias).abs() <= 1e-9 * truth.abs());
+        if r[col("quantity")] == "mixing_ratio" {
+            assert_eq!(r[col("unit")], "ppm");
+            assert!((truth - 420.0).abs() < 0.1, "{truth}");
+        }
+    }
+    for png in ["returns.png"] {
+        let bytes = std::fs::read(dir.path().join(png)).unwrap();
+        assert_eq!(&bytes[1..4], b"PNG", "{png}");
+    }
+}
+
+/// A retrieval that cannot be done stops the run with one message naming the scene key, and
+/// writes nothing.
+#[test]
+fn impossible_retrieval_exits_2_and_writes_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("bad.toml");
+    let good = lidarsim::scene::DEFAULT_SCENE_TOML;
+    // Swap the lines: the "on-line" then absorbs less than the "off-line".
+    let text = good.replacen(
+        "on = \"on\"\noff = \"off\"",
+        "on = \"off\"\noff = \"on\"",
+        1,
+    );
+    assert_ne!(text, good, "the default scene changed: update this test");
+    std::fs::write(&scene, text).unwrap();
+    let out_dir = dir.path().join("out");
+    let out = lidarsim([
+        "run".as_ref(),
+        scene.as_os_str(),
+        "--out".as_ref(),
+        out_dir.as_os_str(),
+    ]);
+    assert_eq!(out.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("bad.toml:"), "{stderr}");
+    assert!(stderr.contains("`retrieval.on`"), "{stderr}");
+    assert!(
+        stderr.contains("absorbs no more than the off-line"),
+        "{stderr}"
+    );
+    assert_eq!(stderr.lines().count(), 1, "{stderr}");
+    assert!(
+        !out_dir.exists(),
+        "an output directory was created for a failed run"
+    );
+}

@@ -589,3 +589,269 @@ fn impossible_retrievals_name_the_scene_key() {
         assert!(e.to_string().starts_with("bad.toml:"), "{what}: {e}");
     }
 }
+
+/// 1-based line of the first occurrence of `needle` in `text`.
+fn line_of(text: &str, needle: &str) -> usize {
+    let at = text
+        .find(needle)
+        .unwrap_or_else(|| panic!("`{needle}` not in the scene"));
+    text[..at].matches('\n').count() + 1
+}
+
+/// Every malformed instrument or retrieval key gives one error naming the file, the line and
+/// the key (README, "Scene errors"). Each case: (what, replace, with, key, words, the text whose
+/// line the error must name).
+#[test]
+fn malformed_instrument_and_retrieval_keys_name_file_line_and_key() {
+    let cases: &[(&str, &str, &str, &str, &str, &str)] = &[
+        (
+            "unknown line shape",
+            "line_shape = \"gaussian\"",
+            "line_shape = \"voigt\"",
+            "laser.line_shape",
+            "is not a line shape",
+            "line_shape =",
+        ),
+        (
+            "line width missing",
+            "\nlinewidth_fwhm_mhz = 30.0",
+            "",
+            "laser.line_shape",
+            "needs `linewidth_fwhm_mhz`",
+            "line_shape =",
+        ),
+        (
+            "negative line width",
+            "linewidth_fwhm_mhz = 30.0",
+            "linewidth_fwhm_mhz = -3.0",
+            "laser.linewidth_fwhm_mhz",
+            "must be > 0",
+            "linewidth_fwhm_mhz",
+        ),
+        (
+            "nodes out of range",
+            "linewidth_fwhm_mhz = 30.0",
+            "linewidth_fwhm_mhz = 30.0\nline_shape_nodes = 0",
+            "laser.line_shape_nodes",
+            "must lie in 1..=64",
+            "line_shape_nodes",
+        ),
+        (
+            "table without file",
+            "line_shape = \"gaussian\"\nlinewidth_fwhm_mhz = 30.0",
+            "line_shape = \"table\"",
+            "laser.line_shape",
+            "needs `line_shape_file`",
+            "line_shape =",
+        ),
+        (
+            "missing line-shape table",
+            "line_shape = \"gaussian\"\nlinewidth_fwhm_mhz = 30.0",
+            "line_shape = \"table\"\nline_shape_file = \"nope.csv\"",
+            "laser.line_shape_file",
+            "nope.csv",
+            "line_shape_file",
+        ),
+        (
+            "purity above 1",
+            "linewidth_fwhm_mhz = 30.0",
+            "linewidth_fwhm_mhz = 30.0\nspectral_purity = 1.5",
+            "laser.spectral_purity",
+            "must lie in (0, 1]",
+            "spectral_purity",
+        ),
+        (
+            "impure without impurity",
+            "linewidth_fwhm_mhz = 30.0",
+            "linewidth_fwhm_mhz = 30.0\nspectral_purity = 0.99",
+            "laser.spectral_purity",
+            "needs `impurity_wavenumber_cm1`",
+            "spectral_purity",
+        ),
+        (
+            "impurity without impurity",
+            "linewidth_fwhm_mhz = 30.0",
+            "linewidth_fwhm_mhz = 30.0\nimpurity_wavenumber_cm1 = 6350.0",
+            "laser.impurity_wavenumber_cm1",
+            "goes with `spectral_purity` below 1",
+            "impurity_wavenumber_cm1",
+        ),
+        (
+            "pulse energy twice",
+            "telescope_diameter_m = 0.5",
+            "telescope_diameter_m = 0.5\npulse_energy_j = 0.1",
+            "lidar.pulse_energy_j",
+            "goes there",
+            "pulse_energy_j = 0.1",
+        ),
+        (
+            "pulse energies per line",
+            "pulse_energy_j = 0.05",
+            "pulse_energy_j = [0.05, 0.05, 0.05]",
+            "laser.pulse_energy_j",
+            "has 3 values",
+            "pulse_energy_j =",
+        ),
+        (
+            "monitor error 1",
+            "linewidth_fwhm_mhz = 30.0",
+            "linewidth_fwhm_mhz = 30.0\nenergy_monitor_error_fraction = 1.0",
+            "laser.energy_monitor_error_fraction",
+            "must lie in [0, 1)",
+            "energy_monitor_error_fraction",
+        ),
+        (
+            "quantum efficiency 0",
+            "quantum_efficiency = 0.8",
+            "quantum_efficiency = 0.0",
+            "receiver.quantum_efficiency",
+            "must be > 0",
+            "quantum_efficiency",
+        ),
+        (
+            "two filter widths",
+            "filter_bandwidth_ghz = 1.0",
+            "filter_bandwidth_ghz = 1.0\nfilter_bandwidth_nm = 1.0",
+            "receiver.filter_bandwidth_ghz",
+            "not both",
+            "filter_bandwidth_ghz",
+        ),
+        (
+            "gain below 1",
+            "gain = 10.0",
+            "gain = 0.5",
+            "receiver.gain",
+            "must lie in [1, 1e8]",
+            "gain =",
+        ),
+        (
+            "NEP without bandwidth",
+            "\nbandwidth_mhz = 10.0",
+            "",
+            "receiver",
+            "bandwidth_mhz",
+            "[receiver]",
+        ),
+        (
+            "background without a filter",
+            "filter_bandwidth_ghz = 1.0\n",
+            "",
+            "background",
+            "filter's width",
+            "[background]",
+        ),
+        (
+            "unknown gas",
+            "[retrieval]",
+            "[retrieval]\ngas = \"XYZ\"",
+            "retrieval.gas",
+            "not a HITRAN molecule",
+            "gas = \"XYZ\"",
+        ),
+        (
+            "gas without lines",
+            "[retrieval]",
+            "[retrieval]\ngas = \"H2O\"",
+            "retrieval.gas",
+            "has no H2O lines",
+            "gas = \"H2O\"",
+        ),
+        (
+            "unknown channel",
+            "[retrieval]",
+            "[retrieval]\non = \"nope\"",
+            "retrieval.on",
+            "no channel named `nope`",
+            "on = \"nope\"",
+        ),
+        (
+            "no receiver",
+            "[receiver]\nfilter_bandwidth_ghz = 1.0\nfilter_transmission = 0.8\nquantum_efficiency = 0.8\ngain = 10.0\nionization_ratio = 0.45\nnep_w_per_sqrt_hz = 4.0e-14\nbandwidth_mhz = 10.0\n",
+            "",
+            "retrieval",
+            "needs a [receiver]",
+            "[retrieval]",
+        ),
+        (
+            "two averagings",
+            "averaging_shots = 2000",
+            "averaging_shots = 2000\naveraging_length_km = 10.0\nplatform_speed_m_per_s = 200.0",
+            "retrieval.averaging_shots",
+            "not both",
+            "averaging_shots",
+        ),
+        (
+            "no averaging",
+            "averaging_shots = 2000\n",
+            "",
+            "retrieval",
+            "needs `averaging_shots`",
+            "[retrieval]",
+        ),
+        (
+            "cell not whole gates",
+            "dial_cell_m = 1000.0",
+            "dial_cell_m = 1030.0",
+            "retrieval.dial_cell_m",
+            "not a whole number",
+            "dial_cell_m",
+        ),
+        (
+            "unknown target",
+            "target = \"surface\"",
+            "target = \"cirrus\"",
+            "retrieval.target",
+            "neither `surface` nor a layer",
+            "target =",
+        ),
+        (
+            "too few realisations",
+            "realisations = 200",
+            "realisations = 5",
+            "retrieval.realisations",
+            "must lie in 10..=1000000",
+            "realisations",
+        ),
+        (
+            "nothing to retrieve",
+            "target = \"surface\"\ndial_cell_m = 1000.0\n",
+            "",
+            "retrieval.target",
+            "nothing to retrieve",
+            "[retrieval]",
+        ),
+    ];
+    let mut failures = Vec::new();
+    for (what, from, to, key, words, at) in cases {
+        assert!(SCENE.contains(from), "{what}: `{from}` is not in the scene");
+        let mut text = SCENE.replacen(from, to, 1);
+        if *what == "nothing to retrieve" {
+            // Move the surface out of the gates so that no target is found by default either.
+            text = text.replacen("end_m = 8100.0", "end_m = 7900.0", 1);
+        }
+        if *what == "background without a filter" {
+            text = text.replacen(
+                "[gates]",
+                "[background]\nradiance_w_per_m2_sr_um = 10.0\n[gates]",
+                1,
+            );
+        }
+        let line = line_of(&text, at);
+        match Scene::from_toml(Path::new("bad.toml"), &text) {
+            Ok(_) => failures.push(format!("{what}: accepted")),
+            Err(e) => {
+                let shown = e.to_string();
+                if !(e.field.as_deref() == Some(*key)
+                    && e.line == Some(line)
+                    && shown.contains(words)
+                    && shown.starts_with(&format!("bad.toml:{line}: `{key}`")))
+                {
+                    failures.push(format!(
+                        "{what}: got `{shown}` (expected line {line}, key {key})"
+                    ));
+                }
+            }
+        }
+    }
+    assert!(failures.is_empty(), "\n{}", failures.join("\n"));
+}
