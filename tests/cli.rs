@@ -164,10 +164,10 @@ fn default_scene_retrieves_xco2_and_writes_signals_retrieval_and_figures() {
             assert!((truth - 420.0).abs() < 0.1, "{truth}");
         }
     }
-    for png in ["returns.png"] {
-        let bytes = std::fs::read(dir.path().join(png)).unwrap();
-        assert_eq!(&bytes[1..4], b"PNG", "{png}");
-    }
+    // No DIAL in the default scene: the returns figure only.
+    let bytes = std::fs::read(dir.path().join("returns.png")).unwrap();
+    assert_eq!(&bytes[1..4], b"PNG");
+    assert!(!dir.path().join("dial.png").exists());
 }
 
 /// A retrieval that cannot be done stops the run with one message naming the scene key, and

@@ -4,7 +4,7 @@
 //!
 //! Per gate of duration τ = 2Δr/c and per pulse of line ℓ ([`super::detector`] has the noise
 //! formula): the signal is the line's return through the filter (energies in
-//! [`LineReturns`](super::laser::LineReturns) already carry the filter and the optical
+//! [`LineReturns`] already carry the filter and the optical
 //! efficiency), the background power is P_b = L Δλ Ω A η_opt T_f at the line's wavelength.
 //!
 //! A measurement averages N shot pairs. Shot s of line ℓ has energy e_s = E_ℓ(1 + ε_E z) and
@@ -287,7 +287,7 @@ pub const SHOTS_DRAWN_ONE_BY_ONE: u64 = 256;
 /// Draw the laser state of `shots` pulses (module docs). A perfect laser draws nothing.
 ///
 /// Per shot, with e = 1 + ε_E z₁ (relative energy), δ = σ_j z₂ and m = 1 + ε_M z₃:
-/// E[e] = 1, E[eδ] = 0, E[eδ²] = σ², E[em] = 1, and the covariances of (e, eδ², em):
+/// E⟨e⟩ = 1, E⟨eδ⟩ = 0, E⟨eδ²⟩ = σ², E⟨em⟩ = 1, and the covariances of (e, eδ², em):
 /// Var e = ε², Var eδ² = (1 + ε²) 3σ⁴ − σ⁴, Var em = ε² + ε_M²(1 + ε²),
 /// Cov(e, eδ²) = Cov(eδ², em) = ε²σ², Cov(e, em) = ε²; eδ is uncorrelated with the others,
 /// Var eδ = (1 + ε²)σ². Above [`SHOTS_DRAWN_ONE_BY_ONE`] shots the sums are drawn from the
