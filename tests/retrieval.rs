@@ -418,6 +418,31 @@ fn noise_free_retrievals_return_the_truth() {
     }
 }
 
+/// Same scene and seed, same products at any thread count (the noise draws are tied to the
+/// realisation, the transport to its batches).
+#[test]
+fn retrievals_do_not_depend_on_the_thread_count() {
+    let s = scene(&SCENE.replacen(
+        "linewidth_fwhm_mhz = 30.0",
+        "linewidth_fwhm_mhz = 30.0\nfrequency_jitter_rms_mhz = 0.3\npulse_energy_jitter_fraction = 0.05",
+        1,
+    ));
+    let at = |threads: usize| {
+        let mut opts = TransportOptions::from_scene(&s);
+        opts.photons = 20_000;
+        opts.threads = threads;
+        pipeline::run(&s, &opts).expect("run").products
+    };
+    let (one, two) = (at(1), at(2));
+    assert!(!one.is_empty());
+    // Bit for bit (NaN-free here, so PartialEq is exact equality).
+    assert!(
+        one.iter()
+            .all(|p| p.retrieved.is_finite() && p.simulated_error_averaged.is_finite())
+    );
+    assert_eq!(one, two);
+}
+
 /// Monte Carlo channel combinations: an on − off combination folded batch by batch has the
 /// standard error that the separately folded on and off returns and their co-moment give
 /// (var(a − b) = var a + var b − 2 cov(a, b)), and an identity combination is the channel.
