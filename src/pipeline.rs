@@ -12,9 +12,10 @@ use crate::instrument::signals::{Signals, Telescope};
 use crate::lidar_eq;
 use crate::optics::{OpticalAtmosphere, OpticsError};
 use crate::retrieval::{
-    AssumedInstrument, LayerColumns, Product, ReferenceState, Retrieval, RetrievalError,
+    AssumedInstrument, LayerColumns, Method, Product, Quantity, ReferenceState, Retrieval,
+    RetrievalError,
 };
-use crate::returns::{Order, Returns};
+use crate::returns::{Order, Returns, Source};
 use crate::scene::Scene;
 use crate::transport::{self, McResult, TransportError, TransportOptions};
 
@@ -38,6 +39,30 @@ pub struct RunOutput {
     pub retrieval: Option<Retrieval>,
     /// Retrieved products, for every set of signals and field of view.
     pub products: Vec<Product>,
+}
+
+impl RunOutput {
+    /// The products of one method and quantity retrieved from one set of returns and field of
+    /// view (IPDA: one; DIAL: one per cell, nearest the lidar first).
+    pub fn products_of(
+        &self,
+        method: Method,
+        quantity: Quantity,
+        source: Source,
+        order: Order,
+        fov_full_angle_mrad: f64,
+    ) -> Vec<&Product> {
+        self.products
+            .iter()
+            .filter(|p| {
+                p.method == method
+                    && p.quantity == quantity
+                    && p.source == source
+                    && p.order == order
+                    && p.fov_full_angle_mrad == fov_full_angle_mrad
+            })
+            .collect()
+    }
 }
 
 /// Why a run failed.

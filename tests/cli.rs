@@ -55,12 +55,13 @@ fn run_default_scene_writes_contract_columns() {
     assert!(dir.path().join("summary.json").is_file());
 }
 
-#[test]
-fn bad_scene_exits_2_naming_file_line_and_key_and_writes_nothing() {
+/// Run the default scene with one replacement as `bad.toml`; require exit code 2, one line on
+/// stderr naming the file, and no output directory. Returns stderr.
+fn run_broken_default_scene(from: &str, to: &str) -> String {
     let dir = tempfile::tempdir().unwrap();
     let scene = dir.path().join("bad.toml");
     let good = lidarsim::scene::DEFAULT_SCENE_TOML;
-    let text = good.replacen("pulse_energy_j = 0.03", "pulse_energy_j = -1", 1);
+    let text = good.replacen(from, to, 1);
     assert_ne!(text, good, "the default scene changed: update this test");
     std::fs::write(&scene, text).unwrap();
     let out_dir = dir.path().join("out");
@@ -71,15 +72,25 @@ fn bad_scene_exits_2_naming_file_line_and_key_and_writes_nothing() {
         out_dir.as_os_str(),
     ]);
     assert_eq!(out.status.code(), Some(2));
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(stderr.contains("bad.toml:"), "{stderr}");
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
     assert!(
-        stderr.contains("`laser.pulse_energy_j`: -1 must be > 0"),
+        stderr.starts_with("lidarsim: error: ") && stderr.contains("bad.toml:"),
         "{stderr}"
     );
+    assert_eq!(stderr.lines().count(), 1, "{stderr}");
     assert!(
         !out_dir.exists(),
         "an output directory was created for a failed run"
+    );
+    stderr
+}
+
+#[test]
+fn bad_scene_exits_2_naming_file_line_and_key_and_writes_nothing() {
+    let stderr = run_broken_default_scene("pulse_energy_j = 0.03", "pulse_energy_j = -1");
+    assert!(
+        stderr.contains("`laser.pulse_energy_j`: -1 must be > 0"),
+        "{stderr}"
     );
 }
 
@@ -174,35 +185,12 @@ fn default_scene_retrieves_xco2_and_writes_signals_retrieval_and_figures() {
 /// writes nothing.
 #[test]
 fn impossible_retrieval_exits_2_and_writes_nothing() {
-    let dir = tempfile::tempdir().unwrap();
-    let scene = dir.path().join("bad.toml");
-    let good = lidarsim::scene::DEFAULT_SCENE_TOML;
     // Swap the lines: the "on-line" then absorbs less than the "off-line".
-    let text = good.replacen(
-        "on = \"on\"\noff = \"off\"",
-        "on = \"off\"\noff = \"on\"",
-        1,
-    );
-    assert_ne!(text, good, "the default scene changed: update this test");
-    std::fs::write(&scene, text).unwrap();
-    let out_dir = dir.path().join("out");
-    let out = lidarsim([
-        "run".as_ref(),
-        scene.as_os_str(),
-        "--out".as_ref(),
-        out_dir.as_os_str(),
-    ]);
-    assert_eq!(out.status.code(), Some(2));
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(stderr.contains("bad.toml:"), "{stderr}");
+    let stderr =
+        run_broken_default_scene("on = \"on\"\noff = \"off\"", "on = \"off\"\noff = \"on\"");
     assert!(stderr.contains("`retrieval.on`"), "{stderr}");
     assert!(
         stderr.contains("absorbs no more than the off-line"),
         "{stderr}"
-    );
-    assert_eq!(stderr.lines().count(), 1, "{stderr}");
-    assert!(
-        !out_dir.exists(),
-        "an output directory was created for a failed run"
     );
 }

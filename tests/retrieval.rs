@@ -10,7 +10,7 @@ use lidarsim::instrument::signals::Signals;
 use lidarsim::lidar_eq;
 use lidarsim::optics::OpticalAtmosphere;
 use lidarsim::pipeline::{self, RunError, RunOutput};
-use lidarsim::retrieval::{Method, Product, Quantity};
+use lidarsim::retrieval::{Method, Quantity};
 use lidarsim::returns::{Order, Source};
 use lidarsim::rng::{Stream, streams};
 use lidarsim::scene::Scene;
@@ -79,26 +79,6 @@ fn run(s: &Scene, photons: u64) -> RunOutput {
     let mut opts = TransportOptions::from_scene(s);
     opts.photons = photons;
     pipeline::run(s, &opts).expect("run")
-}
-
-fn products(
-    run: &RunOutput,
-    method: Method,
-    quantity: Quantity,
-    source: Source,
-    order: Order,
-    fov: f64,
-) -> Vec<&Product> {
-    run.products
-        .iter()
-        .filter(|p| {
-            p.method == method
-                && p.quantity == quantity
-                && p.source == source
-                && p.order == order
-                && p.fov_full_angle_mrad == fov
-        })
-        .collect()
 }
 
 /// Surface-gate line return of line `line` from the analytic lidar equation.
@@ -356,25 +336,18 @@ fn noise_free_retrievals_return_the_truth() {
             (Source::MonteCarlo, Order::Exactly(1)),
             (Source::MonteCarlo, Order::Total),
         ] {
-            let ipda = products(&out, Method::Ipda, Quantity::MixingRatio, src, order, fov);
+            let ipda = out.products_of(Method::Ipda, Quantity::MixingRatio, src, order, fov);
             assert_eq!(ipda.len(), 1);
             let p = ipda[0];
             assert!((p.truth - 420.48).abs() < 0.01, "truth {}", p.truth);
             assert!(p.bias().abs() < 0.05, "IPDA bias {} ppm", p.bias());
             assert!(p.bias().abs() < 1e-3, "IPDA bias {} ppm", p.bias());
-            let column = products(
-                &out,
-                Method::IpdaVirtual,
-                Quantity::SlantColumn,
-                src,
-                order,
-                fov,
-            );
+            let column =
+                out.products_of(Method::IpdaVirtual, Quantity::SlantColumn, src, order, fov);
             assert!((column[0].retrieved / column[0].truth - 1.0).abs() < 1e-5);
-            let dial = products(&out, Method::Dial, Quantity::MixingRatio, src, order, fov);
+            let dial = out.products_of(Method::Dial, Quantity::MixingRatio, src, order, fov);
             assert_eq!(dial.len(), 6);
-            let analytic = products(
-                &out,
+            let analytic = out.products_of(
                 Method::Dial,
                 Quantity::MixingRatio,
                 Source::Analytic,
@@ -514,16 +487,14 @@ fn multiple_scattering_biases_ipda_more_at_wider_fields_of_view() {
     let out = run(&s, 200_000);
     let mut biases = Vec::new();
     for fov in [0.2, 2.0, 10.0] {
-        let single = products(
-            &out,
+        let single = out.products_of(
             Method::Ipda,
             Quantity::MixingRatio,
             Source::MonteCarlo,
             Order::Exactly(1),
             fov,
         )[0];
-        let all = products(
-            &out,
+        let all = out.products_of(
             Method::Ipda,
             Quantity::MixingRatio,
             Source::MonteCarlo,

@@ -14,7 +14,7 @@ use std::path::Path;
 use std::time::Instant;
 
 use lidarsim::pipeline::{self, RunOutput};
-use lidarsim::retrieval::{Method, Product, Quantity};
+use lidarsim::retrieval::{Method, Quantity};
 use lidarsim::returns::{Order, Source};
 use lidarsim::scene::{DEFAULT_SCENE_TOML, Scene};
 use lidarsim::transport::TransportOptions;
@@ -26,26 +26,6 @@ fn run(text: &str, photons: u64) -> (Scene, RunOutput, f64) {
     let t = Instant::now();
     let out = pipeline::run(&scene, &opts).expect("run");
     (scene, out, t.elapsed().as_secs_f64())
-}
-
-fn pick(
-    out: &RunOutput,
-    method: Method,
-    quantity: Quantity,
-    source: Source,
-    order: Order,
-    fov: f64,
-) -> Vec<&Product> {
-    out.products
-        .iter()
-        .filter(|p| {
-            p.method == method
-                && p.quantity == quantity
-                && p.source == source
-                && p.order == order
-                && p.fov_full_angle_mrad == fov
-        })
-        .collect()
 }
 
 /// The default scene without its laser's imperfections and without particles.
@@ -84,7 +64,7 @@ fn main() {
             (Source::MonteCarlo, Order::Exactly(1), "MC order 1"),
             (Source::MonteCarlo, Order::Total, "MC all orders"),
         ] {
-            let p = pick(&out, Method::Ipda, Quantity::MixingRatio, src, order, fov)[0];
+            let p = out.products_of(Method::Ipda, Quantity::MixingRatio, src, order, fov)[0];
             println!(
                 "| {fov} | {name} | {:.4} | {:.4} | {:+.1e} | {:.1e} | {:.1e} |",
                 p.truth,
@@ -113,16 +93,14 @@ fn main() {
         "| cell altitude [m] | truth [ppm] | analytic bias [ppm] | MC all orders − analytic [ppm] | MC error [ppm] | MC error if traced apart [ppm] |"
     );
     println!("|---|---|---|---|---|---|");
-    let an = pick(
-        &out,
+    let an = out.products_of(
         Method::Dial,
         Quantity::MixingRatio,
         Source::Analytic,
         Order::Exactly(1),
         0.2,
     );
-    let mc = pick(
-        &out,
+    let mc = out.products_of(
         Method::Dial,
         Quantity::MixingRatio,
         Source::MonteCarlo,
@@ -182,16 +160,14 @@ fn main() {
             .start;
         let lines = out.mc_lines.as_ref().unwrap();
         for (f, fov) in scene.lidar.fov_full_angle_mrad.iter().enumerate() {
-            let single = pick(
-                &out,
+            let single = out.products_of(
                 Method::Ipda,
                 Quantity::MixingRatio,
                 Source::MonteCarlo,
                 Order::Exactly(1),
                 *fov,
             )[0];
-            let all = pick(
-                &out,
+            let all = out.products_of(
                 Method::Ipda,
                 Quantity::MixingRatio,
                 Source::MonteCarlo,
