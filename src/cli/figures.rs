@@ -123,12 +123,7 @@ fn returns_figure(
                 .legend(move |(x, y)| Circle::new((x + 10, y), 3, c.filled()));
         }
     }
-    chart
-        .configure_series_labels()
-        .label_font((FONT, 13))
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()?;
+    super::plot::draw_legend(&mut chart)?;
     root.present()?;
     Ok(())
 }
@@ -236,12 +231,7 @@ fn dial_figure(path: &Path, products: &[&Product]) -> DrawResult {
             .label(format!("{name} ± random error"))
             .legend(move |(x, y)| Circle::new((x + 10, y), 3, c.filled()));
     }
-    chart
-        .configure_series_labels()
-        .label_font((FONT, 13))
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()?;
+    super::plot::draw_legend(&mut chart)?;
     root.present()?;
     Ok(())
 }

@@ -365,12 +365,7 @@ fn plot(
                 .label(name.as_str())
                 .legend(move |(px, py)| PathElement::new(vec![(px, py), (px + 20, py)], c));
         }
-        chart
-            .configure_series_labels()
-            .label_font((FONT, 13))
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()?;
+        super::plot::draw_legend(&mut chart)?;
         root.present()?;
         Ok(())
     })();

@@ -24,3 +24,22 @@ pub fn init_font() {
         .expect("assets/DejaVuSans.ttf is a valid TTF font");
     });
 }
+
+/// Draw a chart's series legend in the house style (translucent white box, black border).
+pub fn draw_legend<'a, DB, CT>(
+    chart: &mut plotters::chart::ChartContext<'a, DB, CT>,
+) -> Result<(), String>
+where
+    DB: plotters::prelude::DrawingBackend + 'a,
+    CT: plotters::coord::CoordTranslate,
+{
+    use plotters::prelude::*;
+    chart
+        .configure_series_labels()
+        .label_font((FONT, 13))
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()
+        // The backend's error borrows the drawing area; its words are what the caller needs.
+        .map_err(|e| e.to_string())
+}
