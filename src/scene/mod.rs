@@ -117,7 +117,8 @@ pub struct Lidar {
     pub zenith_angle_deg: f64,
     /// Pointing azimuth \[deg\] (matters only for the direction of a slant path).
     pub azimuth_deg: f64,
-    /// Pulse energy \[J\].
+    /// Pulse energy the transport and the lidar equation run with \[J\]: the first laser line's
+    /// (the line combinations scale the others by their own energies).
     pub pulse_energy_j: f64,
     /// Full divergence angle of the beam \[mrad\] (0: pencil beam).
     pub beam_divergence_full_angle_mrad: f64,
