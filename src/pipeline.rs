@@ -81,7 +81,8 @@ pub enum RunError {
 }
 
 /// Run every stage of `scene`; `transport` says how to run the Monte Carlo (0 photons: the
-/// analytic lidar equation only). Its `combinations` are set here from the scene's laser.
+/// analytic lidar equation only). Its `combinations` and `combination_pairs` are set here from
+/// the scene's laser.
 pub fn run(scene: &Scene, transport: &TransportOptions) -> Result<RunOutput, RunError> {
     let atmosphere = OpticalAtmosphere::build(scene)?;
     let analytic = lidar_eq::single_scatter(scene, &atmosphere);
@@ -104,6 +105,7 @@ pub fn run(scene: &Scene, transport: &TransportOptions) -> Result<RunOutput, Run
     let (mc, mc_lines) = if transport.photons > 0 {
         let mut opts = transport.clone();
         opts.combinations = scene.sampling.combinations();
+        opts.combination_pairs = scene.sampling.covariance_pairs();
         let mc = transport::run(scene, &atmosphere, &opts)?;
         let lines = mc.combined.as_ref().map(|c| scene.sampling.split(c));
         (Some(mc), lines)

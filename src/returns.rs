@@ -177,11 +177,6 @@ impl Returns {
         out
     }
 
-    /// Channel index by name.
-    pub fn channel_index(&self, name: &str) -> Option<usize> {
-        self.channels.iter().position(|c| c == name)
-    }
-
     /// The returns of linear combinations of channels (deterministic combination, bin by bin).
     ///
     /// Energies combine exactly. Standard errors combine through the covariances where they are

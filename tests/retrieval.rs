@@ -246,13 +246,9 @@ fn noisy_measurements_have_the_variance_of_the_formula() {
             );
             let reals = 10_000;
             let mut rngs = streams(3, Stream::Instrument, 1);
-            let gate_range = g..g + 1;
-            let window = std::slice::from_ref(&gate_range);
+            let window = [sig.window(line, fov, g..g + 1)];
             let xs: Vec<f64> = (0..reals)
-                .map(|_| {
-                    sig.realise(&s.laser, line, fov, window, shots, &mut rngs[0])
-                        .0[0]
-                })
+                .map(|_| sig.realise(&s.laser, &window, shots, &mut rngs[0]).0[0])
                 .collect();
             let mean = xs.iter().sum::<f64>() / reals as f64;
             let var = xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (reals - 1) as f64;
@@ -444,6 +440,7 @@ fn combined_channels_carry_consistent_errors_and_covariances() {
             terms: vec![(0, 1.0), (1, -1.0)],
         },
     ];
+    opts.combination_pairs = vec![(0, 1)];
     let mc = transport::run(&s, &atm, &opts).unwrap();
     let c = mc.combined.as_ref().unwrap();
     let r = &mc.returns;

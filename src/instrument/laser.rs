@@ -335,6 +335,15 @@ impl SpectralSampling {
         all
     }
 
+    /// The pairs of [`Self::combinations`] whose covariance a Monte Carlo run should fold: every
+    /// pair of line means (the on/off covariance the retrievals use).
+    pub fn covariance_pairs(&self) -> Vec<(usize, usize)> {
+        let n = self.lines.len();
+        (0..n)
+            .flat_map(|a| (a + 1..n).map(move |b| (a, b)))
+            .collect()
+    }
+
     /// Line returns from the returns of [`Self::combinations`] (Monte Carlo: combined batch by
     /// batch).
     pub fn split(&self, combined: &Returns) -> LineReturns {

@@ -176,46 +176,33 @@ impl Signals {
         })
     }
 
-    /// Photo-electrons and noise per pulse of the echo summed over `gates` (a hard target's
-    /// window): one integration of their joint duration.
-    pub fn window(&self, line: usize, fov: usize, gates: Range<usize>) -> GateNoise {
+    /// The echo summed over `gates` (a hard target's window, or one gate): its expected energy,
+    /// frequency derivatives, and photo-electrons and noise per pulse (one integration of the
+    /// gates' joint duration).
+    pub fn window(&self, line: usize, fov: usize, gates: Range<usize>) -> WindowSignal {
         let n = gates.len() as f64;
-        let (e, _, _) = self.window_energy(line, fov, gates);
-        self.detector.gate(
-            e,
-            self.background_power_w[line * self.fov_full_angle_mrad.len() + fov],
-            self.lines[line].wavenumber_cm1,
-            n * self.gate_duration_s,
-        )
-    }
-
-    /// Relative signal change per shot caused by the frequency jitter, σ_j S/P̄ (signed), of
-    /// the echo summed over `gates`.
-    pub fn jitter_relative(
-        &self,
-        laser: &Laser,
-        line: usize,
-        fov: usize,
-        gates: Range<usize>,
-    ) -> f64 {
-        let (e, s, _) = self.window_energy(line, fov, gates);
-        if e > 0.0 {
-            laser.frequency_jitter_rms_mhz * s / e
-        } else {
-            0.0
+        let (e, s, c) = self.window_energy(line, fov, gates);
+        WindowSignal {
+            noise: self.detector.gate(
+                e,
+                self.background_power_w[line * self.fov_full_angle_mrad.len() + fov],
+                self.lines[line].wavenumber_cm1,
+                n * self.gate_duration_s,
+            ),
+            energy_j: e,
+            slope_j_per_mhz: s,
+            curvature_j_per_mhz2: c,
         }
     }
 
-    /// One noisy measurement of line `line` in field of view `fov`, averaged over `shots`
-    /// pulses: the background-subtracted photo-electrons summed over the shots in each window
-    /// of `windows`, and the energy monitor's reading summed over the shots, in units of the
-    /// nominal pulse energy (module docs).
+    /// One noisy measurement of a line, averaged over `shots` pulses: the background-subtracted
+    /// photo-electrons summed over the shots in each of `windows` (of that line and one field
+    /// of view, from [`Signals::window`]), and the energy monitor's reading summed over the
+    /// shots, in units of the nominal pulse energy (module docs).
     pub fn realise(
         &self,
         laser: &Laser,
-        line: usize,
-        fov: usize,
-        windows: &[Range<usize>],
+        windows: &[WindowSignal],
         shots: u64,
         rng: &mut Rng,
     ) -> (Vec<f64>, f64) {
@@ -224,17 +211,41 @@ impl Signals {
         let counts = windows
             .iter()
             .map(|w| {
-                let per_shot = self.window(line, fov, w.clone());
-                let (e, s, c) = self.window_energy(line, fov, w.clone());
+                let (e, s, c) = (w.energy_j, w.slope_j_per_mhz, w.curvature_j_per_mhz2);
                 let energy_sum = shot.energy * (e - 0.5 * c * var)
                     + s * shot.energy_delta
                     + 0.5 * c * shot.energy_delta2;
-                let pe_per_j = if e > 0.0 { per_shot.signal_pe / e } else { 0.0 };
+                let pe_per_j = if e > 0.0 { w.noise.signal_pe / e } else { 0.0 };
                 self.detector
-                    .sample_sum((energy_sum * pe_per_j).max(0.0), &per_shot, shots, rng)
+                    .sample_sum((energy_sum * pe_per_j).max(0.0), &w.noise, shots, rng)
             })
             .collect();
         (counts, shot.monitored_energy)
+    }
+}
+
+/// The expected echo of a window of gates of one line and field of view, per pulse.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WindowSignal {
+    /// Photo-electrons and noise.
+    pub noise: GateNoise,
+    /// Mean energy \[J\].
+    pub energy_j: f64,
+    /// ∂E/∂ν \[J/MHz\].
+    pub slope_j_per_mhz: f64,
+    /// ∂²E/∂ν² \[J/MHz²\].
+    pub curvature_j_per_mhz2: f64,
+}
+
+impl WindowSignal {
+    /// Relative signal change per shot caused by a frequency jitter of rms σ_j, σ_j S/P̄
+    /// (signed; 0 without signal).
+    pub fn jitter_relative(&self, jitter_rms_mhz: f64) -> f64 {
+        if self.energy_j > 0.0 {
+            jitter_rms_mhz * self.slope_j_per_mhz / self.energy_j
+        } else {
+            0.0
+        }
     }
 }
 

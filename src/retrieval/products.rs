@@ -34,7 +34,7 @@ use super::config::RetrievalConfig;
 use super::reference::{LayerColumns, PathDepths, ReferenceState};
 use crate::instrument::detector::photon_energy_j;
 use crate::instrument::laser::{Laser, LineReturns};
-use crate::instrument::signals::Signals;
+use crate::instrument::signals::{Signals, WindowSignal};
 use crate::returns::{Order, Source};
 use crate::rng::{self, Stream};
 
@@ -193,9 +193,12 @@ pub struct Retrieval {
     pub pair: String,
     /// Random seed of the instrument noise.
     pub seed: u64,
+    /// Every measurement the configuration asks for (derived once from the above).
+    targets: Vec<Target>,
 }
 
 /// What one retrieval of one measurement needs: where, and how to turn D into the product.
+#[derive(Debug, Clone)]
 struct Target {
     method: Method,
     quantity: Quantity,
@@ -230,7 +233,7 @@ impl Retrieval {
         pair: String,
         seed: u64,
     ) -> Result<Self, RetrievalError> {
-        let r = Retrieval {
+        let mut r = Retrieval {
             config,
             laser,
             reference,
@@ -240,8 +243,10 @@ impl Retrieval {
             range_m,
             pair,
             seed,
+            targets: Vec::new(),
         };
-        for t in r.targets() {
+        r.targets = r.targets();
+        for t in &r.targets {
             // dD/ds is the target gas's own differential optical depth over the path.
             let (_, g) = r.reference.daod(&t.path, r.config.on, r.config.off, 1.0);
             if !(g > 0.0) {
@@ -371,7 +376,7 @@ impl Retrieval {
             .ok_or_else(|| RetrievalError::Gas("returns without the signals' order".into()))?;
         let e_on = self.laser.pulse_energy_j[on];
         let e_off = self.laser.pulse_energy_j[off];
-        let targets = self.targets();
+        let targets = &self.targets;
         let n_avg = self.config.averaging_shots;
         let reals = self.config.realisations;
         // Every window any product is measured on, once.
@@ -391,7 +396,14 @@ impl Retrieval {
                     .collect()
             })
             .collect();
-        let sims = self.simulate(signals, fov, &windows, reals);
+        // The expected echo and noise of every window, for the on- (0) and the off-line (1).
+        let expected: [Vec<WindowSignal>; 2] = [on, off].map(|line| {
+            windows
+                .iter()
+                .map(|w| signals.window(line, fov, w.clone()))
+                .collect()
+        });
+        let sims = self.simulate(signals, &expected, reals);
         let mut products = Vec::with_capacity(targets.len());
         for (t, ids) in targets.iter().zip(&window_ids) {
             // Expected signals: D, its Monte Carlo variance (and as if independent).
@@ -438,16 +450,17 @@ impl Retrieval {
             let (retrieved, slope) = self.value(t, d);
             // Analytic random error per shot pair.
             let mut var_shot = 0.0;
-            for line in [on, off] {
+            for line_windows in &expected {
                 let mut jitter = 0.0;
-                for (k, w) in t.windows.iter().enumerate() {
-                    let snr = signals.window(line, fov, w.clone()).snr();
+                for (k, id) in ids.iter().enumerate() {
+                    let w = &line_windows[*id];
+                    let snr = w.noise.snr();
                     var_shot += if snr > 0.0 {
                         1.0 / (snr * snr)
                     } else {
                         f64::INFINITY
                     };
-                    jitter += sign(k) * signals.jitter_relative(&self.laser, line, fov, w.clone());
+                    jitter += sign(k) * w.jitter_relative(self.laser.frequency_jitter_rms_mhz);
                 }
                 var_shot += jitter * jitter;
                 if ipda {
@@ -505,8 +518,7 @@ impl Retrieval {
     fn simulate(
         &self,
         signals: &Signals,
-        fov: usize,
-        windows: &[Range<usize>],
+        expected: &[Vec<WindowSignal>; 2],
         reals: usize,
     ) -> Vec<Measurement> {
         let streams = rng::streams(self.seed, Stream::Instrument, 2 * reals);
@@ -526,7 +538,7 @@ impl Retrieval {
                 };
                 for (i, line) in lines.iter().enumerate() {
                     let (counts, monitored) =
-                        signals.realise(&self.laser, *line, fov, windows, shots, &mut rng);
+                        signals.realise(&self.laser, &expected[i], shots, &mut rng);
                     // Photo-electrons back to energy: the lines' photon energies differ by 1e-4.
                     let j_per_pe = photon_energy_j(signals.lines[*line].wavenumber_cm1)
                         / signals.detector.quantum_efficiency;

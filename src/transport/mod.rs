@@ -97,8 +97,11 @@ pub struct TransportOptions {
     /// instead of from the exponential (0 turns it off).
     pub range_stratification: f64,
     /// Linear combinations of channels to report as well (laser lines from their quadrature
-    /// nodes), folded batch by batch so that their standard errors and covariances are right.
+    /// nodes), folded batch by batch so that their standard errors are right.
     pub combinations: Vec<Combination>,
+    /// Pairs (a, b), a < b, of `combinations` whose covariance is folded too (the on- and
+    /// off-line returns); only these, as their number grows with the square of the lines.
+    pub combination_pairs: Vec<(usize, usize)>,
 }
 
 impl TransportOptions {
@@ -116,6 +119,7 @@ impl TransportOptions {
             ddis_epsilon: DDIS_EPSILON,
             range_stratification: RANGE_STRATIFICATION,
             combinations: Vec::new(),
+            combination_pairs: Vec::new(),
         }
     }
 }
@@ -138,7 +142,7 @@ pub struct McResult {
     /// Received energy by channel, FOV, gate and order, with standard errors.
     pub returns: Returns,
     /// The combined channels of [`TransportOptions::combinations`], with standard errors and the
-    /// covariance of every pair (`None` without combinations).
+    /// covariances of [`TransportOptions::combination_pairs`] (`None` without combinations).
     pub combined: Option<Returns>,
     /// Energy leaving the scene per channel, as a fraction of the emitted energy (zero unless
     /// the flux tally was on).
@@ -304,6 +308,16 @@ pub fn run(
             c.name
         )));
     }
+    let n_combos = opts.combinations.len();
+    if let Some((a, b)) = opts
+        .combination_pairs
+        .iter()
+        .find(|(a, b)| !(a < b && *b < n_combos))
+    {
+        return Err(TransportError::Options(format!(
+            "combination pair ({a}, {b}) is not two distinct combinations of the {n_combos}"
+        )));
+    }
     let axis = lidar.axis();
     let (axis_e1, axis_e2) = axis.any_orthonormal_pair();
     let receiver = DVec3::new(0.0, 0.0, lidar.altitude_m);
@@ -389,7 +403,8 @@ pub fn run(
         .map_err(|e| TransportError::Threads(opts.threads, e.to_string()))?;
     let threads = pool.current_num_threads();
 
-    let mut acc = Accumulator::new(shape, fov_order).with_combinations(opts.combinations.clone());
+    let mut acc = Accumulator::new(shape, fov_order)
+        .with_combinations(opts.combinations.clone(), opts.combination_pairs.clone());
     let mut stats = RunStats::default();
     let started = Instant::now();
     let bar = indicatif::ProgressBar::hidden();

@@ -86,7 +86,7 @@ pub(crate) struct Accumulator {
     combined: Option<Combined>,
 }
 
-/// Running moments of combined channels and of every pair of them.
+/// Running moments of combined channels and of chosen pairs of them.
 struct Combined {
     combos: Vec<Combination>,
     /// Bins per channel in the reported layout.
@@ -117,17 +117,19 @@ impl Accumulator {
         }
     }
 
-    /// Also fold these combinations of channels (`terms` index the transport's channels).
-    pub fn with_combinations(mut self, combos: Vec<Combination>) -> Self {
+    /// Also fold these combinations of channels (`terms` index the transport's channels), and
+    /// the covariances of the pairs (a, b), a < b, of them.
+    pub fn with_combinations(
+        mut self,
+        combos: Vec<Combination>,
+        pairs: Vec<(usize, usize)>,
+    ) -> Self {
         if combos.is_empty() {
             return self;
         }
         let s = self.shape;
         let bins = s.n_fov * s.n_gates * (s.n_order_bins + 1);
         let n = combos.len();
-        let pairs: Vec<(usize, usize)> = (0..n)
-            .flat_map(|a| (a + 1..n).map(move |b| (a, b)))
-            .collect();
         self.combined = Some(Combined {
             combos,
             bins,
