@@ -414,7 +414,9 @@ fn retrievals_do_not_depend_on_the_thread_count() {
 
 /// Monte Carlo channel combinations: an on − off combination folded batch by batch has the
 /// standard error that the separately folded on and off returns and their co-moment give
-/// (var(a − b) = var a + var b − 2 cov(a, b)), and an identity combination is the channel.
+/// (var(a − b) = var a + var b − 2 cov(a, b)), also when combined afterwards bin by bin
+/// (`Returns::combine`); cov(a, a − b) = var a − cov(a, b); an identity combination is the
+/// channel.
 #[test]
 fn combined_channels_carry_consistent_errors_and_covariances() {
     use lidarsim::returns::Combination;
@@ -440,12 +442,17 @@ fn combined_channels_carry_consistent_errors_and_covariances() {
             terms: vec![(0, 1.0), (1, -1.0)],
         },
     ];
-    opts.combination_pairs = vec![(0, 1)];
+    opts.combination_pairs = vec![(0, 1), (0, 2)];
     let mc = transport::run(&s, &atm, &opts).unwrap();
     let c = mc.combined.as_ref().unwrap();
     let r = &mc.returns;
     assert_eq!(c.energy_j[..2 * c.bins_per_channel()], r.energy_j[..]);
     assert_eq!(c.stderr_j[..2 * c.bins_per_channel()], r.stderr_j[..]);
+    // The same difference combined afterwards, bin by bin, through the on/off covariance.
+    let after = c.combine(&[Combination {
+        name: "diff".into(),
+        terms: vec![(0, 1.0), (1, -1.0)],
+    }]);
     let mut judged = 0;
     for g in 0..c.range_m.len() {
         for o in 0..c.orders.len() {
@@ -460,10 +467,28 @@ fn combined_channels_carry_consistent_errors_and_covariances() {
                     (from_parts / direct - 1.0).abs() < 1e-6,
                     "gate {g} order {o}: {from_parts} vs {direct}"
                 );
+                let se = after.stderr_j[after.index(0, 0, g, o)];
+                assert!(
+                    (se * se / direct - 1.0).abs() < 1e-6,
+                    "gate {g} order {o}: combined afterwards {} vs {direct}",
+                    se * se
+                );
+                // cov(on, on − off) = var(on) − cov(on, off): the second folded pair.
+                let cov_on_diff = c.covariance_j2(0, 2, 0, g, o).unwrap();
+                assert!(
+                    (cov_on_diff - (var_on - cov)).abs() < 1e-6 * var_on.max(direct),
+                    "gate {g} order {o}: {cov_on_diff} vs {}",
+                    var_on - cov
+                );
             }
         }
     }
     assert!(judged > 100, "{judged}");
+    // A pair that was not folded is unknown, not zero.
+    let g = (0..c.range_m.len())
+        .find(|g| c.stderr_j[c.index(1, 0, *g, 0)] > 0.0)
+        .unwrap();
+    assert_eq!(c.covariance_j2(1, 2, 0, g, 0), None);
 }
 
 /// Multiple scattering in the retrieval: through a low water cloud (τ = 1, 200–400 m), the IPDA on single
