@@ -387,6 +387,63 @@ fn noise_free_retrievals_return_the_truth() {
     }
 }
 
+/// A laser whose on-line sits x MHz off its nominal frequency, retrieved by a retrieval that
+/// assumes the nominal one: XCO2 comes out as truth × DAOD(ν_on + x)/DAOD(ν_on), both
+/// differential optical depths computed here straight from the spectroscopy stage on the
+/// scene's molecular layers (monochromatic laser, no Rayleigh scattering, no filter).
+#[test]
+fn a_frequency_offset_biases_ipda_as_the_shifted_differential_optical_depth() {
+    let s = scene(
+        &SCENE
+            .replacen("[atmosphere]", "[atmosphere]\nrayleigh = false", 1)
+            .replacen(
+                "filter_bandwidth_ghz = 1.0",
+                "filter_bandwidth_ghz = 1000.0",
+                1,
+            )
+            .replacen(
+                "line_shape = \"gaussian\"\nlinewidth_fwhm_mhz = 30.0",
+                "frequency_offset_mhz = [60.0, 0.0]",
+                1,
+            )
+            .replacen("dial_cell_m = 1000.0\n", "", 1),
+    );
+    let out = run(&s, 0);
+    let p = out.products_of(
+        Method::Ipda,
+        Quantity::MixingRatio,
+        Source::Analytic,
+        Order::Exactly(1),
+        0.2,
+    )[0];
+    let atm = s.atmosphere.as_ref().unwrap();
+    let gas = s.gas.as_ref().unwrap();
+    let edges: Vec<f64> = s
+        .molecular_edges()
+        .unwrap()
+        .into_iter()
+        .filter(|e| *e <= 8000.0)
+        .collect();
+    let nus = [6360.04 + 60.0 / 29_979.245_8, 6360.04, 6360.61];
+    let tau =
+        layer_optical_depths_at(&atm.profile, &gas.lines, &edges, &nus, &gas.options).unwrap();
+    let column = |i: usize| tau.iter().map(|l| l[i]).sum::<f64>();
+    let ratio = (column(0) - column(2)) / (column(1) - column(2));
+    println!(
+        "60 MHz offset: retrieved/truth {} vs DAOD ratio {ratio}",
+        p.retrieved / p.truth
+    );
+    assert!(
+        (ratio - 1.0).abs() > 1e-3,
+        "the offset must matter: {ratio}"
+    );
+    assert!(
+        (p.retrieved / p.truth / ratio - 1.0).abs() < 1e-9,
+        "{} vs {ratio}",
+        p.retrieved / p.truth
+    );
+}
+
 /// Same scene and seed, same products at any thread count (the noise draws are tied to the
 /// realisation, the transport to its batches).
 #[test]
@@ -449,10 +506,16 @@ fn combined_channels_carry_consistent_errors_and_covariances() {
     assert_eq!(c.energy_j[..2 * c.bins_per_channel()], r.energy_j[..]);
     assert_eq!(c.stderr_j[..2 * c.bins_per_channel()], r.stderr_j[..]);
     // The same difference combined afterwards, bin by bin, through the on/off covariance.
-    let after = c.combine(&[Combination {
-        name: "diff".into(),
-        terms: vec![(0, 1.0), (1, -1.0)],
-    }]);
+    let after = c.combine(&[
+        Combination {
+            name: "diff".into(),
+            terms: vec![(0, 1.0), (1, -1.0)],
+        },
+        Combination {
+            name: "2on-off".into(),
+            terms: vec![(0, 2.0), (1, -1.0)],
+        },
+    ]);
     let mut judged = 0;
     for g in 0..c.range_m.len() {
         for o in 0..c.orders.len() {
@@ -472,6 +535,14 @@ fn combined_channels_carry_consistent_errors_and_covariances() {
                     (se * se / direct - 1.0).abs() < 1e-6,
                     "gate {g} order {o}: combined afterwards {} vs {direct}",
                     se * se
+                );
+                // Non-unit coefficients: var(2a − b) = 4 var a + var b − 4 cov(a, b).
+                let se2 = after.stderr_j[after.index(1, 0, g, o)];
+                let expect = 4.0 * var_on + var_off - 4.0 * cov;
+                assert!(
+                    (se2 * se2 / expect - 1.0).abs() < 1e-6,
+                    "gate {g} order {o}: {} vs {expect}",
+                    se2 * se2
                 );
                 // cov(on, on − off) = var(on) − cov(on, off): the second folded pair.
                 let cov_on_diff = c.covariance_j2(0, 2, 0, g, o).unwrap();

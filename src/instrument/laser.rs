@@ -91,17 +91,6 @@ impl Laser {
     pub fn jitter_step_mhz(&self) -> f64 {
         (2.0 * self.frequency_jitter_rms_mhz).max(1.0)
     }
-
-    /// The same laser without its imperfections: nominal centres, no jitter, full spectral
-    /// purity, same line shape. This is what a retrieval assumes about the instrument.
-    pub fn nominal(&self) -> Laser {
-        Laser {
-            frequency_offset_mhz: vec![0.0; self.frequency_offset_mhz.len()],
-            frequency_jitter_rms_mhz: 0.0,
-            spectral_purity: 1.0,
-            ..self.clone()
-        }
-    }
 }
 
 /// The receiver's spectral filter: a flat top of full width `bandwidth_cm1` and peak
@@ -123,12 +112,17 @@ impl Filter {
         }
     }
 
-    /// The quadrature nodes of line `line` of `laser` that pass this filter: the line shape
+    /// The quadrature nodes of a line of `laser` whose centre sits `offset_mhz` from the
+    /// filter's centre (its nominal wavenumber) that pass this filter: the line shape
     /// integrated over the pass band only ([`LineShape::nodes_within`]), offsets relative to
     /// the line's actual centre, weights summing to the share of its energy inside the band.
-    pub fn line_nodes(&self, laser: &Laser, line: usize) -> Vec<super::line_shape::QuadratureNode> {
+    pub fn line_nodes(
+        &self,
+        laser: &Laser,
+        offset_mhz: f64,
+    ) -> Vec<super::line_shape::QuadratureNode> {
         let half_mhz = 0.5 * self.bandwidth_cm1 * MHZ_PER_CM1;
-        let off = laser.frequency_offset_mhz[line];
+        let off = offset_mhz;
         laser
             .line_shape
             .nodes_within(laser.nodes, -half_mhz - off, half_mhz - off)
@@ -247,7 +241,7 @@ impl SpectralSampling {
             let scale = laser.pulse_energy_j[l] / e0;
             let centre = line.wavenumber_cm1 + laser.frequency_offset_mhz[l] / MHZ_PER_CM1;
             let tf = |nu: f64| filter.transmission_at(nu, line.wavenumber_cm1);
-            let nodes = filter.line_nodes(laser, l);
+            let nodes = filter.line_nodes(laser, laser.frequency_offset_mhz[l]);
             let mut terms: Vec<(usize, f64)> = Vec::new();
             let mut centre_channel = None;
             for (i, q) in nodes.iter().enumerate() {

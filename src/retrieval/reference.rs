@@ -131,10 +131,11 @@ impl PathDepths {
 }
 
 /// The instrument as a retrieval assumes it: the laser's lines, its line shape and the
-/// receiver's filter, without the laser's imperfections ([`Laser::nominal`]).
+/// receiver's filter, without the laser's imperfections (frequency offset, jitter, spectral
+/// impurity).
 #[derive(Debug, Clone, Copy)]
 pub struct AssumedInstrument<'a> {
-    /// The laser (its nominal form is used).
+    /// The laser (its line shape and quadrature; its imperfections are ignored).
     pub laser: &'a Laser,
     /// Its lines.
     pub lines: &'a [Line],
@@ -173,10 +174,9 @@ impl ReferenceState {
                 "no {gas} lines near the laser lines"
             )));
         }
-        // The nominal laser's nodes through the filter, weights normalised (a constant share of
-        // energy cancels in the on/off ratio).
-        let nominal = laser.nominal();
-        let nodes = filter.line_nodes(&nominal, 0);
+        // The nodes of a line at its nominal centre through the filter, weights normalised (a
+        // constant share of energy cancels in the on/off ratio).
+        let nodes = filter.line_nodes(laser, 0.0);
         let total: f64 = nodes.iter().map(|q| q.weight).sum();
         if !(total > 0.0) {
             return Err(RetrievalError::Gas(
