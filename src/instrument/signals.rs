@@ -385,34 +385,65 @@ mod tests {
 
     #[test]
     fn shot_sums_have_the_stated_moments() {
-        // E[Σe] = N, Var(Σe) = N ε²; E[Σ e δ²] = N σ²; E[Σ e δ] = 0.
-        let mut laser = Laser::ideal(1.0, 1);
-        laser.pulse_energy_jitter_fraction = 0.05;
-        laser.frequency_jitter_rms_mhz = 0.3;
-        let mut rng = streams(5, Stream::Instrument, 1).remove(0);
-        let (n, reps) = (50u64, 4000);
-        let (mut m, mut m2, mut d2) = (0.0, 0.0, 0.0);
-        for _ in 0..reps {
-            let s = draw_shots(&laser, n, &mut rng);
-            m += s.energy;
-            m2 += s.energy * s.energy;
-            d2 += s.energy_delta2;
+        // Every moment `draw_shots` documents, shot by shot (N = 50) and from the joint normal
+        // (N = 5000), and a laser whose only imperfection is its energy monitor. Tolerances:
+        // 4 standard errors (means: √(Var/reps); variances: Var·√((2 + κ)/reps) with κ the
+        // excess kurtosis, 12/N for Σeδ²; covariances: √(Var_a Var_b/reps) for the weak
+        // correlations here).
+        let laser = |ee: f64, sj: f64, em: f64| {
+            let mut l = Laser::ideal(1.0, 1);
+            l.pulse_energy_jitter_fraction = ee;
+            l.frequency_jitter_rms_mhz = sj;
+            l.energy_monitor_error_fraction = em;
+            l
+        };
+        for (ee, sj, em) in [(0.05, 0.3, 0.01), (0.0, 0.0, 0.01)] {
+            let l = laser(ee, sj, em);
+            let (e2, s2) = (ee * ee, sj * sj);
+            for n in [50u64, 5000] {
+                let mut rng = streams(5, Stream::Instrument, 1).remove(0);
+                let reps = 4000;
+                let draws: Vec<ShotSums> = (0..reps).map(|_| draw_shots(&l, n, &mut rng)).collect();
+                let (r, nf) = (reps as f64, n as f64);
+                let mean = |f: &dyn Fn(&ShotSums) -> f64| draws.iter().map(f).sum::<f64>() / r;
+                let cov = |f: &dyn Fn(&ShotSums) -> f64, g: &dyn Fn(&ShotSums) -> f64| {
+                    let (mf, mg) = (mean(f), mean(g));
+                    draws.iter().map(|d| (f(d) - mf) * (g(d) - mg)).sum::<f64>() / (r - 1.0)
+                };
+                let a = |d: &ShotSums| d.energy;
+                let b = |d: &ShotSums| d.energy_delta;
+                let dd = |d: &ShotSums| d.energy_delta2;
+                let m = |d: &ShotSums| d.monitored_energy;
+                let var_a = nf * e2;
+                let var_b = nf * (1.0 + e2) * s2;
+                let var_d = nf * ((1.0 + e2) * 3.0 * s2 * s2 - s2 * s2);
+                let var_m = nf * (e2 + em * em * (1.0 + e2));
+                let what = format!("ε {ee}, σ {sj}, ε_M {em}, N {n}");
+                let close = |got: f64, want: f64, se: f64| (got - want).abs() <= 4.0 * se;
+                assert!(close(mean(&a), nf, (var_a / r).sqrt()), "{what}");
+                assert!(close(mean(&m), nf, (var_m / r).sqrt()), "{what}");
+                assert!(close(mean(&dd), nf * s2, (var_d / r).sqrt()), "{what}");
+                let rel = |kurtosis: f64| ((2.0 + kurtosis) / r).sqrt();
+                for (got, want, k) in [
+                    (cov(&a, &a), var_a, 0.0),
+                    (cov(&b, &b), var_b, 0.0),
+                    (cov(&dd, &dd), var_d, 12.0 / nf),
+                    (cov(&m, &m), var_m, 0.0),
+                ] {
+                    assert!(
+                        close(got, want, want * rel(k)),
+                        "{what}: variance {got} vs {want}"
+                    );
+                }
+                for (got, want, se) in [
+                    (cov(&a, &dd), nf * e2 * s2, (var_a * var_d / r).sqrt()),
+                    (cov(&a, &m), nf * e2, (var_a * var_m / r).sqrt()),
+                    (cov(&dd, &m), nf * e2 * s2, (var_d * var_m / r).sqrt()),
+                    (cov(&a, &b), 0.0, (var_a * var_b / r).sqrt()),
+                ] {
+                    assert!(close(got, want, se), "{what}: covariance {got} vs {want}");
+                }
+            }
         }
-        let r = reps as f64;
-        let mean = m / r;
-        let var = m2 / r - mean * mean;
-        let nf = n as f64;
-        // Standard errors: √(N ε²/reps) for the mean; ~√(2/reps) relative for the variance.
-        assert!((mean - nf).abs() < 4.0 * (nf * 0.0025 / r).sqrt(), "{mean}");
-        assert!(
-            (var / (nf * 0.0025) - 1.0).abs() < 4.0 * (2.0 / r).sqrt(),
-            "{var}"
-        );
-        // Σ e δ² has relative standard deviation ≈ √(2/N) per draw.
-        assert!(
-            (d2 / r / (nf * 0.09) - 1.0).abs() < 4.0 * (2.0 / (nf * r)).sqrt(),
-            "{}",
-            d2 / r
-        );
     }
 }
