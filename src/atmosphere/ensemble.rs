@@ -276,3 +276,56 @@ pub fn perturb_member(
         capped,
     ))
 }
+
+/// A uniform change of the atmospheric state, for sensitivities and knowledge errors: every
+/// level's temperature shifted, water vapour scaled, the surface pressure moved.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StateShift {
+    /// Added to the temperature of every level \[K\].
+    pub temperature_k: f64,
+    /// Factor on the water vapour mixing ratio of every level (1.1: 10 % more).
+    pub h2o_factor: f64,
+    /// Added to the surface pressure \[hPa\] (levels follow by [`hybrid_shift_pa`]).
+    pub surface_pressure_hpa: f64,
+}
+
+impl StateShift {
+    /// No change.
+    pub const NONE: StateShift = StateShift {
+        temperature_k: 0.0,
+        h2o_factor: 1.0,
+        surface_pressure_hpa: 0.0,
+    };
+}
+
+/// `member` changed by `shift`, as an ensemble member is perturbed ([`perturb_member`]: levels
+/// moved to the new surface pressure, altitudes recomputed hydrostatically from the same surface
+/// altitude), without the relative-humidity cap: a sensitivity to 10 % more water vapour must
+/// not be clipped where the profile is near saturation.
+///
+/// The altitudes are hydrostatic even for [`StateShift::NONE`], so a finite difference compares
+/// two shifted profiles (a shift against `NONE`), never a shifted one against the original,
+/// whose altitudes may come from another integration (AFGL tables).
+pub fn shift_member(member: &SetMember, shift: &StateShift) -> Result<SetMember, AtmosphereError> {
+    if !(shift.temperature_k.is_finite()
+        && shift.h2o_factor.is_finite()
+        && shift.h2o_factor > 0.0
+        && shift.surface_pressure_hpa.is_finite())
+    {
+        return Err(AtmosphereError::InvalidArgument(format!(
+            "state shift {shift:?}: temperature and surface pressure must be finite, the water vapour factor positive"
+        )));
+    }
+    let n = member.profile.len();
+    let mut delta = vec![shift.temperature_k; n];
+    delta.extend(std::iter::repeat_n(shift.h2o_factor.ln(), n));
+    delta.extend(std::iter::repeat_n(0.0, n));
+    delta.push(shift.surface_pressure_hpa);
+    let cfg = EnsembleConfig {
+        max_relative_humidity: f64::INFINITY,
+        ..EnsembleConfig::new(1, 0)
+    };
+    let (mut out, _) = perturb_member(member, &delta, &member.meta.id, &cfg)?;
+    out.profile.name = member.profile.name.clone();
+    Ok(out)
+}
