@@ -28,6 +28,8 @@ enum Command {
     Mie(Box<cli::mie::Args>),
     /// Measure speed and Monte Carlo efficiency on fixed workloads.
     Bench(cli::bench::Args),
+    /// Run a scene's DIAL/IPDA retrievals over a profile ensemble, with an error budget.
+    Dial(Box<cli::dial::Args>),
 }
 
 fn main() -> ExitCode {
@@ -38,6 +40,7 @@ fn main() -> ExitCode {
         Command::Profiles(a) => cli::profiles::run(a),
         Command::Mie(a) => cli::mie::run(*a),
         Command::Bench(a) => cli::bench::run(a),
+        Command::Dial(a) => cli::dial::run(*a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -21,6 +21,8 @@ pub enum Stream {
     Instrument = 1,
     /// Atmospheric ensembles.
     Ensemble = 2,
+    /// Ensemble studies: one instrument-noise seed per profile.
+    Study = 3,
 }
 
 /// Generators for work units `0..count` of a stream: unit i is the stream start jumped i times.

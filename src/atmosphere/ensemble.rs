@@ -329,3 +329,34 @@ pub fn shift_member(member: &SetMember, shift: &StateShift) -> Result<SetMember,
     out.profile.name = member.profile.name.clone();
     Ok(out)
 }
+
+/// An ensemble of `n` members around the mean of a latitude class's AFGL atmospheres with the
+/// representative NWP forecast-error covariance scaled for the class
+/// ([`super::ErrorModel::representative`], [`super::ErrorModel::scaled_for_class`]): what
+/// `lidarsim profiles generate --class C --n N --seed S` writes. Member ids are `{class}-0001`….
+pub fn class_ensemble(
+    class: super::LatitudeClass,
+    n: usize,
+    seed: u64,
+) -> Result<(ProfileSet, EnsembleReport), AtmosphereError> {
+    let afgl = ProfileSet {
+        name: format!("AFGL {class}"),
+        members: class
+            .afgl_atmospheres()
+            .iter()
+            .map(|s| s.member())
+            .collect(),
+        notes: Vec::new(),
+    };
+    let mean = afgl.mean_member()?;
+    let cov = super::ErrorModel::representative()
+        .scaled_for_class(class)
+        .covariance(&mean.profile)?;
+    let cfg = EnsembleConfig {
+        id_prefix: format!("{}-", class.name()),
+        ..EnsembleConfig::new(n, seed)
+    };
+    let (mut set, report) = generate_ensemble(&mean, &cov, &cfg)?;
+    set.name = format!("{n} members around the AFGL {class} mean, seed {seed}");
+    Ok((set, report))
+}

@@ -39,7 +39,9 @@ pub mod set;
 
 pub use column::RescaleBasis;
 pub use covariance::{Covariance, ErrorModel, Factor, RepairReport, StateVariable};
-pub use ensemble::{EnsembleConfig, EnsembleReport, StateShift, generate_ensemble, shift_member};
+pub use ensemble::{
+    EnsembleConfig, EnsembleReport, StateShift, class_ensemble, generate_ensemble, shift_member,
+};
 pub use humidity::SaturationOver;
 pub use set::{LatitudeClass, ProfileMeta, ProfileSet, SetMember, read_profile_set};
 

@@ -1,9 +1,11 @@
 //! One module per subcommand; each has `Args` (clap) and `run(Args) -> anyhow::Result<()>`.
 
 pub mod bench;
+pub mod dial;
 pub mod figures;
 pub mod lbl;
 pub mod mie;
 pub mod plot;
 pub mod profiles;
 pub mod run;
+pub mod study_figures;

@@ -130,6 +130,9 @@ pub struct Product {
     pub simulated_error_averaged: f64,
     /// Mean of simulated averaged retrievals.
     pub simulated_mean_averaged: f64,
+    /// The first simulated averaged retrieval: one noisy measurement, as an ensemble study
+    /// takes one per profile (NaN if its signal was not positive).
+    pub simulated_first_averaged: f64,
     /// Shot pairs averaged.
     pub shots_averaged: u64,
 }
@@ -207,6 +210,10 @@ struct Target {
     truth: f64,
     /// Optical depths of the path (DIAL: the cell's part scaled).
     path: PathDepths,
+    /// DIAL: the path to the near end of the cell, for `offset`.
+    near: Option<PathDepths>,
+    /// The reference's slant gas column of the path (for virtual cross-sections).
+    slant_reference: f64,
     /// D of the reference at the near end (DIAL), subtracted before solving.
     offset: f64,
     /// Product per unit s (mixing ratio or density of the reference), or for the virtual
@@ -246,6 +253,30 @@ impl Retrieval {
             targets: Vec::new(),
         };
         r.targets = r.targets();
+        r.set_pair(r.config.on, r.config.off, r.pair.clone())?;
+        Ok(r)
+    }
+
+    /// Retrieve with another on/off pair of the same lines. The paths through the reference
+    /// state do not depend on the pair, so a study of many pairs computes them once; only the
+    /// pair's own terms (virtual cross-sections, the DIAL near-end D) are redone. Checks that
+    /// the new on-line absorbs more than the off-line over every path.
+    pub fn set_pair(&mut self, on: usize, off: usize, pair: String) -> Result<(), RetrievalError> {
+        let n = self.reference.weights.len();
+        if on >= n || off >= n || on == off {
+            return Err(RetrievalError::Gas(format!(
+                "line pair ({on}, {off}) is not two different lines of {n}"
+            )));
+        }
+        self.config.on = on;
+        self.config.off = off;
+        self.pair = pair;
+        let mut targets = std::mem::take(&mut self.targets);
+        for t in &mut targets {
+            self.pair_terms(t);
+        }
+        self.targets = targets;
+        let r = &*self;
         for t in &r.targets {
             // dD/ds is the target gas's own differential optical depth over the path.
             let (_, g) = r.reference.daod(&t.path, r.config.on, r.config.off, 1.0);
@@ -256,16 +287,40 @@ impl Retrieval {
                 )));
             }
         }
-        Ok(r)
+        Ok(())
+    }
+
+    /// The terms of a target that depend on the on/off pair.
+    fn pair_terms(&self, t: &mut Target) {
+        let (on, off) = (self.config.on, self.config.off);
+        match t.method {
+            Method::IpdaVirtual => {
+                let slant_ref = t.slant_reference;
+                let dsigma = self
+                    .reference
+                    .virtual_cross_section_m2(&t.path, on, slant_ref)
+                    - self
+                        .reference
+                        .virtual_cross_section_m2(&t.path, off, slant_ref);
+                t.per_unit = 1.0 / dsigma;
+                t.other_daod = self.reference.daod(&t.path, on, off, 0.0).0;
+            }
+            Method::Dial => {
+                if let Some(near) = &t.near {
+                    t.offset = self.reference.daod(near, on, off, 1.0).0;
+                }
+            }
+            Method::Ipda => {}
+        }
     }
 
     fn altitude(&self, range_m: f64) -> f64 {
         self.lidar_altitude_m + self.mu * range_m
     }
 
-    /// Every measurement the configuration asks for.
+    /// Every measurement the configuration asks for, without the pair's own terms
+    /// ([`Self::pair_terms`]).
     fn targets(&self) -> Vec<Target> {
-        let (on, off) = (self.config.on, self.config.off);
         let z0 = self.lidar_altitude_m;
         let mut out = Vec::new();
         if let Some(t) = &self.config.target {
@@ -287,25 +342,22 @@ impl Retrieval {
                 offset: 0.0,
                 other_daod: 0.0,
                 path: path.clone(),
+                near: None,
+                slant_reference: gas_ref / self.mu.abs(),
                 windows: window.clone(),
             });
-            let slant_ref = gas_ref / self.mu.abs();
-            let dsigma = self
-                .reference
-                .virtual_cross_section_m2(&path, on, slant_ref)
-                - self
-                    .reference
-                    .virtual_cross_section_m2(&path, off, slant_ref);
             out.push(Target {
                 method: Method::IpdaVirtual,
                 quantity: Quantity::SlantColumn,
                 range_m: (0.0, t.range_m),
                 altitude_m: alt,
                 truth: gas / self.mu.abs(),
-                per_unit: 1.0 / dsigma,
+                per_unit: f64::NAN,
                 offset: 0.0,
-                other_daod: self.reference.daod(&path, on, off, 0.0).0,
+                other_daod: f64::NAN,
                 path,
+                near: None,
+                slant_reference: gas_ref / self.mu.abs(),
                 windows: window,
             });
         }
@@ -316,7 +368,6 @@ impl Retrieval {
                 let (za, zb) = (self.altitude(ra), self.altitude(rb));
                 let near = self.reference.path(z0, za, self.mu);
                 let far = self.reference.path(z0, zb, self.mu);
-                let offset = self.reference.daod(&near, on, off, 1.0).0;
                 let path = PathDepths::cell(&near, &far);
                 let (gas_ref, dry_ref) = self.reference.columns.between(za, zb);
                 let (gas, dry) = self.truth.between(za, zb);
@@ -337,9 +388,11 @@ impl Retrieval {
                         altitude_m: alt,
                         truth,
                         per_unit,
-                        offset,
+                        offset: f64::NAN,
                         other_daod: 0.0,
                         path: path.clone(),
+                        near: Some(near.clone()),
+                        slant_reference: gas_ref / self.mu.abs(),
                         windows: vec![a..a + 1, b..b + 1],
                     });
                 }
@@ -485,6 +538,7 @@ impl Retrieval {
             };
             let averaged: Vec<f64> = sims[..reals].iter().map(retrieve_sim).collect();
             let single: Vec<f64> = sims[reals..].iter().map(retrieve_sim).collect();
+            let sim_first = averaged.first().copied().unwrap_or(f64::NAN);
             let (sim_mean, sim_sd) = mean_sd(&averaged);
             let (_, sim_single) = mean_sd(&single);
             products.push(Product {
@@ -505,6 +559,7 @@ impl Retrieval {
                 simulated_error_per_shot_pair: sim_single,
                 simulated_error_averaged: sim_sd,
                 simulated_mean_averaged: sim_mean,
+                simulated_first_averaged: sim_first,
                 shots_averaged: n_avg,
             });
         }

@@ -197,6 +197,9 @@ pub struct Atmosphere {
     pub rayleigh: bool,
     /// Depolarisation factor per channel (Bucholtz 1995 Table 1 unless given).
     pub depolarisation_factor: Vec<f64>,
+    /// The dry-air column average of CO2 the scene asks for \[ppm\] (`co2_ppm`), applied to
+    /// its profile and to any profile swapped in ([`Scene::with_profile`]).
+    pub co2_ppm: Option<f64>,
 }
 
 /// A horizontal layer of particles and/or extra absorption.
@@ -849,6 +852,7 @@ impl Validator<'_> {
             top_m,
             rayleigh: rayleigh_on,
             depolarisation_factor,
+            co2_ppm: a.co2_ppm,
         })
     }
 
@@ -1333,6 +1337,156 @@ impl Scene {
         }
         if let Some(s) = &mut self.surface {
             expand(&mut s.albedo, &parent);
+        }
+    }
+
+    /// The scene with another atmospheric profile (an ensemble member, say), checked as the
+    /// scene file's own is: the scene's `co2_ppm` rescales its CO2 column, and it must cover
+    /// the scene's surface and top of the atmosphere. Errors name the scene key that the
+    /// profile does not fit.
+    pub fn with_profile(&self, mut profile: Profile) -> Result<Scene, InputError> {
+        let Some(a) = &self.atmosphere else {
+            return Err(self.input_error(
+                "atmosphere",
+                "",
+                "the scene has no atmosphere to swap a profile into",
+            ));
+        };
+        profile
+            .validate()
+            .map_err(|e| self.input_error("atmosphere", "", e.to_string()))?;
+        if let Some(ppm) = a.co2_ppm {
+            profile
+                .rescale_gas("CO2", ppm * 1e-6)
+                .map_err(|e| self.input_error("atmosphere", "co2_ppm", e.to_string()))?;
+        }
+        let (bottom, top) = (profile.altitude_m[0], profile.altitude_m[profile.len() - 1]);
+        if top < a.top_m {
+            return Err(self.input_error(
+                "atmosphere",
+                "top_m",
+                format!(
+                    "profile `{}` ends at {top:.0} m, below the scene's top of the atmosphere ({:.0} m)",
+                    profile.name, a.top_m
+                ),
+            ));
+        }
+        if let Some(s) = &self.surface
+            && s.altitude_m < bottom
+        {
+            return Err(self.input_error(
+                "surface",
+                "altitude_m",
+                format!(
+                    "profile `{}` starts at {bottom:.0} m, above the scene's surface ({:.0} m)",
+                    profile.name, s.altitude_m
+                ),
+            ));
+        }
+        if let Some(g) = &self.gas {
+            for id in g.lines.molecules() {
+                let name = isotopologues::molecule_name(id).unwrap_or("?");
+                if profile.gas(name).is_none() {
+                    return Err(self.input_error(
+                        "gas_absorption",
+                        "",
+                        format!(
+                            "profile `{}` has no {name}, which the lines absorb",
+                            profile.name
+                        ),
+                    ));
+                }
+            }
+        }
+        let mut scene = self.clone();
+        if let Some(a) = &mut scene.atmosphere {
+            a.profile = profile;
+        }
+        Ok(scene)
+    }
+
+    /// The scene with another laser on the same lines (another frequency offset, jitter, line
+    /// width or purity): its channels are sampled anew and per-channel values follow the lines.
+    /// The laser must have one entry per line in its per-line vectors.
+    pub fn with_laser(&self, laser: Laser) -> Result<Scene, InputError> {
+        let n = self.lines.len();
+        if laser.pulse_energy_j.len() != n
+            || laser.frequency_offset_mhz.len() != n
+            || laser.impurity_wavenumber_cm1.len() != n
+        {
+            return Err(self.input_error(
+                "laser",
+                "",
+                format!("a laser for {n} lines needs {n} values per line"),
+            ));
+        }
+        let mut scene = self.clone();
+        scene.collapse_per_channel_values();
+        let lines: Vec<Line> = scene
+            .lines
+            .iter()
+            .map(|c| Line {
+                name: c.name.clone(),
+                wavenumber_cm1: c.wavenumber_cm1,
+            })
+            .collect();
+        let filter = scene
+            .receiver
+            .as_ref()
+            .map(|r| r.filter)
+            .unwrap_or(Filter::none());
+        scene.sampling = SpectralSampling::new(&laser, &lines, &filter);
+        scene.channels = scene
+            .sampling
+            .channels
+            .iter()
+            .map(|c| Channel {
+                name: c.name.clone(),
+                wavenumber_cm1: c.wavenumber_cm1,
+            })
+            .collect();
+        if let Some(c) = scene.channels.iter().find(|c| !(c.wavenumber_cm1 > 0.0)) {
+            return Err(self.input_error(
+                "laser",
+                "frequency_offset_mhz",
+                format!("channel `{}` falls at {} cm⁻¹", c.name, c.wavenumber_cm1),
+            ));
+        }
+        scene.lidar.pulse_energy_j = laser.pulse_energy_j[0];
+        scene.laser = laser;
+        scene.expand_per_channel_values();
+        Ok(scene)
+    }
+
+    /// The inverse of [`Self::expand_per_channel_values`]: one value per line again, each
+    /// line's from its first channel (all of a line's channels carry the line's value).
+    fn collapse_per_channel_values(&mut self) {
+        let first: Vec<usize> = (0..self.lines.len())
+            .map(|l| {
+                self.sampling
+                    .channels
+                    .iter()
+                    .position(|c| c.line == l)
+                    .unwrap_or(l)
+            })
+            .collect();
+        if first.len() == self.channels.len() && first.iter().enumerate().all(|(i, f)| i == *f) {
+            return;
+        }
+        fn pick<T: Clone>(v: &mut Vec<T>, first: &[usize]) {
+            *v = first.iter().map(|i| v[*i].clone()).collect();
+        }
+        if let Some(a) = &mut self.atmosphere {
+            pick(&mut a.depolarisation_factor, &first);
+        }
+        for l in &mut self.layers {
+            pick(&mut l.extinction_per_m, &first);
+            pick(&mut l.single_scattering_albedo, &first);
+            pick(&mut l.phase, &first);
+            pick(&mut l.absorption_per_m, &first);
+        }
+        if let Some(s) = &mut self.surface {
+            pick(&mut s.albedo, &first);
         }
     }
 

@@ -1,0 +1,485 @@
+//! `lidarsim dial [SCENE] (--profiles SET | --ensemble N) [--class C] [--on NAMES] --out DIR`:
+//! a scene's retrievals over a profile ensemble with an error budget (`lidarsim::study::dial`).
+
+use std::fmt::Write as _;
+use std::io::{IsTerminal, Write};
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, bail};
+
+use lidarsim::atmosphere::{LatitudeClass, ProfileSet, class_ensemble, read_profile_set};
+use lidarsim::output::write_atomically;
+use lidarsim::scene::Scene;
+use lidarsim::study::dial::{
+    self, BudgetSteps, N_SOURCES, ProfileOutcome, Source, StudyOptions, StudyResult, Summary,
+};
+
+/// Arguments of `lidarsim dial`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// Scene file (TOML) with `[laser]`/`[receiver]`/`[retrieval]`; without it the embedded
+    /// default scene.
+    pub scene: Option<PathBuf>,
+    /// Profile set (lidarsim format: `profiles generate` or `profiles convert`).
+    #[arg(
+        long,
+        conflicts_with = "ensemble",
+        required_unless_present = "ensemble"
+    )]
+    pub profiles: Option<PathBuf>,
+    /// Instead of a set: N members per class drawn around the class's AFGL mean with the
+    /// representative NWP forecast-error covariance (as `profiles generate --class C`; class i
+    /// of tropical, mid, high takes seed S + i).
+    #[arg(long)]
+    pub ensemble: Option<usize>,
+    /// Seed of a generated ensemble and of the instrument noise (default: the scene's).
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Latitude class to run: tropical, mid, high or all.
+    #[arg(long, default_value = "all")]
+    pub class: String,
+    /// On-lines (scene channel names, comma-separated), each paired with the retrieval's
+    /// off-line; default the retrieval's own on-line.
+    #[arg(long, value_delimiter = ',')]
+    pub on: Vec<String>,
+    /// Photons per profile; 0 (default for a scene without particle layers) uses the analytic
+    /// lidar equation. Default with particle layers: the scene's `simulation.photons`.
+    #[arg(long)]
+    pub photons: Option<u64>,
+    /// Worker threads, 0 for all cores.
+    #[arg(long, default_value_t = 0)]
+    pub threads: usize,
+    /// Budget: temperature knowledge error [K].
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
+    pub budget_temperature_k: f64,
+    /// Budget: humidity knowledge error [%].
+    #[arg(long, default_value_t = 10.0, allow_negative_numbers = true)]
+    pub budget_humidity_percent: f64,
+    /// Budget: surface-pressure knowledge error [hPa].
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
+    pub budget_surface_pressure_hpa: f64,
+    /// Budget: on-line frequency offset [MHz].
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
+    pub budget_frequency_offset_mhz: f64,
+    /// Budget: line-width error [%].
+    #[arg(long, default_value_t = 10.0, allow_negative_numbers = true)]
+    pub budget_linewidth_percent: f64,
+    /// Output directory (created if needed).
+    #[arg(long, default_value = "dial_study")]
+    pub out: PathBuf,
+    /// Do not draw the figures.
+    #[arg(long)]
+    pub no_plots: bool,
+}
+
+/// Run the subcommand.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let scene = match &args.scene {
+        Some(p) => Scene::read(p)?,
+        None => Scene::default_scene()?,
+    };
+    let retrieval = scene
+        .retrieval
+        .as_ref()
+        .context("the scene has no [retrieval]: nothing to study")?;
+    let classes: Vec<LatitudeClass> = match args.class.as_str() {
+        "all" => LatitudeClass::ALL.to_vec(),
+        c => vec![c.parse::<LatitudeClass>().map_err(anyhow::Error::msg)?],
+    };
+    let seed = args.seed.unwrap_or(scene.simulation.seed);
+    let set = profile_set(&args, &classes, seed)?;
+    let steps = BudgetSteps {
+        temperature_k: finite("--budget-temperature-k", args.budget_temperature_k)?,
+        humidity_fraction: finite("--budget-humidity-percent", args.budget_humidity_percent)?
+            / 100.0,
+        surface_pressure_hpa: finite(
+            "--budget-surface-pressure-hpa",
+            args.budget_surface_pressure_hpa,
+        )?,
+        frequency_offset_mhz: finite(
+            "--budget-frequency-offset-mhz",
+            args.budget_frequency_offset_mhz,
+        )?,
+        linewidth_fraction: finite("--budget-linewidth-percent", args.budget_linewidth_percent)?
+            / 100.0,
+    };
+    if steps.humidity_fraction <= -1.0 || steps.linewidth_fraction <= -1.0 {
+        bail!("--budget-humidity-percent and --budget-linewidth-percent must be above -100");
+    }
+    let line = |name: &str| -> anyhow::Result<usize> {
+        scene
+            .lines
+            .iter()
+            .position(|c| c.name == name)
+            .with_context(|| {
+                let names: Vec<&str> = scene.lines.iter().map(|c| c.name.as_str()).collect();
+                format!(
+                    "--on {name}: the scene has no line `{name}` (lines: {})",
+                    names.join(", ")
+                )
+            })
+    };
+    let pairs = if args.on.is_empty() {
+        vec![(retrieval.on, retrieval.off)]
+    } else {
+        let mut p = Vec::new();
+        for name in &args.on {
+            let on = line(name)?;
+            if on == retrieval.off {
+                bail!("--on {name} is the retrieval's off-line");
+            }
+            p.push((on, retrieval.off));
+        }
+        p
+    };
+    let photons = args.photons.unwrap_or(if scene.layers.is_empty() {
+        0
+    } else {
+        scene.simulation.photons
+    });
+    let options = StudyOptions {
+        photons,
+        seed,
+        pairs,
+        steps,
+        fov: 0,
+    };
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(args.threads)
+        .build()
+        .with_context(|| format!("cannot start {} threads", args.threads))?;
+    let bar = progress_bar(set.len());
+    let started = Instant::now();
+    let show = std::io::stderr().is_terminal();
+    let tick = || {
+        bar.inc(1);
+        if show && bar.is_hidden() && started.elapsed() > Duration::from_secs(1) {
+            bar.set_draw_target(indicatif::ProgressDrawTarget::stderr());
+        }
+    };
+    let result = pool.install(|| dial::run(&scene, &set, &options, &tick))?;
+    bar.finish_and_clear();
+    let summaries = dial::summarise(&result.outcomes);
+
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create the output directory {}", args.out.display()))?;
+    let mut written = vec![
+        write(&args.out.join("profiles.csv"), &profiles_csv(&result))?,
+        write(&args.out.join("summary.csv"), &summary_csv(&summaries))?,
+        write(
+            &args.out.join("budget.csv"),
+            &budget_csv(&summaries, &steps, &scene),
+        )?,
+        write(&args.out.join("failed.csv"), &failed_csv(&result.outcomes))?,
+    ];
+    if !args.no_plots {
+        written.extend(super::study_figures::draw(
+            &args.out, &set, &result, &summaries,
+        )?);
+    }
+    written.push(write(
+        &args.out.join("summary.json"),
+        &summary_json(&scene, &set, &options, &result),
+    )?);
+
+    let mut out = std::io::stdout().lock();
+    print_report(&mut out, &set, &result, &summaries, photons)?;
+    let names: Vec<String> = written.iter().map(|p| p.display().to_string()).collect();
+    writeln!(out, "wrote {}", names.join(", "))?;
+    Ok(())
+}
+
+fn finite(name: &str, v: f64) -> anyhow::Result<f64> {
+    if !v.is_finite() {
+        bail!("{name} {v} must be a finite number");
+    }
+    Ok(v)
+}
+
+/// The profiles to run: a set's members of the chosen classes, or generated ensembles.
+fn profile_set(args: &Args, classes: &[LatitudeClass], seed: u64) -> anyhow::Result<ProfileSet> {
+    if let Some(path) = &args.profiles {
+        let set = read_profile_set(path)?;
+        let mut out = ProfileSet {
+            name: set.name.clone(),
+            members: Vec::new(),
+            notes: set.notes.clone(),
+        };
+        for c in classes {
+            out.members.extend(set.class(*c).members);
+        }
+        if out.is_empty() {
+            bail!("{}: no profile of class {}", path.display(), args.class);
+        }
+        return Ok(out);
+    }
+    let n = args
+        .ensemble
+        .context("give --profiles SET or --ensemble N")?;
+    if n < 2 {
+        bail!("--ensemble {n}: an ensemble needs at least 2 members");
+    }
+    // 10⁵ members of ~50 levels is ~100 MB of profiles: beyond that, shard the study.
+    if n > 100_000 {
+        bail!("--ensemble {n}: at most 100000 members per class");
+    }
+    let mut set = ProfileSet {
+        name: format!("{n} members per class, seed {seed}"),
+        members: Vec::new(),
+        notes: Vec::new(),
+    };
+    for c in classes {
+        let i = LatitudeClass::ALL.iter().position(|x| x == c).unwrap_or(0) as u64;
+        let (s, report) = class_ensemble(*c, n, seed.wrapping_add(i))?;
+        if report.capped_values > 0 {
+            set.notes.push(format!(
+                "class {c}: water vapour capped at 100 % relative humidity in {} of {} values",
+                report.capped_values, report.total_values
+            ));
+        }
+        set.members.extend(s.members);
+    }
+    Ok(set)
+}
+
+fn progress_bar(n: usize) -> indicatif::ProgressBar {
+    let bar = indicatif::ProgressBar::hidden();
+    bar.set_length(n as u64);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{spinner} dial {bar:40} {pos}/{len} profiles, {elapsed} (eta {eta})",
+        )
+        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    bar
+}
+
+fn write(path: &Path, text: &str) -> anyhow::Result<PathBuf> {
+    write_atomically(path, text.as_bytes())
+        .with_context(|| format!("cannot write {}", path.display()))?;
+    Ok(path.to_path_buf())
+}
+
+/// Header of `profiles.csv`, one row per profile, line pair and retrieved quantity.
+pub const PROFILES_HEADER: &str = "profile_id,class,pair,method,altitude_bottom_m,altitude_top_m,truth_ppm,retrieved_ppm,error_ppm,retrieved_noisy_ppm,error_noisy_ppm,retrieved_own_profile_ppm";
+
+fn profiles_csv(result: &StudyResult) -> String {
+    let mut s = String::from(PROFILES_HEADER);
+    for src in Source::ALL {
+        let _ = write!(s, ",{}_ppm", src.label());
+    }
+    s.push('\n');
+    for o in &result.outcomes {
+        let Ok(records) = &o.records else { continue };
+        for r in records {
+            let _ = write!(
+                s,
+                "{},{},{},{},{},{},{},{},{},{},{},{}",
+                o.id,
+                o.class,
+                r.pair,
+                r.method.label(),
+                r.altitude_m.0,
+                r.altitude_m.1,
+                r.truth_ppm,
+                r.retrieved_ppm,
+                r.error_ppm(),
+                r.retrieved_noisy_ppm,
+                r.error_noisy_ppm(),
+                r.retrieved_own_ppm
+            );
+            for v in &r.budget_ppm {
+                let _ = write!(s, ",{v}");
+            }
+            s.push('\n');
+        }
+    }
+    s
+}
+
+/// Header of `summary.csv`, one row per class (and `all`), pair and retrieved quantity.
+pub const SUMMARY_HEADER: &str = "class,pair,method,altitude_bottom_m,altitude_top_m,profiles,truth_mean_ppm,bias_ppm,sd_ppm,noisy_bias_ppm,noisy_sd_ppm,random_error_rms_ppm,noise_ratio,total_budget_ppm";
+
+fn summary_csv(summaries: &[Summary]) -> String {
+    let mut s = String::from(SUMMARY_HEADER);
+    s.push('\n');
+    for m in summaries {
+        let _ = writeln!(
+            s,
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            m.class,
+            m.pair,
+            m.method.label(),
+            m.altitude_m.0,
+            m.altitude_m.1,
+            m.profiles,
+            m.truth_mean_ppm,
+            m.bias_ppm,
+            m.sd_ppm,
+            m.noisy_bias_ppm,
+            m.noisy_sd_ppm,
+            m.sources[0].rms_ppm,
+            m.noise_ratio,
+            m.total_ppm
+        );
+    }
+    s
+}
+
+/// Header of `budget.csv`, one row per class, pair, quantity and error source.
+pub const BUDGET_HEADER: &str = "class,pair,method,altitude_bottom_m,altitude_top_m,source,perturbation,bias_ppm,sd_ppm,rms_ppm,share";
+
+fn budget_csv(summaries: &[Summary], steps: &BudgetSteps, scene: &Scene) -> String {
+    let mut s = String::from(BUDGET_HEADER);
+    s.push('\n');
+    for m in summaries {
+        for (j, src) in Source::ALL.iter().enumerate() {
+            let st = &m.sources[j];
+            let _ = writeln!(
+                s,
+                "{},{},{},{},{},{},\"{}\",{},{},{},{}",
+                m.class,
+                m.pair,
+                m.method.label(),
+                m.altitude_m.0,
+                m.altitude_m.1,
+                src.label(),
+                src.describe(steps, &scene.laser),
+                st.bias_ppm,
+                st.sd_ppm,
+                st.rms_ppm,
+                st.share
+            );
+        }
+    }
+    s
+}
+
+fn failed_csv(outcomes: &[ProfileOutcome]) -> String {
+    let mut s = String::from("profile_id,class,reason\n");
+    for o in outcomes {
+        if let Err(e) = &o.records {
+            let _ = writeln!(s, "{},{},\"{}\"", o.id, o.class, e.replace('"', "\"\""));
+        }
+    }
+    s
+}
+
+fn summary_json(
+    scene: &Scene,
+    set: &ProfileSet,
+    options: &StudyOptions,
+    result: &StudyResult,
+) -> String {
+    let t = &result.timing;
+    let failed = result
+        .outcomes
+        .iter()
+        .filter(|o| o.records.is_err())
+        .count();
+    let v = serde_json::json!({
+        "scene": scene.path.display().to_string(),
+        "profile_set": set.name,
+        "profiles": set.len(),
+        "failed": failed,
+        "photons_per_profile": options.photons,
+        "seed": options.seed,
+        "pairs": options.pairs.iter().map(|(a, b)| format!("{}/{}", scene.lines[*a].name, scene.lines[*b].name)).collect::<Vec<_>>(),
+        "budget_steps": {
+            "temperature_k": options.steps.temperature_k,
+            "humidity_fraction": options.steps.humidity_fraction,
+            "surface_pressure_hpa": options.steps.surface_pressure_hpa,
+            "frequency_offset_mhz": options.steps.frequency_offset_mhz,
+            "linewidth_fraction": options.steps.linewidth_fraction,
+        },
+        "timing_s": {
+            "wall": t.wall_s,
+            "mean_references": t.mean_references_s,
+            "truth_optics_thread_sum": t.truth_optics_s,
+            "returns_thread_sum": t.returns_s,
+            "references_thread_sum": t.references_s,
+            "retrievals_thread_sum": t.retrievals_s,
+        },
+        "lidarsim_version": env!("CARGO_PKG_VERSION"),
+    });
+    format!("{v:#}\n")
+}
+
+fn print_report(
+    out: &mut impl Write,
+    set: &ProfileSet,
+    result: &StudyResult,
+    summaries: &[Summary],
+    photons: u64,
+) -> std::io::Result<()> {
+    let failed: Vec<&ProfileOutcome> = result
+        .outcomes
+        .iter()
+        .filter(|o| o.records.is_err())
+        .collect();
+    writeln!(
+        out,
+        "{} profiles of {} ({}), {} failed and left out of the statistics",
+        set.len(),
+        set.name,
+        if photons > 0 {
+            format!("Monte Carlo, {photons} photons per profile")
+        } else {
+            "analytic lidar equation".into()
+        },
+        failed.len()
+    )?;
+    for o in &failed {
+        if let Err(e) = &o.records {
+            writeln!(out, "  failed: profile {} ({}): {e}", o.id, o.class)?;
+        }
+    }
+    writeln!(
+        out,
+        "XCO2 (IPDA; class-mean virtual σ, own dry-air column), errors in ppm:"
+    )?;
+    writeln!(
+        out,
+        "  {:<9} {:<20} {:>5} {:>8} {:>8} {:>9} {:>9} {:>8} {:>7}  largest budget rows",
+        "class", "pair", "n", "bias", "sd", "noisy sd", "random", "total", "ratio"
+    )?;
+    for m in summaries
+        .iter()
+        .filter(|m| m.method == lidarsim::retrieval::Method::Ipda)
+    {
+        let mut rows: Vec<(usize, f64)> = (0..N_SOURCES).map(|j| (j, m.sources[j].share)).collect();
+        rows.sort_by(|a, b| b.1.total_cmp(&a.1));
+        let top: Vec<String> = rows
+            .iter()
+            .take(3)
+            .map(|(j, s)| format!("{} {:.0} %", Source::ALL[*j].label(), 100.0 * s))
+            .collect();
+        writeln!(
+            out,
+            "  {:<9} {:<20} {:>5} {:>8.3} {:>8.3} {:>9.3} {:>9.3} {:>8.3} {:>7.3}  {}",
+            m.class,
+            m.pair,
+            m.profiles,
+            m.bias_ppm,
+            m.sd_ppm,
+            m.noisy_sd_ppm,
+            m.sources[0].rms_ppm,
+            m.total_ppm,
+            m.noise_ratio,
+            top.join(", ")
+        )?;
+    }
+    let t = &result.timing;
+    writeln!(
+        out,
+        "time: {:.2} s wall; thread-summed: truth optics {:.2} s, returns {:.2} s, reference states {:.2} s (+{:.2} s class means), retrievals {:.2} s",
+        t.wall_s,
+        t.truth_optics_s,
+        t.returns_s,
+        t.references_s,
+        t.mean_references_s,
+        t.retrievals_s
+    )?;
+    Ok(())
+}

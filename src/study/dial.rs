@@ -1,0 +1,908 @@
+//! A scene's DIAL/IPDA retrievals over an ensemble of profiles, with an error budget.
+//!
+//! For every profile of a set the scene is run with that profile as the truth
+//! ([`Scene::with_profile`]): optics, the analytic lidar equation (or the Monte Carlo, with
+//! photons), line returns, signals, and the retrievals of every on/off pair asked for. The
+//! retrieval is the seed paper's: the slant column from **virtual cross-sections of the
+//! ensemble-mean profile of the profile's latitude class**, σ = −ln T_gas/(2N) (DESIGN §3), and
+//! XCO2 = N / N_dry with the profile's own dry-air column (the meteorology a retrieval takes
+//! from NWP and a surface model); for DIAL the cell's density over its dry-air density. The
+//! noisy value is one simulated averaged measurement per profile, with the profile's own noise
+//! seed.
+//!
+//! **Error budget.** Each row perturbs one input with the others held, on the same returns
+//! and the same noise seed (finite differences), against the retrieval with the profile's own
+//! state as reference (the weighting-function IPDA of [`crate::retrieval`]; DIAL cells alike):
+//!
+//! | row | what differs |
+//! |---|---|
+//! | random | none: the analytic random error (detector, shot and speckle-free noise, energy monitor, jitter) of the averaged measurement, a standard deviation |
+//! | temperature | the retrieval assumes every level colder by `temperature_k` than the truth |
+//! | humidity | the truth has `humidity_fraction` more water vapour than the retrieval assumes |
+//! | surface pressure | the retrieval assumes a surface pressure higher by `surface_pressure_hpa` |
+//! | frequency offset | the true on-lines sit `frequency_offset_mhz` above what the retrieval assumes |
+//! | frequency jitter | the scene's laser jitter against none |
+//! | line width | the true line width is `linewidth_fraction` wider than assumed |
+//! | spectral impurity | the scene's spectral purity against a pure laser |
+//! | mean-profile σ | the virtual cross-sections of the class-mean profile against the profile's own |
+//!
+//! The state changes are made with [`shift_member`] (levels re-hydrostated), and compared with
+//! the unshifted-but-re-levelled state, so only the change itself shows.
+//!
+//! Profiles are independent work units run in parallel with rayon; each one's noise seed is
+//! the profile's index in the set ([`Stream::Study`]), so any thread count gives the same
+//! numbers. A profile that cannot be run (it does not cover the scene, is supersaturated, a
+//! retrieval fails) is reported with the reason and left out of the statistics.
+
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Instant;
+
+use rand::RngExt;
+use rayon::prelude::*;
+use thiserror::Error;
+
+use crate::atmosphere::humidity::{SaturationOver, saturation_vapour_pressure_pa};
+use crate::atmosphere::{LatitudeClass, Profile, ProfileSet, SetMember, StateShift, shift_member};
+use crate::instrument::laser::{Filter, Laser, LineReturns};
+use crate::instrument::line_shape::LineShape;
+use crate::instrument::signals::{Signals, Telescope};
+use crate::lidar_eq;
+use crate::optics::OpticalAtmosphere;
+use crate::retrieval::{
+    AssumedInstrument, LayerColumns, Method, Product, Quantity, ReferenceState, Retrieval,
+    RetrievalConfig,
+};
+use crate::returns::Order;
+use crate::rng::{self, Stream};
+use crate::scene::Scene;
+use crate::transport::{self, TransportOptions};
+
+/// A relative humidity above this (over liquid water) makes a profile unphysical for the study:
+/// 100 % plus rounding of the files it came from.
+pub const MAX_RELATIVE_HUMIDITY: f64 = 1.001;
+
+/// Sizes of the budget's perturbations (module docs). The defaults are unit steps (1 K, 10 %,
+/// 1 hPa, 1 MHz, 10 %), so the budget reads as sensitivities; give a mission's own
+/// uncertainties for its budget.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BudgetSteps {
+    /// Temperature knowledge error at every level \[K\].
+    pub temperature_k: f64,
+    /// Relative humidity knowledge error (0.1: the truth has 10 % more water vapour).
+    pub humidity_fraction: f64,
+    /// Surface pressure knowledge error \[hPa\].
+    pub surface_pressure_hpa: f64,
+    /// On-line frequency offset \[MHz\].
+    pub frequency_offset_mhz: f64,
+    /// Relative line-width error.
+    pub linewidth_fraction: f64,
+}
+
+impl Default for BudgetSteps {
+    fn default() -> Self {
+        BudgetSteps {
+            temperature_k: 1.0,
+            humidity_fraction: 0.1,
+            surface_pressure_hpa: 1.0,
+            frequency_offset_mhz: 1.0,
+            linewidth_fraction: 0.1,
+        }
+    }
+}
+
+/// The rows of the error budget.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Source {
+    /// Detector and shot noise (a standard deviation).
+    Random,
+    /// Temperature profile knowledge.
+    Temperature,
+    /// Humidity knowledge.
+    Humidity,
+    /// Surface pressure knowledge.
+    SurfacePressure,
+    /// Laser frequency offset.
+    FrequencyOffset,
+    /// Laser frequency jitter.
+    FrequencyJitter,
+    /// Laser line width.
+    LineWidth,
+    /// Laser spectral impurity.
+    SpectralImpurity,
+    /// Virtual cross-sections of the class-mean profile instead of the profile's own.
+    MeanProfileSigma,
+}
+
+impl Source {
+    /// Every row, in table order.
+    pub const ALL: [Source; 9] = [
+        Source::Random,
+        Source::Temperature,
+        Source::Humidity,
+        Source::SurfacePressure,
+        Source::FrequencyOffset,
+        Source::FrequencyJitter,
+        Source::LineWidth,
+        Source::SpectralImpurity,
+        Source::MeanProfileSigma,
+    ];
+
+    /// Column-friendly name.
+    pub fn label(self) -> &'static str {
+        match self {
+            Source::Random => "random",
+            Source::Temperature => "temperature",
+            Source::Humidity => "humidity",
+            Source::SurfacePressure => "surface_pressure",
+            Source::FrequencyOffset => "frequency_offset",
+            Source::FrequencyJitter => "frequency_jitter",
+            Source::LineWidth => "line_width",
+            Source::SpectralImpurity => "spectral_impurity",
+            Source::MeanProfileSigma => "mean_profile_sigma",
+        }
+    }
+
+    /// What the row's perturbation is, for tables and legends.
+    pub fn describe(self, steps: &BudgetSteps, laser: &Laser) -> String {
+        match self {
+            Source::Random => "detector and shot noise (1σ, averaged)".into(),
+            Source::Temperature => format!("T assumed {} K too low", steps.temperature_k),
+            Source::Humidity => format!("H2O {} % above assumed", 100.0 * steps.humidity_fraction),
+            Source::SurfacePressure => {
+                format!("p_s assumed {} hPa too high", steps.surface_pressure_hpa)
+            }
+            Source::FrequencyOffset => {
+                format!("on-line {} MHz above assumed", steps.frequency_offset_mhz)
+            }
+            Source::FrequencyJitter => {
+                format!("jitter {} MHz rms vs none", laser.frequency_jitter_rms_mhz)
+            }
+            Source::LineWidth => format!(
+                "line width {} % wider than assumed",
+                100.0 * steps.linewidth_fraction
+            ),
+            Source::SpectralImpurity => {
+                format!("spectral purity {} vs 1", laser.spectral_purity)
+            }
+            Source::MeanProfileSigma => "class-mean virtual σ vs the profile's own".into(),
+        }
+    }
+}
+
+/// Number of budget rows.
+pub const N_SOURCES: usize = Source::ALL.len();
+
+/// How to run a study.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StudyOptions {
+    /// Photons per profile (0: the analytic lidar equation, single scattering).
+    pub photons: u64,
+    /// Seed of the per-profile instrument noise (and of the Monte Carlo).
+    pub seed: u64,
+    /// (on, off) line indices of the scene's lines to retrieve with.
+    pub pairs: Vec<(usize, usize)>,
+    /// Budget perturbation sizes.
+    pub steps: BudgetSteps,
+    /// Field of view (index among the scene's) the retrievals use.
+    pub fov: usize,
+}
+
+impl StudyOptions {
+    /// The scene's own retrieval pair, analytic, the scene's seed, unit budget steps.
+    pub fn from_scene(scene: &Scene) -> Option<StudyOptions> {
+        let r = scene.retrieval.as_ref()?;
+        Some(StudyOptions {
+            photons: 0,
+            seed: scene.simulation.seed,
+            pairs: vec![(r.on, r.off)],
+            steps: BudgetSteps::default(),
+            fov: 0,
+        })
+    }
+}
+
+/// One retrieved quantity of one profile and line pair: XCO2 of an IPDA column or of a DIAL
+/// cell \[ppm\].
+#[derive(Debug, Clone, PartialEq)]
+pub struct Record {
+    /// `on/off`.
+    pub pair: String,
+    /// [`Method::Ipda`] (column to the hard target) or [`Method::Dial`] (a cell).
+    pub method: Method,
+    /// Altitude interval \[m\].
+    pub altitude_m: (f64, f64),
+    /// The profile's own value.
+    pub truth_ppm: f64,
+    /// Retrieved from the noise-free signals with the class-mean virtual σ (the study's
+    /// retrieval).
+    pub retrieved_ppm: f64,
+    /// The same from one noisy averaged measurement.
+    pub retrieved_noisy_ppm: f64,
+    /// Retrieved from the noise-free signals with the profile's own state as reference.
+    pub retrieved_own_ppm: f64,
+    /// Budget rows in [`Source::ALL`] order \[ppm\]: the random error (a standard deviation)
+    /// and the error each perturbation causes (signed).
+    pub budget_ppm: [f64; N_SOURCES],
+}
+
+impl Record {
+    /// Retrieved − truth without noise.
+    pub fn error_ppm(&self) -> f64 {
+        self.retrieved_ppm - self.truth_ppm
+    }
+    /// Retrieved − truth with noise.
+    pub fn error_noisy_ppm(&self) -> f64 {
+        self.retrieved_noisy_ppm - self.truth_ppm
+    }
+}
+
+/// What became of one profile.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ProfileOutcome {
+    /// Profile id in its set.
+    pub id: String,
+    /// Its latitude class.
+    pub class: LatitudeClass,
+    /// Its records, or why it could not be run.
+    pub records: Result<Vec<Record>, String>,
+}
+
+/// Thread-summed time spent in each part of a study \[s\].
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Timing {
+    /// Class-mean reference states (line by line).
+    pub mean_references_s: f64,
+    /// Truth optics: line by line at every channel, Rayleigh, particles.
+    pub truth_optics_s: f64,
+    /// Returns: the lidar equation or the Monte Carlo, and signals.
+    pub returns_s: f64,
+    /// Reference states of each profile and its perturbations (line by line at the nodes).
+    pub references_s: f64,
+    /// Retrievals (and one noisy measurement each).
+    pub retrievals_s: f64,
+    /// Wall-clock time of the whole study.
+    pub wall_s: f64,
+}
+
+/// A finished study.
+#[derive(Debug, Clone)]
+pub struct StudyResult {
+    /// Every profile, in set order.
+    pub outcomes: Vec<ProfileOutcome>,
+    /// The class-mean profiles whose virtual σ was used (after the scene's CO2 rescale).
+    pub mean_profiles: Vec<(LatitudeClass, Profile)>,
+    /// Where the time went.
+    pub timing: Timing,
+}
+
+/// Why a study could not start.
+#[derive(Debug, Error)]
+pub enum StudyError {
+    /// The scene cannot be studied (no retrieval, no receiver, no gas).
+    #[error("{0}")]
+    Scene(String),
+    /// The ensemble-mean profile of a class failed.
+    #[error("the mean profile of class {class}: {message}")]
+    MeanProfile {
+        /// The class.
+        class: LatitudeClass,
+        /// Why.
+        message: String,
+    },
+}
+
+/// Nanosecond counters behind [`Timing`], shared by the worker threads.
+#[derive(Default)]
+struct Clock {
+    truth_optics: AtomicU64,
+    returns: AtomicU64,
+    references: AtomicU64,
+    retrievals: AtomicU64,
+}
+
+impl Clock {
+    fn time<T>(counter: &AtomicU64, f: impl FnOnce() -> T) -> T {
+        let t = Instant::now();
+        let out = f();
+        counter.fetch_add(t.elapsed().as_nanos() as u64, Ordering::Relaxed);
+        out
+    }
+}
+
+/// A study set up for one scene and profile set.
+struct Study<'a> {
+    scene: &'a Scene,
+    config: &'a RetrievalConfig,
+    options: &'a StudyOptions,
+    filter: Filter,
+    /// Class-mean reference states.
+    means: Vec<(LatitudeClass, ReferenceState)>,
+    clock: Clock,
+}
+
+/// Run `scene`'s retrievals for every profile of `set` (module docs). `progress` is called
+/// once per finished profile.
+pub fn run(
+    scene: &Scene,
+    set: &ProfileSet,
+    options: &StudyOptions,
+    progress: &(dyn Fn() + Sync),
+) -> Result<StudyResult, StudyError> {
+    let started = Instant::now();
+    let config = scene
+        .retrieval
+        .as_ref()
+        .ok_or_else(|| StudyError::Scene("the scene has no [retrieval]".into()))?;
+    if scene.receiver.is_none() {
+        return Err(StudyError::Scene(
+            "the scene has no [receiver]: a study needs the instrument's noise".into(),
+        ));
+    }
+    if scene.gas.is_none() {
+        return Err(StudyError::Scene(
+            "the scene has no [gas_absorption]: nothing to retrieve".into(),
+        ));
+    }
+    let n_lines = scene.lines.len();
+    if options.pairs.is_empty() {
+        return Err(StudyError::Scene("no on/off line pair to retrieve".into()));
+    }
+    for &(on, off) in &options.pairs {
+        if on >= n_lines || off >= n_lines || on == off {
+            return Err(StudyError::Scene(format!(
+                "line pair ({on}, {off}) is not two different lines of the scene's {n_lines}"
+            )));
+        }
+    }
+    if options.fov >= scene.lidar.fov_full_angle_mrad.len() {
+        return Err(StudyError::Scene(format!(
+            "field of view {} of {}",
+            options.fov,
+            scene.lidar.fov_full_angle_mrad.len()
+        )));
+    }
+    let filter = scene
+        .receiver
+        .as_ref()
+        .map(|r| r.filter)
+        .unwrap_or(Filter::none());
+    let mut study = Study {
+        scene,
+        config,
+        options,
+        filter,
+        means: Vec::new(),
+        clock: Clock::default(),
+    };
+    // The class-mean profiles and their reference states.
+    let t_means = Instant::now();
+    let mut mean_profiles = Vec::new();
+    for class in LatitudeClass::ALL {
+        let members = set.class(class);
+        if members.is_empty() {
+            continue;
+        }
+        let err = |message: String| StudyError::MeanProfile { class, message };
+        let mean = members.mean_member().map_err(|e| err(e.to_string()))?;
+        let mean_scene = scene
+            .with_profile(mean.profile)
+            .map_err(|e| err(e.to_string()))?;
+        let profile = mean_scene
+            .atmosphere
+            .as_ref()
+            .map(|a| a.profile.clone())
+            .ok_or_else(|| err("no atmosphere".into()))?;
+        let edges = mean_scene
+            .molecular_edges()
+            .ok_or_else(|| err("no molecular grid".into()))?;
+        let reference = study.reference(&profile, &edges).map_err(err)?;
+        study.means.push((class, reference));
+        mean_profiles.push((class, profile));
+    }
+    let mean_references_s = t_means.elapsed().as_secs_f64();
+    // One noise seed per profile, from its index: independent of threads and of other profiles.
+    let seeds: Vec<u64> = rng::streams(options.seed, Stream::Study, set.len())
+        .into_iter()
+        .map(|mut r| r.random::<u64>())
+        .collect();
+    let one = |(member, seed): (&SetMember, &u64)| {
+        let records = study.profile(member, *seed);
+        progress();
+        ProfileOutcome {
+            id: member.meta.id.clone(),
+            class: member.meta.class(),
+            records,
+        }
+    };
+    // With photons the transport parallelises each profile itself.
+    let outcomes: Vec<ProfileOutcome> = if options.photons > 0 {
+        set.members.iter().zip(&seeds).map(one).collect()
+    } else {
+        set.members.par_iter().zip(&seeds).map(one).collect()
+    };
+    let secs = |c: &AtomicU64| c.load(Ordering::Relaxed) as f64 * 1e-9;
+    let timing = Timing {
+        mean_references_s,
+        truth_optics_s: secs(&study.clock.truth_optics),
+        returns_s: secs(&study.clock.returns),
+        references_s: secs(&study.clock.references),
+        retrievals_s: secs(&study.clock.retrievals),
+        wall_s: started.elapsed().as_secs_f64(),
+    };
+    Ok(StudyResult {
+        outcomes,
+        mean_profiles,
+        timing,
+    })
+}
+
+/// Line returns and signals of one truth.
+struct Measured {
+    scene: Scene,
+    lines: LineReturns,
+    signals: Signals,
+}
+
+impl Study<'_> {
+    /// The reference state of `profile` on `edges` (cut to the profile's top), as the
+    /// retrieval assumes the scene's instrument.
+    fn reference(&self, profile: &Profile, edges: &[f64]) -> Result<ReferenceState, String> {
+        let gas = self.scene.gas.as_ref().ok_or("no gas absorption")?;
+        ReferenceState::new(
+            profile,
+            &fit_edges(edges, profile),
+            &self.config.gas,
+            &gas.lines,
+            &gas.options,
+            AssumedInstrument {
+                laser: &self.scene.laser,
+                lines: &self.scene.sampling.lines,
+                filter: &self.filter,
+            },
+        )
+        .map_err(|e| e.to_string())
+    }
+
+    /// The expected returns and signals of `scene` (a truth).
+    fn measure(&self, scene: Scene) -> Result<Measured, String> {
+        let optics = Clock::time(&self.clock.truth_optics, || {
+            OpticalAtmosphere::build(&scene).map_err(|e| e.to_string())
+        })?;
+        Clock::time(&self.clock.returns, || {
+            let (lines, order) = if self.options.photons > 0 {
+                let mut opts = TransportOptions::from_scene(&scene);
+                opts.photons = self.options.photons;
+                opts.seed = self.options.seed;
+                opts.combinations = scene.sampling.combinations();
+                opts.combination_pairs = scene.sampling.covariance_pairs();
+                let mc = transport::run(&scene, &optics, &opts).map_err(|e| e.to_string())?;
+                let combined = mc.combined.as_ref().ok_or("no combined returns")?;
+                (scene.sampling.split(combined), Order::Total)
+            } else {
+                let analytic = lidar_eq::single_scatter(&scene, &optics);
+                (scene.sampling.combine(&analytic), Order::Exactly(1))
+            };
+            let receiver = scene.receiver.as_ref().ok_or("no receiver")?;
+            let telescope = Telescope {
+                area_m2: scene.lidar.telescope_area_m2(),
+                optical_efficiency: scene.lidar.optical_efficiency,
+            };
+            let signals = Signals::new(
+                &lines,
+                order,
+                &scene.sampling.lines,
+                receiver,
+                telescope,
+                scene.gates.width_m,
+            )
+            .ok_or("no signals of the returns")?;
+            Ok(Measured {
+                scene,
+                lines,
+                signals,
+            })
+        })
+    }
+
+    /// The products of every pair retrieved from `m` with `reference` (one retrieval set-up,
+    /// its paths shared by the pairs: [`Retrieval::set_pair`]).
+    fn retrieve(
+        &self,
+        m: &Measured,
+        reference: &ReferenceState,
+        truth: &LayerColumns,
+        seed: u64,
+    ) -> Result<Vec<Vec<Product>>, String> {
+        Clock::time(&self.clock.retrievals, || {
+            let mut config = self.config.clone();
+            config.realisations = 1;
+            let lines = &m.scene.lines;
+            let name =
+                |(on, off): (usize, usize)| format!("{}/{}", lines[on].name, lines[off].name);
+            let (on, off) = self.options.pairs[0];
+            config.on = on;
+            config.off = off;
+            let mut r = Retrieval::new(
+                config,
+                m.scene.laser.clone(),
+                reference.clone(),
+                truth.clone(),
+                m.scene.lidar.altitude_m,
+                m.scene.lidar.axis().z,
+                (0..m.scene.gates.count)
+                    .map(|g| m.scene.gates.centre_m(g))
+                    .collect(),
+                name((on, off)),
+                seed,
+            )
+            .map_err(|e| e.to_string())?;
+            let mut out = Vec::with_capacity(self.options.pairs.len());
+            for &(on, off) in &self.options.pairs {
+                r.set_pair(on, off, name((on, off)))
+                    .map_err(|e| e.to_string())?;
+                out.push(
+                    r.retrieve(&m.lines, &m.signals, self.options.fov)
+                        .map_err(|e| e.to_string())?,
+                );
+            }
+            Ok(out)
+        })
+    }
+
+    /// Every record of one profile.
+    fn profile(&self, member: &SetMember, seed: u64) -> Result<Vec<Record>, String> {
+        let scene = self
+            .scene
+            .with_profile(member.profile.clone())
+            .map_err(|e| e.to_string())?;
+        let profile = scene
+            .atmosphere
+            .as_ref()
+            .map(|a| a.profile.clone())
+            .ok_or("no atmosphere")?;
+        check_saturation(&profile)?;
+        let mean = self
+            .means
+            .iter()
+            .find(|(c, _)| *c == member.meta.class())
+            .map(|(_, r)| r)
+            .ok_or("no mean profile of its class")?;
+        let edges = scene.molecular_edges().ok_or("no molecular grid")?;
+        let truth =
+            LayerColumns::new(&profile, &edges, &self.config.gas).map_err(|e| e.to_string())?;
+        let truth_member = SetMember {
+            meta: member.meta.clone(),
+            profile,
+        };
+        let steps = &self.options.steps;
+        // References: the truth's own, re-levelled, and one per knowledge error.
+        let (own, knowledge) = Clock::time(&self.clock.references, || {
+            let own = self.reference(&truth_member.profile, &edges)?;
+            let shifted = |s: StateShift| -> Result<ReferenceState, String> {
+                let p = shift_member(&truth_member, &s).map_err(|e| e.to_string())?;
+                self.reference(&p.profile, &edges)
+            };
+            let none = StateShift::NONE;
+            let knowledge = [
+                shifted(none)?,
+                shifted(StateShift {
+                    temperature_k: -steps.temperature_k,
+                    ..none
+                })?,
+                shifted(StateShift {
+                    h2o_factor: 1.0 / (1.0 + steps.humidity_fraction),
+                    ..none
+                })?,
+                shifted(StateShift {
+                    surface_pressure_hpa: steps.surface_pressure_hpa,
+                    ..none
+                })?,
+            ];
+            Ok::<_, String>((own, knowledge))
+        })?;
+        // Truths: the scene's laser, and one per laser perturbation (None: the row is 0).
+        let laser = &scene.laser;
+        let mut offset = laser.clone();
+        for &(on, _) in &self.options.pairs {
+            offset.frequency_offset_mhz[on] += steps.frequency_offset_mhz;
+        }
+        let no_jitter = (laser.frequency_jitter_rms_mhz > 0.0).then(|| Laser {
+            frequency_jitter_rms_mhz: 0.0,
+            ..laser.clone()
+        });
+        let wider = widened(&laser.line_shape, 1.0 + steps.linewidth_fraction).map(|s| Laser {
+            line_shape: s,
+            ..laser.clone()
+        });
+        let pure = (laser.spectral_purity < 1.0).then(|| Laser {
+            spectral_purity: 1.0,
+            ..laser.clone()
+        });
+        let variant = |l: Option<Laser>| -> Result<Option<Measured>, String> {
+            match l {
+                None => Ok(None),
+                Some(l) => {
+                    let s = scene.with_laser(l).map_err(|e| e.to_string())?;
+                    self.measure(s).map(Some)
+                }
+            }
+        };
+        let lasers = [
+            variant(Some(offset))?,
+            variant(no_jitter)?,
+            variant(wider)?,
+            variant(pure)?,
+        ];
+        let base = self.measure(scene)?;
+
+        let paper = self.retrieve(&base, mean, &truth, seed)?;
+        let own_p = self.retrieve(&base, &own, &truth, seed)?;
+        let know: Vec<Vec<Vec<Product>>> = knowledge
+            .iter()
+            .map(|r| self.retrieve(&base, r, &truth, seed))
+            .collect::<Result<_, _>>()?;
+        let las: Vec<Option<Vec<Vec<Product>>>> = lasers
+            .iter()
+            .map(|m| {
+                m.as_ref()
+                    .map(|m| self.retrieve(m, &own, &truth, seed))
+                    .transpose()
+            })
+            .collect::<Result<_, _>>()?;
+        let mut records = Vec::new();
+        for p in 0..self.options.pairs.len() {
+            let know_p: Vec<Vec<Product>> = know.iter().map(|k| k[p].clone()).collect();
+            let las_p: Vec<Option<Vec<Product>>> = las
+                .iter()
+                .map(|l| l.as_ref().map(|l| l[p].clone()))
+                .collect();
+            records.extend(pair_records(&paper[p], &own_p[p], &know_p, &las_p));
+        }
+        Ok(records)
+    }
+}
+
+/// The records of one pair from its products (in [`Retrieval`]'s target order: IPDA mixing
+/// ratio and slant column, then per DIAL cell density and mixing ratio).
+///
+/// `know` holds the products with the re-levelled own reference and with each knowledge error
+/// (temperature, humidity, surface pressure); `las` those with each laser perturbation
+/// (offset, no jitter, wider, pure), None where the perturbation does not apply.
+fn pair_records(
+    paper: &[Product],
+    own: &[Product],
+    know: &[Vec<Product>],
+    las: &[Option<Vec<Product>>],
+) -> Vec<Record> {
+    let mut out = Vec::new();
+    let mut i = 0;
+    while i + 1 < paper.len() {
+        // (the column or density product, the mixing-ratio product) of this target.
+        let (col, mr) = match paper[i].method {
+            Method::Ipda => (i + 1, i),
+            _ => (i, i + 1),
+        };
+        debug_assert_eq!(paper[mr].quantity, Quantity::MixingRatio);
+        let truth = paper[mr].truth;
+        // Dry-air amount of the truth in the column product's unit: N_dry = N / x.
+        let dry = paper[col].truth / (truth * 1e-6);
+        let ppm = |v: f64| v / dry * 1e6;
+        let d = |a: &[Product], b: &[Product]| a[mr].retrieved - b[mr].retrieved;
+        let mut budget = [0.0; N_SOURCES];
+        budget[0] = ppm(paper[col].random_error_averaged);
+        budget[1] = d(&know[1], &know[0]);
+        budget[2] = d(&know[2], &know[0]);
+        budget[3] = d(&know[3], &know[0]);
+        let laser_row = |k: usize, sign: f64| {
+            las[k]
+                .as_ref()
+                .map_or(0.0, |p| sign * (p[mr].retrieved - own[mr].retrieved))
+        };
+        budget[4] = laser_row(0, 1.0);
+        budget[5] = laser_row(1, -1.0);
+        budget[6] = laser_row(2, 1.0);
+        budget[7] = laser_row(3, -1.0);
+        let retrieved = ppm(paper[col].retrieved);
+        budget[8] = retrieved - ppm(own[col].retrieved);
+        out.push(Record {
+            pair: paper[mr].channel_pair.clone(),
+            method: paper[mr].method,
+            altitude_m: paper[mr].altitude_m,
+            truth_ppm: truth,
+            retrieved_ppm: retrieved,
+            retrieved_noisy_ppm: ppm(paper[col].simulated_first_averaged),
+            retrieved_own_ppm: own[mr].retrieved,
+            budget_ppm: budget,
+        });
+        i += 2;
+    }
+    out
+}
+
+/// `edges` cut to the top of `profile` (a profile re-levelled colder ends a little lower).
+fn fit_edges(edges: &[f64], profile: &Profile) -> Vec<f64> {
+    let top = profile.altitude_m[profile.len() - 1].min(edges[edges.len() - 1]);
+    let mut out: Vec<f64> = edges.iter().copied().filter(|z| *z < top).collect();
+    out.push(top);
+    out
+}
+
+/// The line shape `factor` times wider, if it has a width to scale.
+fn widened(shape: &LineShape, factor: f64) -> Option<LineShape> {
+    match shape {
+        LineShape::Gaussian { fwhm_mhz } => Some(LineShape::Gaussian {
+            fwhm_mhz: fwhm_mhz * factor,
+        }),
+        LineShape::Lorentzian { fwhm_mhz } => Some(LineShape::Lorentzian {
+            fwhm_mhz: fwhm_mhz * factor,
+        }),
+        LineShape::Monochromatic | LineShape::Table(_) => None,
+    }
+}
+
+/// A profile supersaturated over liquid water (beyond [`MAX_RELATIVE_HUMIDITY`]) is refused.
+fn check_saturation(p: &Profile) -> Result<(), String> {
+    let Some(h2o) = p.gas("H2O") else {
+        return Ok(());
+    };
+    for k in 0..p.len() {
+        let e = h2o[k] * p.pressure_pa[k];
+        let e_s = saturation_vapour_pressure_pa(p.temperature_k[k], SaturationOver::Water);
+        if e > MAX_RELATIVE_HUMIDITY * e_s {
+            return Err(format!(
+                "supersaturated: relative humidity {:.1} % at {:.0} m ({:.1} hPa, {:.1} K)",
+                100.0 * e / e_s,
+                p.altitude_m[k],
+                p.pressure_pa[k] / 100.0,
+                p.temperature_k[k]
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Bias and spread of one budget row over a group of profiles \[ppm\].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SourceStats {
+    /// Mean error (0 for the random row).
+    pub bias_ppm: f64,
+    /// Standard deviation over the profiles (the random row: the rms of each profile's 1σ).
+    pub sd_ppm: f64,
+    /// √(bias² + sd²).
+    pub rms_ppm: f64,
+    /// rms² over the sum of every row's rms²: the row's share of the total error variance.
+    pub share: f64,
+}
+
+/// Statistics of one retrieved quantity over a group of profiles.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Summary {
+    /// A latitude class, or `all`.
+    pub class: String,
+    /// `on/off`.
+    pub pair: String,
+    /// IPDA or DIAL.
+    pub method: Method,
+    /// Altitude interval \[m\].
+    pub altitude_m: (f64, f64),
+    /// Profiles in the group (failed ones excluded).
+    pub profiles: usize,
+    /// Mean truth \[ppm\].
+    pub truth_mean_ppm: f64,
+    /// Mean and standard deviation of retrieved − truth, noise-free \[ppm\].
+    pub bias_ppm: f64,
+    /// See `bias_ppm`.
+    pub sd_ppm: f64,
+    /// The same with one noisy measurement per profile \[ppm\].
+    pub noisy_bias_ppm: f64,
+    /// See `noisy_bias_ppm`.
+    pub noisy_sd_ppm: f64,
+    /// Standard deviation of noisy − noise-free over the profiles, divided by the rms analytic
+    /// random error: 1 within sampling error (√(1/(2n)) relative) if the analytic error is right.
+    pub noise_ratio: f64,
+    /// The budget rows in [`Source::ALL`] order.
+    pub sources: [SourceStats; N_SOURCES],
+    /// √ of the sum of every row's rms² \[ppm\].
+    pub total_ppm: f64,
+}
+
+fn mean_sd(v: &[f64]) -> (f64, f64) {
+    let n = v.len() as f64;
+    if v.is_empty() {
+        return (f64::NAN, f64::NAN);
+    }
+    let m = v.iter().sum::<f64>() / n;
+    let var = if v.len() > 1 {
+        v.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / (n - 1.0)
+    } else {
+        f64::NAN
+    };
+    (m, var.sqrt())
+}
+
+/// Statistics per class (and over all classes when there are several), pair, method and
+/// altitude interval, in class, pair and record order. Failed profiles are left out.
+pub fn summarise(outcomes: &[ProfileOutcome]) -> Vec<Summary> {
+    let mut groups: Vec<(String, Vec<&ProfileOutcome>)> = LatitudeClass::ALL
+        .iter()
+        .map(|c| {
+            let members: Vec<&ProfileOutcome> = outcomes.iter().filter(|o| o.class == *c).collect();
+            (c.name().to_string(), members)
+        })
+        .filter(|(_, m)| !m.is_empty())
+        .collect();
+    if groups.len() > 1 {
+        groups.push(("all".into(), outcomes.iter().collect()));
+    }
+    let mut out = Vec::new();
+    for (class, members) in groups {
+        let ok: Vec<&Vec<Record>> = members
+            .iter()
+            .filter_map(|o| o.records.as_ref().ok())
+            .collect();
+        let Some(first) = ok.first() else {
+            continue;
+        };
+        // Records of every profile come in the same order (same scene, same pairs).
+        for (k, r0) in first.iter().enumerate() {
+            let recs: Vec<&Record> = ok.iter().filter_map(|rs| rs.get(k)).collect();
+            let col =
+                |f: &dyn Fn(&Record) -> f64| -> Vec<f64> { recs.iter().map(|r| f(r)).collect() };
+            let (truth_mean_ppm, _) = mean_sd(&col(&|r| r.truth_ppm));
+            let (bias_ppm, sd_ppm) = mean_sd(&col(&|r| r.error_ppm()));
+            let (noisy_bias_ppm, noisy_sd_ppm) = mean_sd(&col(&|r| r.error_noisy_ppm()));
+            let (_, noise_sd) = mean_sd(&col(&|r| r.retrieved_noisy_ppm - r.retrieved_ppm));
+            let mut sources = [SourceStats {
+                bias_ppm: 0.0,
+                sd_ppm: 0.0,
+                rms_ppm: 0.0,
+                share: 0.0,
+            }; N_SOURCES];
+            for (j, s) in sources.iter_mut().enumerate() {
+                let v = col(&|r| r.budget_ppm[j]);
+                if j == 0 {
+                    let rms = (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt();
+                    *s = SourceStats {
+                        bias_ppm: 0.0,
+                        sd_ppm: rms,
+                        rms_ppm: rms,
+                        share: 0.0,
+                    };
+                } else {
+                    let (m, sd) = mean_sd(&v);
+                    let sd = if sd.is_nan() { 0.0 } else { sd };
+                    *s = SourceStats {
+                        bias_ppm: m,
+                        sd_ppm: sd,
+                        rms_ppm: (m * m + sd * sd).sqrt(),
+                        share: 0.0,
+                    };
+                }
+            }
+            let total2: f64 = sources.iter().map(|s| s.rms_ppm * s.rms_ppm).sum();
+            for s in &mut sources {
+                s.share = if total2 > 0.0 {
+                    s.rms_ppm * s.rms_ppm / total2
+                } else {
+                    0.0
+                };
+            }
+            out.push(Summary {
+                class: class.clone(),
+                pair: r0.pair.clone(),
+                method: r0.method,
+                altitude_m: r0.altitude_m,
+                profiles: recs.len(),
+                truth_mean_ppm,
+                bias_ppm,
+                sd_ppm,
+                noisy_bias_ppm,
+                noisy_sd_ppm,
+                noise_ratio: noise_sd / sources[0].rms_ppm,
+                sources,
+                total_ppm: total2.sqrt(),
+            });
+        }
+    }
+    out
+}
