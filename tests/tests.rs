@@ -15,5 +15,7 @@ mod retrieval;
 mod scene;
 /// Line-by-line gas absorption against HAPI.
 mod spectroscopy;
+/// Ensemble studies: `lidarsim dial` and its error budget.
+mod study;
 /// Monte Carlo transport against the analytic lidar equation and conservation laws.
 mod transport;

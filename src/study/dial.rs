@@ -374,11 +374,24 @@ pub fn run(
         means: Vec::new(),
         clock: Clock::default(),
     };
+    // Profiles that cannot be run are found first: they take no part in the class means.
+    let checked: Vec<Result<(), String>> =
+        set.members.par_iter().map(|m| study.usable(m)).collect();
     // The class-mean profiles and their reference states.
     let t_means = Instant::now();
     let mut mean_profiles = Vec::new();
     for class in LatitudeClass::ALL {
-        let members = set.class(class);
+        let members = ProfileSet {
+            name: format!("{} [{class}]", set.name),
+            members: set
+                .members
+                .iter()
+                .zip(&checked)
+                .filter(|(m, ok)| m.meta.class() == class && ok.is_ok())
+                .map(|(m, _)| m.clone())
+                .collect(),
+            notes: Vec::new(),
+        };
         if members.is_empty() {
             continue;
         }
@@ -405,8 +418,11 @@ pub fn run(
         .into_iter()
         .map(|mut r| r.random::<u64>())
         .collect();
-    let one = |(member, seed): (&SetMember, &u64)| {
-        let records = study.profile(member, *seed);
+    let one = |((member, seed), ok): ((&SetMember, &u64), &Result<(), String>)| {
+        let records = match ok {
+            Ok(()) => study.profile(member, *seed),
+            Err(e) => Err(e.clone()),
+        };
         progress();
         ProfileOutcome {
             id: member.meta.id.clone(),
@@ -416,9 +432,19 @@ pub fn run(
     };
     // With photons the transport parallelises each profile itself.
     let outcomes: Vec<ProfileOutcome> = if options.photons > 0 {
-        set.members.iter().zip(&seeds).map(one).collect()
+        set.members
+            .iter()
+            .zip(&seeds)
+            .zip(&checked)
+            .map(one)
+            .collect()
     } else {
-        set.members.par_iter().zip(&seeds).map(one).collect()
+        set.members
+            .par_iter()
+            .zip(&seeds)
+            .zip(&checked)
+            .map(one)
+            .collect()
     };
     let secs = |c: &AtomicU64| c.load(Ordering::Relaxed) as f64 * 1e-9;
     let timing = Timing {
@@ -547,6 +573,19 @@ impl Study<'_> {
             }
             Ok(out)
         })
+    }
+
+    /// Why `member` cannot be run, if it cannot: it does not fit the scene
+    /// ([`Scene::with_profile`]) or is supersaturated.
+    fn usable(&self, member: &SetMember) -> Result<(), String> {
+        let scene = self
+            .scene
+            .with_profile(member.profile.clone())
+            .map_err(|e| e.to_string())?;
+        match &scene.atmosphere {
+            Some(a) => check_saturation(&a.profile),
+            None => Err("no atmosphere".into()),
+        }
     }
 
     /// Every record of one profile.

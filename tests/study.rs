@@ -1,0 +1,517 @@
+//! Ensemble studies (`lidarsim dial`): the ensemble that goes in against the covariance asked
+//! for, the analytic random error against the spread of noisy retrievals, the budget's
+//! knowledge rows against finite differences computed here from line-by-line optical depths,
+//! the class-mean virtual-σ error against its closed form and a hand calculation, failed
+//! profiles, thread counts, and the command line.
+
+use std::path::Path;
+
+use lidarsim::atmosphere::{
+    ErrorModel, LatitudeClass, ProfileSet, SetMember, StandardAtmosphere, StateShift,
+    class_ensemble, shift_member,
+};
+use lidarsim::retrieval::{LayerColumns, Method};
+use lidarsim::scene::Scene;
+use lidarsim::spectroscopy::{LineList, layer_optical_depths_at, tips};
+use lidarsim::study::dial::{self, ProfileOutcome, Source, StudyOptions};
+
+use crate::util::{lidarsim, lidarsim_ok};
+
+/// A space-borne CO2 IPDA, nadir from 450 km, monochromatic on-line 2.2 GHz up R16e and
+/// off-line in the trough, built-in band model, no Rayleigh scattering (so the measured
+/// differential optical depth is the gas's alone), 1 km layers to 50 km.
+const SCENE: &str = r#"description = "study test"
+[lidar]
+altitude_km = 450.0
+zenith_angle_deg = 180.0
+beam_divergence_full_angle_mrad = 0.15
+beam_profile = "gaussian"
+telescope_diameter_m = 1.5
+optical_efficiency = 0.5
+fov_full_angle_mrad = 0.2
+[[channel]]
+name = "on"
+wavenumber_cm1 = 6360.04
+[[channel]]
+name = "side"
+wavenumber_cm1 = 6360.01
+[[channel]]
+name = "off"
+wavenumber_cm1 = 6360.61
+[laser]
+pulse_energy_j = 0.03
+repetition_rate_hz = 50.0
+[receiver]
+filter_bandwidth_ghz = 1.0
+filter_transmission = 0.8
+quantum_efficiency = 0.8
+gain = 10.0
+ionization_ratio = 0.45
+nep_w_per_sqrt_hz = 4.0e-14
+bandwidth_mhz = 10.0
+[retrieval]
+gas = "CO2"
+on = "on"
+off = "off"
+target = "surface"
+averaging_shots = 350
+[gates]
+start_m = 449800.0
+end_m = 450050.0
+width_m = 50.0
+[atmosphere]
+standard = "us_standard"
+co2_ppm = 420.0
+layer_thickness_m = 1000.0
+top_m = 50000.0
+rayleigh = false
+[gas_absorption]
+molecules = ["CO2"]
+[surface]
+altitude_m = 0.0
+albedo = 0.2
+[simulation]
+photons = 0
+seed = 3
+"#;
+
+fn scene() -> Scene {
+    Scene::from_toml(Path::new("study.toml"), SCENE).expect("test scene")
+}
+
+fn options(s: &Scene) -> StudyOptions {
+    StudyOptions::from_scene(s).expect("scene has a retrieval")
+}
+
+fn set_of(name: &str, members: Vec<SetMember>) -> ProfileSet {
+    ProfileSet {
+        name: name.into(),
+        members,
+        notes: Vec::new(),
+    }
+}
+
+fn ipda_records(o: &ProfileOutcome) -> Vec<&dial::Record> {
+    o.records
+        .as_ref()
+        .expect("profile ran")
+        .iter()
+        .filter(|r| r.method == Method::Ipda)
+        .collect()
+}
+
+/// Vertical optical depth of CO2 of the whole column at the on- and off-line, and the column's
+/// CO2 and dry-air amounts, of `profile` on the scene's grid (cut to the profile's top).
+fn column(s: &Scene, profile: &lidarsim::atmosphere::Profile) -> (f64, f64, f64, f64) {
+    let mut edges = s.molecular_edges().unwrap();
+    let top = profile
+        .altitude_m
+        .last()
+        .unwrap()
+        .min(*edges.last().unwrap());
+    edges.retain(|z| *z < top);
+    edges.push(top);
+    let gas = s.gas.as_ref().unwrap();
+    let nu = [s.lines[0].wavenumber_cm1, s.lines[2].wavenumber_cm1];
+    let tau = layer_optical_depths_at(profile, &gas.lines, &edges, &nu, &gas.options).unwrap();
+    let on: f64 = tau.iter().map(|t| t[0]).sum();
+    let off: f64 = tau.iter().map(|t| t[1]).sum();
+    let cols = LayerColumns::new(profile, &edges, "CO2").unwrap();
+    let (co2, dry) = (
+        cols.gas_per_m2.iter().sum::<f64>(),
+        cols.dry_air_per_m2.iter().sum::<f64>(),
+    );
+    (on, off, co2, dry)
+}
+
+/// The ensemble drawn for a class has the covariance that was asked for: per-level variances
+/// of T and ln H2O within sampling error of the error model's (a sample variance of n draws
+/// has a relative standard deviation of √(2/(n−1)), 7 % at n = 400; the bound is 4.5 of them),
+/// and the T correlation of neighbouring levels within 0.1 of the model's.
+#[test]
+fn ensemble_statistics_match_the_covariance_asked_for() {
+    let class = LatitudeClass::Mid;
+    let n = 400;
+    let (set, _) = class_ensemble(class, n, 11).unwrap();
+    let afgl = set_of(
+        "afgl",
+        class
+            .afgl_atmospheres()
+            .iter()
+            .map(|s| s.member())
+            .collect(),
+    );
+    let mean = afgl.mean_member().unwrap().profile;
+    let cov = ErrorModel::representative()
+        .scaled_for_class(class)
+        .covariance(&mean)
+        .unwrap();
+    let sd = cov.std_devs();
+    let levels = mean.len();
+    let bound = 4.5 * (2.0 / (n as f64 - 1.0)).sqrt();
+    let sample = |f: &dyn Fn(&SetMember, usize) -> f64, k: usize| -> (f64, Vec<f64>) {
+        let v: Vec<f64> = set.members.iter().map(|m| f(m, k)).collect();
+        let m = v.iter().sum::<f64>() / n as f64;
+        let d: Vec<f64> = v.iter().map(|x| x - m).collect();
+        (d.iter().map(|x| x * x).sum::<f64>() / (n as f64 - 1.0), d)
+    };
+    let mut checked_q = 0;
+    let t_of = |m: &SetMember, k: usize| m.profile.temperature_k[k] - mean.temperature_k[k];
+    let q_of = |m: &SetMember, k: usize| {
+        (m.profile.gas("H2O").unwrap()[k] / mean.gas("H2O").unwrap()[k]).ln()
+    };
+    for k in 0..levels {
+        let (var_t, _) = sample(&t_of, k);
+        if sd[k] > 0.0 {
+            let r = var_t / (sd[k] * sd[k]);
+            assert!(
+                (r - 1.0).abs() < bound,
+                "T variance at level {k}: ratio {r}"
+            );
+        }
+        // ln H2O where no member can reach the 100 % RH cap (the mean below 30 % RH: a cap
+        // needs a 4σ draw).
+        let e = mean.gas("H2O").unwrap()[k] * mean.pressure_pa[k];
+        let e_s = lidarsim::atmosphere::humidity::saturation_vapour_pressure_pa(
+            mean.temperature_k[k],
+            lidarsim::atmosphere::SaturationOver::Water,
+        );
+        let s = sd[levels + k];
+        if e < 0.3 * e_s && s > 0.0 {
+            let (var_q, _) = sample(&q_of, k);
+            let r = var_q / (s * s);
+            assert!(
+                (r - 1.0).abs() < bound,
+                "ln q variance at level {k}: ratio {r}"
+            );
+            checked_q += 1;
+        }
+    }
+    assert!(checked_q > 10, "only {checked_q} humidity levels checked");
+    // Neighbouring-level temperature correlation.
+    for k in (5..levels - 1).step_by(7) {
+        let (va, da) = sample(&t_of, k);
+        let (vb, db) = sample(&t_of, k + 1);
+        let c = da.iter().zip(&db).map(|(a, b)| a * b).sum::<f64>() / (n as f64 - 1.0);
+        let r = c / (va * vb).sqrt();
+        let asked = cov.matrix[(k, k + 1)] / (sd[k] * sd[k + 1]);
+        assert!(
+            (r - asked).abs() < 0.1,
+            "T correlation {k}/{}: {r} vs {asked}",
+            k + 1
+        );
+    }
+}
+
+/// One noisy measurement per profile, from the profile's own noise seed: the spread of
+/// noisy − noise-free retrievals over 1500 profiles equals the analytic random error within
+/// 10 % (the ratio of standard deviations has a relative sampling error of 1/√(2n) = 1.8 %).
+#[test]
+fn analytic_random_error_matches_the_spread_of_noisy_retrievals() {
+    let s = scene();
+    let (set, _) = class_ensemble(LatitudeClass::Tropical, 1500, 5).unwrap();
+    let result = dial::run(&s, &set, &options(&s), &|| {}).unwrap();
+    let summary = dial::summarise(&result.outcomes);
+    let ipda = summary
+        .iter()
+        .find(|m| m.method == Method::Ipda)
+        .expect("an IPDA summary");
+    assert_eq!(ipda.profiles, 1500);
+    println!(
+        "noise ratio over 1500 profiles: {:.4} (random error rms {:.4} ppm)",
+        ipda.noise_ratio, ipda.sources[0].rms_ppm
+    );
+    assert!(
+        (ipda.noise_ratio - 1.0).abs() < 0.1,
+        "sd(noisy − noise-free) / analytic = {}",
+        ipda.noise_ratio
+    );
+}
+
+/// The temperature, surface-pressure and humidity rows equal finite differences computed here
+/// from line-by-line optical depths of the shifted profiles: for a monochromatic laser the
+/// IPDA retrieves X = X_ref · D_measured / D_ref (D_measured: the truth's differential optical
+/// depth; X_ref and D_ref: the assumed profile's), so a row is
+/// X_ref,shifted · D/D_ref,shifted − X_ref,0 · D/D_ref,0 with both references re-levelled
+/// (`shift_member`). Agreement to 1e-6 relative: only rounding differs.
+#[test]
+fn knowledge_rows_equal_independent_finite_differences() {
+    let s = scene();
+    let (set, _) = class_ensemble(LatitudeClass::High, 3, 2).unwrap();
+    let result = dial::run(&s, &set, &options(&s), &|| {}).unwrap();
+    let steps = options(&s).steps;
+    for (member, outcome) in set.members.iter().zip(&result.outcomes) {
+        let rec = ipda_records(outcome)[0];
+        let truth = s.with_profile(member.profile.clone()).unwrap();
+        let truth_member = SetMember {
+            meta: member.meta.clone(),
+            profile: truth.atmosphere.as_ref().unwrap().profile.clone(),
+        };
+        let (on, off, co2, dry) = column(&s, &truth_member.profile);
+        let d_true = on - off;
+        assert!((rec.truth_ppm - co2 / dry * 1e6).abs() < 1e-9 * rec.truth_ppm);
+        let retrieved = |shift: StateShift| {
+            let p = shift_member(&truth_member, &shift).unwrap().profile;
+            let (on, off, co2, dry) = column(&s, &p);
+            co2 / dry * 1e6 * d_true / (on - off)
+        };
+        let none = StateShift::NONE;
+        let x0 = retrieved(none);
+        let rows = [
+            (
+                Source::Temperature,
+                retrieved(StateShift {
+                    temperature_k: -steps.temperature_k,
+                    ..none
+                }) - x0,
+            ),
+            (
+                Source::Humidity,
+                retrieved(StateShift {
+                    h2o_factor: 1.0 / (1.0 + steps.humidity_fraction),
+                    ..none
+                }) - x0,
+            ),
+            (
+                Source::SurfacePressure,
+                retrieved(StateShift {
+                    surface_pressure_hpa: steps.surface_pressure_hpa,
+                    ..none
+                }) - x0,
+            ),
+        ];
+        for (src, want) in rows {
+            let j = Source::ALL.iter().position(|x| *x == src).unwrap();
+            let got = rec.budget_ppm[j];
+            println!(
+                "{} {}: {got:.6} ppm (finite difference {want:.6})",
+                member.meta.id,
+                src.label()
+            );
+            assert!(
+                (got - want).abs() < 1e-6 * want.abs() + 1e-9,
+                "{} row of {}: {got} ppm, finite difference {want} ppm",
+                src.label(),
+                member.meta.id
+            );
+        }
+        // A colder assumed atmosphere on the line's side: the assumed cross-section is larger
+        // (line strength and width both grow as T falls there), so less CO2 is retrieved.
+        assert!(rows[0].1 < 0.0);
+    }
+}
+
+/// With the class-mean virtual σ and the profile's own dry-air column, the noise-free error
+/// of each profile is X (Δσ_own/Δσ_mean − 1), Δσ = D/N of the column: computed here from
+/// line-by-line optical depths of the profile and of the set's mean. Then the hand
+/// calculation for profiles 1 K warmer and colder than their mean: in the Lorentz regime
+/// σ ∝ S(T) γ/(Δν² + γ²), so d ln σ/dT = c₂E″/T² − d ln Q/dT − (n/T)(Δν² − γ²)/(Δν² + γ²),
+/// evaluated at the D-weighted mean pressure and temperature of the column; the study's error
+/// has its sign and is within 10 % of its size (a single effective layer, the Doppler part of
+/// the profile and the off-line neglected; measured: 0.03 % and 0.2 %).
+#[test]
+fn mean_profile_sigma_error_is_the_cross_section_ratio_and_matches_a_hand_calculation() {
+    let s = scene();
+    let base = StandardAtmosphere::MidlatitudeSummer.member();
+    let warm = shift_member(
+        &base,
+        &StateShift {
+            temperature_k: 1.0,
+            ..StateShift::NONE
+        },
+    )
+    .unwrap();
+    let cold = shift_member(
+        &base,
+        &StateShift {
+            temperature_k: -1.0,
+            ..StateShift::NONE
+        },
+    )
+    .unwrap();
+    let mut warm = warm;
+    let mut cold = cold;
+    warm.meta.id = "warm".into();
+    cold.meta.id = "cold".into();
+    let set = set_of("±1 K", vec![warm.clone(), cold.clone()]);
+    let result = dial::run(&s, &set, &options(&s), &|| {}).unwrap();
+    let mean = s
+        .with_profile(set.mean_member().unwrap().profile)
+        .unwrap()
+        .atmosphere
+        .unwrap()
+        .profile;
+    let (on_m, off_m, co2_m, _) = column(&s, &mean);
+    let dsigma_mean = (on_m - off_m) / co2_m;
+    for (member, outcome) in set.members.iter().zip(&result.outcomes) {
+        let rec = ipda_records(outcome)[0];
+        let truth = s
+            .with_profile(member.profile.clone())
+            .unwrap()
+            .atmosphere
+            .unwrap()
+            .profile;
+        let (on, off, co2, dry) = column(&s, &truth);
+        let x = co2 / dry * 1e6;
+        let want = x * ((on - off) / co2 / dsigma_mean - 1.0);
+        assert!(
+            (rec.error_ppm() - want).abs() < 1e-6 * want.abs() + 1e-9,
+            "{}: error {} ppm, closed form {want} ppm",
+            member.meta.id,
+            rec.error_ppm()
+        );
+    }
+    // Hand calculation at the D-weighted mean state of the column.
+    let edges = s.molecular_edges().unwrap();
+    let gas = s.gas.as_ref().unwrap();
+    let nu_on = s.lines[0].wavenumber_cm1;
+    let tau = layer_optical_depths_at(
+        &mean,
+        &gas.lines,
+        &edges,
+        &[nu_on, s.lines[2].wavenumber_cm1],
+        &gas.options,
+    )
+    .unwrap();
+    let layers = lidarsim::spectroscopy::layers::curtis_godson_layers(&mean, &edges).unwrap();
+    let w: Vec<f64> = tau.iter().map(|t| t[0] - t[1]).collect();
+    let wsum: f64 = w.iter().sum();
+    let p_atm = layers
+        .iter()
+        .zip(&w)
+        .map(|(l, w)| w * l.pressure_pa)
+        .sum::<f64>()
+        / wsum
+        / 101_325.0;
+    let t = layers
+        .iter()
+        .zip(&w)
+        .map(|(l, w)| w * l.temperature_k)
+        .sum::<f64>()
+        / wsum;
+    let band = LineList::co2_30012_band_model();
+    let r16 = band
+        .lines
+        .iter()
+        .min_by(|a, b| {
+            (a.nu_cm1 - 6359.967)
+                .abs()
+                .total_cmp(&(b.nu_cm1 - 6359.967).abs())
+        })
+        .unwrap();
+    let c2 = 1.438_776_9;
+    let q = |t: f64| tips::partition_sum(2, 1, t).unwrap();
+    let dlnq = (q(t + 0.5).ln() - q(t - 0.5).ln()) / 1.0;
+    let gamma = r16.gamma_air_cm1_per_atm * p_atm * (296.0 / t).powf(r16.n_air);
+    let dnu = nu_on - (r16.nu_cm1 + r16.delta_air_cm1_per_atm * p_atm);
+    let lorentz = (dnu * dnu - gamma * gamma) / (dnu * dnu + gamma * gamma);
+    let dln_sigma = c2 * r16.elower_cm1 / (t * t) - dlnq - r16.n_air / t * lorentz;
+    for (id, dt) in [("warm", 1.0), ("cold", -1.0)] {
+        let o = result.outcomes.iter().find(|o| o.id == id).unwrap();
+        let got = ipda_records(o)[0].error_ppm();
+        let hand = 420.0 * dln_sigma * dt;
+        println!(
+            "{id}: study {got:.4} ppm, hand calculation {hand:.4} ppm (p {p_atm:.3} atm, T {t:.1} K)"
+        );
+        assert!(
+            got.signum() == hand.signum() && (got / hand - 1.0).abs() < 0.1,
+            "{id}: study {got} ppm, hand calculation {hand} ppm (p {p_atm:.3} atm, T {t:.1} K)"
+        );
+    }
+}
+
+/// A profile that cannot be run is reported by id with the reason and left out of the
+/// statistics: one supersaturated, one ending below the scene's top of the atmosphere.
+#[test]
+fn failed_profiles_are_reported_and_left_out() {
+    let s = scene();
+    let (mut set, _) = class_ensemble(LatitudeClass::Mid, 4, 9).unwrap();
+    let wet = &mut set.members[1];
+    for g in &mut wet.profile.gases {
+        if g.name == "H2O" {
+            g.vmr[0] *= 5.0;
+        }
+    }
+    let low = &mut set.members[2].profile;
+    let keep = low.altitude_m.iter().filter(|z| **z < 40_000.0).count();
+    low.altitude_m.truncate(keep);
+    low.pressure_pa.truncate(keep);
+    low.temperature_k.truncate(keep);
+    for g in &mut low.gases {
+        g.vmr.truncate(keep);
+    }
+    let result = dial::run(&s, &set, &options(&s), &|| {}).unwrap();
+    let reason = |i: usize| result.outcomes[i].records.as_ref().err().cloned();
+    assert!(reason(0).is_none() && reason(3).is_none());
+    let wet = reason(1).expect("supersaturated profile fails");
+    assert!(wet.contains("supersaturated"), "{wet}");
+    let low = reason(2).expect("short profile fails");
+    assert!(low.contains("top_m") && low.contains("below"), "{low}");
+    let summary = dial::summarise(&result.outcomes);
+    assert!(summary.iter().all(|m| m.profiles == 2));
+}
+
+/// Profiles run in parallel with per-profile seeds: the same numbers with 1 and 2 threads.
+#[test]
+fn studies_do_not_depend_on_the_thread_count() {
+    let s = scene();
+    let (set, _) = class_ensemble(LatitudeClass::Tropical, 6, 4).unwrap();
+    let mut o = options(&s);
+    o.pairs.push((1, 2));
+    let run = |threads| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| dial::run(&s, &set, &o, &|| {}).unwrap().outcomes)
+    };
+    assert_eq!(run(1), run(2));
+}
+
+/// The command line: files with their headers, failed profiles listed, errors named.
+#[test]
+fn dial_command_writes_its_tables() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene_path = dir.path().join("study.toml");
+    std::fs::write(&scene_path, SCENE).unwrap();
+    let out = dir.path().join("out");
+    let stdout = lidarsim_ok([
+        "dial".as_ref(),
+        scene_path.as_os_str(),
+        "--ensemble".as_ref(),
+        "4".as_ref(),
+        "--class".as_ref(),
+        "mid".as_ref(),
+        "--on".as_ref(),
+        "on,side".as_ref(),
+        "--no-plots".as_ref(),
+        "--out".as_ref(),
+        out.as_os_str(),
+    ]);
+    assert!(stdout.contains("4 profiles"), "{stdout}");
+    let profiles = std::fs::read_to_string(out.join("profiles.csv")).unwrap();
+    let mut lines = profiles.lines();
+    assert!(
+        lines
+            .next()
+            .unwrap()
+            .starts_with("profile_id,class,pair,method,")
+    );
+    // 4 profiles × 2 pairs × one IPDA column.
+    assert_eq!(lines.count(), 8);
+    let budget = std::fs::read_to_string(out.join("budget.csv")).unwrap();
+    assert_eq!(budget.lines().count(), 1 + 2 * Source::ALL.len());
+    let bad = lidarsim([
+        "dial".as_ref(),
+        scene_path.as_os_str(),
+        "--ensemble".as_ref(),
+        "4".as_ref(),
+        "--on".as_ref(),
+        "nope".as_ref(),
+        "--out".as_ref(),
+        out.as_os_str(),
+    ]);
+    assert_eq!(bad.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(err.contains("no line `nope`"), "{err}");
+}
