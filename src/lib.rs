@@ -34,4 +34,5 @@ pub mod rng;
 pub mod scene;
 pub mod spectroscopy;
 pub mod stats;
+pub mod study;
 pub mod transport;

@@ -28,6 +28,9 @@ enum Command {
     Mie(Box<cli::mie::Args>),
     /// Measure speed and Monte Carlo efficiency on fixed workloads.
     Bench(cli::bench::Args),
+    /// Line selection for CO2 IPDA: XCO2 sensitivities to T, frequency, surface pressure and
+    /// humidity, random error and rank of candidate on-lines; write DIR/sensitivities.csv.
+    SelectLines(Box<cli::select_lines::Args>),
 }
 
 fn main() -> ExitCode {
@@ -38,6 +41,7 @@ fn main() -> ExitCode {
         Command::Profiles(a) => cli::profiles::run(a),
         Command::Mie(a) => cli::mie::run(*a),
         Command::Bench(a) => cli::bench::run(a),
+        Command::SelectLines(a) => cli::select_lines::run(*a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

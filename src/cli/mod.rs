@@ -7,3 +7,4 @@ pub mod mie;
 pub mod plot;
 pub mod profiles;
 pub mod run;
+pub mod select_lines;
