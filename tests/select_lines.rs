@@ -490,3 +490,76 @@ fn cli_profile_set_classes_failures_and_figures() {
         assert!(len > 10_000, "{f}: {len} bytes");
     }
 }
+
+/// The random error against the retrieval stage's analytic random error of the same IPDA: the
+/// default scene with one 0.5 mrad field of view (the 0.15 mrad beam falls inside it whole),
+/// run with `lidarsim run --photons 0`, and select-lines on the scene's own grid (100 m layers
+/// to 80 km) and lines. Tolerance 1 %: the run's laser has a 30 MHz line and 0.1 % of its energy
+/// outside the line (impurity), which select-lines leaves out (monochromatic); they change the
+/// echo by ~0.1 %.
+#[test]
+fn random_error_matches_the_retrieval_stage() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("scene.toml");
+    let text = lidarsim::scene::DEFAULT_SCENE_TOML.replacen(
+        "fov_full_angle_mrad = [0.2, 0.5]",
+        "fov_full_angle_mrad = [0.5]",
+        1,
+    );
+    assert_ne!(text, lidarsim::scene::DEFAULT_SCENE_TOML);
+    std::fs::write(&scene, text).unwrap();
+    let run_dir = dir.path().join("run");
+    lidarsim_ok([
+        "run".as_ref(),
+        scene.as_os_str(),
+        "--photons".as_ref(),
+        "0".as_ref(),
+        "--no-plots".as_ref(),
+        "--out".as_ref(),
+        run_dir.as_os_str(),
+    ]);
+    let retrieval = std::fs::read_to_string(run_dir.join("retrieval.csv")).unwrap();
+    let mut lines = retrieval.lines();
+    let head: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let col = |name: &str| head.iter().position(|h| *h == name).unwrap();
+    let row: Vec<&str> = lines
+        .map(|l| l.split(',').collect::<Vec<_>>())
+        .find(|r| r[col("method")] == "ipda" && r[col("source")] == "analytic")
+        .unwrap();
+    let expected: f64 = row[col("random_error_averaged")].parse().unwrap();
+    let out = dir.path().join("select");
+    lidarsim_ok([
+        "select-lines".as_ref(),
+        "--atmosphere".as_ref(),
+        "us_standard".as_ref(),
+        "--on-cm1".as_ref(),
+        "6360.040".as_ref(),
+        "--off-cm1".as_ref(),
+        "6360.610".as_ref(),
+        "--co2-ppm".as_ref(),
+        "420".as_ref(),
+        "--layer-m".as_ref(),
+        "100".as_ref(),
+        "--top-km".as_ref(),
+        "80".as_ref(),
+        "--scene".as_ref(),
+        scene.as_os_str(),
+        "--no-plots".as_ref(),
+        "--out".as_ref(),
+        out.as_os_str(),
+    ]);
+    let csv = std::fs::read_to_string(out.join("sensitivities.csv")).unwrap();
+    let got: f64 = csv
+        .lines()
+        .nth(1)
+        .unwrap()
+        .split(',')
+        .nth(13)
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert!(
+        (got / expected - 1.0).abs() < 0.01,
+        "select-lines {got} ppm, retrieval stage {expected} ppm"
+    );
+}
