@@ -30,6 +30,9 @@ enum Command {
     Bench(cli::bench::Args),
     /// Run a scene's DIAL/IPDA retrievals over a profile ensemble, with an error budget.
     Dial(Box<cli::dial::Args>),
+    /// Line selection for CO2 IPDA: XCO2 sensitivities to T, frequency, surface pressure and
+    /// humidity, random error and rank of candidate on-lines; write DIR/sensitivities.csv.
+    SelectLines(Box<cli::select_lines::Args>),
 }
 
 fn main() -> ExitCode {
@@ -41,6 +44,7 @@ fn main() -> ExitCode {
         Command::Mie(a) => cli::mie::run(*a),
         Command::Bench(a) => cli::bench::run(a),
         Command::Dial(a) => cli::dial::run(*a),
+        Command::SelectLines(a) => cli::select_lines::run(*a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

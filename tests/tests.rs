@@ -13,6 +13,8 @@ mod particles;
 mod retrieval;
 /// Scenes: parsing, validation and their documented errors.
 mod scene;
+/// Line selection for CO2 IPDA: sensitivities against hand-made finite differences, the CLI.
+mod select_lines;
 /// Line-by-line gas absorption against HAPI.
 mod spectroscopy;
 /// Ensemble studies: `lidarsim dial` and its error budget.

@@ -8,4 +8,5 @@ pub mod mie;
 pub mod plot;
 pub mod profiles;
 pub mod run;
+pub mod select_lines;
 pub mod study_figures;

@@ -9,3 +9,4 @@
 //! retrieval) directly, once per profile, without files in between.
 
 pub mod dial;
+pub mod select;

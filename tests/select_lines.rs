@@ -1,0 +1,565 @@
+//! Line selection (`lidarsim select-lines`, `lidarsim::study::select`): the sensitivities
+//! against finite differences built by hand from the line-by-line optical depths, the frequency
+//! sensitivity against the slope of the cross-sections, the sign of the temperature sensitivity
+//! against the line-strength law, and the command line's contract.
+
+use lidarsim::atmosphere::{SetMember, StandardAtmosphere, StateShift, shift_member};
+use lidarsim::instrument::line_shape::MHZ_PER_CM1;
+use lidarsim::retrieval::LayerColumns;
+use lidarsim::spectroscopy::layers::curtis_godson_layers;
+use lidarsim::spectroscopy::{
+    LblOptions, LineFilter, LineList, cross_section_at, layer_optical_depths_at,
+};
+use lidarsim::study::select::{
+    self, GHZ_PER_CM1, GridSpec, MemberResult, OnPosition, Steps, StudyConfig,
+};
+
+use crate::util::{lidarsim, lidarsim_ok};
+
+const OFF_CM1: f64 = 6360.610;
+/// Coarse grid (1 km layers to 40 km, below every AFGL top: the edges are exactly these).
+const LAYER_M: f64 = 1000.0;
+const TOP_M: f64 = 40_000.0;
+
+/// The band model plus one artificial H2O line 0.25 cm⁻¹ above R16e, so that the other-gas
+/// absorption the retrieval subtracts is not zero and the humidity sensitivity has a spectral
+/// part.
+fn lines() -> LineList {
+    let mut l = LineList::co2_30012_band_model();
+    let mut h2o = l
+        .lines
+        .iter()
+        .find(|x| x.local_lower_quanta().trim() == "R 16e")
+        .unwrap()
+        .clone();
+    h2o.molecule_id = 1;
+    h2o.iso_id = 1;
+    h2o.nu_cm1 += 0.25;
+    h2o.sw_cm_per_molecule = 2e-25;
+    h2o.elower_cm1 = 300.0;
+    h2o.quanta = [b' '; 60];
+    l.lines.push(h2o);
+    l.lines.sort_by(|a, b| a.nu_cm1.total_cmp(&b.nu_cm1));
+    l
+}
+
+fn centre(label: &str) -> f64 {
+    select::band_lines(&LineList::co2_30012_band_model())
+        .into_iter()
+        .find(|b| b.label == label)
+        .unwrap()
+        .nu_cm1
+}
+
+fn position(label: &str, offset_ghz: f64) -> OnPosition {
+    OnPosition {
+        nu_cm1: centre(label) + offset_ghz / GHZ_PER_CM1,
+        line: Some(label.into()),
+        offset_ghz,
+    }
+}
+
+fn us_standard() -> SetMember {
+    let mut m = StandardAtmosphere::UsStandard.member();
+    m.profile.rescale_gas("CO2", 420e-6).unwrap();
+    m
+}
+
+fn config(positions: Vec<OnPosition>) -> StudyConfig {
+    StudyConfig {
+        lines: lines(),
+        options: LblOptions::default(),
+        off_cm1: OFF_CM1,
+        positions,
+        grid: GridSpec {
+            layer_m: LAYER_M,
+            top_m: TOP_M,
+        },
+        steps: Steps::CONTRACT,
+        noise: None,
+        spectra: Vec::new(),
+    }
+}
+
+fn run(member: &SetMember, cfg: &StudyConfig) -> MemberResult {
+    select::study_member(member, cfg).unwrap()
+}
+
+/// Vertical optical depths summed over the grid at `nus`: (all gases, CO2 only, others only).
+fn column_tau(
+    profile: &lidarsim::atmosphere::Profile,
+    edges: &[f64],
+    nus: &[f64],
+) -> (Vec<f64>, Vec<f64>) {
+    let all = lines();
+    let co2 = all.filtered(&LineFilter {
+        molecules: Some(vec![2]),
+        ..Default::default()
+    });
+    let opts = LblOptions::default();
+    let sum = |l: &LineList| -> Vec<f64> {
+        let t = layer_optical_depths_at(profile, l, edges, nus, &opts).unwrap();
+        (0..nus.len())
+            .map(|k| t.iter().map(|row| row[k]).sum())
+            .collect()
+    };
+    (sum(&all), sum(&co2))
+}
+
+fn xco2(profile: &lidarsim::atmosphere::Profile, edges: &[f64]) -> f64 {
+    let c = LayerColumns::new(profile, edges, "CO2").unwrap();
+    c.gas_per_m2.iter().sum::<f64>() / c.dry_air_per_m2.iter().sum::<f64>()
+}
+
+/// XCO2 retrieved − true [ppm] by hand: a monochromatic IPDA's DAOD is linear in the scale s of
+/// the assumed CO2, D(s) = s D_CO2,assumed + D_other,assumed, so
+/// X_ret = X_assumed (D_true − D_other,assumed)/D_CO2,assumed.
+fn hand_error_ppm(
+    truth: &lidarsim::atmosphere::Profile,
+    assumed: &lidarsim::atmosphere::Profile,
+    edges: &[f64],
+    on: f64,
+) -> f64 {
+    let (t_all, _) = column_tau(truth, edges, &[on, OFF_CM1]);
+    let (a_all, a_co2) = column_tau(assumed, edges, &[on, OFF_CM1]);
+    let d_true = t_all[0] - t_all[1];
+    let d_co2 = a_co2[0] - a_co2[1];
+    let d_other = (a_all[0] - a_co2[0]) - (a_all[1] - a_co2[1]);
+    (xco2(assumed, edges) * (d_true - d_other) / d_co2 - xco2(truth, edges)) * 1e6
+}
+
+fn shifted(m: &SetMember, s: StateShift) -> lidarsim::atmosphere::Profile {
+    shift_member(m, &s).unwrap().profile
+}
+
+/// Per K, per hPa and per 10 % H2O against finite differences made by hand (shifted profiles,
+/// optical depths of `layer_optical_depths_at`, columns of `LayerColumns`, the linear IPDA
+/// retrieval written out). Tolerance 1e-8 ppm: both sides sum the same layer optical depths
+/// (in another order) and the study's Newton iteration stops at |Δs| ≤ 1e-14, so they agree to
+/// ~1e-11 ppm on X ≈ 420 ppm; the sensitivities themselves are 0.05–2 ppm.
+#[test]
+fn state_sensitivities_match_hand_finite_differences() {
+    let m = us_standard();
+    let positions = vec![position("R16e", 2.0), position("R26e", -1.0)];
+    let cfg = config(positions.clone());
+    let r = run(&m, &cfg);
+    let expected_edges: Vec<f64> = (0..=40).map(|i| i as f64 * LAYER_M).collect();
+    assert_eq!(r.edges_m, expected_edges);
+    let none = shifted(&m, StateShift::NONE);
+    let warm = shifted(
+        &m,
+        StateShift {
+            temperature_k: 1.0,
+            ..StateShift::NONE
+        },
+    );
+    let high_ps = shifted(
+        &m,
+        StateShift {
+            surface_pressure_hpa: 1.0,
+            ..StateShift::NONE
+        },
+    );
+    let wet = shifted(
+        &m,
+        StateShift {
+            h2o_factor: 1.1,
+            ..StateShift::NONE
+        },
+    );
+    let e = &r.edges_m;
+    for (p, got) in positions.iter().zip(&r.positions) {
+        let per_k = hand_error_ppm(&warm, &none, e, p.nu_cm1);
+        let per_hpa = hand_error_ppm(&none, &high_ps, e, p.nu_cm1);
+        let per_h2o = hand_error_ppm(&wet, &none, e, p.nu_cm1);
+        for (name, hand, study) in [
+            ("per K", per_k, got.dxco2_per_k_ppm),
+            ("per hPa", per_hpa, got.dxco2_per_hpa_ppm),
+            ("per 10 % H2O", per_h2o, got.dxco2_per_10pct_h2o_ppm),
+        ] {
+            assert!(
+                (hand - study).abs() < 1e-8,
+                "{} {name}: hand {hand} ppm, study {study} ppm",
+                p.nu_cm1
+            );
+            // Not a vacuous agreement: every sensitivity is a real effect here.
+            assert!(hand.abs() > 0.01, "{} {name}: {hand}", p.nu_cm1);
+        }
+        // An assumed surface pressure too high puts too much CO2 in the reference: X low, by
+        // about X/p_s = 420/1013 ppm per hPa for a weighting function spread over the column.
+        assert!(
+            (-0.8..-0.15).contains(&got.dxco2_per_hpa_ppm),
+            "{}",
+            got.dxco2_per_hpa_ppm
+        );
+        // DAOD: on minus off, all gases, by hand.
+        let (all, _) = column_tau(&none, e, &[p.nu_cm1, OFF_CM1]);
+        assert!((got.daod_one_way - (all[0] - all[1])).abs() < 1e-12);
+        assert!((got.t2_on - (-2.0 * all[0]).exp()).abs() < 1e-12);
+    }
+}
+
+/// Per MHz: the slope of the on-line's DAOD with frequency by hand from cross-sections at ν and
+/// ν + 1 MHz in each Curtis-Godson layer (σ × column), divided by the assumed CO2 DAOD:
+/// dX = X (D(ν + 1 MHz) − D(ν))/D_CO2(ν). Tolerance as above.
+#[test]
+fn frequency_sensitivity_is_the_slope_of_the_daod() {
+    let m = us_standard();
+    let positions = vec![
+        position("R16e", 2.0),
+        position("R16e", -2.0),
+        position("R26e", 0.5),
+    ];
+    let cfg = config(positions.clone());
+    let r = run(&m, &cfg);
+    let none = shifted(&m, StateShift::NONE);
+    let layers = curtis_godson_layers(&none, &r.edges_m).unwrap();
+    let all = lines();
+    let opts = LblOptions::default();
+    for (p, got) in positions.iter().zip(&r.positions) {
+        let nus = [p.nu_cm1, p.nu_cm1 + 1.0 / MHZ_PER_CM1, OFF_CM1];
+        let (mut tau, mut tau_co2) = ([0.0; 3], [0.0; 3]);
+        for l in &layers {
+            for (gi, gas) in l.gas_names.iter().enumerate() {
+                let id = match gas.as_str() {
+                    "CO2" => 2,
+                    "H2O" => 1,
+                    _ => continue,
+                };
+                let sigma = cross_section_at(&all, id, &l.state_for(gi), &nus, &opts).unwrap();
+                for k in 0..3 {
+                    let t = sigma[k] * l.gas_columns_per_cm2[gi];
+                    tau[k] += t;
+                    if id == 2 {
+                        tau_co2[k] += t;
+                    }
+                }
+            }
+        }
+        let slope = (tau[1] - tau[2]) - (tau[0] - tau[2]);
+        let hand = xco2(&none, &r.edges_m) * slope / (tau_co2[0] - tau_co2[2]) * 1e6;
+        assert!(
+            (hand - got.dxco2_per_mhz_ppm).abs() < 1e-8,
+            "{}: hand {hand}, study {}",
+            p.nu_cm1,
+            got.dxco2_per_mhz_ppm
+        );
+        assert!(hand.abs() > 0.01, "{hand}");
+    }
+    // Up the high-frequency side of R16e the absorption falls with frequency (the truth absorbs
+    // less than assumed: X low); down the other side it rises.
+    assert!(r.positions[0].dxco2_per_mhz_ppm < 0.0);
+    assert!(r.positions[1].dxco2_per_mhz_ppm > 0.0);
+}
+
+/// The sign of the temperature sensitivity, thought through. With the pressure levels fixed
+/// (shift_member keeps p, re-levels z), a warmer truth changes only the cross-sections. The line
+/// strength goes as S ∝ e^{−c₂E″/T}/Q(T), so d ln S/dT = c₂E″/T² − d ln Q/dT:
+/// * R16e (E″ = 106 cm⁻¹): c₂E″/T² ≈ 0.0023/K at 260 K < d ln Q/dT ≈ 1/T + vibration ≈ 0.0045/K,
+///   so S falls with T; 2 GHz up its side the Lorentz wing ∝ S γ_L, and γ_L ∝ T^−0.7 falls too.
+///   The warmer truth absorbs less than the assumed (colder) state predicts: XCO2 retrieved
+///   LOW, dX/dK < 0.
+/// * R40e (E″ = 640 cm⁻¹): c₂E″/T² ≈ 0.0136/K ≫ d ln Q/dT, so S rises with T; at the line
+///   centre σ ∝ S/γ rises further: dX/dK > 0.
+///
+/// The d ln S/dT of both are computed here from the TIPS partition sum, independently of the
+/// study, and the signs compared.
+#[test]
+fn temperature_sensitivity_sign_follows_the_line_strength() {
+    let band = select::band_lines(&LineList::co2_30012_band_model());
+    let list = LineList::co2_30012_band_model();
+    let e_lower = |label: &str| {
+        let nu = band.iter().find(|b| b.label == label).unwrap().nu_cm1;
+        list.lines
+            .iter()
+            .find(|l| l.nu_cm1 == nu)
+            .unwrap()
+            .elower_cm1
+    };
+    let dlns_dt = |label: &str, t: f64| {
+        let c2 = 1.438_776_9;
+        let ln_s = |t: f64| {
+            -c2 * e_lower(label) / t
+                - lidarsim::spectroscopy::tips::partition_sum(2, 1, t)
+                    .unwrap()
+                    .ln()
+        };
+        ln_s(t + 0.5) - ln_s(t - 0.5)
+    };
+    assert!(dlns_dt("R16e", 260.0) < 0.0);
+    assert!(dlns_dt("R40e", 260.0) > 0.0);
+    let r = run(
+        &us_standard(),
+        &config(vec![position("R16e", 2.0), position("R40e", 0.0)]),
+    );
+    assert!(
+        r.positions[0].dxco2_per_k_ppm < -0.1,
+        "{}",
+        r.positions[0].dxco2_per_k_ppm
+    );
+    assert!(
+        r.positions[1].dxco2_per_k_ppm > 0.1,
+        "{}",
+        r.positions[1].dxco2_per_k_ppm
+    );
+}
+
+const CONTRACT: &str = "atmosphere,nu_on_cm1,nu_off_cm1,daod_one_way,wf_peak_hpa,dxco2_per_k_ppm,dxco2_per_mhz_ppm,dxco2_per_hpa_ppm,dxco2_per_10pct_h2o_ppm";
+
+/// The contract: header first columns in order, one row per atmosphere and on-line position.
+#[test]
+fn cli_writes_one_row_per_atmosphere_and_position() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().to_string_lossy().into_owned();
+    let on = [6360.0337, 6362.4704];
+    let stdout = lidarsim_ok([
+        "select-lines",
+        "--atmosphere",
+        "us_standard,tropical",
+        "--on-cm1",
+        "6360.0337,6362.4704",
+        "--off-cm1",
+        "6360.61",
+        "--co2-ppm",
+        "420",
+        "--layer-m",
+        "2000",
+        "--top-km",
+        "30",
+        "--no-plots",
+        "--out",
+        &out,
+    ]);
+    assert!(stdout.contains("us_standard: 1 profiles"), "{stdout}");
+    let csv = std::fs::read_to_string(dir.path().join("sensitivities.csv")).unwrap();
+    let mut lines = csv.lines();
+    let header = lines.next().unwrap();
+    assert!(header.starts_with(&format!("{CONTRACT},")), "{header}");
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    assert_eq!(rows.len(), 4, "{csv}");
+    for atm in ["us_standard", "tropical"] {
+        for nu in on {
+            let n = rows
+                .iter()
+                .filter(|r| r[0] == atm && (r[1].parse::<f64>().unwrap() - nu).abs() < 1e-6)
+                .count();
+            assert_eq!(n, 1, "{atm} {nu}: {csv}");
+        }
+    }
+    for r in &rows {
+        assert_eq!(r.len(), header.split(',').count());
+        assert_eq!(r[2].parse::<f64>().unwrap(), 6360.61);
+        for v in &r[3..9] {
+            assert!(v.parse::<f64>().unwrap().is_finite(), "{r:?}");
+        }
+        assert!(!dir.path().join("transmission_us_standard.png").exists());
+    }
+}
+
+/// A bad off-line: exit code 2 and one line naming the option and the value; no output.
+#[test]
+fn cli_rejects_a_bad_off_line() {
+    for bad in ["1000", "-5", "nan"] {
+        let dir = tempfile::tempdir().unwrap();
+        let out_dir = dir.path().join("out");
+        let out = lidarsim([
+            "select-lines".as_ref(),
+            "--atmosphere".as_ref(),
+            "us_standard".as_ref(),
+            "--off-cm1".as_ref(),
+            bad.as_ref(),
+            "--co2-ppm".as_ref(),
+            "420".as_ref(),
+            "--out".as_ref(),
+            out_dir.as_os_str(),
+        ]);
+        assert_eq!(out.status.code(), Some(2), "{bad}");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            stderr.starts_with("lidarsim: error: --off-cm1 ")
+                && stderr.to_lowercase().contains(bad),
+            "{stderr}"
+        );
+        assert_eq!(stderr.lines().count(), 1, "{stderr}");
+        assert!(!out_dir.exists());
+    }
+}
+
+/// A profile set: class statistics, per-profile rows, a profile that cannot be studied named and
+/// excluded, and the figures.
+#[test]
+fn cli_profile_set_classes_failures_and_figures() {
+    let dir = tempfile::tempdir().unwrap();
+    let set = dir.path().join("set.csv");
+    // Two tropical profiles (hydrostatic altitudes from 0 m); `short` ends at 700 hPa, about
+    // 3 km, below one 4 km layer: it cannot cover the grid.
+    let mut text =
+        String::from("profile,latitude_deg,longitude_deg,pressure_hPa,temperature_K,H2O_ppmv\n");
+    let levels = [
+        (1013.0, 299.0, 20000.0),
+        (850.0, 290.0, 12000.0),
+        (700.0, 282.0, 6000.0),
+        (500.0, 267.0, 2000.0),
+        (300.0, 242.0, 300.0),
+        (200.0, 220.0, 30.0),
+        (100.0, 195.0, 5.0),
+        (50.0, 205.0, 4.0),
+        (10.0, 225.0, 4.0),
+        (1.0, 260.0, 4.0),
+    ];
+    for (id, lat, t_off, n) in [
+        ("a", 10.0, 0.0, 10),
+        ("b", -12.0, 2.0, 10),
+        ("short", 5.0, 0.0, 3),
+    ] {
+        for (p, t, q) in &levels[..n] {
+            text.push_str(&format!("{id},{lat},0,{p},{},{q}\n", t + t_off));
+        }
+    }
+    std::fs::write(&set, text).unwrap();
+    let out = dir.path().join("out");
+    let stdout = lidarsim_ok([
+        "select-lines".as_ref(),
+        "--profiles".as_ref(),
+        set.as_os_str(),
+        "--per-profile".as_ref(),
+        "--max-j".as_ref(),
+        "18".as_ref(),
+        "--offsets-ghz=1.5,2".as_ref(),
+        "--off-cm1".as_ref(),
+        "6360.61".as_ref(),
+        "--co2-ppm".as_ref(),
+        "410".as_ref(),
+        "--layer-m".as_ref(),
+        "4000".as_ref(),
+        "--top-km".as_ref(),
+        "40".as_ref(),
+        "--figure-lines".as_ref(),
+        "R16e".as_ref(),
+        "--out".as_ref(),
+        out.as_os_str(),
+    ]);
+    assert!(
+        stdout.contains("tropical: profile short excluded: "),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("tropical: 2 profiles (1 excluded)"),
+        "{stdout}"
+    );
+    let csv = std::fs::read_to_string(out.join("sensitivities.csv")).unwrap();
+    let rows: Vec<Vec<&str>> = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').collect())
+        .collect();
+    // J'' ≤ 18: P2..P18 (9) and R0..R18 (10) lines, two offsets each; per class, a and b.
+    let positions = 19 * 2;
+    for atm in ["tropical", "a", "b"] {
+        let group: Vec<_> = rows.iter().filter(|r| r[0] == atm).collect();
+        assert_eq!(group.len(), positions, "{atm}");
+        // Ranks 1..n in order of the total error.
+        let total_col = 14;
+        for (k, r) in group.iter().enumerate() {
+            assert_eq!(r[15], (k + 1).to_string());
+            if k > 0 {
+                let prev: f64 = group[k - 1][total_col].parse().unwrap();
+                assert!(r[total_col].parse::<f64>().unwrap() >= prev);
+            }
+        }
+    }
+    assert!(!rows.iter().any(|r| r[0] == "short"));
+    // The class mean is the mean of its two members, position by position.
+    let find = |atm: &str, nu: &str| rows.iter().find(|r| r[0] == atm && r[1] == nu).unwrap();
+    for r in rows.iter().filter(|r| r[0] == "tropical") {
+        let (a, b) = (find("a", r[1]), find("b", r[1]));
+        for col in [3, 5, 6, 7, 8] {
+            let mean = 0.5 * (a[col].parse::<f64>().unwrap() + b[col].parse::<f64>().unwrap());
+            let got: f64 = r[col].parse().unwrap();
+            assert!(
+                (got - mean).abs() <= 1e-5 * mean.abs() + 1e-12,
+                "{col}: {got} {mean}"
+            );
+        }
+        assert_eq!(r[16], "2");
+        // Two different members: a spread in the on-line transmission.
+        assert!(r[12].parse::<f64>().unwrap() > 0.0);
+    }
+    for f in ["transmission_tropical.png", "errors_tropical.png"] {
+        let len = std::fs::metadata(out.join(f)).unwrap().len();
+        assert!(len > 10_000, "{f}: {len} bytes");
+    }
+}
+
+/// The random error against the retrieval stage's analytic random error of the same IPDA: the
+/// default scene with one 0.5 mrad field of view (the 0.15 mrad beam falls inside it whole),
+/// run with `lidarsim run --photons 0`, and select-lines on the scene's own grid (100 m layers
+/// to 80 km) and lines. Tolerance 1 %: the run's laser has a 30 MHz line and 0.1 % of its energy
+/// outside the line (impurity), which select-lines leaves out (monochromatic); they change the
+/// echo by ~0.1 %.
+#[test]
+fn random_error_matches_the_retrieval_stage() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("scene.toml");
+    let text = lidarsim::scene::DEFAULT_SCENE_TOML.replacen(
+        "fov_full_angle_mrad = [0.2, 0.5]",
+        "fov_full_angle_mrad = [0.5]",
+        1,
+    );
+    assert_ne!(text, lidarsim::scene::DEFAULT_SCENE_TOML);
+    std::fs::write(&scene, text).unwrap();
+    let run_dir = dir.path().join("run");
+    lidarsim_ok([
+        "run".as_ref(),
+        scene.as_os_str(),
+        "--photons".as_ref(),
+        "0".as_ref(),
+        "--no-plots".as_ref(),
+        "--out".as_ref(),
+        run_dir.as_os_str(),
+    ]);
+    let retrieval = std::fs::read_to_string(run_dir.join("retrieval.csv")).unwrap();
+    let mut lines = retrieval.lines();
+    let head: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let col = |name: &str| head.iter().position(|h| *h == name).unwrap();
+    let row: Vec<&str> = lines
+        .map(|l| l.split(',').collect::<Vec<_>>())
+        .find(|r| r[col("method")] == "ipda" && r[col("source")] == "analytic")
+        .unwrap();
+    let expected: f64 = row[col("random_error_averaged")].parse().unwrap();
+    let out = dir.path().join("select");
+    lidarsim_ok([
+        "select-lines".as_ref(),
+        "--atmosphere".as_ref(),
+        "us_standard".as_ref(),
+        "--on-cm1".as_ref(),
+        "6360.040".as_ref(),
+        "--off-cm1".as_ref(),
+        "6360.610".as_ref(),
+        "--co2-ppm".as_ref(),
+        "420".as_ref(),
+        "--layer-m".as_ref(),
+        "100".as_ref(),
+        "--top-km".as_ref(),
+        "80".as_ref(),
+        "--scene".as_ref(),
+        scene.as_os_str(),
+        "--no-plots".as_ref(),
+        "--out".as_ref(),
+        out.as_os_str(),
+    ]);
+    let csv = std::fs::read_to_string(out.join("sensitivities.csv")).unwrap();
+    let got: f64 = csv
+        .lines()
+        .nth(1)
+        .unwrap()
+        .split(',')
+        .nth(13)
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert!(
+        (got / expected - 1.0).abs() < 0.01,
+        "select-lines {got} ppm, retrieval stage {expected} ppm"
+    );
+}
