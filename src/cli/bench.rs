@@ -1,4 +1,9 @@
-//! `lidarsim bench`: speed and Monte Carlo efficiency of the transport on a fixed workload.
+//! `lidarsim bench`: speed and Monte Carlo efficiency of the transport on a fixed workload, or
+//! (`--study N`) the speed of the seed paper's clear-sky ensemble study.
+//!
+//! The study workload is `scenes/study_co2_ipda.toml` (compiled in) run by `lidarsim dial` over
+//! N generated profiles per latitude class (3N in all), every one of its 10 on-lines against the
+//! off-line, IPDA and DIAL, with the whole error budget, analytic lidar equation.
 //!
 //! The workload is the Bissonnette et al. (1995) case C.1 (`scenes/bissonnette_c1.toml`, compiled
 //! in) with one 1 mrad field of view. The figure of merit is FOM = 1/(rel_err² · t) of the
@@ -6,6 +11,8 @@
 //! (1100–1110 m), t the wall-clock time of the transport at the given thread count.
 
 use std::io::Write;
+
+use anyhow::Context;
 use std::path::{Path, PathBuf};
 
 use lidarsim::optics::OpticalAtmosphere;
@@ -42,6 +49,98 @@ pub struct Args {
     /// Write the figures as JSON here as well.
     #[arg(long)]
     pub json: Option<PathBuf>,
+    /// Instead of the transport: time the clear-sky ensemble study with N profiles per class.
+    #[arg(long, value_name = "N")]
+    pub study: Option<usize>,
+}
+
+const STUDY_SCENE: &str = include_str!("../../scenes/study_co2_ipda.toml");
+
+/// The ensemble study benchmark (module docs).
+fn study_bench(n: usize, args: &Args) -> anyhow::Result<()> {
+    use lidarsim::atmosphere::{LatitudeClass, ProfileSet, class_ensemble};
+    use lidarsim::study::dial::{self, StudyOptions};
+    use std::time::Instant;
+    anyhow::ensure!(
+        (1..=100_000).contains(&n),
+        "--study {n}: give 1 to 100000 profiles per class"
+    );
+    let scene = Scene::from_toml(
+        Path::new("<embedded scenes/study_co2_ipda.toml>"),
+        STUDY_SCENE,
+    )?;
+    let retrieval = scene
+        .retrieval
+        .as_ref()
+        .context("study scene has a retrieval")?;
+    let pairs: Vec<(usize, usize)> = (0..scene.lines.len())
+        .filter(|&k| k != retrieval.off)
+        .map(|k| (k, retrieval.off))
+        .collect();
+    let t = Instant::now();
+    let mut set = ProfileSet::default();
+    for (i, c) in LatitudeClass::ALL.iter().enumerate() {
+        set.members.extend(
+            class_ensemble(*c, n, args.seed.wrapping_add(i as u64))?
+                .0
+                .members,
+        );
+    }
+    let generate_s = t.elapsed().as_secs_f64();
+    let options = StudyOptions {
+        pairs,
+        seed: args.seed,
+        ..StudyOptions::from_scene(&scene).context("study scene has a retrieval")?
+    };
+    let mut out = std::io::stdout().lock();
+    writeln!(
+        out,
+        "ensemble study: {} profiles (3 classes × {n}), {} on-lines × IPDA and {} DIAL cells, error budget of {} rows; ensemble generated in {generate_s:.2} s",
+        set.len(),
+        options.pairs.len(),
+        retrieval.dial.map_or(0, |d| d.cells),
+        lidarsim::study::dial::N_SOURCES
+    )?;
+    writeln!(
+        out,
+        "threads  wall_s  profiles/s  truth_optics_s  returns_s  references_s  retrievals_s  (thread-summed)"
+    )?;
+    let mut rows = Vec::new();
+    for &threads in &args.threads {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()?;
+        let mut best: Option<dial::Timing> = None;
+        for _ in 0..args.repeat.max(1) {
+            let r = pool.install(|| dial::run(&scene, &set, &options, &|| {}))?;
+            let failed = r.outcomes.iter().filter(|o| o.records.is_err()).count();
+            anyhow::ensure!(failed == 0, "{failed} profiles failed");
+            if best.is_none_or(|b| r.timing.wall_s < b.wall_s) {
+                best = Some(r.timing);
+            }
+        }
+        let Some(t) = best else { continue };
+        writeln!(
+            out,
+            "{:>7} {:>7.2} {:>11.1} {:>15.2} {:>10.2} {:>13.2} {:>13.2}",
+            pool.current_num_threads(),
+            t.wall_s,
+            set.len() as f64 / t.wall_s,
+            t.truth_optics_s,
+            t.returns_s,
+            t.references_s + t.mean_references_s,
+            t.retrievals_s
+        )?;
+        rows.push(serde_json::json!({
+            "threads": pool.current_num_threads(), "profiles": set.len(), "wall_s": t.wall_s,
+            "generate_s": generate_s, "truth_optics_s": t.truth_optics_s, "returns_s": t.returns_s,
+            "references_s": t.references_s + t.mean_references_s, "retrievals_s": t.retrievals_s,
+        }));
+    }
+    if let Some(path) = &args.json {
+        std::fs::write(path, serde_json::to_string_pretty(&rows)?)?;
+    }
+    Ok(())
 }
 
 /// The C.1 scene with a single 1 mrad field of view, orders split into 1 and 2+.
@@ -59,6 +158,9 @@ pub fn c1_scene() -> anyhow::Result<Scene> {
 
 /// Run the subcommand.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    if let Some(n) = args.study {
+        return study_bench(n, &args);
+    }
     let mut scene = c1_scene()?;
     scene.simulation.photons = args.photons;
     scene.simulation.seed = args.seed;

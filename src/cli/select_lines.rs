@@ -28,18 +28,27 @@ pub struct Args {
     #[arg(
         long,
         value_delimiter = ',',
-        required_unless_present = "profiles",
-        conflicts_with = "profiles"
+        required_unless_present_any = ["profiles", "ensemble"],
+        conflicts_with_all = ["profiles", "ensemble"]
     )]
     atmosphere: Vec<StandardAtmosphere>,
     /// A lidarsim profile-set CSV; statistics per latitude class.
-    #[arg(long, value_name = "SET")]
+    #[arg(long, value_name = "SET", conflicts_with = "ensemble")]
     profiles: Option<PathBuf>,
-    /// Latitude class of --profiles: high, mid, tropical, or all (one group per class).
-    #[arg(long, default_value = "all", requires = "profiles")]
+    /// Instead of a set: N members per class around the class's AFGL mean with the
+    /// representative NWP forecast-error covariance (as `lidarsim dial --ensemble`: class i of
+    /// tropical, mid, high takes seed S + i).
+    #[arg(long, value_name = "N")]
+    ensemble: Option<usize>,
+    /// Seed of --ensemble.
+    #[arg(long, default_value_t = 1, requires = "ensemble")]
+    seed: u64,
+    /// Latitude class of --profiles or --ensemble: high, mid, tropical, or all (one group per
+    /// class).
+    #[arg(long, default_value = "all")]
     class: String,
     /// With --profiles: also one row per profile id (atmosphere = the id).
-    #[arg(long, requires = "profiles")]
+    #[arg(long)]
     per_profile: bool,
     /// HITRAN .par line files (repeatable; e.g. CO2 and H2O). Without: the built-in CO2
     /// 30012←00001 band model (CO2 626 only, approximate).
@@ -137,8 +146,33 @@ fn check_positive(name: &str, v: f64) -> anyhow::Result<()> {
 
 /// The groups of members: (atmosphere name, members).
 fn groups(a: &Args) -> anyhow::Result<Vec<(String, Vec<SetMember>)>> {
-    if let Some(path) = &a.profiles {
-        let set = read_profile_set(path)?;
+    if a.profiles.is_some() || a.ensemble.is_some() {
+        let set = match (&a.profiles, a.ensemble) {
+            (Some(path), _) => read_profile_set(path)?,
+            (None, Some(n)) => {
+                if !(2..=100_000).contains(&n) {
+                    bail!("--ensemble {n}: give 2 to 100000 members per class");
+                }
+                let mut set = lidarsim::atmosphere::ProfileSet::default();
+                for (i, c) in LatitudeClass::ALL.iter().enumerate() {
+                    if a.class == "all" || a.class.parse::<LatitudeClass>().ok() == Some(*c) {
+                        let (s, _) = lidarsim::atmosphere::class_ensemble(
+                            *c,
+                            n,
+                            a.seed.wrapping_add(i as u64),
+                        )?;
+                        set.members.extend(s.members);
+                    }
+                }
+                set.name = format!("{n} members per class, seed {}", a.seed);
+                set
+            }
+            (None, None) => bail!("give --profiles SET or --ensemble N"),
+        };
+        let path = a
+            .profiles
+            .clone()
+            .unwrap_or_else(|| PathBuf::from(set.name.clone()));
         if set.is_empty() {
             bail!("--profiles {}: the set has no profiles", path.display());
         }

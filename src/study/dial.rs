@@ -489,8 +489,9 @@ impl Study<'_> {
         .map_err(|e| e.to_string())
     }
 
-    /// The expected returns and signals of `scene` (a truth).
-    fn measure(&self, scene: Scene) -> Result<Measured, String> {
+    /// The expected returns and signals of `scene` (a truth); with photons, traced from the
+    /// profile's `seed` (every truth of one profile on the same photons).
+    fn measure(&self, scene: Scene, seed: u64) -> Result<Measured, String> {
         let optics = Clock::time(&self.clock.truth_optics, || {
             OpticalAtmosphere::build(&scene).map_err(|e| e.to_string())
         })?;
@@ -498,7 +499,7 @@ impl Study<'_> {
             let (lines, order) = if self.options.photons > 0 {
                 let mut opts = TransportOptions::from_scene(&scene);
                 opts.photons = self.options.photons;
-                opts.seed = self.options.seed;
+                opts.seed = seed;
                 opts.combinations = scene.sampling.combinations();
                 opts.combination_pairs = scene.sampling.covariance_pairs();
                 let mc = transport::run(&scene, &optics, &opts).map_err(|e| e.to_string())?;
@@ -662,7 +663,7 @@ impl Study<'_> {
                 None => Ok(None),
                 Some(l) => {
                     let s = scene.with_laser(l).map_err(|e| e.to_string())?;
-                    self.measure(s).map(Some)
+                    self.measure(s, seed).map(Some)
                 }
             }
         };
@@ -672,7 +673,7 @@ impl Study<'_> {
             variant(wider)?,
             variant(pure)?,
         ];
-        let base = self.measure(scene)?;
+        let base = self.measure(scene, seed)?;
 
         let paper = self.retrieve(&base, mean, &truth, seed)?;
         let own_p = self.retrieve(&base, &own, &truth, seed)?;
