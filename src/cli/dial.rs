@@ -2,9 +2,8 @@
 //! a scene's retrievals over a profile ensemble with an error budget (`lidarsim::study::dial`).
 
 use std::fmt::Write as _;
-use std::io::{IsTerminal, Write};
+use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
 
@@ -149,17 +148,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .num_threads(args.threads)
         .build()
         .with_context(|| format!("cannot start {} threads", args.threads))?;
-    let bar = progress_bar(set.len());
-    let started = Instant::now();
-    let show = std::io::stderr().is_terminal();
-    let tick = || {
-        bar.inc(1);
-        if show && bar.is_hidden() && started.elapsed() > Duration::from_secs(1) {
-            bar.set_draw_target(indicatif::ProgressDrawTarget::stderr());
-        }
-    };
-    let result = pool.install(|| dial::run(&scene, &set, &options, &tick))?;
-    bar.finish_and_clear();
+    let bar = super::progress::Progress::new(set.len(), "dial", "profiles");
+    let result = pool.install(|| dial::run(&scene, &set, &options, &|| bar.tick()))?;
+    bar.finish();
     let summaries = dial::summarise(&result.outcomes);
 
     std::fs::create_dir_all(&args.out)
@@ -241,18 +232,6 @@ fn profile_set(args: &Args, classes: &[LatitudeClass], seed: u64) -> anyhow::Res
         set.members.extend(s.members);
     }
     Ok(set)
-}
-
-fn progress_bar(n: usize) -> indicatif::ProgressBar {
-    let bar = indicatif::ProgressBar::hidden();
-    bar.set_length(n as u64);
-    bar.set_style(
-        indicatif::ProgressStyle::with_template(
-            "{spinner} dial {bar:40} {pos}/{len} profiles, {elapsed} (eta {eta})",
-        )
-        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-    );
-    bar
 }
 
 fn write(path: &Path, text: &str) -> anyhow::Result<PathBuf> {

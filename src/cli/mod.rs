@@ -7,6 +7,7 @@ pub mod lbl;
 pub mod mie;
 pub mod plot;
 pub mod profiles;
+pub mod progress;
 pub mod run;
 pub mod select_lines;
 pub mod study_figures;

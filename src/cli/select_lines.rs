@@ -366,6 +366,8 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let mut rows: Vec<Row> = Vec::new();
     let mut per_profile: Vec<Row> = Vec::new();
     let mut figures: Vec<GroupFigures> = Vec::new();
+    let total: usize = groups.iter().map(|(_, m)| m.len()).sum();
+    let bar = super::progress::Progress::new(total, "select-lines", "profiles");
     for (name, mut members) in groups {
         let mut failed = Vec::new();
         members.retain_mut(
@@ -377,7 +379,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
                 }
             },
         );
-        let results = select::study_members(&members, &cfg);
+        let results = select::study_members(&members, &cfg, &|| bar.tick());
         let mut ok: Vec<&MemberResult> = Vec::new();
         for r in &results {
             match r {
@@ -444,6 +446,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         }
         rows.extend(group_rows);
     }
+    bar.finish();
     rows.extend(per_profile);
     let path = a.out.join("sensitivities.csv");
     write_atomically(&path, select::to_csv(&rows).as_bytes())

@@ -733,18 +733,21 @@ pub fn study_member(member: &SetMember, cfg: &StudyConfig) -> Result<MemberResul
 }
 
 /// Study every member, in parallel (rayon) and in member order; the numbers do not depend on
-/// the thread count (each member is computed alone).
+/// the thread count (each member is computed alone). `progress` is called once per member.
 pub fn study_members(
     members: &[SetMember],
     cfg: &StudyConfig,
+    progress: &(dyn Fn() + Sync),
 ) -> Vec<Result<MemberResult, MemberFailure>> {
     members
         .par_iter()
         .map(|m| {
-            study_member(m, cfg).map_err(|e| MemberFailure {
+            let r = study_member(m, cfg).map_err(|e| MemberFailure {
                 id: m.meta.id.clone(),
                 reason: e.to_string(),
-            })
+            });
+            progress();
+            r
         })
         .collect()
 }
