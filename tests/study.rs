@@ -515,3 +515,41 @@ fn dial_command_writes_its_tables() {
     let err = String::from_utf8_lossy(&bad.stderr);
     assert!(err.contains("no line `nope`"), "{err}");
 }
+
+/// The seams a study swaps profiles and lasers through give what the scene parser gives for
+/// the same scene written with that profile or laser.
+#[test]
+fn swapped_profiles_and_lasers_equal_parsed_scenes() {
+    let with_laser_keys = |keys: &str| {
+        SCENE.replace(
+            "[laser]\npulse_energy_j = 0.03\nrepetition_rate_hz = 50.0\n",
+            &format!("[laser]\npulse_energy_j = 0.03\nrepetition_rate_hz = 50.0\n{keys}\n"),
+        )
+    };
+    let parse = |text: &str| Scene::from_toml(Path::new("study.toml"), text).unwrap();
+    let plain = parse(&with_laser_keys(""));
+    let shaped = parse(&with_laser_keys(
+        "line_shape = \"gaussian\"\nlinewidth_fwhm_mhz = 30.0\nfrequency_jitter_rms_mhz = 0.5\nspectral_purity = 0.99\nimpurity_wavenumber_cm1 = [6360.05, 6360.02, 6360.62]",
+    ));
+    assert!(shaped.channels.len() > plain.channels.len());
+    // Monochromatic → shaped and back.
+    let swapped = plain.with_laser(shaped.laser.clone()).unwrap();
+    assert_eq!(swapped.channels, shaped.channels);
+    assert_eq!(swapped.sampling, shaped.sampling);
+    assert_eq!(
+        swapped.surface.as_ref().unwrap().albedo,
+        shaped.surface.as_ref().unwrap().albedo
+    );
+    let back = swapped.with_laser(plain.laser.clone()).unwrap();
+    assert_eq!(back.channels, plain.channels);
+    assert_eq!(back.surface.unwrap().albedo, plain.surface.unwrap().albedo);
+    // A profile swapped in is rescaled and checked as the parser does it.
+    let tropical = parse(&SCENE.replace("us_standard", "tropical"));
+    let swapped = scene()
+        .with_profile(StandardAtmosphere::Tropical.profile())
+        .unwrap();
+    assert_eq!(
+        swapped.atmosphere.unwrap().profile,
+        tropical.atmosphere.unwrap().profile
+    );
+}

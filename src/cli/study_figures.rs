@@ -315,7 +315,23 @@ fn budget_figure(path: &Path, summaries: &[Summary]) -> DrawResult {
         .x_label_area_size(50)
         .y_label_area_size(70)
         .build_cartesian_2d(-0.5..(n as f64 - 0.5), lo..hi)?;
-    let names: Vec<String> = rows.iter().map(|m| m.pair.clone()).collect();
+    // Pair names without the off-line when all pairs share it.
+    let offs: Vec<&str> = rows
+        .iter()
+        .map(|m| m.pair.rsplit('/').next().unwrap_or(""))
+        .collect();
+    let same_off = offs.windows(2).all(|w| w[0] == w[1]);
+    let names: Vec<String> = rows
+        .iter()
+        .map(|m| match (same_off, m.pair.rsplit_once('/')) {
+            (true, Some((on, _))) => on.to_string(),
+            _ => m.pair.clone(),
+        })
+        .collect();
+    let x_desc = match (same_off, offs.first()) {
+        (true, Some(off)) => format!("on-line (off-line `{off}`)"),
+        _ => "on-line / off-line".to_string(),
+    };
     chart
         .configure_mesh()
         .x_labels(n.max(1))
@@ -327,10 +343,22 @@ fn budget_figure(path: &Path, summaries: &[Summary]) -> DrawResult {
                 String::new()
             }
         })
-        .x_label_style((FONT, 13))
-        .x_desc("on-line / off-line")
+        .x_label_style((FONT, 12))
+        .x_desc(x_desc)
+        .y_labels(((hi - lo).ceil() as usize * 2).max(2))
         .y_desc("error [ppm] (rms over profiles; random: 1σ)")
-        .y_label_formatter(&|y| format!("{}", 10f64.powf(*y)))
+        .y_label_formatter(&|y| {
+            // Label the decades only, with no more digits than they need.
+            if (y - y.round()).abs() > 1e-6 {
+                return String::new();
+            }
+            let e = y.round() as i32;
+            if e >= 0 {
+                format!("{}", 10f64.powi(e))
+            } else {
+                format!("{:.*}", (-e) as usize, 10f64.powi(e))
+            }
+        })
         .label_style((FONT, 13))
         .axis_desc_style((FONT, 15))
         .draw()?;
@@ -351,8 +379,11 @@ fn budget_figure(path: &Path, summaries: &[Summary]) -> DrawResult {
         if pts.is_empty() {
             continue;
         }
+        for w in pts.windows(2).filter(|w| w[1].0 - w[0].0 == 1.0) {
+            chart.draw_series(LineSeries::new(w.to_vec(), colour.stroke_width(1)))?;
+        }
         chart
-            .draw_series(LineSeries::new(pts.clone(), colour.stroke_width(1)))?
+            .draw_series(std::iter::empty::<Circle<(f64, f64), i32>>())?
             .label(src.label())
             .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], colour));
         chart.draw_series(pts.iter().map(|p| Circle::new(*p, 4, colour.filled())))?;

@@ -1323,20 +1323,26 @@ impl Scene {
         if parent.iter().enumerate().all(|(i, p)| i == *p) && parent.len() == self.lines.len() {
             return;
         }
-        fn expand<T: Clone>(v: &mut Vec<T>, parent: &[usize]) {
-            *v = parent.iter().map(|p| v[*p].clone()).collect();
+        self.remap_per_channel_values(&parent);
+    }
+
+    /// Every per-channel value of layers, surface and atmosphere replaced by
+    /// `v[index[0]], v[index[1]], …`: from lines to channels and back.
+    fn remap_per_channel_values(&mut self, index: &[usize]) {
+        fn remap<T: Clone>(v: &mut Vec<T>, index: &[usize]) {
+            *v = index.iter().map(|i| v[*i].clone()).collect();
         }
         if let Some(a) = &mut self.atmosphere {
-            expand(&mut a.depolarisation_factor, &parent);
+            remap(&mut a.depolarisation_factor, index);
         }
         for l in &mut self.layers {
-            expand(&mut l.extinction_per_m, &parent);
-            expand(&mut l.single_scattering_albedo, &parent);
-            expand(&mut l.phase, &parent);
-            expand(&mut l.absorption_per_m, &parent);
+            remap(&mut l.extinction_per_m, index);
+            remap(&mut l.single_scattering_albedo, index);
+            remap(&mut l.phase, index);
+            remap(&mut l.absorption_per_m, index);
         }
         if let Some(s) = &mut self.surface {
-            expand(&mut s.albedo, &parent);
+            remap(&mut s.albedo, index);
         }
     }
 
@@ -1473,21 +1479,7 @@ impl Scene {
         if first.len() == self.channels.len() && first.iter().enumerate().all(|(i, f)| i == *f) {
             return;
         }
-        fn pick<T: Clone>(v: &mut Vec<T>, first: &[usize]) {
-            *v = first.iter().map(|i| v[*i].clone()).collect();
-        }
-        if let Some(a) = &mut self.atmosphere {
-            pick(&mut a.depolarisation_factor, &first);
-        }
-        for l in &mut self.layers {
-            pick(&mut l.extinction_per_m, &first);
-            pick(&mut l.single_scattering_albedo, &first);
-            pick(&mut l.phase, &first);
-            pick(&mut l.absorption_per_m, &first);
-        }
-        if let Some(s) = &mut self.surface {
-            pick(&mut s.albedo, &first);
-        }
+        self.remap_per_channel_values(&first);
     }
 
     /// The molecular grid: layer edges from the profile bottom (or the surface) to the top of
