@@ -52,7 +52,7 @@ use crate::retrieval::{
     AssumedInstrument, LayerColumns, Method, Product, Quantity, ReferenceState, Retrieval,
     RetrievalConfig,
 };
-use crate::returns::Order;
+use crate::returns::{Order, Returns};
 use crate::rng::{self, Stream};
 use crate::scene::Scene;
 use crate::transport::{self, TransportOptions};
@@ -465,6 +465,8 @@ pub fn run(
 /// Line returns and signals of one truth.
 struct Measured {
     scene: Scene,
+    /// The channels' returns (analytic only), for truths whose channels are a subset.
+    channels: Option<Returns>,
     lines: LineReturns,
     signals: Signals,
 }
@@ -496,7 +498,7 @@ impl Study<'_> {
             OpticalAtmosphere::build(&scene).map_err(|e| e.to_string())
         })?;
         Clock::time(&self.clock.returns, || {
-            let (lines, order) = if self.options.photons > 0 {
+            let (channels, lines, order) = if self.options.photons > 0 {
                 let mut opts = TransportOptions::from_scene(&scene);
                 opts.photons = self.options.photons;
                 opts.seed = seed;
@@ -504,31 +506,40 @@ impl Study<'_> {
                 opts.combination_pairs = scene.sampling.covariance_pairs();
                 let mc = transport::run(&scene, &optics, &opts).map_err(|e| e.to_string())?;
                 let combined = mc.combined.as_ref().ok_or("no combined returns")?;
-                (scene.sampling.split(combined), Order::Total)
+                (None, scene.sampling.split(combined), Order::Total)
             } else {
                 let analytic = lidar_eq::single_scatter(&scene, &optics);
-                (scene.sampling.combine(&analytic), Order::Exactly(1))
+                let lines = scene.sampling.combine(&analytic);
+                (Some(analytic), lines, Order::Exactly(1))
             };
-            let receiver = scene.receiver.as_ref().ok_or("no receiver")?;
-            let telescope = Telescope {
-                area_m2: scene.lidar.telescope_area_m2(),
-                optical_efficiency: scene.lidar.optical_efficiency,
-            };
-            let signals = Signals::new(
-                &lines,
-                order,
-                &scene.sampling.lines,
-                receiver,
-                telescope,
-                scene.gates.width_m,
-            )
-            .ok_or("no signals of the returns")?;
-            Ok(Measured {
-                scene,
-                lines,
-                signals,
-            })
+            with_signals(scene, channels, lines, order)
         })
+    }
+
+    /// The truth `scene` (another laser on `base`'s profile): from `base`'s channel returns
+    /// when it samples only wavenumbers `base` has (a laser without jitter or impurity: the
+    /// analytic return of a channel depends on its wavenumber and its line alone), else anew.
+    fn measure_like(&self, base: &Measured, scene: Scene, seed: u64) -> Result<Measured, String> {
+        let subset = base.channels.as_ref().and_then(|r| {
+            let index: Option<Vec<usize>> = scene
+                .sampling
+                .channels
+                .iter()
+                .map(|c| {
+                    base.scene.sampling.channels.iter().position(|b| {
+                        b.line == c.line && b.wavenumber_cm1.to_bits() == c.wavenumber_cm1.to_bits()
+                    })
+                })
+                .collect();
+            index.map(|i| r.channel_subset(&i))
+        });
+        match subset {
+            Some(channels) => Clock::time(&self.clock.returns, || {
+                let lines = scene.sampling.combine(&channels);
+                with_signals(scene, Some(channels), lines, Order::Exactly(1))
+            }),
+            None => self.measure(scene, seed),
+        }
     }
 
     /// The products of every pair retrieved from `m` with `reference` (one retrieval set-up,
@@ -658,12 +669,13 @@ impl Study<'_> {
             spectral_purity: 1.0,
             ..laser.clone()
         });
+        let base = self.measure(scene, seed)?;
         let variant = |l: Option<Laser>| -> Result<Option<Measured>, String> {
             match l {
                 None => Ok(None),
                 Some(l) => {
-                    let s = scene.with_laser(l).map_err(|e| e.to_string())?;
-                    self.measure(s, seed).map(Some)
+                    let s = base.scene.with_laser(l).map_err(|e| e.to_string())?;
+                    self.measure_like(&base, s, seed).map(Some)
                 }
             }
         };
@@ -673,8 +685,6 @@ impl Study<'_> {
             variant(wider)?,
             variant(pure)?,
         ];
-        let base = self.measure(scene, seed)?;
-
         let paper = self.retrieve(&base, mean, &truth, seed)?;
         let own_p = self.retrieve(&base, &own, &truth, seed)?;
         let know: Vec<Vec<Vec<Product>>> = knowledge
@@ -700,6 +710,35 @@ impl Study<'_> {
         }
         Ok(records)
     }
+}
+
+/// Signals of a truth's line returns through its receiver.
+fn with_signals(
+    scene: Scene,
+    channels: Option<Returns>,
+    lines: LineReturns,
+    order: Order,
+) -> Result<Measured, String> {
+    let receiver = scene.receiver.as_ref().ok_or("no receiver")?;
+    let telescope = Telescope {
+        area_m2: scene.lidar.telescope_area_m2(),
+        optical_efficiency: scene.lidar.optical_efficiency,
+    };
+    let signals = Signals::new(
+        &lines,
+        order,
+        &scene.sampling.lines,
+        receiver,
+        telescope,
+        scene.gates.width_m,
+    )
+    .ok_or("no signals of the returns")?;
+    Ok(Measured {
+        scene,
+        channels,
+        lines,
+        signals,
+    })
 }
 
 /// The records of one pair from its products (in [`Retrieval`]'s target order: IPDA mixing
