@@ -16,7 +16,7 @@
 //!
 //! | row | what differs |
 //! |---|---|
-//! | random | none: the analytic random error (detector, shot and speckle-free noise, energy monitor, jitter) of the averaged measurement, a standard deviation |
+//! | random | none: the analytic random error (detector and shot noise, energy monitor, jitter) of the averaged measurement, a standard deviation |
 //! | temperature | the retrieval assumes every level colder by `temperature_k` than the truth |
 //! | humidity | the truth has `humidity_fraction` more water vapour than the retrieval assumes |
 //! | surface pressure | the retrieval assumes a surface pressure higher by `surface_pressure_hpa` |
