@@ -5,6 +5,8 @@ mod util;
 
 /// Atmospheric state: standard atmospheres, profile sets, ensembles.
 mod atmosphere;
+/// Beyond-Voigt line shapes against HAPI, HITRAN conventions, CSV line lists.
+mod beyond_voigt;
 /// The command line.
 mod cli;
 /// Particles: Mie, size distributions, phase-function tables and sampling.

@@ -26,10 +26,22 @@ use super::plot::{FONT, init_font};
 /// Arguments of `lidarsim lbl`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// HITRAN 160-character line file (.par, or a HAPI .data table). Without it: the built-in
-    /// CO2 30012←00001 band model (approximate).
+    /// Line file: HITRAN 160-character records (.par, or a HAPI .data table), or a CSV with
+    /// HITRAN parameter names (`*.csv`, beyond-Voigt parameters included). Without it: the
+    /// built-in CO2 30012←00001 band model (approximate).
     #[arg(long, value_name = "FILE")]
     lines: Option<PathBuf>,
+    /// Line profile: voigt, sdvoigt (speed-dependent Voigt) or ht (Hartmann-Tran); the last two
+    /// need a CSV line list with their parameters.
+    #[arg(long, default_value = "voigt")]
+    line_shape: lidarsim::spectroscopy::LineShapeModel,
+    /// First-order line mixing (the CSV's y_air, y_self).
+    #[arg(long)]
+    line_mixing: bool,
+    /// Mole fraction of the absorbing gas, for self broadening (cross-section mode; 0: pure air
+    /// broadening).
+    #[arg(long, default_value_t = 0.0)]
+    vmr: f64,
     /// Pressure [atm] (cross-section mode).
     #[arg(long)]
     pressure_atm: Option<f64>,
@@ -101,6 +113,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let grid = WavenumberGrid::new(args.start_cm1, args.end_cm1, args.step_cm1)?;
     let mut opts = LblOptions {
         wing_cm1: args.wing_cm1,
+        line_shape: args.line_shape,
+        line_mixing: args.line_mixing,
         ..Default::default()
     };
     if args.shifted_wing {
@@ -116,7 +130,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 grid.start_cm1 - opts.wing_cm1 - 1.0,
                 grid.end_cm1() + opts.wing_cm1 + 1.0,
             );
-            LineList::read_par(p, &filter)?
+            LineList::read(p, &filter)?
         }
         None => LineList::co2_30012_band_model(),
     };
@@ -145,10 +159,13 @@ fn run_cross_sections(
     if !(p_atm.is_finite() && p_atm >= 0.0) {
         bail!("--pressure-atm must be finite and ≥ 0 (got {p_atm})");
     }
+    if !(0.0..=1.0).contains(&args.vmr) {
+        bail!("--vmr must lie in [0, 1] (got {})", args.vmr);
+    }
     let state = GasState {
         pressure_pa: p_atm * lidarsim::constants::STANDARD_ATMOSPHERE_PA,
         temperature_k: t_k,
-        self_vmr: 0.0,
+        self_vmr: args.vmr,
     };
     let molecules = lines.molecules();
     if molecules.is_empty() {
@@ -167,9 +184,12 @@ fn run_cross_sections(
     }
     let mut text = String::new();
     text.push_str(&format!(
-        "# lidarsim lbl: absorption cross-sections [cm^2/molecule], air-broadened\n# lines: {}\n\
-         # pressure_atm = {p_atm}, temperature_k = {t_k}, wing_cm1 = {} around the {} centre, Voigt {}\n",
+        "# lidarsim lbl: absorption cross-sections [cm^2/molecule], self-broadening mole fraction {}\n# lines: {}\n\
+         # line shape {}{}; pressure_atm = {p_atm}, temperature_k = {t_k}, wing_cm1 = {} around the {} centre, Voigt {}\n",
+        args.vmr,
         lines.source,
+        opts.line_shape.name(),
+        if opts.line_mixing { " with line mixing" } else { "" },
         opts.wing_cm1,
         if opts.wing_centre == WingCentre::Shifted { "shifted" } else { "unshifted" },
         if args.exact { "exact" } else { "fast (multigrid)" },

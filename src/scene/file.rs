@@ -97,6 +97,8 @@ pub(super) struct GasAbsorptionFile {
     pub table_start_cm1: Option<f64>,
     pub table_end_cm1: Option<f64>,
     pub table_step_cm1: Option<f64>,
+    pub line_shape: Option<String>,
+    pub line_mixing: Option<bool>,
 }
 
 #[derive(Debug, Deserialize)]

@@ -539,6 +539,12 @@ impl Validator<'_> {
         if let Some(w) = g.wing_cm1 {
             options.wing_cm1 = self.positive(&sec.key("wing_cm1"), w)?;
         }
+        if let Some(shape) = &g.line_shape {
+            options.line_shape = shape
+                .parse()
+                .map_err(|m: String| self.err(&sec.key("line_shape"), m))?;
+        }
+        options.line_mixing = g.line_mixing.unwrap_or(false);
         let lo = channels
             .iter()
             .map(|c| c.wavenumber_cm1)
@@ -582,12 +588,20 @@ impl Validator<'_> {
         let lines = match &g.lines {
             Some(f) => {
                 let path = self.path.parent().unwrap_or(Path::new(".")).join(f);
-                LineList::read_par(&path, &filter)
+                LineList::read(&path, &filter)
                     .map_err(|e| self.err(&sec.key("lines"), format!("line file: {e}")))?
             }
             // The built-in approximate CO2 band (docs/spectroscopy.md), cut like a file.
             None => LineList::co2_30012_band_model().filtered(&filter),
         };
+        options.check_lines(&lines).map_err(|e| {
+            let key = if g.line_shape.is_some() {
+                "line_shape"
+            } else {
+                "line_mixing"
+            };
+            self.err(&sec.key(key), e.to_string())
+        })?;
         for id in lines.molecules() {
             let name = isotopologues::molecule_name(id).unwrap_or("?");
             if atm.profile.gas(name).is_none() {

@@ -137,6 +137,7 @@ impl Co2BandModel {
             n_air: poly(&self.n_air_poly, am),
             delta_air_cm1_per_atm: poly(&self.delta_air_poly, m as f64),
             quanta,
+            shape: None,
         }
     }
 

@@ -51,6 +51,63 @@ pub struct Line {
     /// The four quantum-number fields (global upper, global lower, local upper, local lower),
     /// 15 characters each, as in the record.
     pub quanta: [u8; 60],
+    /// Beyond-Voigt parameters (speed dependence, Dicke narrowing, line mixing) from a CSV line
+    /// list ([`super::csv_lines`]); `None` for a `.par` record.
+    pub shape: Option<Box<ShapeParameters>>,
+}
+
+/// The line-shape parameters of one line for one perturber, in HITRAN's names and units
+/// (widths and shifts in cm⁻¹/atm at 296 K; Tennyson et al. 2014).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Broadener {
+    /// `gamma0`: speed-averaged half width.
+    pub gamma0: f64,
+    /// `n_gamma0`: its exponent, Γ₀(T) = Γ₀ (296/T)^n.
+    pub n_gamma0: f64,
+    /// `delta0`: speed-averaged shift.
+    pub delta0: f64,
+    /// `n_delta0`: its linear temperature dependence [cm⁻¹/atm/K], Δ₀(T) = Δ₀ + n (T − 296).
+    pub n_delta0: f64,
+    /// `SD_gamma`: Γ₂/Γ₀.
+    pub sd_gamma: f64,
+    /// `n_gamma2`: exponent of Γ₂.
+    pub n_gamma2: f64,
+    /// `SD_delta`: Δ₂/Δ₀.
+    pub sd_delta: f64,
+    /// `nuVC`: velocity-changing collision frequency.
+    pub nu_vc: f64,
+    /// `n_nuVC`: its exponent.
+    pub n_nu_vc: f64,
+    /// `eta`: correlation parameter.
+    pub eta: f64,
+    /// `y`: first-order line-mixing coefficient [1/atm].
+    pub y: f64,
+    /// `n_y`: its exponent.
+    pub n_y: f64,
+}
+
+/// Which beyond-Voigt parameters a line list carries (the columns its file has).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct ShapeColumns {
+    /// `SD_gamma_air` (speed dependence of the width).
+    pub speed_dependence: bool,
+    /// `nuVC_air` (Dicke narrowing).
+    pub dicke: bool,
+    /// `eta_air` (correlation).
+    pub correlation: bool,
+    /// `y_air` (first-order line mixing).
+    pub line_mixing: bool,
+}
+
+/// Beyond-Voigt parameters of a line: air and self broadening, and which the file had.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ShapeParameters {
+    /// Broadening by air.
+    pub air: Broadener,
+    /// Self broadening (the air values where the file has no `_self` column).
+    pub self_broadening: Broadener,
+    /// The columns the file had.
+    pub columns: ShapeColumns,
 }
 
 impl Line {
@@ -100,7 +157,7 @@ impl LineFilter {
         }
     }
 
-    fn keeps_species(&self, m: u8, i: u8) -> bool {
+    pub(crate) fn keeps_species(&self, m: u8, i: u8) -> bool {
         self.molecules.as_ref().is_none_or(|ms| ms.contains(&m))
             && self
                 .isotopologues
@@ -108,7 +165,7 @@ impl LineFilter {
                 .is_none_or(|is| is.contains(&(m, i)))
     }
 
-    fn keeps_nu(&self, nu: f64) -> bool {
+    pub(crate) fn keeps_nu(&self, nu: f64) -> bool {
         self.min_cm1.is_none_or(|lo| nu >= lo) && self.max_cm1.is_none_or(|hi| nu <= hi)
     }
 }
@@ -219,6 +276,23 @@ impl LineList {
                 l.delta_air_cm1_per_atm,
             ] {
                 h.f64(v);
+            }
+            if let Some(sp) = &l.shape {
+                for b in [&sp.air, &sp.self_broadening] {
+                    for v in [
+                        b.gamma0, b.n_gamma0, b.delta0, b.n_delta0, b.sd_gamma, b.n_gamma2,
+                        b.sd_delta, b.nu_vc, b.n_nu_vc, b.eta, b.y, b.n_y,
+                    ] {
+                        h.f64(v);
+                    }
+                }
+                let c = sp.columns;
+                h.bytes(&[
+                    u8::from(c.speed_dependence),
+                    u8::from(c.dicke),
+                    u8::from(c.correlation),
+                    u8::from(c.line_mixing),
+                ]);
             }
         }
         h.finish()
@@ -335,6 +409,7 @@ fn parse_record(
         n_air: num(F_NAIR)?,
         delta_air_cm1_per_atm: num(F_DAIR)?,
         quanta: b[67..127].try_into().unwrap_or([b' '; 60]),
+        shape: None,
     };
     for (v, (a, z, name)) in [
         (line.sw_cm_per_molecule, F_SW),

@@ -21,7 +21,9 @@
 //! and every default are described in `docs/spectroscopy.md`.
 
 pub mod band_model;
+pub mod csv_lines;
 pub mod hitran;
+pub mod htp;
 pub mod isotopologues;
 pub mod layers;
 pub mod table;
@@ -29,12 +31,12 @@ pub mod tips;
 pub mod voigt;
 pub mod xsec;
 
-pub use hitran::{Line, LineFilter, LineList};
+pub use hitran::{Broadener, Line, LineFilter, LineList, ShapeColumns, ShapeParameters};
 pub use layers::{CgLayer, LineOfSight};
 pub use table::GasOpticalDepthTable;
 pub use xsec::{
-    Conventions, GasState, LblOptions, VoigtMethod, WavenumberGrid, WingCentre, cross_section,
-    cross_section_at, layer_optical_depths_at,
+    Conventions, GasState, LblOptions, LineShapeModel, VoigtMethod, WavenumberGrid, WingCentre,
+    cross_section, cross_section_at, layer_optical_depths_at,
 };
 
 use crate::input::InputError;
@@ -60,6 +62,14 @@ pub enum SpectroscopyError {
         temperature_k: f64,
         /// Why.
         reason: String,
+    },
+    /// A line profile asks for parameters the line list does not have.
+    #[error("{lines}: {parameters}")]
+    MissingParameters {
+        /// The line list (its file).
+        lines: String,
+        /// Which parameters, and for what.
+        parameters: String,
     },
     /// An argument outside its valid range (names the argument and the value).
     #[error("invalid {name} = {value}: {reason}")]

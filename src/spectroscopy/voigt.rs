@@ -26,7 +26,7 @@ const FRAC_1_SQRT_PI: f64 = 0.564_189_583_547_756_3;
 /// sqrt(ln 2).
 pub const SQRT_LN2: f64 = 0.832_554_611_157_697_8;
 /// sqrt(ln2/π).
-pub const SQRT_LN2_OVER_PI: f64 = 0.469_718_639_319_144_1;
+pub const SQRT_LN2_OVER_PI: f64 = 0.469_718_639_349_825_66;
 
 /// |z|² below which [`re_w`] calls the exact Faddeeva function.
 pub const EXACT_RADIUS_SQUARED: f64 = 64.0;

@@ -27,6 +27,7 @@
 use rayon::prelude::*;
 
 use super::hitran::LineList;
+use super::htp::{HtParameters, hartmann_tran};
 use super::tips::partition_sum;
 use super::voigt::{SQRT_LN2, SQRT_LN2_OVER_PI, re_w, re_w_exact};
 use super::{SpectroscopyError, isotopologues::Isotopologue};
@@ -83,6 +84,43 @@ pub enum VoigtMethod {
     Exact,
 }
 
+/// The line profile.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum LineShapeModel {
+    /// Voigt (default): Gaussian Doppler core convolved with a Lorentzian.
+    Voigt,
+    /// Speed-dependent Voigt: quadratic speed dependence of width and shift (Γ₂, Δ₂).
+    SdVoigt,
+    /// Hartmann-Tran: speed dependence, velocity-changing collisions ν_VC and their
+    /// correlation η ([`super::htp`]).
+    HartmannTran,
+}
+
+impl LineShapeModel {
+    /// The name the command line and scene files use.
+    pub fn name(self) -> &'static str {
+        match self {
+            LineShapeModel::Voigt => "voigt",
+            LineShapeModel::SdVoigt => "sdvoigt",
+            LineShapeModel::HartmannTran => "ht",
+        }
+    }
+}
+
+impl std::str::FromStr for LineShapeModel {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "voigt" => Ok(LineShapeModel::Voigt),
+            "sdvoigt" => Ok(LineShapeModel::SdVoigt),
+            "ht" => Ok(LineShapeModel::HartmannTran),
+            _ => Err(format!(
+                "unknown line shape `{s}` (known: voigt, sdvoigt, ht)"
+            )),
+        }
+    }
+}
+
 /// Options of the line-by-line computation.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct LblOptions {
@@ -102,6 +140,11 @@ pub struct LblOptions {
     /// Use the multigrid method on uniform grids. Default true; false evaluates every line at
     /// every grid point (HAPI's brute force).
     pub multigrid: bool,
+    /// The line profile. Default [`LineShapeModel::Voigt`]; the others need the parameters of a
+    /// CSV line list ([`super::csv_lines`]).
+    pub line_shape: LineShapeModel,
+    /// First-order (Rosenkranz) line mixing, absorption ∝ Re I + Y·Im I. Default false.
+    pub line_mixing: bool,
 }
 
 impl Default for LblOptions {
@@ -114,11 +157,42 @@ impl Default for LblOptions {
             conventions: Conventions::CODATA_2018,
             voigt: VoigtMethod::Fast,
             multigrid: true,
+            line_shape: LineShapeModel::Voigt,
+            line_mixing: false,
         }
     }
 }
 
 impl LblOptions {
+    /// Whether `lines` carry what the line shape and line mixing asked for: the beyond-Voigt
+    /// parameters of a CSV line list, with the columns each profile needs. An error names the
+    /// missing columns (and the file).
+    pub fn check_lines(&self, lines: &LineList) -> Result<(), SpectroscopyError> {
+        if self.line_shape == LineShapeModel::Voigt && !self.line_mixing {
+            return Ok(());
+        }
+        for l in &lines.lines {
+            match &l.shape {
+                Some(sp) => check_columns(lines, l, sp, self)?,
+                None => {
+                    return Err(SpectroscopyError::MissingParameters {
+                        lines: lines.source.clone(),
+                        parameters: format!(
+                            "line shape `{}`{} needs beyond-Voigt parameters, which only a CSV line list with HITRAN parameter names carries (this list has none)",
+                            self.line_shape.name(),
+                            if self.line_mixing {
+                                " with line mixing"
+                            } else {
+                                ""
+                            }
+                        ),
+                    });
+                }
+            }
+        }
+        Ok(())
+    }
+
     /// The conventions of the HAPI reference file (`hapi_ref_CO2_R16_6358-6362.csv`): HAPI 1.3
     /// constants, air broadening only, window around the unshifted centre, exact Faddeeva.
     pub fn hapi_reference() -> Self {
@@ -250,18 +324,46 @@ struct Prepared {
     y: f64,
     /// γ_D [cm⁻¹].
     gamma_d: f64,
+    /// Beyond the plain Voigt: line mixing and/or the Hartmann-Tran profile.
+    beyond: Beyond,
+}
+
+/// How a prepared line departs from the Voigt.
+#[derive(Debug, Clone, Copy)]
+enum Beyond {
+    /// The Voigt.
+    No,
+    /// The Voigt with first-order line mixing Y.
+    Mixing(f64),
+    /// The Hartmann-Tran profile (and its limits) with S(T) and line mixing Y.
+    Ht(HtParameters, f64, f64),
 }
 
 impl Prepared {
     #[inline]
     fn eval(&self, nu: f64, exact: bool) -> f64 {
-        let x = (nu - self.nu_c) * self.cx;
-        self.amp
-            * if exact {
-                re_w_exact(x, self.y)
-            } else {
-                re_w(x, self.y)
+        match self.beyond {
+            Beyond::No => {
+                let x = (nu - self.nu_c) * self.cx;
+                self.amp
+                    * if exact {
+                        re_w_exact(x, self.y)
+                    } else {
+                        re_w(x, self.y)
+                    }
             }
+            // Re I + Y Im I with I = sqrt(ln2/π)/γ_D w(x + iy) (htp module docs).
+            Beyond::Mixing(y_mix) => {
+                let x = (nu - self.nu_c) * self.cx;
+                let w =
+                    errorfunctions::w_with_relerror(num_complex::Complex64::new(x, self.y), 0.0);
+                self.amp * (w.re + y_mix * w.im)
+            }
+            Beyond::Ht(ref p, s_t, y_mix) => {
+                let i = hartmann_tran(p, nu);
+                s_t * (i.re + y_mix * i.im)
+            }
+        }
     }
     #[inline]
     fn in_window(&self, nu: f64, w: f64) -> bool {
@@ -321,20 +423,79 @@ fn prepare(
             / (-c2 * l.elower_cm1 / T_REF).exp()
             * (1.0 - (-c2 * l.nu_cm1 / t).exp())
             / (1.0 - (-c2 * l.nu_cm1 / T_REF).exp());
-        let gamma_l = (T_REF / t).powf(l.n_air)
-            * (l.gamma_air_cm1_per_atm * (p_atm - p_self) + l.gamma_self_cm1_per_atm * p_self);
         let gamma_d = l.nu_cm1
             * (2.0 * conv.boltzmann_j_per_k * t * std::f64::consts::LN_2
                 / (mass * conv.speed_of_light_m_per_s * conv.speed_of_light_m_per_s))
                 .sqrt();
+        // Collisional parameters: HITRAN's conventions for a CSV line with its own parameters
+        // (every one mole-fraction weighted between air and self; Tennyson et al. 2014), the
+        // .par record's otherwise (one exponent, the air shift for the whole pressure).
+        let (gamma_l, shift, ht) = match &l.shape {
+            Some(sp) => {
+                let x_self = if opts.self_broadening {
+                    state.self_vmr
+                } else {
+                    0.0
+                };
+                let c = collisional(sp, p_atm, x_self, t);
+                check_columns(lines, l, sp, opts)?;
+                (c.gamma0, c.delta0, Some(c))
+            }
+            None => {
+                if opts.line_shape != LineShapeModel::Voigt || opts.line_mixing {
+                    return Err(SpectroscopyError::MissingParameters {
+                        lines: lines.source.clone(),
+                        parameters: "the HITRAN .par format has no beyond-Voigt parameters: give a CSV line list with them".into(),
+                    });
+                }
+                (
+                    (T_REF / t).powf(l.n_air)
+                        * (l.gamma_air_cm1_per_atm * (p_atm - p_self)
+                            + l.gamma_self_cm1_per_atm * p_self),
+                    l.delta_air_cm1_per_atm * p_atm,
+                    None,
+                )
+            }
+        };
         let nu_c = if opts.line_shift {
-            l.nu_cm1 + l.delta_air_cm1_per_atm * p_atm
+            l.nu_cm1 + shift
         } else {
             l.nu_cm1
         };
         let nu_w = match opts.wing_centre {
             WingCentre::Unshifted => l.nu_cm1,
             WingCentre::Shifted => nu_c,
+        };
+        let y_mix = match (&ht, opts.line_mixing) {
+            (Some(c), true) => c.y,
+            _ => 0.0,
+        };
+        let beyond = match (ht, opts.line_shape) {
+            (Some(c), LineShapeModel::SdVoigt | LineShapeModel::HartmannTran)
+                if !(c.gamma2 == 0.0
+                    && c.delta2 == 0.0
+                    && (opts.line_shape == LineShapeModel::SdVoigt
+                        || (c.nu_vc == 0.0 && c.eta == 0.0))) =>
+            {
+                let hart = opts.line_shape == LineShapeModel::HartmannTran;
+                Beyond::Ht(
+                    HtParameters {
+                        nu0: l.nu_cm1,
+                        gamma_d,
+                        gamma0: gamma_l,
+                        gamma2: c.gamma2,
+                        delta0: nu_c - l.nu_cm1,
+                        delta2: if opts.line_shift { c.delta2 } else { 0.0 },
+                        nu_vc: if hart { c.nu_vc } else { 0.0 },
+                        eta: if hart { c.eta } else { 0.0 },
+                    },
+                    s_t,
+                    y_mix,
+                )
+            }
+            // No speed dependence (and for HT no Dicke narrowing): the Voigt itself.
+            _ if y_mix != 0.0 => Beyond::Mixing(y_mix),
+            _ => Beyond::No,
         };
         out.push(Prepared {
             nu0: l.nu_cm1,
@@ -344,6 +505,7 @@ fn prepare(
             cx: SQRT_LN2 / gamma_d,
             y: SQRT_LN2 * gamma_l / gamma_d,
             gamma_d,
+            beyond,
         });
     }
     // `LineList::lines` is public: a hand-built list may be unsorted; the searches need ν₀ order.
@@ -351,6 +513,107 @@ fn prepare(
         out.sort_by(|a, b| a.nu0.total_cmp(&b.nu0));
     }
     Ok(out)
+}
+
+/// A line's collisional parameters at one state \[cm⁻¹\] (Y dimensionless).
+#[derive(Debug, Clone, Copy)]
+struct Collisional {
+    gamma0: f64,
+    delta0: f64,
+    gamma2: f64,
+    delta2: f64,
+    nu_vc: f64,
+    eta: f64,
+    y: f64,
+}
+
+/// HITRAN's temperature and pressure conventions (reference 296 K; Tennyson et al. 2014):
+/// widths, Γ₂ and ν_VC as power laws in 296/T, shifts linear in T − 296, Γ₂ = SD_gamma·Γ₀,
+/// Δ₂ = SD_delta·Δ₀, Y = p·y·(296/T)^n_y, every parameter weighted by mole fraction between
+/// air (1 − x) and self (x) broadening; p in atm.
+fn collisional(sp: &super::ShapeParameters, p_atm: f64, x_self: f64, t: f64) -> Collisional {
+    const T_REF: f64 = 296.0;
+    let r = T_REF / t;
+    let mut c = Collisional {
+        gamma0: 0.0,
+        delta0: 0.0,
+        gamma2: 0.0,
+        delta2: 0.0,
+        nu_vc: 0.0,
+        eta: 0.0,
+        y: 0.0,
+    };
+    for (b, x) in [(&sp.air, 1.0 - x_self), (&sp.self_broadening, x_self)] {
+        if x == 0.0 {
+            continue;
+        }
+        let delta0 = b.delta0 + b.n_delta0 * (t - T_REF);
+        c.gamma0 += x * b.gamma0 * r.powf(b.n_gamma0);
+        c.delta0 += x * delta0;
+        c.gamma2 += x * b.sd_gamma * b.gamma0 * r.powf(b.n_gamma2);
+        c.delta2 += x * b.sd_delta * delta0;
+        c.nu_vc += x * b.nu_vc * r.powf(b.n_nu_vc);
+        c.eta += x * b.eta;
+        c.y += x * b.y * r.powf(b.n_y);
+    }
+    for v in [
+        &mut c.gamma0,
+        &mut c.delta0,
+        &mut c.gamma2,
+        &mut c.delta2,
+        &mut c.nu_vc,
+        &mut c.y,
+    ] {
+        *v *= p_atm;
+    }
+    c
+}
+
+/// The profile `opts` asks for needs columns the line's file has.
+fn check_columns(
+    lines: &LineList,
+    l: &super::Line,
+    sp: &super::ShapeParameters,
+    opts: &LblOptions,
+) -> Result<(), SpectroscopyError> {
+    let have = sp.columns;
+    let mut missing = Vec::new();
+    if matches!(
+        opts.line_shape,
+        LineShapeModel::SdVoigt | LineShapeModel::HartmannTran
+    ) && !have.speed_dependence
+    {
+        missing.push("SD_gamma_air");
+    }
+    if opts.line_shape == LineShapeModel::HartmannTran {
+        if !have.dicke {
+            missing.push("nuVC_air");
+        }
+        if !have.correlation {
+            missing.push("eta_air");
+        }
+    }
+    if opts.line_mixing && !have.line_mixing {
+        missing.push("y_air");
+    }
+    if missing.is_empty() {
+        return Ok(());
+    }
+    Err(SpectroscopyError::MissingParameters {
+        lines: lines.source.clone(),
+        parameters: format!(
+            "line shape `{}`{} needs the column{} {} (line at {} cm⁻¹ and every other)",
+            opts.line_shape.name(),
+            if opts.line_mixing {
+                " with line mixing"
+            } else {
+                ""
+            },
+            if missing.len() > 1 { "s" } else { "" },
+            missing.join(", "),
+            l.nu_cm1
+        ),
+    })
 }
 
 /// Absorption cross-section σ(ν) [cm²/molecule] of molecule `molecule_id` (HITRAN number) at

@@ -1,0 +1,225 @@
+//! Beyond Voigt: the partially-correlated quadratic-speed-dependent hard-collision profile
+//! (pCqSDHC, the Hartmann-Tran profile) and its limits, with first-order line mixing.
+//!
+//! The profile of Tran, Ngo & Hartmann (2013, JQSRT 129, 199; erratum JQSRT 134, 104), as
+//! recommended by Tennyson et al. (2014, Pure Appl. Chem. 86, 1931) and evaluated by HAPI, is
+//! the complex function
+//!
+//! ```text
+//! I(ν) = (1/π) · A / (1 − (ν_VC − η (C₀ − 3C₂/2)) A + η C₂ B)
+//! C₀ = Γ₀ + iΔ₀,  C₂ = Γ₂ + iΔ₂,  C̃₀ = (1 − η)(C₀ − 3C₂/2) + ν_VC,  C̃₂ = (1 − η) C₂
+//! X = (i(ν₀ − ν) + C̃₀)/C̃₂,  Y = 1/(2 c C̃₂)²,  c = √ln2/γ_D
+//! Z₁ = √(X + Y) − √Y,  Z₂ = √(X + Y) + √Y
+//! A = √π c (w(iZ₁) − w(iZ₂)),
+//! B = (−1 + √π/(2√Y) (1 − Z₁²) w(iZ₁) − √π/(2√Y) (1 − Z₂²) w(iZ₂)) / C̃₂
+//! ```
+//!
+//! with γ_D the Doppler HWHM and w the Faddeeva function. Its Lorentz limit is
+//! (1/π)/(Γ₀ − i(ν − ν₀ − Δ₀)): Re I is the normalised line shape (unit area) and Im I is
+//! positive on the high-wavenumber side. **Line mixing** (first order, Rosenkranz 1975) is
+//! then absorption ∝ Re I + Y·Im I, so Y > 0 raises the high-wavenumber side (the convention of
+//! the NIST/HITRAN parameters, `../shared/data/nist_30012/PROVENANCE.md`).
+//!
+//! Limits: η = 0 gives the speed-dependent Nelkin-Ghatak (hard-collision) profile, η = ν_VC = 0
+//! the speed-dependent Voigt, and C₂ = 0 with η = ν_VC = 0 the Voigt: that case takes the
+//! Voigt's own formula, Z₁ = c (i(ν₀ − ν) + C₀), A = √π c w(iZ₁).
+//!
+//! **Numerics.** As Γ₂/Γ₀ → 0 (some lines have 1e-4), Y grows as 1/C̃₂² and
+//! Z₁ = √(X + Y) − √Y cancels catastrophically; it is evaluated as X/(√(X + Y) + √Y), the same
+//! number without the cancellation (HAPI switches instead to a first-order expansion when
+//! |X| ≤ 3e-8 |Y|). B multiplies η C₂, whose factor C₂/C̃₂ = 1/(1 − η) keeps that product's
+//! absolute error at rounding level even though B itself cancels. Where |Y| ≪ |X| the two w
+//! terms of A cancel by √(Y/X); HAPI switches to an asymptotic form below |Y/X| = 1e-15, which
+//! would need a detuning of ~10¹² cm⁻¹ for these lines (|Y/X| ≈ 1/(4c²C̃₂|ν − ν₀|)), so the
+//! general form is kept (at a 25 cm⁻¹ wing and 1 atm √(Y/X) ≈ 0.01: two digits lost of 16).
+
+use num_complex::Complex64;
+
+use super::voigt::SQRT_LN2;
+
+const SQRT_PI: f64 = 1.772_453_850_905_516;
+
+/// The Faddeeva function w(z) (errorfunctions: S. G. Johnson's package, as scipy's `wofz`).
+#[inline]
+fn w(z: Complex64) -> Complex64 {
+    errorfunctions::w_with_relerror(z, 0.0)
+}
+
+/// Parameters of one line at one state (all cm⁻¹ except η).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HtParameters {
+    /// Unshifted line centre ν₀.
+    pub nu0: f64,
+    /// Doppler HWHM γ_D.
+    pub gamma_d: f64,
+    /// Speed-averaged collisional half width Γ₀.
+    pub gamma0: f64,
+    /// Its quadratic speed dependence Γ₂.
+    pub gamma2: f64,
+    /// Speed-averaged pressure shift Δ₀.
+    pub delta0: f64,
+    /// Its quadratic speed dependence Δ₂.
+    pub delta2: f64,
+    /// Velocity-changing collision frequency ν_VC (Dicke narrowing).
+    pub nu_vc: f64,
+    /// Correlation parameter η (dimensionless, 0 ≤ η < 1).
+    pub eta: f64,
+}
+
+/// The complex normalised Hartmann-Tran profile I(ν) \[1/cm⁻¹\] (module docs): Re I is the line
+/// shape, Im I the dispersion that first-order line mixing adds.
+pub fn hartmann_tran(p: &HtParameters, nu: f64) -> Complex64 {
+    let i = Complex64::new(0.0, 1.0);
+    let c = SQRT_LN2 / p.gamma_d;
+    let c0 = Complex64::new(p.gamma0, p.delta0);
+    let c2 = Complex64::new(p.gamma2, p.delta2);
+    let c0t = (1.0 - p.eta) * (c0 - 1.5 * c2) + p.nu_vc;
+    let c2t = (1.0 - p.eta) * c2;
+    let detuning = i * (p.nu0 - nu);
+    let (a, b) = if c2t.norm() == 0.0 {
+        // No speed dependence: the Voigt's own argument, z = c (i(ν₀ − ν) + C̃₀).
+        let z1 = (detuning + c0t) * c;
+        let w1 = w(i * z1);
+        let a = SQRT_PI * c * w1;
+        // B is multiplied by C₂ = 0 below.
+        (a, Complex64::new(0.0, 0.0))
+    } else {
+        let x = (detuning + c0t) / c2t;
+        let sqrt_y = 1.0 / (2.0 * c * c2t);
+        let y = sqrt_y * sqrt_y;
+        // Principal √(X + Y), as published. Z₁ = √(X+Y) − √Y = X/(√(X+Y) + √Y): the second
+        // form where the first would cancel (always, as Re √Y ≥ 0 and Re √(X+Y) ≥ 0 when
+        // Γ₂ > 0).
+        let root = (x + y).sqrt();
+        let sum = root + sqrt_y;
+        let diff = root - sqrt_y;
+        let z1 = if sum.norm() >= diff.norm() {
+            x / sum
+        } else {
+            diff
+        };
+        let z2 = sum;
+        let (w1, w2) = (w(i * z1), w(i * z2));
+        let a = SQRT_PI * c * (w1 - w2);
+        let k = SQRT_PI / (2.0 * sqrt_y);
+        let b = (-1.0 + k * (1.0 - z1 * z1) * w1 - k * (1.0 - z2 * z2) * w2) / c2t;
+        (a, b)
+    };
+    let denom = 1.0 - (p.nu_vc - p.eta * (c0 - 1.5 * c2)) * a + p.eta * c2 * b;
+    a / denom * std::f64::consts::FRAC_1_PI
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::spectroscopy::voigt::voigt_profile_exact;
+
+    fn r16(p_atm: f64) -> HtParameters {
+        // R(16)e of the NIST list at 296 K: Γ₀ = 0.0739 p, Γ₂/Γ₀ = 0.0772, ν_VC = 0.0054 p.
+        HtParameters {
+            nu0: 6359.967248,
+            gamma_d: 0.005_8,
+            gamma0: 0.073_949_633 * p_atm,
+            gamma2: 0.077_240_676 * 0.073_949_633 * p_atm,
+            delta0: -0.005_407_741 * p_atm,
+            delta2: 0.0,
+            nu_vc: 0.005_439_081 * p_atm,
+            eta: 0.0,
+        }
+    }
+
+    /// Without speed dependence, Dicke narrowing and correlation the profile is the Voigt
+    /// (real part, exact Faddeeva) and its dispersion the Faddeeva function's imaginary part.
+    #[test]
+    fn without_beyond_voigt_terms_it_is_the_voigt() {
+        let p = HtParameters {
+            gamma2: 0.0,
+            nu_vc: 0.0,
+            ..r16(0.5)
+        };
+        for k in -200..=200 {
+            let nu = p.nu0 + k as f64 * 0.01;
+            let i = hartmann_tran(&p, nu);
+            let v = voigt_profile_exact(nu - p.nu0 - p.delta0, p.gamma_d, p.gamma0);
+            assert!((i.re - v).abs() <= 1e-14 * v, "ν {nu}: {} vs {v}", i.re);
+        }
+    }
+
+    /// Unit area: ∫ Re I dν = 1, the far wings (Lorentzian, Γ₀/(π Δ²)) added analytically.
+    #[test]
+    fn the_profile_has_unit_area() {
+        for p_atm in [1.0, 0.1, 0.01] {
+            let p = HtParameters {
+                eta: 0.3,
+                ..r16(p_atm)
+            };
+            let half = 30.0;
+            let n = 600_000;
+            let h = 2.0 * half / n as f64;
+            let mut sum = 0.0;
+            for k in 0..=n {
+                let nu = p.nu0 + p.delta0 - half + k as f64 * h;
+                let w = if k == 0 || k == n { 0.5 } else { 1.0 };
+                sum += w * hartmann_tran(&p, nu).re * h;
+            }
+            let wings = 2.0 * p.gamma0 / (std::f64::consts::PI * half);
+            assert!(
+                (sum + wings - 1.0).abs() < 2e-5,
+                "p {p_atm} atm: area {}",
+                sum + wings
+            );
+        }
+    }
+
+    /// As Γ₂ → 0 the profile tends to the Γ₂ = 0 one linearly, without cancellation noise:
+    /// I(2ε) − I(0) = 2 (I(ε) − I(0)) up to second order (measured: the residual is ~240 ε of
+    /// the first-order term; the floor is the rounding of I), over ±2 cm⁻¹, down to
+    /// Γ₂/Γ₀ = 1e-12, where √(X + Y) − √Y computed as written would lose 7 digits of I.
+    #[test]
+    fn small_speed_dependence_is_accurate() {
+        let base = HtParameters {
+            gamma2: 0.0,
+            ..r16(1.0)
+        };
+        for ratio in [1e-6, 1e-9, 1e-12] {
+            let at = |r: f64, nu: f64| {
+                hartmann_tran(
+                    &HtParameters {
+                        gamma2: r * base.gamma0,
+                        ..base
+                    },
+                    nu,
+                )
+            };
+            let (mut worst, mut scale, mut peak) = (0.0f64, 0.0f64, 0.0f64);
+            for k in -2000..=2000 {
+                let nu = base.nu0 + k as f64 * 0.001;
+                let i0 = at(0.0, nu);
+                let d1 = at(ratio, nu) - i0;
+                let d2 = at(2.0 * ratio, nu) - i0;
+                worst = worst.max((d2 - 2.0 * d1).norm());
+                scale = scale.max(d1.norm());
+                peak = peak.max(i0.norm());
+            }
+            assert!(
+                // Rounding of I itself (1e-16 relative) is the floor.
+                worst <= 300.0 * ratio * scale + 1e-14 * peak,
+                "Γ₂/Γ₀ = {ratio}: second-order residual {worst:e} against first-order {scale:e}"
+            );
+        }
+    }
+
+    /// Speed dependence narrows the line: a higher peak and weaker near wings than the Voigt
+    /// of the same Γ₀, by about 1 % at R(16)e's 1 atm parameters (the NIST fits' size).
+    #[test]
+    fn speed_dependence_raises_the_peak() {
+        let sd = HtParameters {
+            nu_vc: 0.0,
+            ..r16(1.0)
+        };
+        let v = HtParameters { gamma2: 0.0, ..sd };
+        let centre = sd.nu0 + sd.delta0;
+        let ratio = hartmann_tran(&sd, centre).re / hartmann_tran(&v, centre).re;
+        assert!(ratio > 1.003 && ratio < 1.03, "peak ratio {ratio}");
+    }
+}
