@@ -193,12 +193,13 @@ pub fn retrieval_setup(scene: &Scene) -> Result<Retrieval, RetrievalError> {
         .as_ref()
         .map(|r| r.filter)
         .unwrap_or(crate::instrument::laser::Filter::none());
+    let (lines, options) = config.assumed(&gas.lines, &gas.options);
     let reference = ReferenceState::new(
         &atm.profile,
         &edges,
         &config.gas,
-        &gas.lines,
-        &gas.options,
+        lines,
+        &options,
         AssumedInstrument {
             laser: &scene.laser,
             lines: &scene.sampling.lines,

@@ -14,7 +14,7 @@ use lidarsim::spectroscopy::htp::{HtParameters, hartmann_tran};
 use lidarsim::spectroscopy::xsec::GasState;
 use lidarsim::spectroscopy::{
     Conventions, LblOptions, LineFilter, LineList, LineShapeModel, SpectroscopyError,
-    cross_section_at,
+    cross_section_at, layer_optical_depths_at,
 };
 
 use crate::util::{lidarsim, project_root, shared_file};
@@ -354,4 +354,98 @@ albedo = 0.3
         e.contains("gas_absorption.line_shape") && e.contains("CSV"),
         "{e}"
     );
+}
+
+/// A scene's retrieval can assume other spectroscopy than its truth (`[retrieval]`
+/// `line_shape`, `line_mixing`, `lines`): a Hartmann-Tran truth with line mixing retrieved with
+/// the Voigt gives the IPDA bias X (D_truth/D_Voigt − 1) of a monochromatic laser, both D
+/// computed here from layer optical depths of the 12 km path (to 1e-6 of the bias).
+#[test]
+fn a_retrieval_can_assume_other_spectroscopy() {
+    let Some(path) = shared_file("data/nist_30012/CO2_30012_NIST_SDNGP_LM.csv") else {
+        return;
+    };
+    let text = format!(
+        r#"[lidar]
+altitude_m = 12000.0
+zenith_angle_deg = 180.0
+beam_divergence_full_angle_mrad = 0.1
+telescope_diameter_m = 0.3
+optical_efficiency = 0.5
+fov_full_angle_mrad = 1.0
+[[channel]]
+name = "on"
+wavenumber_cm1 = 6360.00184
+[[channel]]
+name = "off"
+wavenumber_cm1 = 6360.574
+[laser]
+pulse_energy_j = 0.01
+repetition_rate_hz = 100.0
+[receiver]
+filter_bandwidth_ghz = 1.0
+quantum_efficiency = 0.8
+nep_w_per_sqrt_hz = 4.0e-14
+bandwidth_mhz = 10.0
+[retrieval]
+target = "surface"
+averaging_shots = 100
+realisations = 10
+line_shape = "voigt"
+line_mixing = false
+[gates]
+start_m = 11900.0
+end_m = 12050.0
+width_m = 50.0
+[atmosphere]
+standard = "us_standard"
+co2_ppm = 420.0
+layer_thickness_m = 500.0
+top_m = 15000.0
+rayleigh = false
+[gas_absorption]
+lines = {:?}
+line_shape = "ht"
+line_mixing = true
+[surface]
+altitude_m = 0.0
+albedo = 0.3
+[simulation]
+photons = 0
+"#,
+        path.display().to_string()
+    );
+    let scene = lidarsim::scene::Scene::from_toml(Path::new("assumed.toml"), &text).unwrap();
+    let opts = lidarsim::transport::TransportOptions::from_scene(&scene);
+    let run = lidarsim::pipeline::run(&scene, &opts).unwrap();
+    let ipda = run
+        .products
+        .iter()
+        .find(|p| p.method == lidarsim::retrieval::Method::Ipda)
+        .unwrap();
+    // Independent: D over the 0–12 km path with each spectroscopy.
+    let gas = scene.gas.as_ref().unwrap();
+    let atm = scene.atmosphere.as_ref().unwrap();
+    let edges: Vec<f64> = (0..=24).map(|i| i as f64 * 500.0).collect();
+    let nus = [6360.00184, 6360.574];
+    let d = |o: &LblOptions| {
+        let t = layer_optical_depths_at(&atm.profile, &gas.lines, &edges, &nus, o).unwrap();
+        t.iter().map(|r| r[0] - r[1]).sum::<f64>()
+    };
+    let d_truth = d(&gas.options);
+    let d_voigt = d(&LblOptions {
+        line_shape: LineShapeModel::Voigt,
+        line_mixing: false,
+        ..gas.options
+    });
+    let want = ipda.truth * (d_truth / d_voigt - 1.0);
+    let got = ipda.retrieved - ipda.truth;
+    println!(
+        "IPDA 12 km, on 0.04 cm⁻¹ above R(16)e: bias {got:.4} ppm, X (D_HT/D_V − 1) = {want:.4} ppm"
+    );
+    assert!(
+        (got - want).abs() < 1e-6 * want.abs() + 1e-9,
+        "{got} vs {want}"
+    );
+    assert!(want.abs() > 0.1);
 }

@@ -2,6 +2,19 @@
 //! the averaging. Built from a scene's `[retrieval]` section (validated there) or by hand.
 
 use std::ops::Range;
+use std::sync::Arc;
+
+use crate::spectroscopy::{LblOptions, LineList};
+
+/// The spectroscopy a retrieval assumes for its reference state: lines and line shape, which
+/// may differ from the truth's (to study imperfect spectroscopy).
+#[derive(Debug, Clone, PartialEq)]
+pub struct AssumedSpectroscopy {
+    /// The lines.
+    pub lines: Arc<LineList>,
+    /// Line-by-line options (line shape, line mixing, wing…).
+    pub options: LblOptions,
+}
 
 /// The hard target of an integrated-path (IPDA) retrieval.
 #[derive(Debug, Clone, PartialEq)]
@@ -52,6 +65,21 @@ impl DialCells {
     }
 }
 
+impl RetrievalConfig {
+    /// The lines and options of the reference state: the retrieval's own spectroscopy, or the
+    /// truth's (`truth_lines`, `truth_options`) when it has none.
+    pub fn assumed<'a>(
+        &'a self,
+        truth_lines: &'a LineList,
+        truth_options: &LblOptions,
+    ) -> (&'a LineList, LblOptions) {
+        match &self.spectroscopy {
+            Some(s) => (&s.lines, s.options),
+            None => (truth_lines, *truth_options),
+        }
+    }
+}
+
 /// The retrieval settings.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RetrievalConfig {
@@ -71,4 +99,6 @@ pub struct RetrievalConfig {
     pub averaging_label: String,
     /// Noisy realisations simulated per product.
     pub realisations: usize,
+    /// The spectroscopy of the reference state; `None`: the truth's (`[gas_absorption]`).
+    pub spectroscopy: Option<AssumedSpectroscopy>,
 }

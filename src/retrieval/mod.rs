@@ -7,7 +7,7 @@
 
 pub mod config;
 
-pub use config::{DialCells, HardTarget, RetrievalConfig, TargetKind};
+pub use config::{AssumedSpectroscopy, DialCells, HardTarget, RetrievalConfig, TargetKind};
 pub mod products;
 pub mod reference;
 

@@ -85,6 +85,9 @@ pub(super) struct RetrievalFile {
     pub averaging_length_km: Option<f64>,
     pub platform_speed_m_per_s: Option<f64>,
     pub realisations: Option<usize>,
+    pub lines: Option<String>,
+    pub line_shape: Option<String>,
+    pub line_mixing: Option<bool>,
 }
 
 #[derive(Debug, Deserialize)]

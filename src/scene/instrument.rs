@@ -2,6 +2,7 @@
 //! `[retrieval]`, validated into the instrument's and the retrieval's plain types.
 
 use std::path::Path;
+use std::sync::Arc;
 
 use super::file::{self, KeyPath, SceneFile};
 use super::{Atmosphere, Channel, GasAbsorption, Gates, Layer, Lidar, Surface, Validator};
@@ -10,8 +11,9 @@ use crate::instrument::detector::{self, Detector};
 use crate::instrument::laser::{Filter, Laser};
 use crate::instrument::line_shape::{LineShape, LineShapeTable, MHZ_PER_CM1};
 use crate::instrument::signals::Receiver;
-use crate::retrieval::{DialCells, HardTarget, RetrievalConfig, TargetKind};
+use crate::retrieval::{AssumedSpectroscopy, DialCells, HardTarget, RetrievalConfig, TargetKind};
 use crate::spectroscopy::isotopologues;
+use crate::spectroscopy::{LineFilter, LineList};
 
 /// Default number of line-shape quadrature nodes (odd, so the line centre is a node).
 const DEFAULT_LINE_SHAPE_NODES: usize = 5;
@@ -468,6 +470,7 @@ impl Validator<'_> {
                 format!("{realisations} must lie in 10..=1000000"),
             ));
         }
+        let spectroscopy = self.assumed_spectroscopy(r, g)?;
         Ok(Some(RetrievalConfig {
             gas: gas_name,
             on,
@@ -477,7 +480,65 @@ impl Validator<'_> {
             averaging_shots,
             averaging_label,
             realisations,
+            spectroscopy,
         }))
+    }
+
+    /// `[retrieval]`'s own spectroscopy (`lines`, `line_shape`, `line_mixing`), if it differs
+    /// from the truth's: lines cut like the truth's, the truth's options otherwise.
+    fn assumed_spectroscopy(
+        &self,
+        r: &file::RetrievalFile,
+        g: &GasAbsorption,
+    ) -> Result<Option<AssumedSpectroscopy>, InputError> {
+        if r.lines.is_none() && r.line_shape.is_none() && r.line_mixing.is_none() {
+            return Ok(None);
+        }
+        let sec = KeyPath::table("retrieval");
+        let mut options = g.options;
+        if let Some(shape) = &r.line_shape {
+            options.line_shape = shape
+                .parse()
+                .map_err(|m: String| self.err(&sec.key("line_shape"), m))?;
+        }
+        if let Some(m) = r.line_mixing {
+            options.line_mixing = m;
+        }
+        let lines = match &r.lines {
+            Some(f) => {
+                let path = self.path.parent().unwrap_or(Path::new(".")).join(f);
+                let (lo, hi) = g
+                    .lines
+                    .lines
+                    .iter()
+                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), l| {
+                        (a.min(l.nu_cm1), b.max(l.nu_cm1))
+                    });
+                let molecules = Some(g.lines.molecules());
+                let filter = LineFilter {
+                    molecules,
+                    isotopologues: None,
+                    min_cm1: Some(lo - 1.0),
+                    max_cm1: Some(hi + 1.0),
+                };
+                Arc::new(
+                    LineList::read(&path, &filter)
+                        .map_err(|e| self.err(&sec.key("lines"), format!("line file: {e}")))?,
+                )
+            }
+            None => g.lines.clone(),
+        };
+        options.check_lines(&lines).map_err(|e| {
+            let key = if r.line_shape.is_some() {
+                "line_shape"
+            } else if r.line_mixing.is_some() {
+                "line_mixing"
+            } else {
+                "lines"
+            };
+            self.err(&sec.key(key), e.to_string())
+        })?;
+        Ok(Some(AssumedSpectroscopy { lines, options }))
     }
 
     /// The IPDA hard target: given, or the surface when it is in range.

@@ -476,12 +476,13 @@ impl Study<'_> {
     /// retrieval assumes the scene's instrument.
     fn reference(&self, profile: &Profile, edges: &[f64]) -> Result<ReferenceState, String> {
         let gas = self.scene.gas.as_ref().ok_or("no gas absorption")?;
+        let (lines, options) = self.config.assumed(&gas.lines, &gas.options);
         ReferenceState::new(
             profile,
             &fit_edges(edges, profile),
             &self.config.gas,
-            &gas.lines,
-            &gas.options,
+            lines,
+            &options,
             AssumedInstrument {
                 laser: &self.scene.laser,
                 lines: &self.scene.sampling.lines,
