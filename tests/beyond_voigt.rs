@@ -365,6 +365,45 @@ fn a_retrieval_can_assume_other_spectroscopy() {
     let Some(path) = shared_file("data/nist_30012/CO2_30012_NIST_SDNGP_LM.csv") else {
         return;
     };
+    let scene = assumed_scene(&path);
+
+    let opts = lidarsim::transport::TransportOptions::from_scene(&scene);
+    let run = lidarsim::pipeline::run(&scene, &opts).unwrap();
+    let ipda = run
+        .products
+        .iter()
+        .find(|p| p.method == lidarsim::retrieval::Method::Ipda)
+        .unwrap();
+    // Independent: D over the 0–12 km path with each spectroscopy.
+    let gas = scene.gas.as_ref().unwrap();
+    let atm = scene.atmosphere.as_ref().unwrap();
+    let edges: Vec<f64> = (0..=24).map(|i| i as f64 * 500.0).collect();
+    let nus = [6360.00184, 6360.574];
+    let d = |o: &LblOptions| {
+        let t = layer_optical_depths_at(&atm.profile, &gas.lines, &edges, &nus, o).unwrap();
+        t.iter().map(|r| r[0] - r[1]).sum::<f64>()
+    };
+    let d_truth = d(&gas.options);
+    let d_voigt = d(&LblOptions {
+        line_shape: LineShapeModel::Voigt,
+        line_mixing: false,
+        ..gas.options
+    });
+    let want = ipda.truth * (d_truth / d_voigt - 1.0);
+    let got = ipda.retrieved - ipda.truth;
+    println!(
+        "IPDA 12 km, on 0.04 cm⁻¹ above R(16)e: bias {got:.4} ppm, X (D_HT/D_V − 1) = {want:.4} ppm"
+    );
+    assert!(
+        (got - want).abs() < 1e-6 * want.abs() + 1e-9,
+        "{got} vs {want}"
+    );
+    assert!(want.abs() > 0.1);
+}
+
+/// An IPDA at 12 km over a Hartmann-Tran truth with line mixing (NIST lines), retrieved with the
+/// Voigt.
+fn assumed_scene(path: &std::path::Path) -> lidarsim::scene::Scene {
     let text = format!(
         r#"[lidar]
 altitude_m = 12000.0
@@ -415,37 +454,52 @@ photons = 0
 "#,
         path.display().to_string()
     );
-    let scene = lidarsim::scene::Scene::from_toml(Path::new("assumed.toml"), &text).unwrap();
-    let opts = lidarsim::transport::TransportOptions::from_scene(&scene);
-    let run = lidarsim::pipeline::run(&scene, &opts).unwrap();
-    let ipda = run
-        .products
+    lidarsim::scene::Scene::from_toml(Path::new("assumed.toml"), &text).unwrap()
+}
+
+/// In `lidarsim dial` the assumed spectroscopy is a row of the error budget: for each profile
+/// it equals X (D_truth/D_Voigt − 1) of that profile's 12 km path (to 1e-6).
+#[test]
+fn the_line_shape_is_a_budget_row() {
+    let Some(path) = shared_file("data/nist_30012/CO2_30012_NIST_SDNGP_LM.csv") else {
+        return;
+    };
+    let scene = assumed_scene(&path);
+    let (set, _) =
+        lidarsim::atmosphere::class_ensemble(lidarsim::atmosphere::LatitudeClass::Mid, 3, 1)
+            .unwrap();
+    let options = lidarsim::study::dial::StudyOptions::from_scene(&scene).unwrap();
+    let result = lidarsim::study::dial::run(&scene, &set, &options, &|| {}).unwrap();
+    let j = lidarsim::study::dial::Source::ALL
         .iter()
-        .find(|p| p.method == lidarsim::retrieval::Method::Ipda)
+        .position(|s| *s == lidarsim::study::dial::Source::Spectroscopy)
         .unwrap();
-    // Independent: D over the 0–12 km path with each spectroscopy.
     let gas = scene.gas.as_ref().unwrap();
-    let atm = scene.atmosphere.as_ref().unwrap();
     let edges: Vec<f64> = (0..=24).map(|i| i as f64 * 500.0).collect();
     let nus = [6360.00184, 6360.574];
-    let d = |o: &LblOptions| {
-        let t = layer_optical_depths_at(&atm.profile, &gas.lines, &edges, &nus, o).unwrap();
-        t.iter().map(|r| r[0] - r[1]).sum::<f64>()
-    };
-    let d_truth = d(&gas.options);
-    let d_voigt = d(&LblOptions {
-        line_shape: LineShapeModel::Voigt,
-        line_mixing: false,
-        ..gas.options
-    });
-    let want = ipda.truth * (d_truth / d_voigt - 1.0);
-    let got = ipda.retrieved - ipda.truth;
-    println!(
-        "IPDA 12 km, on 0.04 cm⁻¹ above R(16)e: bias {got:.4} ppm, X (D_HT/D_V − 1) = {want:.4} ppm"
-    );
-    assert!(
-        (got - want).abs() < 1e-6 * want.abs() + 1e-9,
-        "{got} vs {want}"
-    );
-    assert!(want.abs() > 0.1);
+    for (m, o) in set.members.iter().zip(&result.outcomes) {
+        let rec = &o.records.as_ref().unwrap()[0];
+        let truth = scene
+            .with_profile(m.profile.clone())
+            .unwrap()
+            .atmosphere
+            .unwrap()
+            .profile;
+        let d = |opts: &LblOptions| {
+            let t = layer_optical_depths_at(&truth, &gas.lines, &edges, &nus, opts).unwrap();
+            t.iter().map(|r| r[0] - r[1]).sum::<f64>()
+        };
+        let voigt = LblOptions {
+            line_shape: LineShapeModel::Voigt,
+            line_mixing: false,
+            ..gas.options
+        };
+        let want = rec.truth_ppm * (d(&gas.options) / d(&voigt) - 1.0);
+        let got = rec.budget_ppm[j];
+        assert!(
+            (got - want).abs() < 1e-6 * want.abs(),
+            "{}: {got} vs {want}",
+            m.meta.id
+        );
+    }
 }

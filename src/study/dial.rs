@@ -25,6 +25,7 @@
 //! | line width | the true line width is `linewidth_fraction` wider than assumed |
 //! | spectral impurity | the scene's spectral purity against a pure laser |
 //! | mean-profile σ | the virtual cross-sections of the class-mean profile against the profile's own |
+//! | spectroscopy | the retrieval's lines and line shape (`[retrieval]` `lines`, `line_shape`, `line_mixing`) against the truth's |
 //!
 //! The state changes are made with [`shift_member`] (levels re-hydrostated), and compared with
 //! the unshifted-but-re-levelled state, so only the change itself shows.
@@ -111,11 +112,14 @@ pub enum Source {
     SpectralImpurity,
     /// Virtual cross-sections of the class-mean profile instead of the profile's own.
     MeanProfileSigma,
+    /// The retrieval's spectroscopy (`[retrieval]` lines, line shape, line mixing) instead of
+    /// the truth's.
+    Spectroscopy,
 }
 
 impl Source {
     /// Every row, in table order.
-    pub const ALL: [Source; 9] = [
+    pub const ALL: [Source; 10] = [
         Source::Random,
         Source::Temperature,
         Source::Humidity,
@@ -125,6 +129,7 @@ impl Source {
         Source::LineWidth,
         Source::SpectralImpurity,
         Source::MeanProfileSigma,
+        Source::Spectroscopy,
     ];
 
     /// Column-friendly name.
@@ -139,6 +144,7 @@ impl Source {
             Source::LineWidth => "line_width",
             Source::SpectralImpurity => "spectral_impurity",
             Source::MeanProfileSigma => "mean_profile_sigma",
+            Source::Spectroscopy => "spectroscopy",
         }
     }
 
@@ -165,6 +171,7 @@ impl Source {
                 format!("spectral purity {} vs 1", laser.spectral_purity)
             }
             Source::MeanProfileSigma => "class-mean virtual σ vs the profile's own".into(),
+            Source::Spectroscopy => "the retrieval's spectroscopy vs the truth's".into(),
         }
     }
 }
@@ -475,8 +482,22 @@ impl Study<'_> {
     /// The reference state of `profile` on `edges` (cut to the profile's top), as the
     /// retrieval assumes the scene's instrument.
     fn reference(&self, profile: &Profile, edges: &[f64]) -> Result<ReferenceState, String> {
+        self.reference_as(profile, edges, true)
+    }
+
+    /// The reference state with the retrieval's own spectroscopy (`assumed`) or the truth's.
+    fn reference_as(
+        &self,
+        profile: &Profile,
+        edges: &[f64],
+        assumed: bool,
+    ) -> Result<ReferenceState, String> {
         let gas = self.scene.gas.as_ref().ok_or("no gas absorption")?;
-        let (lines, options) = self.config.assumed(&gas.lines, &gas.options);
+        let (lines, options) = if assumed {
+            self.config.assumed(&gas.lines, &gas.options)
+        } else {
+            (&*gas.lines, gas.options)
+        };
         ReferenceState::new(
             profile,
             &fit_edges(edges, profile),
@@ -628,8 +649,13 @@ impl Study<'_> {
         };
         let steps = &self.options.steps;
         // References: the truth's own, re-levelled, and one per knowledge error.
-        let (own, knowledge) = Clock::time(&self.clock.references, || {
+        let (own, exact, knowledge) = Clock::time(&self.clock.references, || {
             let own = self.reference(&truth_member.profile, &edges)?;
+            // The truth's spectroscopy, where the retrieval assumes another.
+            let exact = match &self.config.spectroscopy {
+                Some(_) => Some(self.reference_as(&truth_member.profile, &edges, false)?),
+                None => None,
+            };
             let shifted = |s: StateShift| -> Result<ReferenceState, String> {
                 let p = shift_member(&truth_member, &s).map_err(|e| e.to_string())?;
                 self.reference(&p.profile, &edges)
@@ -650,7 +676,7 @@ impl Study<'_> {
                     ..none
                 })?,
             ];
-            Ok::<_, String>((own, knowledge))
+            Ok::<_, String>((own, exact, knowledge))
         })?;
         // Truths: the scene's laser, and one per laser perturbation (None: the row is 0).
         let laser = &scene.laser;
@@ -688,6 +714,10 @@ impl Study<'_> {
         ];
         let paper = self.retrieve(&base, mean, &truth, seed)?;
         let own_p = self.retrieve(&base, &own, &truth, seed)?;
+        let exact_p = exact
+            .as_ref()
+            .map(|r| self.retrieve(&base, r, &truth, seed))
+            .transpose()?;
         let know: Vec<Vec<Vec<Product>>> = knowledge
             .iter()
             .map(|r| self.retrieve(&base, r, &truth, seed))
@@ -707,7 +737,8 @@ impl Study<'_> {
                 .iter()
                 .map(|l| l.as_ref().map(|l| l[p].clone()))
                 .collect();
-            records.extend(pair_records(&paper[p], &own_p[p], &know_p, &las_p));
+            let exact = exact_p.as_ref().map(|e| e[p].as_slice());
+            records.extend(pair_records(&paper[p], &own_p[p], exact, &know_p, &las_p));
         }
         Ok(records)
     }
@@ -745,12 +776,14 @@ fn with_signals(
 /// The records of one pair from its products (in [`Retrieval`]'s target order: IPDA mixing
 /// ratio and slant column, then per DIAL cell density and mixing ratio).
 ///
-/// `know` holds the products with the re-levelled own reference and with each knowledge error
+/// `exact` holds the products with the own reference in the truth's spectroscopy, where the
+/// retrieval assumes another; `know` holds the products with the re-levelled own reference and with each knowledge error
 /// (temperature, humidity, surface pressure); `las` those with each laser perturbation
 /// (offset, no jitter, wider, pure), None where the perturbation does not apply.
 fn pair_records(
     paper: &[Product],
     own: &[Product],
+    exact: Option<&[Product]>,
     know: &[Vec<Product>],
     las: &[Option<Vec<Product>>],
 ) -> Vec<Record> {
@@ -784,6 +817,7 @@ fn pair_records(
         budget[7] = laser_row(3, -1.0);
         let retrieved = ppm(paper[col].retrieved);
         budget[8] = retrieved - ppm(own[col].retrieved);
+        budget[9] = exact.map_or(0.0, |e| own[mr].retrieved - e[mr].retrieved);
         out.push(Record {
             pair: paper[mr].channel_pair.clone(),
             method: paper[mr].method,
