@@ -10,8 +10,8 @@ use lidarsim::atmosphere::StandardAtmosphere;
 use lidarsim::spectroscopy::voigt::{re_w, re_w_exact};
 use lidarsim::spectroscopy::xsec::GasState;
 use lidarsim::spectroscopy::{
-    GasOpticalDepthTable, LblOptions, LineFilter, LineList, VoigtMethod, WavenumberGrid,
-    cross_section,
+    GasOpticalDepthTable, LblOptions, LineFilter, LineList, LineShapeModel, VoigtMethod,
+    WavenumberGrid, cross_section,
 };
 
 fn voigt(c: &mut Criterion) {
@@ -86,6 +86,52 @@ fn xsec(c: &mut Criterion) {
     g.finish();
 }
 
+/// Beyond Voigt (issue 15, item 7): the NIST list of the 30012 band (51 lines, 20 cm⁻¹ at
+/// 0.001 cm⁻¹, 1 atm) with the Voigt, the speed-dependent Voigt and Hartmann-Tran with line
+/// mixing, multigrid and direct; throughput in grid points (divide by 51 lines for line·points).
+fn beyond_voigt(c: &mut Criterion) {
+    let shared = std::env::var_os("LIDARSIM_SHARED")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared"));
+    let csv = shared.join("data/nist_30012/CO2_30012_NIST_SDNGP_LM.csv");
+    if !csv.is_file() {
+        println!("skipped: {} is absent", csv.display());
+        return;
+    }
+    let lines = LineList::read(&csv, &LineFilter::default()).unwrap();
+    let grid = WavenumberGrid::new(6350.0, 6370.0, 0.001).unwrap();
+    let state = GasState {
+        pressure_pa: 101_325.0,
+        temperature_k: 296.0,
+        self_vmr: 0.0004,
+    };
+    let mut g = c.benchmark_group("beyond_voigt");
+    g.sample_size(10);
+    g.throughput(Throughput::Elements(grid.len as u64 * lines.len() as u64));
+    for (name, shape, mixing) in [
+        ("voigt", LineShapeModel::Voigt, false),
+        ("sdvoigt", LineShapeModel::SdVoigt, false),
+        ("ht_line_mixing", LineShapeModel::HartmannTran, true),
+    ] {
+        let fast = LblOptions {
+            line_shape: shape,
+            line_mixing: mixing,
+            ..Default::default()
+        };
+        g.bench_function(format!("{name}_multigrid"), |b| {
+            b.iter(|| cross_section(&lines, 2, &state, &grid, &fast).unwrap())
+        });
+        let direct = LblOptions {
+            multigrid: false,
+            ..fast
+        };
+        g.bench_function(format!("{name}_direct"), |b| {
+            b.iter(|| cross_section(&lines, 2, &state, &grid, &direct).unwrap())
+        });
+    }
+    g.finish();
+}
+
 fn table(c: &mut Criterion) {
     let mut prof = StandardAtmosphere::UsStandard.profile();
     for g in prof.gases.iter_mut().filter(|g| g.name == "CO2") {
@@ -114,6 +160,6 @@ criterion_group! {
     name = group;
     // No HTML plots: criterion's plotters backend needs system fonts this machine lacks.
     config = Criterion::default().without_plots();
-    targets = voigt, xsec, table
+    targets = voigt, xsec, beyond_voigt, table
 }
 criterion_main!(group);

@@ -41,7 +41,7 @@ const SQRT_PI: f64 = 1.772_453_850_905_516;
 
 /// The Faddeeva function w(z) (errorfunctions: S. G. Johnson's package, as scipy's `wofz`).
 #[inline]
-fn w(z: Complex64) -> Complex64 {
+fn w_exact(z: Complex64) -> Complex64 {
     errorfunctions::w_with_relerror(z, 0.0)
 }
 
@@ -67,8 +67,20 @@ pub struct HtParameters {
 }
 
 /// The complex normalised Hartmann-Tran profile I(ν) \[1/cm⁻¹\] (module docs): Re I is the line
-/// shape, Im I the dispersion that first-order line mixing adds.
+/// shape, Im I the dispersion that first-order line mixing adds. Exact Faddeeva function.
 pub fn hartmann_tran(p: &HtParameters, nu: f64) -> Complex64 {
+    hartmann_tran_with(p, nu, w_exact)
+}
+
+/// [`hartmann_tran`] with the Faddeeva function's asymptotic expansion far from the origin
+/// ([`super::voigt::w_fast`]): the line-by-line fast path (within 1e-8 of the peak).
+pub fn hartmann_tran_fast(p: &HtParameters, nu: f64) -> Complex64 {
+    hartmann_tran_with(p, nu, super::voigt::w_fast)
+}
+
+/// The profile with a given Faddeeva function.
+#[inline]
+fn hartmann_tran_with(p: &HtParameters, nu: f64, w: fn(Complex64) -> Complex64) -> Complex64 {
     let i = Complex64::new(0.0, 1.0);
     let c = SQRT_LN2 / p.gamma_d;
     let c0 = Complex64::new(p.gamma0, p.delta0);

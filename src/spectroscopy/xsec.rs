@@ -27,9 +27,9 @@
 use rayon::prelude::*;
 
 use super::hitran::LineList;
-use super::htp::{HtParameters, hartmann_tran};
+use super::htp::{HtParameters, hartmann_tran, hartmann_tran_fast};
 use super::tips::partition_sum;
-use super::voigt::{SQRT_LN2, SQRT_LN2_OVER_PI, re_w, re_w_exact};
+use super::voigt::{SQRT_LN2, SQRT_LN2_OVER_PI, re_w, re_w_exact, w_fast};
 use super::{SpectroscopyError, isotopologues::Isotopologue};
 use crate::atmosphere::Profile;
 use crate::constants;
@@ -355,12 +355,20 @@ impl Prepared {
             // Re I + Y Im I with I = sqrt(ln2/π)/γ_D w(x + iy) (htp module docs).
             Beyond::Mixing(y_mix) => {
                 let x = (nu - self.nu_c) * self.cx;
-                let w =
-                    errorfunctions::w_with_relerror(num_complex::Complex64::new(x, self.y), 0.0);
+                let z = num_complex::Complex64::new(x, self.y);
+                let w = if exact {
+                    errorfunctions::w_with_relerror(z, 0.0)
+                } else {
+                    w_fast(z)
+                };
                 self.amp * (w.re + y_mix * w.im)
             }
             Beyond::Ht(ref p, s_t, y_mix) => {
-                let i = hartmann_tran(p, nu);
+                let i = if exact {
+                    hartmann_tran(p, nu)
+                } else {
+                    hartmann_tran_fast(p, nu)
+                };
                 s_t * (i.re + y_mix * i.im)
             }
         }
