@@ -137,6 +137,7 @@ fn cross_sections_follow_the_hitran_conventions() {
             conventions: Conventions::HAPI_1_3,
             line_shape: LineShapeModel::HartmannTran,
             line_mixing: true,
+            voigt: lidarsim::spectroscopy::VoigtMethod::Exact,
             ..Default::default()
         };
         let state = GasState {
@@ -505,8 +506,8 @@ fn the_line_shape_is_a_budget_row() {
 }
 
 /// The fast (multigrid) path evaluates the Hartmann-Tran profile with line mixing as well as
-/// the Voigt: within 1e-7 of the peak (the brief: 1e-5; measured 1.2e-8) of the direct, exact
-/// evaluation of the same profile on a
+/// the Voigt: within 5e-7 of the peak (the brief: 1e-5; measured 8e-8, most of it from taking
+/// the Voigt beyond 30 widths) of the direct, exact evaluation of the same profile on a
 /// 0.001 cm⁻¹ grid over 20 cm⁻¹ of the NIST band, from 1 atm to 0.01 atm.
 #[test]
 fn multigrid_evaluates_beyond_voigt_profiles() {
@@ -541,6 +542,6 @@ fn multigrid_evaluates_beyond_voigt_profiles() {
             .fold(0.0, f64::max)
             / peak;
         println!("HT + line mixing, {p_atm} atm {t} K: multigrid within {err:.1e} of the peak");
-        assert!(err <= 1e-7, "{p_atm} atm: {err:e} of the peak");
+        assert!(err <= 5e-7, "{p_atm} atm: {err:e} of the peak");
     }
 }
