@@ -119,10 +119,10 @@ fn hartmann_tran_with(p: &HtParameters, nu: f64, w: fn(Complex64) -> Complex64) 
         // Principal √(X + Y), as published. Z₁ = √(X+Y) − √Y = X/(√(X+Y) + √Y): the second
         // form where the first would cancel (always, as Re √Y ≥ 0 and Re √(X+Y) ≥ 0 when
         // Γ₂ > 0).
-        let root = (x + y).sqrt();
+        let root = principal_sqrt(x + y);
         let sum = root + sqrt_y;
         let diff = root - sqrt_y;
-        let z1 = if sum.norm() >= diff.norm() {
+        let z1 = if sum.norm_sqr() >= diff.norm_sqr() {
             x / sum
         } else {
             diff
