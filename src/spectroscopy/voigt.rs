@@ -43,9 +43,15 @@ pub fn re_w(x: f64, y: f64) -> f64 {
     if r2 < EXACT_RADIUS_SQUARED {
         return re_w_exact(x, y);
     }
-    // Truncation after N terms: error ≈ (2N−1)!!/(2|z|²)^N ≤ 3e-10 of |w| in every branch
-    // (the real part's relative error is ≤ (2N+1) times that, < 5e-9).
-    let n = if r2 >= 1.0e9 {
+    re_w_asymptotic(x, y, asymptotic_terms(r2))
+}
+
+/// Terms of the asymptotic expansion for |z|² = `r2` ≥ 64: truncation after N terms errs by
+/// ≈ (2N−1)!!/(2|z|²)^N ≤ 3e-10 of |w| in every branch (the real part's relative error is
+/// ≤ (2N+1) times that, < 5e-9).
+#[inline]
+fn asymptotic_terms(r2: f64) -> u32 {
+    if r2 >= 1.0e9 {
         1
     } else if r2 >= 1.0e5 {
         2
@@ -55,20 +61,17 @@ pub fn re_w(x: f64, y: f64) -> f64 {
         4
     } else {
         7
-    };
-    re_w_asymptotic(x, y, n)
+    }
 }
 
-/// The asymptotic expansion of Re w with `n` correction terms (A&S 7.1.23); accurate for
-/// |z| ≫ 1 only.
+/// 1/z and the series S = 1 + Σ (2n−1)!!/(2z²)ⁿ with `n` terms (Horner from the innermost),
+/// as ((Re 1/z, Im 1/z), (Re S, Im S)); w ≈ (i/√π)·S/z.
 #[inline]
-pub fn re_w_asymptotic(x: f64, y: f64, n: u32) -> f64 {
+fn asymptotic_series(x: f64, y: f64, n: u32) -> ((f64, f64), (f64, f64)) {
     let r2 = x * x + y * y;
-    // 1/z and u = 1/(2 z²)
     let (zr, zi) = (x / r2, -y / r2);
     let ur = 0.5 * (zr * zr - zi * zi);
     let ui = zr * zi;
-    // S = 1 + u·1·(1 + 3u(1 + 5u(…)))  (Horner from the innermost term)
     let (mut sr, mut si) = (1.0, 0.0);
     for k in (1..=n).rev() {
         let c = (2 * k - 1) as f64;
@@ -76,6 +79,14 @@ pub fn re_w_asymptotic(x: f64, y: f64, n: u32) -> f64 {
         sr = 1.0 + c * pr;
         si = c * pi;
     }
+    ((zr, zi), (sr, si))
+}
+
+/// The asymptotic expansion of Re w with `n` correction terms (A&S 7.1.23); accurate for
+/// |z| ≫ 1 only.
+#[inline]
+pub fn re_w_asymptotic(x: f64, y: f64, n: u32) -> f64 {
+    let ((zr, zi), (sr, si)) = asymptotic_series(x, y, n);
     // w = (i/√π)·S/z  →  Re w = −Im(S/z)/√π
     -(sr * zi + si * zr) * FRAC_1_SQRT_PI
 }
@@ -90,27 +101,7 @@ pub fn w_fast(z: Complex64) -> Complex64 {
     if r2 < EXACT_RADIUS_SQUARED || y < 0.0 {
         return errorfunctions::w_with_relerror(z, 0.0);
     }
-    let n = if r2 >= 1.0e9 {
-        1
-    } else if r2 >= 1.0e5 {
-        2
-    } else if r2 >= 4.0e3 {
-        3
-    } else if r2 >= 400.0 {
-        4
-    } else {
-        7
-    };
-    let (zr, zi) = (x / r2, -y / r2);
-    let ur = 0.5 * (zr * zr - zi * zi);
-    let ui = zr * zi;
-    let (mut sr, mut si) = (1.0, 0.0);
-    for k in (1..=n).rev() {
-        let c = (2 * k - 1) as f64;
-        let (pr, pi) = (ur * sr - ui * si, ur * si + ui * sr);
-        sr = 1.0 + c * pr;
-        si = c * pi;
-    }
+    let ((zr, zi), (sr, si)) = asymptotic_series(x, y, asymptotic_terms(r2));
     // w = (i/√π)·S/z
     Complex64::new(
         -(sr * zi + si * zr) * FRAC_1_SQRT_PI,
