@@ -335,9 +335,50 @@ enum Beyond {
     No,
     /// The Voigt with first-order line mixing Y.
     Mixing(f64),
-    /// The Hartmann-Tran profile (and its limits) with S(T), line mixing Y, and the detuning
-    /// beyond which the fast path takes the Voigt of the same Γ₀ and Δ₀ ([`HT_WING_WIDTHS`]).
-    Ht(HtParameters, f64, f64, f64),
+    /// The Hartmann-Tran profile (and its limits).
+    Ht(HtLine),
+}
+
+/// A beyond-Voigt line: its parameters, S(T), line mixing Y, and its far-wing form for the
+/// fast path: beyond `wing` from the centre, the Voigt of the same Γ₀ and Δ₀ plus the
+/// difference's leading terms, k_re/Δ⁴ (real part) and k_im/Δ³ (imaginary part), matched at
+/// ±`wing` on each side ([`HT_WING_WIDTHS`]).
+#[derive(Debug, Clone, Copy)]
+struct HtLine {
+    p: HtParameters,
+    s_t: f64,
+    y_mix: f64,
+    wing: f64,
+    /// [below, above] the centre.
+    k_re: [f64; 2],
+    k_im: [f64; 2],
+}
+
+impl HtLine {
+    fn new(p: HtParameters, s_t: f64, y_mix: f64, nu_c: f64, wing: f64) -> HtLine {
+        let voigt = HtParameters {
+            gamma2: 0.0,
+            delta2: 0.0,
+            nu_vc: 0.0,
+            eta: 0.0,
+            ..p
+        };
+        let mut k_re = [0.0; 2];
+        let mut k_im = [0.0; 2];
+        for (side, d) in [-wing, wing].into_iter().enumerate() {
+            let diff = hartmann_tran(&p, nu_c + d) - hartmann_tran(&voigt, nu_c + d);
+            k_re[side] = diff.re * d.powi(4);
+            k_im[side] = diff.im * d.powi(3);
+        }
+        HtLine {
+            p,
+            s_t,
+            y_mix,
+            wing,
+            k_re,
+            k_im,
+        }
+    }
 }
 
 impl Prepared {
@@ -364,19 +405,24 @@ impl Prepared {
                 };
                 self.amp * (w.re + y_mix * w.im)
             }
-            Beyond::Ht(ref p, s_t, y_mix, wing) => {
-                if !exact && (nu - self.nu_c).abs() > wing {
-                    // Far wing: the Voigt of the same Γ₀, Δ₀ (see HT_WING_WIDTHS).
-                    let x = (nu - self.nu_c) * self.cx;
+            Beyond::Ht(ref h) => {
+                let d = nu - self.nu_c;
+                if !exact && d.abs() > h.wing {
+                    // Far wing: the Voigt of the same Γ₀, Δ₀ and the difference's leading terms.
+                    let x = d * self.cx;
                     let w = w_fast(num_complex::Complex64::new(x, self.y));
-                    return self.amp * (w.re + y_mix * w.im);
+                    let side = usize::from(d > 0.0);
+                    let d2 = d * d;
+                    let re = self.amp * w.re + h.s_t * h.k_re[side] / (d2 * d2);
+                    let im = self.amp * w.im + h.s_t * h.k_im[side] / (d2 * d);
+                    return re + h.y_mix * im;
                 }
                 let i = if exact {
-                    hartmann_tran(p, nu)
+                    hartmann_tran(&h.p, nu)
                 } else {
-                    hartmann_tran_fast(p, nu)
+                    hartmann_tran_fast(&h.p, nu)
                 };
-                s_t * (i.re + y_mix * i.im)
+                h.s_t * (i.re + h.y_mix * i.im)
             }
         }
     }
@@ -493,7 +539,7 @@ fn prepare(
                         || (c.nu_vc == 0.0 && c.eta == 0.0))) =>
             {
                 let hart = opts.line_shape == LineShapeModel::HartmannTran;
-                Beyond::Ht(
+                Beyond::Ht(HtLine::new(
                     HtParameters {
                         nu0: l.nu_cm1,
                         gamma_d,
@@ -506,8 +552,9 @@ fn prepare(
                     },
                     s_t,
                     y_mix,
+                    nu_c,
                     HT_WING_WIDTHS * gamma_l.max(gamma_d),
-                )
+                ))
             }
             // No speed dependence (and for HT no Dicke narrowing): the Voigt itself.
             _ if y_mix != 0.0 => Beyond::Mixing(y_mix),
@@ -532,11 +579,10 @@ fn prepare(
 }
 
 /// Beyond this many widths (the larger of Γ₀ and γ_D) from its centre, the fast path evaluates a
-/// beyond-Voigt line as the Voigt of the same Γ₀ and Δ₀: the two differ there by less than
-/// 1e-7 of the line's peak in the real part (the difference falls as Δ⁻⁴; in the imaginary
-/// part, which line mixing weights by Y ≲ 1e-3, as Δ⁻³: 4e-7 of the peak). Measured for R(16)e
-/// at 1 and 0.1 atm: 5e-8 and 5e-8 of the peak at 27 and 40 widths.
-pub const HT_WING_WIDTHS: f64 = 30.0;
+/// beyond-Voigt line as the Voigt of the same Γ₀ and Δ₀ plus the leading terms of their
+/// difference, which falls as Δ⁻⁴ in the real part and Δ⁻³ in the imaginary part (measured for
+/// R(16)e at 1 and 0.1 atm), matched at this distance on each side of the line.
+pub const HT_WING_WIDTHS: f64 = 8.0;
 
 /// A line's collisional parameters at one state \[cm⁻¹\] (Y dimensionless).
 #[derive(Debug, Clone, Copy)]
