@@ -174,20 +174,7 @@ impl LblOptions {
         for l in &lines.lines {
             match &l.shape {
                 Some(sp) => check_columns(lines, l, sp, self)?,
-                None => {
-                    return Err(SpectroscopyError::MissingParameters {
-                        lines: lines.source.clone(),
-                        parameters: format!(
-                            "line shape `{}`{} needs beyond-Voigt parameters, which only a CSV line list with HITRAN parameter names carries (this list has none)",
-                            self.line_shape.name(),
-                            if self.line_mixing {
-                                " with line mixing"
-                            } else {
-                                ""
-                            }
-                        ),
-                    });
-                }
+                None => return Err(no_parameters(lines, self)),
             }
         }
         Ok(())
@@ -504,10 +491,7 @@ fn prepare(
             }
             None => {
                 if opts.line_shape != LineShapeModel::Voigt || opts.line_mixing {
-                    return Err(SpectroscopyError::MissingParameters {
-                        lines: lines.source.clone(),
-                        parameters: "the HITRAN .par format has no beyond-Voigt parameters: give a CSV line list with them".into(),
-                    });
+                    return Err(no_parameters(lines, opts));
                 }
                 (
                     (T_REF / t).powf(l.n_air)
@@ -638,6 +622,30 @@ fn collisional(sp: &super::ShapeParameters, p_atm: f64, x_self: f64, t: f64) -> 
     c
 }
 
+/// `line shape `ht` with line mixing`, for messages.
+fn shape_label(opts: &LblOptions) -> String {
+    format!(
+        "line shape `{}`{}",
+        opts.line_shape.name(),
+        if opts.line_mixing {
+            " with line mixing"
+        } else {
+            ""
+        }
+    )
+}
+
+/// A list without beyond-Voigt parameters (a `.par` file, the band model) asked for them.
+fn no_parameters(lines: &LineList, opts: &LblOptions) -> SpectroscopyError {
+    SpectroscopyError::MissingParameters {
+        lines: lines.source.clone(),
+        parameters: format!(
+            "{} needs beyond-Voigt parameters, which only a CSV line list with HITRAN parameter names carries (this list has none)",
+            shape_label(opts)
+        ),
+    }
+}
+
 /// The profile `opts` asks for needs columns the line's file has.
 fn check_columns(
     lines: &LineList,
@@ -671,13 +679,8 @@ fn check_columns(
     Err(SpectroscopyError::MissingParameters {
         lines: lines.source.clone(),
         parameters: format!(
-            "line shape `{}`{} needs the column{} {} (line at {} cm⁻¹ and every other)",
-            opts.line_shape.name(),
-            if opts.line_mixing {
-                " with line mixing"
-            } else {
-                ""
-            },
+            "{} needs the column{} {} (line at {} cm⁻¹ and every other)",
+            shape_label(opts),
             if missing.len() > 1 { "s" } else { "" },
             missing.join(", "),
             l.nu_cm1
