@@ -407,26 +407,7 @@ impl Validator<'_> {
             }
         }
         let receiver = self.receiver(&raw, &channels, surface.as_ref().map(|s| s.albedo[0]))?;
-        let lines: Vec<Line> = channels
-            .iter()
-            .map(|c| Line {
-                name: c.name.clone(),
-                wavenumber_cm1: c.wavenumber_cm1,
-            })
-            .collect();
-        let filter = receiver
-            .as_ref()
-            .map(|r| r.filter)
-            .unwrap_or(Filter::none());
-        let sampling = SpectralSampling::new(&laser, &lines, &filter);
-        let sampled: Vec<Channel> = sampling
-            .channels
-            .iter()
-            .map(|c| Channel {
-                name: c.name.clone(),
-                wavenumber_cm1: c.wavenumber_cm1,
-            })
-            .collect();
+        let (sampling, sampled) = sample_lines(&laser, &channels, receiver.as_ref());
         if let Some(c) = sampled.iter().find(|c| !(c.wavenumber_cm1 > 0.0)) {
             return Err(self.err(
                 &KeyPath::table("laser").key("frequency_offset_mhz"),
@@ -1442,29 +1423,9 @@ impl Scene {
         }
         let mut scene = self.clone();
         scene.collapse_per_channel_values();
-        let lines: Vec<Line> = scene
-            .lines
-            .iter()
-            .map(|c| Line {
-                name: c.name.clone(),
-                wavenumber_cm1: c.wavenumber_cm1,
-            })
-            .collect();
-        let filter = scene
-            .receiver
-            .as_ref()
-            .map(|r| r.filter)
-            .unwrap_or(Filter::none());
-        scene.sampling = SpectralSampling::new(&laser, &lines, &filter);
-        scene.channels = scene
-            .sampling
-            .channels
-            .iter()
-            .map(|c| Channel {
-                name: c.name.clone(),
-                wavenumber_cm1: c.wavenumber_cm1,
-            })
-            .collect();
+        let (sampling, channels) = sample_lines(&laser, &scene.lines, scene.receiver.as_ref());
+        scene.sampling = sampling;
+        scene.channels = channels;
         if let Some(c) = scene.channels.iter().find(|c| !(c.wavenumber_cm1 > 0.0)) {
             return Err(self.input_error(
                 "laser",
@@ -1552,6 +1513,33 @@ impl Scene {
         }
         Ok(())
     }
+}
+
+/// The channels that sample `laser`'s `lines` through the receiver's filter (none without a
+/// receiver), as the transport's monochromatic channels.
+fn sample_lines(
+    laser: &Laser,
+    lines: &[Channel],
+    receiver: Option<&Receiver>,
+) -> (SpectralSampling, Vec<Channel>) {
+    let lines: Vec<Line> = lines
+        .iter()
+        .map(|c| Line {
+            name: c.name.clone(),
+            wavenumber_cm1: c.wavenumber_cm1,
+        })
+        .collect();
+    let filter = receiver.map(|r| r.filter).unwrap_or(Filter::none());
+    let sampling = SpectralSampling::new(laser, &lines, &filter);
+    let channels = sampling
+        .channels
+        .iter()
+        .map(|c| Channel {
+            name: c.name.clone(),
+            wavenumber_cm1: c.wavenumber_cm1,
+        })
+        .collect();
+    (sampling, channels)
 }
 
 #[cfg(test)]
