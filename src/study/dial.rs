@@ -382,7 +382,7 @@ pub fn run(
         clock: Clock::default(),
     };
     // Profiles that cannot be run are found first: they take no part in the class means.
-    let checked: Vec<Result<(), String>> =
+    let checked: Vec<Result<Scene, String>> =
         set.members.par_iter().map(|m| study.usable(m)).collect();
     // The class-mean profiles and their reference states.
     let t_means = Instant::now();
@@ -425,9 +425,9 @@ pub fn run(
         .into_iter()
         .map(|mut r| r.random::<u64>())
         .collect();
-    let one = |((member, seed), ok): ((&SetMember, &u64), &Result<(), String>)| {
+    let one = |((member, seed), ok): ((&SetMember, &u64), &Result<Scene, String>)| {
         let records = match ok {
-            Ok(()) => study.profile(member, *seed),
+            Ok(scene) => study.profile(member, scene, *seed),
             Err(e) => Err(e.clone()),
         };
         progress();
@@ -609,31 +609,28 @@ impl Study<'_> {
         })
     }
 
-    /// Why `member` cannot be run, if it cannot: it does not fit the scene
+    /// The scene with `member` as its truth, or why it cannot be run: it does not fit the scene
     /// ([`Scene::with_profile`]) or is supersaturated.
-    fn usable(&self, member: &SetMember) -> Result<(), String> {
+    fn usable(&self, member: &SetMember) -> Result<Scene, String> {
         let scene = self
             .scene
             .with_profile(member.profile.clone())
             .map_err(|e| e.to_string())?;
         match &scene.atmosphere {
-            Some(a) => check_saturation(&a.profile),
-            None => Err("no atmosphere".into()),
+            Some(a) => check_saturation(&a.profile)?,
+            None => return Err("no atmosphere".into()),
         }
+        Ok(scene)
     }
 
-    /// Every record of one profile.
-    fn profile(&self, member: &SetMember, seed: u64) -> Result<Vec<Record>, String> {
-        let scene = self
-            .scene
-            .with_profile(member.profile.clone())
-            .map_err(|e| e.to_string())?;
+    /// Every record of one profile, `scene` its truth ([`Self::usable`]).
+    fn profile(&self, member: &SetMember, scene: &Scene, seed: u64) -> Result<Vec<Record>, String> {
+        let scene = scene.clone();
         let profile = scene
             .atmosphere
             .as_ref()
             .map(|a| a.profile.clone())
             .ok_or("no atmosphere")?;
-        check_saturation(&profile)?;
         let mean = self
             .means
             .iter()
