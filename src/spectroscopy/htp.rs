@@ -86,56 +86,146 @@ pub struct HtParameters {
 /// The complex normalised Hartmann-Tran profile I(ν) \[1/cm⁻¹\] (module docs): Re I is the line
 /// shape, Im I the dispersion that first-order line mixing adds. Exact Faddeeva function.
 pub fn hartmann_tran(p: &HtParameters, nu: f64) -> Complex64 {
-    hartmann_tran_with(p, nu, w_exact)
+    HtProfile::new(p).eval(nu)
 }
 
-/// [`hartmann_tran`] with the Faddeeva function's asymptotic expansion far from the origin
-/// ([`super::voigt::w_fast`]): the line-by-line fast path (within 1e-8 of the peak).
-pub fn hartmann_tran_fast(p: &HtParameters, nu: f64) -> Complex64 {
-    hartmann_tran_with(p, nu, super::voigt::w_fast)
+/// The profile of one line at one state with everything that does not depend on ν worked out
+/// once: the line-by-line loops evaluate it at hundreds of wavenumbers per line.
+#[derive(Debug, Clone, Copy)]
+pub struct HtProfile {
+    nu0: f64,
+    /// c = √ln2/γ_D and √π c.
+    c: f64,
+    sqrt_pi_c: f64,
+    /// C̃₀.
+    c0t: Complex64,
+    /// 1/C̃₂, √Y and Y; `None` without speed dependence (the Voigt's own argument, module docs).
+    speed: Option<Speed>,
+    /// The denominator's terms; `None` when they vanish (the speed-dependent Voigt: the
+    /// denominator is 1).
+    narrowing: Option<Narrowing>,
 }
 
-/// The profile with a given Faddeeva function.
-#[inline]
-fn hartmann_tran_with(p: &HtParameters, nu: f64, w: fn(Complex64) -> Complex64) -> Complex64 {
-    let i = Complex64::new(0.0, 1.0);
-    let c = SQRT_LN2 / p.gamma_d;
-    let c0 = Complex64::new(p.gamma0, p.delta0);
-    let c2 = Complex64::new(p.gamma2, p.delta2);
-    let c0t = (1.0 - p.eta) * (c0 - 1.5 * c2) + p.nu_vc;
-    let c2t = (1.0 - p.eta) * c2;
-    let detuning = i * (p.nu0 - nu);
-    let (a, b) = if c2t.re == 0.0 && c2t.im == 0.0 {
-        // No speed dependence: the Voigt's own argument, z = c (i(ν₀ − ν) + C̃₀).
-        let z1 = (detuning + c0t) * c;
-        let w1 = w(i * z1);
-        let a = SQRT_PI * c * w1;
-        // B is multiplied by C₂ = 0 below.
-        (a, Complex64::new(0.0, 0.0))
-    } else {
-        let x = (detuning + c0t) / c2t;
-        let sqrt_y = 1.0 / (2.0 * c * c2t);
-        let y = sqrt_y * sqrt_y;
-        // Principal √(X + Y), as published. Z₁ = √(X+Y) − √Y = X/(√(X+Y) + √Y): the second
-        // form where the first would cancel (always, as Re √Y ≥ 0 and Re √(X+Y) ≥ 0 when
-        // Γ₂ > 0).
-        let root = principal_sqrt(x + y);
-        let sum = root + sqrt_y;
-        let diff = root - sqrt_y;
-        let z1 = if sum.norm_sqr() >= diff.norm_sqr() {
-            x / sum
-        } else {
-            diff
+/// 1 − (ν_VC − η (C₀ − 3C₂/2)) A + η C₂ B = 1 − `vc` A + `eta_c2` B.
+#[derive(Debug, Clone, Copy)]
+struct Narrowing {
+    vc: Complex64,
+    /// `None` for η = 0 (the Nelkin-Ghatak limit): B is then not needed at all.
+    eta_c2: Option<Complex64>,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Speed {
+    inv_c2t: Complex64,
+    sqrt_y: Complex64,
+    y: Complex64,
+    /// √π/(2√Y), the factor of B's w terms.
+    k: Complex64,
+}
+
+impl HtProfile {
+    /// The ν-independent constants of the profile of `p`.
+    pub fn new(p: &HtParameters) -> HtProfile {
+        let c = SQRT_LN2 / p.gamma_d;
+        let c0 = Complex64::new(p.gamma0, p.delta0);
+        let c2 = Complex64::new(p.gamma2, p.delta2);
+        let c0t = (1.0 - p.eta) * (c0 - 1.5 * c2) + p.nu_vc;
+        let c2t = (1.0 - p.eta) * c2;
+        let speed = (c2t.re != 0.0 || c2t.im != 0.0).then(|| {
+            let sqrt_y = 1.0 / (2.0 * c * c2t);
+            Speed {
+                inv_c2t: 1.0 / c2t,
+                sqrt_y,
+                y: sqrt_y * sqrt_y,
+                k: SQRT_PI / (2.0 * sqrt_y),
+            }
+        });
+        let vc = p.nu_vc - p.eta * (c0 - 1.5 * c2);
+        let eta_c2 = p.eta * c2;
+        let nonzero = |z: Complex64| z.re != 0.0 || z.im != 0.0;
+        HtProfile {
+            nu0: p.nu0,
+            c,
+            sqrt_pi_c: SQRT_PI * c,
+            c0t,
+            speed,
+            narrowing: (nonzero(vc) || nonzero(eta_c2)).then_some(Narrowing {
+                vc,
+                eta_c2: nonzero(eta_c2).then_some(eta_c2),
+            }),
+        }
+    }
+
+    /// I(ν), exact Faddeeva function.
+    pub fn eval(&self, nu: f64) -> Complex64 {
+        self.eval_with(nu, w_exact, w_pair_exact)
+    }
+
+    /// I(ν) with fast Faddeeva functions ([`super::voigt::w_pair_fast`]: Weideman's series near
+    /// the origin, the asymptotic expansion far from it, both within 4e-10 of |w|): the
+    /// line-by-line fast path.
+    pub fn eval_fast(&self, nu: f64) -> Complex64 {
+        self.eval_with(
+            nu,
+            super::voigt::w_weideman_or_fast,
+            super::voigt::w_pair_fast,
+        )
+    }
+
+    /// The profile with given Faddeeva functions: `w` at one argument (the Voigt limit), `w2`
+    /// at the two, w(iZ₁) and w(iZ₂), together.
+    #[inline]
+    fn eval_with(
+        &self,
+        nu: f64,
+        w: fn(Complex64) -> Complex64,
+        w2: fn(Complex64, Complex64) -> (Complex64, Complex64),
+    ) -> Complex64 {
+        // i(ν₀ − ν) + C̃₀
+        let shifted = Complex64::new(self.c0t.re, self.c0t.im + (self.nu0 - nu));
+        let i = Complex64::new(0.0, 1.0);
+        // A and η C₂ B.
+        let (a, b) = match self.speed {
+            // No speed dependence: the Voigt's own argument, z = c (i(ν₀ − ν) + C̃₀); B is
+            // multiplied by C₂ = 0.
+            None => (self.sqrt_pi_c * w(i * (shifted * self.c)), None),
+            Some(ref s) => {
+                let x = shifted * s.inv_c2t;
+                // Principal √(X + Y), as published. Z₁ = √(X+Y) − √Y = X/(√(X+Y) + √Y): the
+                // second form where the first would cancel (always, as Re √Y ≥ 0 and
+                // Re √(X+Y) ≥ 0 when Γ₂ > 0).
+                let root = principal_sqrt(x + s.y);
+                let sum = root + s.sqrt_y;
+                let diff = root - s.sqrt_y;
+                let z1 = if sum.norm_sqr() >= diff.norm_sqr() {
+                    x / sum
+                } else {
+                    diff
+                };
+                let z2 = sum;
+                let (w1, w2) = w2(i * z1, i * z2);
+                let a = self.sqrt_pi_c * (w1 - w2);
+                // η C₂ B, only where η ≠ 0.
+                let eta_c2_b = self.narrowing.and_then(|n| n.eta_c2).map(|eta_c2| {
+                    let b = (-1.0 + s.k * (1.0 - z1 * z1) * w1 - s.k * (1.0 - z2 * z2) * w2)
+                        * s.inv_c2t;
+                    eta_c2 * b
+                });
+                (a, eta_c2_b)
+            }
         };
-        let z2 = sum;
-        let (w1, w2) = (w(i * z1), w(i * z2));
-        let a = SQRT_PI * c * (w1 - w2);
-        let k = SQRT_PI / (2.0 * sqrt_y);
-        let b = (-1.0 + k * (1.0 - z1 * z1) * w1 - k * (1.0 - z2 * z2) * w2) / c2t;
-        (a, b)
-    };
-    let denom = 1.0 - (p.nu_vc - p.eta * (c0 - 1.5 * c2)) * a + p.eta * c2 * b;
-    a / denom * std::f64::consts::FRAC_1_PI
+        let i = match self.narrowing {
+            None => a,
+            Some(n) => a / (1.0 - n.vc * a + b.unwrap_or_default()),
+        };
+        i * std::f64::consts::FRAC_1_PI
+    }
+}
+
+/// w at both arguments: the exact function, twice.
+#[inline]
+fn w_pair_exact(z1: Complex64, z2: Complex64) -> (Complex64, Complex64) {
+    (w_exact(z1), w_exact(z2))
 }
 
 #[cfg(test)]

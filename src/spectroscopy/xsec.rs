@@ -27,7 +27,7 @@
 use rayon::prelude::*;
 
 use super::hitran::LineList;
-use super::htp::{HtParameters, hartmann_tran, hartmann_tran_fast};
+use super::htp::{HtParameters, HtProfile, hartmann_tran};
 use super::tips::partition_sum;
 use super::voigt::{SQRT_LN2, SQRT_LN2_OVER_PI, re_w, re_w_exact, w_fast};
 use super::{SpectroscopyError, isotopologues::Isotopologue};
@@ -332,7 +332,7 @@ enum Beyond {
 /// ±`wing` on each side ([`HT_WING_WIDTHS`]).
 #[derive(Debug, Clone, Copy)]
 struct HtLine {
-    p: HtParameters,
+    p: HtProfile,
     s_t: f64,
     y_mix: f64,
     wing: f64,
@@ -358,7 +358,7 @@ impl HtLine {
             k_im[side] = diff.im * d.powi(3);
         }
         HtLine {
-            p,
+            p: HtProfile::new(&p),
             s_t,
             y_mix,
             wing,
@@ -405,9 +405,9 @@ impl Prepared {
                     return re + h.y_mix * im;
                 }
                 let i = if exact {
-                    hartmann_tran(&h.p, nu)
+                    h.p.eval(nu)
                 } else {
-                    hartmann_tran_fast(&h.p, nu)
+                    h.p.eval_fast(nu)
                 };
                 h.s_t * (i.re + h.y_mix * i.im)
             }
