@@ -24,6 +24,45 @@ pub fn std_error(m2: f64, n: usize) -> f64 {
     (m2.max(0.0) / (nf * (nf - 1.0))).sqrt()
 }
 
+/// The greatest power of two ≤ |x|, at least the smallest normal number (so that dividing by
+/// it is exact and never overflows); 0 for 0.
+#[inline]
+fn power_of_two_scale(x: f64) -> f64 {
+    let a = x.abs();
+    if a == 0.0 || !a.is_finite() {
+        return a;
+    }
+    // The exponent bits alone: a power of two, no rounding.
+    f64::from_bits(a.to_bits() & 0x7ff0_0000_0000_0000).max(f64::MIN_POSITIVE)
+}
+
+/// [`welford_add`] with M2 kept in units of `scale`², a power of two within a factor 2 of the
+/// largest |x| seen (raised, and M2 rescaled exactly, when a larger value comes): the variance
+/// of tallies far below 1e-154 (returns from deep in an optically thick cloud) would otherwise
+/// underflow to a standard error of exactly 0 while the values still scatter. Where nothing
+/// underflows the result equals [`welford_add`]'s bit for bit (the scalings are exact).
+#[inline]
+pub fn welford_add_scaled(mean: &mut f64, m2: &mut f64, scale: &mut f64, n: usize, x: f64) {
+    let new = power_of_two_scale(x);
+    if new > *scale {
+        if *scale > 0.0 {
+            let r = *scale / new;
+            *m2 *= r * r;
+        }
+        *scale = new;
+    }
+    let delta = x - *mean;
+    *mean += delta / n as f64;
+    if *scale > 0.0 {
+        *m2 += (delta / *scale) * ((x - *mean) / *scale);
+    }
+}
+
+/// Standard error of the mean of n batch values from a scaled M2 ([`welford_add_scaled`]).
+pub fn std_error_scaled(m2: f64, scale: f64, n: usize) -> f64 {
+    std_error(m2, n) * scale
+}
+
 /// Relative error σ_mean/|mean|; infinite where the mean is zero (no score).
 pub fn rel_err(mean: f64, std_error: f64) -> f64 {
     if mean == 0.0 {
@@ -72,6 +111,53 @@ mod tests {
             std_error(m2, 4)
         );
         assert!((figure_of_merit(0.1, 2.0) - 50.0).abs() < 1e-12);
+        assert!((rel_err(-2.0, 0.5) - 0.25).abs() < 1e-15);
+        assert_eq!(rel_err(0.0, 1.0), f64::INFINITY);
         assert_eq!(figure_of_merit(rel_err(0.0, 1.0), 1.0), 0.0);
+    }
+
+    fn fold_scaled(xs: &[f64]) -> (f64, f64, f64) {
+        let (mut m, mut m2, mut sc) = (0.0, 0.0, 0.0);
+        for (i, x) in xs.iter().enumerate() {
+            welford_add_scaled(&mut m, &mut m2, &mut sc, i + 1, *x);
+        }
+        (m, m2, sc)
+    }
+
+    /// The scaled fold is the plain one where nothing underflows, and keeps the standard error
+    /// of values near 1e-200, whose squares underflow: 1e-200 × {1, 2, 3, 4} has standard
+    /// error √(5/12) 1e-200, where the plain fold gives 0.
+    #[test]
+    fn scaled_standard_error_survives_tiny_values() {
+        let xs = [0.0, 3.0, 1.5, 7.25, 0.125, 2.0];
+        let (m, m2) = fold(&xs);
+        let (ms, m2s, sc) = fold_scaled(&xs);
+        assert_eq!(m, ms);
+        assert_eq!(std_error(m2, xs.len()), std_error_scaled(m2s, sc, xs.len()));
+        assert_eq!(sc, 4.0);
+        let tiny: Vec<f64> = [1.0, 2.0, 3.0, 4.0].iter().map(|x| x * 1e-200).collect();
+        let (_, m2) = fold(&tiny);
+        assert_eq!(std_error(m2, 4), 0.0, "the plain fold underflows");
+        let (m, m2s, sc) = fold_scaled(&tiny);
+        let se = std_error_scaled(m2s, sc, 4);
+        assert!((m / 2.5e-200 - 1.0).abs() < 1e-15);
+        assert!(
+            (se / ((5.0f64 / 12.0).sqrt() * 1e-200) - 1.0).abs() < 1e-14,
+            "{se:e}"
+        );
+        // A tiny value first, then large ones: the rescaling keeps the large ones' variance.
+        let (_, m2s, sc) = fold_scaled(&[1e-300, 1.0, 2.0, 3.0]);
+        let (_, m2) = fold(&[1e-300, 1.0, 2.0, 3.0]);
+        assert!((std_error_scaled(m2s, sc, 4) / std_error(m2, 4) - 1.0).abs() < 1e-15);
+        // Subnormal values (below 2.2e-308) keep an error bar too.
+        let (_, m2s, sc) = fold_scaled(&[3e-316, 1e-316, 0.0, 2e-316]);
+        let se = std_error_scaled(m2s, sc, 4);
+        assert!(
+            (se / ((5.0f64 / 12.0).sqrt() * 1e-316) - 1.0).abs() < 1e-7,
+            "{se:e}"
+        );
+        // All zero: zero error, no NaN.
+        let (_, m2s, sc) = fold_scaled(&[0.0, 0.0, 0.0]);
+        assert_eq!(std_error_scaled(m2s, sc, 3), 0.0);
     }
 }

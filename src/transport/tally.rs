@@ -77,8 +77,11 @@ pub(crate) struct Accumulator {
     /// Reported bins: [channel][fov][gate][order: total, 1..=N, N+].
     mean: Vec<f64>,
     m2: Vec<f64>,
+    /// Per-bin scale of `m2` ([`stats::welford_add_scaled`]).
+    m2_scale: Vec<f64>,
     flux_mean: Flux,
     flux_m2: Flux,
+    flux_scale: Flux,
     /// Annulus a ↔ scene FOV index.
     fov_of_annulus: Vec<usize>,
     scratch: Vec<f64>,
@@ -93,7 +96,11 @@ struct Combined {
     bins: usize,
     mean: Vec<f64>,
     m2: Vec<f64>,
-    /// Pairs (a, b), a < b, and their running co-moments Σ (x_a − x̄_a)(x_b − x̄_b).
+    /// Scale of `m2` per bin ([`stats::welford_add_scaled`]), and its value before this batch.
+    scale: Vec<f64>,
+    old_scale: Vec<f64>,
+    /// Pairs (a, b), a < b, and their running co-moments Σ (x_a − x̄_a)(x_b − x̄_b), in units of
+    /// the product of the two bins' scales.
     pairs: Vec<(usize, usize)>,
     c2: Vec<f64>,
     /// This batch's values and their deviations from the old means.
@@ -109,8 +116,10 @@ impl Accumulator {
             n_batches: 0,
             mean: vec![0.0; reported],
             m2: vec![0.0; reported],
+            m2_scale: vec![0.0; reported],
             flux_mean: Flux::zeros(shape.n_channels),
             flux_m2: Flux::zeros(shape.n_channels),
+            flux_scale: Flux::zeros(shape.n_channels),
             fov_of_annulus,
             scratch: vec![0.0; reported],
             combined: None,
@@ -135,6 +144,8 @@ impl Accumulator {
             bins,
             mean: vec![0.0; n * bins],
             m2: vec![0.0; n * bins],
+            scale: vec![0.0; n * bins],
+            old_scale: vec![0.0; n * bins],
             c2: vec![0.0; pairs.len() * bins],
             pairs,
             values: vec![0.0; n * bins],
@@ -174,19 +185,26 @@ impl Accumulator {
         debug_assert_eq!(self.scratch.len() % n_rep, 0);
         let n = self.n_batches + 1;
         for (i, v) in self.scratch.iter().enumerate() {
-            stats::welford_add(&mut self.mean[i], &mut self.m2[i], n, *v);
+            stats::welford_add_scaled(
+                &mut self.mean[i],
+                &mut self.m2[i],
+                &mut self.m2_scale[i],
+                n,
+                *v,
+            );
         }
         if let Some(c) = &mut self.combined {
             c.add_batch(&self.scratch, n);
         }
-        for (dst, (dst2, src)) in self
+        for ((dst, dst2), (sc, src)) in self
             .flux_mean
             .parts_mut()
             .into_iter()
-            .zip(self.flux_m2.parts_mut().into_iter().zip(flux.parts()))
+            .zip(self.flux_m2.parts_mut())
+            .zip(self.flux_scale.parts_mut().into_iter().zip(flux.parts()))
         {
             for k in 0..src.len() {
-                stats::welford_add(&mut dst[k], &mut dst2[k], n, src[k]);
+                stats::welford_add_scaled(&mut dst[k], &mut dst2[k], &mut sc[k], n, src[k]);
             }
         }
         self.n_batches += 1;
@@ -213,7 +231,7 @@ impl Accumulator {
         let n = self.n_batches;
         r.energy_j.copy_from_slice(&self.mean);
         for i in 0..self.m2.len() {
-            r.stderr_j[i] = stats::std_error(self.m2[i], n);
+            r.stderr_j[i] = stats::std_error_scaled(self.m2[i], self.m2_scale[i], n);
         }
         let combined = self.combined.as_ref().map(|c| {
             let mut r = Returns::zeros(
@@ -225,7 +243,7 @@ impl Accumulator {
             );
             r.energy_j.copy_from_slice(&c.mean);
             for i in 0..c.m2.len() {
-                r.stderr_j[i] = stats::std_error(c.m2[i], n);
+                r.stderr_j[i] = stats::std_error_scaled(c.m2[i], c.scale[i], n);
             }
             // Covariance of the means: co-moment / (n (n − 1)), as the standard error.
             let nf = n as f64;
@@ -234,17 +252,33 @@ impl Accumulator {
             } else {
                 f64::NAN
             };
+            let bins = c.bins;
+            let cov_j2 = c
+                .pairs
+                .iter()
+                .enumerate()
+                .flat_map(|(p, &(a, b))| {
+                    (0..bins).map(move |i| {
+                        c.c2[p * bins + i] * scale * c.scale[a * bins + i] * c.scale[b * bins + i]
+                    })
+                })
+                .collect();
             r.covariance = Some(Covariance {
                 pairs: c.pairs.clone(),
-                cov_j2: c.c2.iter().map(|v| v * scale).collect(),
+                cov_j2,
             });
             r
         });
         let mean = self.flux_mean.clone();
         let mut err = Flux::zeros(self.shape.n_channels);
-        for (e, m2) in err.parts_mut().into_iter().zip(self.flux_m2.parts()) {
+        for (e, (m2, sc)) in err.parts_mut().into_iter().zip(
+            self.flux_m2
+                .parts()
+                .into_iter()
+                .zip(self.flux_scale.parts()),
+        ) {
             for k in 0..m2.len() {
-                e[k] = stats::std_error(m2[k], n);
+                e[k] = stats::std_error_scaled(m2[k], sc[k], n);
             }
         }
         (r, mean, err, combined)
@@ -267,15 +301,29 @@ impl Combined {
                 }
             }
         }
+        self.old_scale.copy_from_slice(&self.scale);
         for i in 0..self.values.len() {
             self.delta[i] = self.values[i] - self.mean[i];
-            stats::welford_add(&mut self.mean[i], &mut self.m2[i], n, self.values[i]);
+            stats::welford_add_scaled(
+                &mut self.mean[i],
+                &mut self.m2[i],
+                &mut self.scale[i],
+                n,
+                self.values[i],
+            );
         }
         for (p, (a, b)) in self.pairs.iter().enumerate() {
             for i in 0..bins {
-                let ib = b * bins + i;
-                self.c2[p * bins + i] +=
-                    self.delta[a * bins + i] * (self.values[ib] - self.mean[ib]);
+                let (ia, ib) = (a * bins + i, b * bins + i);
+                let (sa, sb) = (self.scale[ia], self.scale[ib]);
+                if sa == 0.0 || sb == 0.0 {
+                    // Every value of one of the two so far is 0: no co-moment yet.
+                    continue;
+                }
+                let c = &mut self.c2[p * bins + i];
+                // Rescale the co-moment to the new scales (exact: powers of two), then add.
+                *c *= (self.old_scale[ia] / sa) * (self.old_scale[ib] / sb);
+                *c += (self.delta[ia] / sa) * ((self.values[ib] - self.mean[ib]) / sb);
             }
         }
     }
