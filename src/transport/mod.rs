@@ -184,9 +184,11 @@ pub(crate) struct Setup<'a> {
     flux_tally: bool,
     /// Cumulative vertical extinction optical depth at the receiver altitude, per channel.
     tau_rx: Vec<f64>,
-    /// Reference-channel cumulative scattering optical depth at the edges, and σ_s per layer.
-    cum_ref: Vec<f64>,
-    sigma_ref: Vec<f64>,
+    /// Free-path samplers, one per scattering class (channels whose scatterers, coefficients and
+    /// phase functions are the same); class 0 holds channel 0. One class is the common case
+    /// (grey scattering: on/off lines); with more, each collision and each scattering angle is
+    /// drawn from the mixture of the classes' densities (`photon` module docs).
+    classes: Vec<ScatterClass>,
     /// Detector-directed importance sampling: probability ε, the cone around the receiver axis
     /// where it is used (cosine of its half-angle), and the layers whose phase function has a
     /// forward peak worth it.
@@ -195,6 +197,92 @@ pub(crate) struct Setup<'a> {
     forward_peaked: Vec<bool>,
     /// Probability β of drawing the first collision uniformly in range over the gates.
     stratify: f64,
+}
+
+/// The free-path density of one scattering class: its cumulative vertical scattering optical
+/// depth at the layer edges and its σ_s per layer (those of its first channel).
+pub(crate) struct ScatterClass {
+    channel: usize,
+    cum: Vec<f64>,
+    sigma: Vec<f64>,
+}
+
+impl ScatterClass {
+    fn of_channel(atm: &OpticalAtmosphere, k: usize) -> Self {
+        let nch = atm.n_channels;
+        ScatterClass {
+            channel: k,
+            cum: (0..atm.edges_m.len())
+                .map(|e| atm.cum_tau_s[e * nch + k])
+                .collect(),
+            sigma: (0..atm.n_layers())
+                .map(|l| atm.sigma_s_per_m[l * nch + k])
+                .collect(),
+        }
+    }
+}
+
+/// One representative channel per scattering class, channel 0 first. A channel joins the class
+/// of the first representative it scatters like: the column's scattering optical depths within
+/// [`CLASS_TAU_TOLERANCE`], and in every layer where either scatters appreciably (layer optical
+/// depth above [`CLASS_LAYER_TAU`]) every scatterer's coefficient within a factor 2 of the
+/// representative's and its phase function within a factor 2 at every angle. Within a class
+/// the ALIS ratio weights stay near 1 (on/off lines, whose Rayleigh scattering differs by 1e-5,
+/// are one class; so are 532 and 1064 nm through thin aerosol); between classes they could be
+/// anything, so each class gets its own free-path density and the transport samples their
+/// mixture.
+fn scatter_classes(atm: &OpticalAtmosphere) -> Vec<usize> {
+    let nch = atm.n_channels;
+    let top = atm.edges_m.len().saturating_sub(1);
+    let similar = |r: usize, k: usize| {
+        let column = (atm.cum_tau_s[top * nch + k] - atm.cum_tau_s[top * nch + r]).abs();
+        column <= CLASS_TAU_TOLERANCE
+            && atm.components.iter().enumerate().all(|(l, comps)| {
+                let dz = atm.edges_m[l + 1] - atm.edges_m[l];
+                let tau = |ch: usize| atm.sigma_s_per_m[l * nch + ch] * dz;
+                tau(r).max(tau(k)) <= CLASS_LAYER_TAU
+                    || comps.iter().all(|c| {
+                        let (a, b) = (c.sigma_s_per_m[r], c.sigma_s_per_m[k]);
+                        let coefficient =
+                            (a == b) || (a > 0.0 && b > 0.0 && a <= 2.0 * b && b <= 2.0 * a);
+                        coefficient
+                            && (c.phase[r] == c.phase[k]
+                                || similar_phase(
+                                    &atm.phases[c.phase[r] as usize],
+                                    &atm.phases[c.phase[k] as usize],
+                                ))
+                    })
+            })
+    };
+    let mut reps = vec![0];
+    if !atm.grey_scattering {
+        for k in 1..nch {
+            if !reps.iter().any(|&r| similar(r, k)) {
+                reps.push(k);
+            }
+        }
+    }
+    reps
+}
+
+/// Largest difference of column scattering optical depth within one scattering class: the
+/// ALIS weight e^{−(τ_k − τ_r)} of a path through the column then stays within e^{±0.5} or so.
+const CLASS_TAU_TOLERANCE: f64 = 0.5;
+/// Layer scattering optical depth below which the coefficients and phase functions of a class
+/// may differ by any factor (few collisions happen there).
+const CLASS_LAYER_TAU: f64 = 0.1;
+
+/// Two phase functions within a factor 2 of each other at every scattering angle (361 angles,
+/// uniform in Θ).
+fn similar_phase(
+    p: &crate::particles::phase::PhaseFunction,
+    q: &crate::particles::phase::PhaseFunction,
+) -> bool {
+    (0..=360).all(|i| {
+        let mu = (std::f64::consts::PI * i as f64 / 360.0).cos();
+        let (a, b) = (p.eval(mu), q.eval(mu));
+        a <= 2.0 * b && b <= 2.0 * a
+    })
 }
 
 impl Setup<'_> {
@@ -245,38 +333,40 @@ impl Setup<'_> {
         (t_here - self.tau_rx[k]).abs() / omega_z.abs()
     }
 
-    /// Reference-channel cumulative vertical scattering optical depth at altitude z.
+    /// Cumulative vertical scattering optical depth of class `c` at altitude z.
     #[inline]
-    fn ref_tau_at(&self, z: f64) -> f64 {
+    fn class_tau_at(&self, c: usize, z: f64) -> f64 {
         if !self.has_layers {
             return 0.0;
         }
+        let cls = &self.classes[c];
         let z = z.clamp(self.bottom_m, self.top_m);
         let e = &self.atm.edges_m;
         let l = e
             .partition_point(|x| *x <= z)
             .saturating_sub(1)
-            .min(self.sigma_ref.len() - 1);
-        self.cum_ref[l] + (z - e[l]) * self.sigma_ref[l]
+            .min(cls.sigma.len() - 1);
+        cls.cum[l] + (z - e[l]) * cls.sigma[l]
     }
 
-    /// Altitude (and its layer) at which a photon leaving a point of cumulative reference
+    /// Altitude (and its layer) at which a photon leaving a point of cumulative class-`c`
     /// scattering optical depth `t0` with direction cosine μ ≠ 0 has accumulated τ*.
     #[inline]
-    fn altitude_at_tau(&self, t0: f64, mu: f64, tau_star: f64) -> (f64, usize) {
+    fn altitude_at_tau(&self, c: usize, t0: f64, mu: f64, tau_star: f64) -> (f64, usize) {
+        let cls = &self.classes[c];
         let target = t0 + tau_star * mu;
-        let n = self.sigma_ref.len();
+        let n = cls.sigma.len();
         let l = if mu > 0.0 {
-            self.cum_ref.partition_point(|c| *c <= target)
+            cls.cum.partition_point(|c| *c <= target)
         } else {
-            self.cum_ref.partition_point(|c| *c < target)
+            cls.cum.partition_point(|c| *c < target)
         }
         .saturating_sub(1)
         .min(n - 1);
         let e = &self.atm.edges_m;
-        let sigma = self.sigma_ref[l];
+        let sigma = cls.sigma[l];
         let z = if sigma > 0.0 {
-            e[l] + (target - self.cum_ref[l]) / sigma
+            e[l] + (target - cls.cum[l]) / sigma
         } else {
             e[l]
         };
@@ -369,10 +459,10 @@ pub fn run(
                 s + a
             })
             .collect(),
-        cum_ref: (0..atm.edges_m.len())
-            .map(|e| atm.cum_tau_s[e * nch])
+        classes: scatter_classes(atm)
+            .into_iter()
+            .map(|k| ScatterClass::of_channel(atm, k))
             .collect(),
-        sigma_ref: (0..n_layers).map(|l| atm.sigma_s_per_m[l * nch]).collect(),
         ddis_epsilon: opts.ddis_epsilon,
         ddis_cos: (0.5e-3 * widest_fov_mrad + DDIS_MARGIN_RAD)
             .min(std::f64::consts::PI)
@@ -380,11 +470,15 @@ pub fn run(
         forward_peaked: vec![false; n_layers],
         stratify: opts.range_stratification,
     };
-    // Which layers get DDIS: a forward-peaked scatterer mixture.
+    // Which layers get DDIS: a forward-peaked scatterer mixture (in any class).
     let mut setup = setup;
     setup.forward_peaked = (0..n_layers)
         .map(|l| {
-            !atm.components[l].is_empty() && setup.mixture_phase(l, 0, 1.0) > DDIS_FORWARD_PEAK
+            !atm.components[l].is_empty()
+                && setup
+                    .classes
+                    .iter()
+                    .any(|c| setup.mixture_phase(l, c.channel, 1.0) > DDIS_FORWARD_PEAK)
         })
         .collect();
     let setup = setup;

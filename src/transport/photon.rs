@@ -2,11 +2,15 @@
 //! emit → (range check → flight → surface or collision → local estimate → roulette → scatter)*.
 //!
 //! Method (DESIGN §2; `docs/methods.md` has the derivations):
-//! * Free paths are sampled on the scattering coefficient of the reference channel (channel 0);
-//!   all absorption, and any difference in scattering between channels, rides in per-channel
-//!   weights (ALIS, Emde et al. 2011, JQSRT 112, 1622): per segment
-//!   w_k ← w_k · e^{−τ_a,k} · (σ_s,k/σ_s,0) · e^{−(τ_s,k − τ_s,0)}, and after a scattering
-//!   w_k ← w_k · P_k(Θ)/P_0(Θ). Hence the local estimate carries no single-scattering albedo.
+//! * Free paths are sampled on the scattering coefficient of channel 0 when all channels
+//!   scatter alike (one scattering class, `super::scatter_classes`); all absorption, and any
+//!   small difference in scattering between channels, rides in per-channel weights (ALIS,
+//!   Emde et al. 2011, JQSRT 112, 1622): per segment w_k ← w_k · e^{−τ_a,k} · (σ_s,k/σ_s,0) ·
+//!   e^{−(τ_s,k − τ_s,0)}, and after a scattering w_k ← w_k · P_k(Θ)/P_0(Θ). Hence the local
+//!   estimate carries no single-scattering albedo. With several classes (scattering that
+//!   differs by orders of magnitude), each collision and each scattering angle is drawn from
+//!   the mixture of the classes' densities and every channel weighted by its own density over
+//!   the mixture's (one-sample MIS, balance heuristic; `docs/transport.md`, step 5).
 //! * Every flight is cut to the part of its path from which the photon could still reach a gate
 //!   (an ellipsoid with the receiver as one focus: total path + return leg ≤ 2 r_end). A collision
 //!   is forced inside that part with weight factor 1 − e^{−τ}, the uncollided remainder being
@@ -51,6 +55,10 @@ pub(crate) struct Tracer<'a> {
     ta: Vec<f64>,
     /// Scratch per channel.
     tmp: Vec<f64>,
+    /// Per scattering class: scattering optical depth of the flight and 1 − e^{−τ} (collision
+    /// probability), then scratch for the optical depth to the collision.
+    cls_tau: Vec<f64>,
+    cls_p: Vec<f64>,
     pub bins: Vec<f64>,
     pub flux: Flux,
     pub stats: RunStats,
@@ -75,6 +83,8 @@ impl<'a> Tracer<'a> {
             ts: vec![0.0; nch],
             ta: vec![0.0; nch],
             tmp: vec![0.0; nch],
+            cls_tau: vec![0.0; s.classes.len()],
+            cls_p: vec![0.0; s.classes.len()],
             bins: vec![0.0; s.shape.len()],
             flux: Flux::zeros(nch),
             stats: RunStats::default(),
@@ -145,22 +155,36 @@ impl<'a> Tracer<'a> {
                 (s_bound, boundary)
             };
 
-            // Reference scattering optical depth of the flight.
+            // Scattering optical depth of the flight for each class (class 0: channel 0's).
             let inside = pos.z >= s.bottom_m && pos.z <= s.top_m && s.has_layers;
             let layer0 = if horizontal && inside {
                 atm.layer_of(pos.z)
             } else {
                 0
             };
-            let tau_ref = if horizontal {
-                if inside {
-                    s.sigma_ref[layer0] * s_end
+            let ncls = s.classes.len();
+            for c in 0..ncls {
+                self.cls_tau[c] = if horizontal {
+                    if inside {
+                        s.classes[c].sigma[layer0] * s_end
+                    } else {
+                        0.0
+                    }
                 } else {
-                    0.0
-                }
-            } else {
-                (s.ref_tau_at(pos.z + mu * s_end) - self.ts[0]).abs() / mu.abs()
-            };
+                    let t0 = self.ts[s.classes[c].channel];
+                    (s.class_tau_at(c, pos.z + mu * s_end) - t0).abs() / mu.abs()
+                };
+                // 1 − e^{−τ}, accurate for small τ; exactly 1 in double precision beyond τ ≈ 37.
+                self.cls_p[c] = if self.cls_tau[c] > 40.0 {
+                    1.0
+                } else {
+                    -(-self.cls_tau[c]).exp_m1()
+                };
+            }
+            let p_collide = self.cls_p[0];
+            // Probability that some class collides, averaged over the classes (one class: its own).
+            let p_any: f64 = self.cls_p[..ncls].iter().sum();
+            let scatters = self.cls_tau[..ncls].iter().any(|t| *t > 0.0);
             // Per-channel extinction to the end of the flight (into tmp), only where needed.
             let need_end_tau = end == End::Surface || s.flux_tally;
             if need_end_tau {
@@ -183,18 +207,13 @@ impl<'a> Tracer<'a> {
                 self.score_absorption(pos.z, mu, s_end);
             }
 
-            // 1 − e^{−τ}, accurate for small τ; exactly 1 in double precision beyond τ ≈ 37.
-            let p_collide = if tau_ref > 40.0 {
-                1.0
-            } else {
-                -(-tau_ref).exp_m1()
-            };
-            let collide_factor;
+            // `branch`: probability of the collide branch (the surface branch takes the rest).
+            let branch;
             if end == End::Surface {
                 let hit = pos + dir * s_end;
                 self.score_surface(hit, path + s_end, order + 1);
-                let q = if tau_ref > 0.0 {
-                    p_collide.max(MIN_COLLISION_PROBABILITY)
+                let q = if scatters {
+                    (p_any / ncls as f64).max(MIN_COLLISION_PROBABILITY)
                 } else {
                     0.0
                 };
@@ -222,7 +241,7 @@ impl<'a> Tracer<'a> {
                 for k in 0..nch {
                     self.flux.down[k] += self.w[k] * (-self.tmp[k]).exp() * (1.0 - albedo[k]);
                 }
-                collide_factor = p_collide / q;
+                branch = q;
             } else {
                 // Escape or cut: the uncollided part leaves; a collision is forced in the rest.
                 if s.flux_tally {
@@ -235,14 +254,16 @@ impl<'a> Tracer<'a> {
                         out[k] += self.w[k] * (-self.tmp[k]).exp();
                     }
                 }
-                if !(tau_ref > 0.0) {
+                if !scatters {
                     self.stats.escaped += 1;
                     return;
                 }
-                collide_factor = p_collide;
+                branch = 1.0;
             }
 
-            // Sample the collision: τ* from the exponential truncated to [0, τ_ref). On the
+            // Sample the collision: a class with probability P_c/ΣP (one class: always class 0),
+            // then τ* from its exponential truncated to [0, τ_c). The collision density is then
+            // Σ_c σ_c e^{−τ_c(s)}/ΣP_c: the mixture of the classes' truncated densities. On the
             // first flight, whose distances are ranges, the collision is instead drawn uniformly
             // in range over the gated window with probability β (range stratification), the two
             // densities combined by the balance heuristic: every gate then gets first
@@ -258,78 +279,114 @@ impl<'a> Tracer<'a> {
                 let s_u = a + rng.random::<f64>() * (b - a);
                 let z = pos.z + mu * s_u;
                 let tau = if horizontal {
-                    s.sigma_ref[layer0] * s_u
+                    s.classes[0].sigma[layer0] * s_u
                 } else {
-                    (s.ref_tau_at(z) - self.ts[0]).abs() / mu.abs()
+                    (s.class_tau_at(0, z) - self.ts[0]).abs() / mu.abs()
                 };
                 (s_u, if horizontal { layer0 } else { atm.layer_of(z) }, tau)
             } else {
-                let tau_star = -(-rng.random::<f64>() * p_collide).ln_1p();
-                if horizontal {
-                    (tau_star / s.sigma_ref[layer0], layer0, tau_star)
+                let c = if ncls == 1 {
+                    0
                 } else {
-                    let (z, l) = s.altitude_at_tau(self.ts[0], mu, tau_star);
+                    let mut x = rng.random::<f64>() * p_any;
+                    (0..ncls)
+                        .find(|&c| {
+                            x -= self.cls_p[c];
+                            x < 0.0 && self.cls_p[c] > 0.0
+                        })
+                        .unwrap_or_else(|| {
+                            (0..ncls).rev().find(|&c| self.cls_p[c] > 0.0).unwrap_or(0)
+                        })
+                };
+                let tau_star = -(-rng.random::<f64>() * self.cls_p[c]).ln_1p();
+                if horizontal {
+                    (tau_star / s.classes[c].sigma[layer0], layer0, tau_star)
+                } else {
+                    let t0 = self.ts[s.classes[c].channel];
+                    let (z, l) = s.altitude_at_tau(c, t0, mu, tau_star);
                     (((z - pos.z) / mu).clamp(0.0, s_end), l, tau_star)
                 }
             };
-            let mut collide_factor = collide_factor;
-            if let Some((a, b)) = window {
-                // Physical density of the truncated exponential at s, and the mixture density.
-                let inside = s.has_layers && {
-                    let z = pos.z + mu * s_coll;
-                    z >= s.bottom_m && z <= s.top_m
-                };
-                let sigma = if inside { s.sigma_ref[layer] } else { 0.0 };
-                let p_phys = sigma * (-tau_star).exp() / p_collide;
-                let p_unif = if s_coll >= a && s_coll <= b {
-                    1.0 / (b - a)
-                } else {
-                    0.0
-                };
-                let g = (1.0 - s.stratify) * p_phys + s.stratify * p_unif;
-                if !(p_phys > 0.0) || !(g > 0.0) {
-                    // A range-stratified collision in air that cannot scatter has zero weight.
-                    self.stats.zero_weight += 1;
-                    return;
-                }
-                collide_factor *= p_phys / g;
-            }
+            let p_unif = |s_c: f64| match window {
+                Some((a, b)) if s_c >= a && s_c <= b => 1.0 / (b - a),
+                _ => 0.0,
+            };
+            let beta = if window.is_some() { s.stratify } else { 0.0 };
+            let in_layers = s.has_layers && {
+                let z = pos.z + mu * s_coll;
+                z >= s.bottom_m && z <= s.top_m
+            };
             pos += dir * s_coll;
             path += s_coll;
             order += 1;
             self.stats.collisions += 1;
 
-            // Per-channel weights over the flight (ALIS): absorption, and the scattering ratio
-            // where channels scatter differently (for channel 0 that factor is 1).
-            let i = layer * nch;
-            let dts_ref = if horizontal {
-                s.sigma_ref[layer] * s_coll
-            } else {
-                (s.ref_tau_at(pos.z) - self.ts[0]).abs() / mu.abs()
-            };
-            for k in 0..nch {
-                let (ts_new, ta_new) = atm.cumulative_tau(pos.z, k);
-                let (dts, dta) = if horizontal {
-                    (
-                        atm.sigma_s_per_m[i + k] * s_coll,
-                        atm.sigma_a_per_m[i + k] * s_coll,
-                    )
+            if ncls == 1 {
+                // One class: the collision is drawn from channel 0's own density, so every
+                // channel's weight loses its absorption, e^{−τ_a}, times the collision factor
+                // P/branch (and the range-stratification ratio), and where a channel scatters a
+                // little differently, (σ_s,k/σ_s,0) e^{−(τ_s,k − τ_s,0)} (ALIS).
+                let mut collide_factor = p_collide / branch;
+                if window.is_some() {
+                    // Physical density of the truncated exponential at s, and the mixture density.
+                    let sigma = if in_layers {
+                        s.classes[0].sigma[layer]
+                    } else {
+                        0.0
+                    };
+                    let p_phys = sigma * (-tau_star).exp() / p_collide;
+                    let g = (1.0 - beta) * p_phys + beta * p_unif(s_coll);
+                    if !(p_phys > 0.0) || !(g > 0.0) {
+                        // A range-stratified collision in air that cannot scatter has zero weight.
+                        self.stats.zero_weight += 1;
+                        return;
+                    }
+                    collide_factor *= p_phys / g;
+                }
+                let i = layer * nch;
+                let dts_ref = if horizontal {
+                    s.classes[0].sigma[layer] * s_coll
                 } else {
-                    (
-                        (ts_new - self.ts[k]).abs() / mu.abs(),
-                        (ta_new - self.ta[k]).abs() / mu.abs(),
-                    )
+                    (s.class_tau_at(0, pos.z) - self.ts[0]).abs() / mu.abs()
                 };
-                let mut f = collide_factor;
-                if dta > 0.0 {
-                    f *= (-dta).exp();
+                for k in 0..nch {
+                    let (ts_new, ta_new) = atm.cumulative_tau(pos.z, k);
+                    let (dts, dta) = if horizontal {
+                        (
+                            atm.sigma_s_per_m[i + k] * s_coll,
+                            atm.sigma_a_per_m[i + k] * s_coll,
+                        )
+                    } else {
+                        (
+                            (ts_new - self.ts[k]).abs() / mu.abs(),
+                            (ta_new - self.ta[k]).abs() / mu.abs(),
+                        )
+                    };
+                    let mut f = collide_factor;
+                    if dta > 0.0 {
+                        f *= (-dta).exp();
+                    }
+                    if !atm.grey_scattering {
+                        f *= atm.sigma_s_per_m[i + k] / atm.sigma_s_per_m[i]
+                            * (-(dts - dts_ref)).exp();
+                    }
+                    self.w[k] *= f;
+                    self.ts[k] = ts_new;
+                    self.ta[k] = ta_new;
                 }
-                if !atm.grey_scattering {
-                    f *= atm.sigma_s_per_m[i + k] / atm.sigma_s_per_m[i] * (-(dts - dts_ref)).exp();
-                }
-                self.w[k] *= f;
-                self.ts[k] = ts_new;
-                self.ta[k] = ta_new;
+            } else if !self.mixture_weights(
+                pos,
+                mu,
+                horizontal,
+                s_coll,
+                layer,
+                in_layers,
+                p_any,
+                branch * (1.0 - beta),
+                branch * beta * p_unif(s_coll),
+            ) {
+                self.stats.zero_weight += 1;
+                return;
             }
 
             // Local estimate toward the receiver, every field of view.
@@ -339,19 +396,47 @@ impl<'a> Tracer<'a> {
                 return;
             }
 
-            // Scatter: a scatterer by its share of the reference scattering, Θ from its phase
-            // function, a uniform azimuth. Near the receiver's line of sight and in forward-
-            // peaked media, detector-directed importance sampling (DDIS; Buras & Mayer 2011,
-            // JQSRT 112, 434) draws the new direction, with probability ε, from the same phase
-            // function centred on the direction to the receiver instead; every channel is then
-            // weighted by P_k(Θ)/[(1 − ε) P_0(Θ) + ε P_0(Θ_rx)] (balance heuristic), which is
-            // unbiased and caps the local-estimate spikes of the forward peak.
-            // A collision can only land in a layer with scatterers; rounding at a layer edge
-            // must not make it pick from none.
+            // Scatter: a scatterer by its share of the scattering, Θ from its phase function, a
+            // uniform azimuth; with several classes, first a class among those that scatter
+            // here, uniformly, and every channel then weighted by P_k(Θ)/P̄(Θ), P̄ the classes'
+            // mean phase function (the density actually sampled). Near the receiver's line of
+            // sight and in forward-peaked media, detector-directed importance sampling (DDIS;
+            // Buras & Mayer 2011, JQSRT 112, 434) draws the new direction, with probability ε,
+            // from the same phase function centred on the direction to the receiver instead;
+            // every channel is then weighted by P_k(Θ)/[(1 − ε) P̄(Θ) + ε P̄(Θ_rx)] (balance
+            // heuristic), which is unbiased and caps the local-estimate spikes of the forward
+            // peak. A collision can only land in a layer with scatterers; rounding at a layer
+            // edge must not make it pick from none.
             if atm.components[layer].is_empty() {
                 self.stats.zero_weight += 1;
                 return;
             }
+            let n_here = (0..ncls)
+                .filter(|&c| s.classes[c].sigma[layer] > 0.0)
+                .count();
+            if n_here == 0 {
+                self.stats.zero_weight += 1;
+                return;
+            }
+            let cls = if ncls == 1 {
+                0
+            } else {
+                let j = ((rng.random::<f64>() * n_here as f64) as usize).min(n_here - 1);
+                (0..ncls)
+                    .filter(|&c| s.classes[c].sigma[layer] > 0.0)
+                    .nth(j)
+                    .unwrap_or(0)
+            };
+            let mean_phase = |mu: f64| -> f64 {
+                if ncls == 1 {
+                    return s.mixture_phase(layer, 0, mu);
+                }
+                (0..ncls)
+                    .filter(|&c| s.classes[c].sigma[layer] > 0.0)
+                    .map(|c| s.mixture_phase(layer, s.classes[c].channel, mu))
+                    .sum::<f64>()
+                    / n_here as f64
+            };
             // The direction to the receiver only where DDIS can apply (not in Rayleigh air).
             let ddis_layer = s.ddis_epsilon > 0.0 && s.forward_peaked[layer];
             let omega_rx = if ddis_layer {
@@ -362,16 +447,22 @@ impl<'a> Tracer<'a> {
             };
             let ddis = ddis_layer && -omega_rx.dot(s.axis) >= s.ddis_cos;
             let towards_rx = ddis && rng.random::<f64>() < s.ddis_epsilon;
-            let c = pick_component(&atm.components[layer], s.sigma_ref[layer], rng);
+            let rep = s.classes[cls].channel;
+            let c = pick_component(
+                &atm.components[layer],
+                rep,
+                s.classes[cls].sigma[layer],
+                rng,
+            );
             let mu_sampled =
-                atm.phases[atm.components[layer][c].phase[0] as usize].sample(rng.random());
+                atm.phases[atm.components[layer][c].phase[rep] as usize].sample(rng.random());
             let centre = if towards_rx { omega_rx } else { dir };
             let new_dir = rotate(centre, mu_sampled, unit_azimuth(rng));
             if ddis {
                 let mu_s = dir.dot(new_dir);
-                let p0 = s.mixture_phase(layer, 0, mu_s);
+                let p0 = mean_phase(mu_s);
                 let q = (1.0 - s.ddis_epsilon) * p0
-                    + s.ddis_epsilon * s.mixture_phase(layer, 0, omega_rx.dot(new_dir));
+                    + s.ddis_epsilon * mean_phase(omega_rx.dot(new_dir));
                 for k in 0..nch {
                     let pk = if atm.grey_scattering {
                         p0
@@ -381,13 +472,90 @@ impl<'a> Tracer<'a> {
                     self.w[k] *= pk / q;
                 }
             } else if !atm.grey_scattering {
-                let p0 = s.mixture_phase(layer, 0, mu_sampled);
-                for k in 1..nch {
-                    self.w[k] *= s.mixture_phase(layer, k, mu_sampled) / p0;
+                let p_mean = mean_phase(mu_sampled);
+                for k in 0..nch {
+                    self.w[k] *= s.mixture_phase(layer, k, mu_sampled) / p_mean;
                 }
             }
             dir = new_dir;
         }
+    }
+
+    /// Several scattering classes: the weights of a collision at `pos` (in `layer`, reached
+    /// after `s_coll` along a flight with direction cosine μ), w_k ← w_k f_k/g, where
+    /// f_k = σ_s,k e^{−τ_s,k − τ_a,k} is channel k's own collision density and g the density
+    /// the collision was drawn from: `a_phys` Σ_c σ_c e^{−τ_c}/ΣP_c + `a_unif` (the branch and
+    /// range-stratification shares; `p_any` = ΣP_c). Both are scaled by e^{τ_min}, τ_min the
+    /// least class optical depth among the classes scattering here, so that neither underflows
+    /// in optically thick channels. No class scattering here: false (zero weight).
+    #[allow(clippy::too_many_arguments)]
+    fn mixture_weights(
+        &mut self,
+        pos: DVec3,
+        mu: f64,
+        horizontal: bool,
+        s_coll: f64,
+        layer: usize,
+        in_layers: bool,
+        p_any: f64,
+        a_phys: f64,
+        a_unif: f64,
+    ) -> bool {
+        let s = self.s;
+        let atm = s.atm;
+        let nch = self.w.len();
+        let mut tau_min = f64::INFINITY;
+        for (c, cls) in s.classes.iter().enumerate() {
+            let tau = if horizontal {
+                cls.sigma[layer] * s_coll
+            } else {
+                (s.class_tau_at(c, pos.z) - self.ts[cls.channel]).abs() / mu.abs()
+            };
+            self.cls_tau[c] = tau;
+            if in_layers && cls.sigma[layer] > 0.0 {
+                tau_min = tau_min.min(tau);
+            }
+        }
+        if tau_min == f64::INFINITY {
+            return false;
+        }
+        let mut dens = 0.0;
+        for (c, cls) in s.classes.iter().enumerate() {
+            if cls.sigma[layer] > 0.0 {
+                dens += cls.sigma[layer] * (-(self.cls_tau[c] - tau_min)).exp();
+            }
+        }
+        let g = a_phys * dens / p_any
+            + if a_unif > 0.0 {
+                a_unif * tau_min.exp()
+            } else {
+                0.0
+            };
+        if !(g > 0.0 && g.is_finite()) {
+            return false;
+        }
+        for k in 0..nch {
+            let (ts_new, ta_new) = atm.cumulative_tau(pos.z, k);
+            let i = layer * nch + k;
+            let (dts, dta) = if horizontal {
+                (atm.sigma_s_per_m[i] * s_coll, atm.sigma_a_per_m[i] * s_coll)
+            } else {
+                (
+                    (ts_new - self.ts[k]).abs() / mu.abs(),
+                    (ta_new - self.ta[k]).abs() / mu.abs(),
+                )
+            };
+            let sigma_k = atm.sigma_s_per_m[i];
+            // σ_k = 0: this channel cannot scatter here (and e^{τ_min − τ_k} may be huge).
+            self.w[k] *= if sigma_k > 0.0 && in_layers {
+                sigma_k * (-(dts - tau_min) - dta).exp() / g
+            } else {
+                0.0
+            };
+            self.ts[k] = ts_new;
+            self.ta[k] = ta_new;
+        }
+        true
     }
 
     /// Russian roulette on the largest channel weight; false if the photon dies.
@@ -446,15 +614,24 @@ impl<'a> Tracer<'a> {
         };
         self.stats.local_estimates += 1;
         let mu_s = dir.dot(omega);
-        let p_ref = s.mixture_phase(layer, 0, mu_s);
+        // Grey scattering: one phase function for every channel.
+        let grey = s.atm.grey_scattering;
+        let p_ref = if grey {
+            s.mixture_phase(layer, 0, mu_s)
+        } else {
+            1.0
+        };
         let geometric = p_ref * (0.25 / PI) * cos_axis / d2;
         let base = self.shape.base(gate, s.order_bin(order), annulus);
         let nch = self.w.len();
         for k in 0..nch {
+            if self.w[k] == 0.0 {
+                continue;
+            }
             let tau = s.tau_to_receiver(x.z, omega.z, d, layer, k, self.ts[k] + self.ta[k]);
             let mut e = self.w[k] * geometric * (-tau).exp();
-            if !s.atm.grey_scattering && k > 0 {
-                e *= s.mixture_phase(layer, k, mu_s) / p_ref;
+            if !grey {
+                e *= s.mixture_phase(layer, k, mu_s);
             }
             self.bins[base + k] += e;
         }
@@ -502,20 +679,30 @@ impl<'a> Tracer<'a> {
     }
 }
 
-/// A scatterer of the layer, chosen with probability σ_c/σ (reference channel).
+/// A scatterer of the layer, chosen with probability σ_c/σ in channel `k` (σ: the layer's total
+/// in that channel, > 0).
 #[inline]
-fn pick_component(comps: &[crate::optics::Component], sigma: f64, rng: &mut Rng) -> usize {
+fn pick_component(
+    comps: &[crate::optics::Component],
+    k: usize,
+    sigma: f64,
+    rng: &mut Rng,
+) -> usize {
     if comps.len() == 1 {
         return 0;
     }
     let mut x = rng.random::<f64>() * sigma;
     for (j, comp) in comps.iter().enumerate() {
-        x -= comp.sigma_s_per_m[0];
-        if x < 0.0 {
+        x -= comp.sigma_s_per_m[k];
+        if x < 0.0 && comp.sigma_s_per_m[k] > 0.0 {
             return j;
         }
     }
-    comps.len() - 1
+    // Rounding left x ≥ 0: the last scatterer that scatters in this channel.
+    comps
+        .iter()
+        .rposition(|c| c.sigma_s_per_m[k] > 0.0)
+        .unwrap_or(comps.len() - 1)
 }
 
 /// (cos φ, sin φ) of a uniform azimuth, by rejection from the unit disc and angle doubling
