@@ -1,4 +1,4 @@
-//! Writing a command's output files all together or not at all.
+//! Writing a command's output files all together or not at all, and CSV text fields.
 //!
 //! Every file lidarsim writes goes through an [`OutputSet`]: a command stages all its files,
 //! then calls [`OutputSet::commit`]. Staged files are written into a hidden directory
@@ -27,6 +27,7 @@
 //! filesystems) even when the target is a mount point. A process that is killed can leave one
 //! behind: it is hidden, and its name says what it is.
 
+use std::borrow::Cow;
 use std::ffi::OsString;
 use std::fmt::Display;
 use std::fs::{self, File};
@@ -121,6 +122,17 @@ impl OutputError {
             path: path.to_path_buf(),
             error,
         }
+    }
+}
+
+/// `field` as one RFC 4180 CSV field: quoted, with its quotes doubled, when it holds a comma,
+/// a double quote, a CR or a LF; as it is otherwise. Every text field of lidarsim's CSV files
+/// goes through it (names in scenes may hold any text).
+pub fn csv_field(field: &str) -> Cow<'_, str> {
+    if field.contains([',', '"', '\r', '\n']) {
+        Cow::Owned(format!("\"{}\"", field.replace('"', "\"\"")))
+    } else {
+        Cow::Borrowed(field)
     }
 }
 
@@ -609,6 +621,16 @@ mod tests {
         fs::write(out.join("b.csv"), "old b\n").unwrap();
         fs::write(out.join("notes.txt"), "mine\n").unwrap();
         out
+    }
+
+    #[test]
+    fn csv_field_quotes_only_what_needs_it() {
+        assert_eq!(csv_field("on-line 1"), "on-line 1");
+        assert_eq!(csv_field(""), "");
+        assert_eq!(csv_field("a,b"), "\"a,b\"");
+        assert_eq!(csv_field("say \"hi\""), "\"say \"\"hi\"\"\"");
+        assert_eq!(csv_field("two\nlines"), "\"two\nlines\"");
+        assert_eq!(csv_field("cr\r"), "\"cr\r\"");
     }
 
     #[test]

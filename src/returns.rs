@@ -6,6 +6,8 @@
 
 use std::fmt::Write as _;
 
+use crate::output::csv_field;
+
 /// Where a set of returns comes from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Source {
@@ -246,6 +248,7 @@ impl Returns {
         let src = self.source.label();
         let labels: Vec<String> = self.orders.iter().map(|o| o.label()).collect();
         for (c, ch) in self.channels.iter().enumerate() {
+            let ch = csv_field(ch);
             for (f, fov) in self.fov_full_angle_mrad.iter().enumerate() {
                 for (g, r) in self.range_m.iter().enumerate() {
                     for (o, label) in labels.iter().enumerate() {

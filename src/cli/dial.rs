@@ -8,7 +8,7 @@ use std::path::PathBuf;
 use anyhow::{Context, bail};
 
 use lidarsim::atmosphere::{LatitudeClass, ProfileSet, class_ensemble, read_profile_set};
-use lidarsim::output::{self, OutputSet};
+use lidarsim::output::{self, OutputSet, csv_field};
 use lidarsim::scene::Scene;
 use lidarsim::study::dial::{
     self, BudgetSteps, N_SOURCES, ProfileOutcome, Source, StudyOptions, StudyResult, Summary,
@@ -260,9 +260,9 @@ fn profiles_csv(result: &StudyResult) -> String {
             let _ = write!(
                 s,
                 "{},{},{},{},{},{},{},{},{},{},{},{}",
-                o.id,
+                csv_field(&o.id),
                 o.class,
-                r.pair,
+                csv_field(&r.pair),
                 r.method.label(),
                 r.altitude_m.0,
                 r.altitude_m.1,
@@ -292,8 +292,8 @@ fn summary_csv(summaries: &[Summary]) -> String {
         let _ = writeln!(
             s,
             "{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
-            m.class,
-            m.pair,
+            csv_field(&m.class),
+            csv_field(&m.pair),
             m.method.label(),
             m.altitude_m.0,
             m.altitude_m.1,
@@ -322,14 +322,14 @@ fn budget_csv(summaries: &[Summary], steps: &BudgetSteps, scene: &Scene) -> Stri
             let st = &m.sources[j];
             let _ = writeln!(
                 s,
-                "{},{},{},{},{},{},\"{}\",{},{},{},{}",
-                m.class,
-                m.pair,
+                "{},{},{},{},{},{},{},{},{},{},{}",
+                csv_field(&m.class),
+                csv_field(&m.pair),
                 m.method.label(),
                 m.altitude_m.0,
                 m.altitude_m.1,
                 src.label(),
-                src.describe(steps, &scene.laser),
+                csv_field(&src.describe(steps, &scene.laser)),
                 st.bias_ppm,
                 st.sd_ppm,
                 st.rms_ppm,
@@ -344,7 +344,7 @@ fn failed_csv(outcomes: &[ProfileOutcome]) -> String {
     let mut s = String::from("profile_id,class,reason\n");
     for o in outcomes {
         if let Err(e) = &o.records {
-            let _ = writeln!(s, "{},{},\"{}\"", o.id, o.class, e.replace('"', "\"\""));
+            let _ = writeln!(s, "{},{},{}", csv_field(&o.id), o.class, csv_field(e));
         }
     }
     s

@@ -395,7 +395,7 @@ fn info(a: InfoArgs) -> anyhow::Result<()> {
             .unwrap_or_default();
         println!(
             "{},{},{},{},{:.2},{:.2},{:.5e},{pw},{xco2}",
-            m.meta.id,
+            output::csv_field(&m.meta.id),
             m.meta.latitude_deg,
             m.meta.class(),
             p.len(),
