@@ -1,52 +1,909 @@
-//! Writing output files whole or not at all.
+//! Writing a command's output files all together or not at all, and CSV text fields.
 //!
-//! Every file lidarsim writes goes through [`write_atomically`]: a temporary file in the same
-//! folder, flushed to disk, then renamed over the target, so that a failure (full disk, killed
-//! run) never leaves a half-written file or a mix of old and new contents behind.
+//! Every file lidarsim writes goes through an [`OutputSet`]: a command stages all its files,
+//! then calls [`OutputSet::commit`]. Staged files are written into a hidden directory
+//! (`.lidarsim-staging-<pid>-<n>`) and flushed to disk; nothing at the outputs' paths changes
+//! before the commit. Dropping a set without committing it (any error, `?`) removes the staging
+//! directory, so a failed command leaves no partial file, no temporary entry and no mix of old
+//! and new outputs, whatever the failure (a full disk, a producer that fails, a directory where
+//! a file should go).
+//!
+//! What the commit guarantees, per target directory:
+//!
+//! * **The directory does not exist yet**: the staging directory is renamed to it, one atomic
+//!   step: it appears with all its files or not at all.
+//! * **It exists** (and may hold an earlier run's outputs, which a new run replaces): one
+//!   rename per file over the old one, so each file is at every moment whole, old or new. The
+//!   renames start only when every file of the set is written and flushed and no name is
+//!   blocked (a directory in the way is refused before anything is written, and checked again
+//!   here), and each old file is first kept as a hard link (or a copy) in the staging
+//!   directory. If a rename fails midway, the renames done are undone: the old files come back,
+//!   the new names go, and the error says that nothing changed. Only a crash or power loss in
+//!   the instant of the renames, or an undo that fails too, can leave a mix; the error then
+//!   names the files that are new.
+//!
+//! The staging directory sits inside the target directory when that exists, and in its nearest
+//! existing ancestor otherwise, so that it is on the target's filesystem (a rename cannot cross
+//! filesystems) even when the target is a mount point. A process that is killed can leave one
+//! behind: it is hidden, and its name says what it is.
 
+use std::borrow::Cow;
+use std::ffi::OsString;
+use std::fmt::Display;
+use std::fs::{self, File};
 use std::io::{self, Write};
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
 
-/// The temporary name next to `path` that [`write_atomically`] writes first: hidden, marked
-/// with the process id, and with the same extension (writers such as image encoders choose the
-/// format by it).
-pub fn temporary_path(path: &Path) -> PathBuf {
-    let stem = path
-        .file_stem()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "out".into());
-    let ext = path
-        .extension()
-        .map(|e| format!(".{}", e.to_string_lossy()))
-        .unwrap_or_default();
-    path.with_file_name(format!(".{stem}.tmp{}{ext}", std::process::id()))
+/// Why output could not be written. Every variant names the output path the user gave.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum OutputError {
+    /// An I/O operation failed (a full disk, no permission, ...).
+    #[error("cannot write {}: {error}", path.display())]
+    Io {
+        /// The output.
+        path: PathBuf,
+        /// What the system reported.
+        error: io::Error,
+    },
+    /// A directory has the name of an output file.
+    #[error("cannot write {}: a directory of that name is in the way", .0.display())]
+    DirectoryInTheWay(PathBuf),
+    /// Something on the way to an output file is not a directory.
+    #[error("cannot write {}: {} is not a directory", path.display(), dir.display())]
+    NotADirectory {
+        /// The output.
+        path: PathBuf,
+        /// What should be a directory.
+        dir: PathBuf,
+    },
+    /// The path names no file (`..`, `/`).
+    #[error("cannot write {}: it does not name a file", .0.display())]
+    NotAFileName(PathBuf),
+    /// Two outputs of one command have the same path.
+    #[error("{} is given for two outputs", .0.display())]
+    Twice(PathBuf),
+    /// The producer of a file (e.g. a plotting backend) failed.
+    #[error("cannot write {}: {message}", path.display())]
+    Produce {
+        /// The output.
+        path: PathBuf,
+        /// The producer's error.
+        message: String,
+    },
+    /// A file could not be moved into place during the commit; the moves done were undone.
+    #[error(
+        "cannot move {} into place: {error}; no output was changed",
+        path.display()
+    )]
+    Commit {
+        /// The output that could not be moved.
+        path: PathBuf,
+        /// What the system reported.
+        error: io::Error,
+    },
+    /// A commit failed midway and could not be undone entirely.
+    #[error(
+        "cannot move {} into place: {error}; undoing the other moves failed too: {} {} from this run{}, every other output is as it was",
+        path.display(),
+        list(new),
+        if new.len() == 1 { "is" } else { "are" },
+        kept_note(kept)
+    )]
+    PartlyCommitted {
+        /// The output that could not be moved.
+        path: PathBuf,
+        /// What the system reported.
+        error: io::Error,
+        /// The outputs (files, or a whole new directory) that are now this run's.
+        new: Vec<PathBuf>,
+        /// Where the previous versions of new files that replaced old ones are kept.
+        kept: Vec<PathBuf>,
+    },
 }
 
-/// Write `bytes` to `path` through a temporary file and a rename.
-pub fn write_atomically(path: &Path, bytes: &[u8]) -> io::Result<()> {
-    let tmp = temporary_path(path);
-    let result = (|| {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
-        std::fs::rename(&tmp, path)
-    })();
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result
+fn list(paths: &[PathBuf]) -> String {
+    let v: Vec<String> = paths.iter().map(|p| p.display().to_string()).collect();
+    v.join(", ")
 }
 
-/// Produce a file with `write` (which writes to the path it is given, e.g. a plotting backend)
-/// and move it into place only if that succeeds.
-pub fn write_via<E: From<io::Error>>(
-    path: &Path,
-    write: impl FnOnce(&Path) -> Result<(), E>,
-) -> Result<(), E> {
-    let tmp = temporary_path(path);
-    let result = write(&tmp).and_then(|()| std::fs::rename(&tmp, path).map_err(E::from));
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
+fn kept_note(kept: &[PathBuf]) -> String {
+    if kept.is_empty() {
+        String::new()
+    } else {
+        format!(" (the previous versions are kept as {})", list(kept))
     }
-    result
+}
+
+impl OutputError {
+    fn io(path: &Path, error: io::Error) -> Self {
+        OutputError::Io {
+            path: path.to_path_buf(),
+            error,
+        }
+    }
+}
+
+/// `field` as one RFC 4180 CSV field: quoted, with its quotes doubled, when it holds a comma,
+/// a double quote, a CR or a LF; as it is otherwise. Every text field of lidarsim's CSV files
+/// goes through it (names in scenes may hold any text).
+pub fn csv_field(field: &str) -> Cow<'_, str> {
+    if field.contains([',', '"', '\r', '\n']) {
+        Cow::Owned(format!("\"{}\"", field.replace('"', "\"\"")))
+    } else {
+        Cow::Borrowed(field)
+    }
+}
+
+/// Write one file whole or not at all (an [`OutputSet`] of one file).
+pub fn write_file(path: impl AsRef<Path>, bytes: impl AsRef<[u8]>) -> Result<(), OutputError> {
+    let mut set = OutputSet::new();
+    set.write(path, bytes)?;
+    set.commit().map(|_| ())
+}
+
+/// Refuse, before any work, output paths that could not be written: a path that names no
+/// file, a directory where a file should go, a file where a directory should be, the same path
+/// twice. Commands call it first with every path they may write, so that a long run does not
+/// fail at its end; the [`OutputSet`] checks the same again.
+pub fn check_paths<P: AsRef<Path>>(paths: &[P]) -> Result<(), OutputError> {
+    let mut seen = Vec::new();
+    for p in paths {
+        let path = p.as_ref();
+        let (dir, name) = split(path)?;
+        let key = absolute(&dir, path)?.join(&name);
+        if seen.contains(&key) {
+            return Err(OutputError::Twice(path.to_path_buf()));
+        }
+        if locate(&dir, path)?.is_none() {
+            refuse_directory(&dir.join(&name), path)?;
+        }
+        seen.push(key);
+    }
+    Ok(())
+}
+
+/// The files of one command, staged until [`Self::commit`]; see the module documentation.
+/// Dropped without a commit, it removes everything it staged.
+#[derive(Debug, Default)]
+pub struct OutputSet {
+    /// One staging directory per target directory.
+    stages: Vec<Stage>,
+    /// The outputs in the order they were staged.
+    order: Vec<PathBuf>,
+}
+
+/// The files staged for one target directory.
+#[derive(Debug)]
+struct Stage {
+    /// The directory the files go to, as the caller spelled it.
+    target: PathBuf,
+    /// The same, absolute: one directory spelled two ways is one stage.
+    key: PathBuf,
+    /// The hidden staging directory: `new/` holds the staged files, `old/` the files they
+    /// replace during a commit.
+    dir: PathBuf,
+    /// Staged file names and their outputs as the caller spelled them.
+    files: Vec<(OsString, PathBuf)>,
+    /// Keep the staging directory: it holds the only copy of an old file that a failed undo
+    /// could not put back.
+    keep: bool,
+}
+
+impl Drop for Stage {
+    fn drop(&mut self) {
+        if !self.keep {
+            let _ = fs::remove_dir_all(&self.dir);
+        }
+    }
+}
+
+static NEXT_STAGE: AtomicU64 = AtomicU64::new(0);
+
+/// The directory and file name of an output path.
+fn split(path: &Path) -> Result<(PathBuf, OsString), OutputError> {
+    let name = path
+        .file_name()
+        .ok_or_else(|| OutputError::NotAFileName(path.to_path_buf()))?;
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    Ok((dir, name.to_os_string()))
+}
+
+fn absolute(dir: &Path, path: &Path) -> Result<PathBuf, OutputError> {
+    std::path::absolute(dir).map_err(|e| OutputError::io(path, e))
+}
+
+/// `None` if `dir` is a directory; else its nearest existing ancestor, which must be one.
+fn locate(dir: &Path, path: &Path) -> Result<Option<PathBuf>, OutputError> {
+    let absent = |e: &io::Error| {
+        matches!(
+            e.kind(),
+            io::ErrorKind::NotFound | io::ErrorKind::NotADirectory
+        )
+    };
+    for (i, a) in dir.ancestors().enumerate() {
+        let a = if a.as_os_str().is_empty() {
+            Path::new(".")
+        } else {
+            a
+        };
+        match fs::metadata(a) {
+            Ok(m) if m.is_dir() => return Ok((i > 0).then(|| a.to_path_buf())),
+            Ok(_) => {
+                return Err(OutputError::NotADirectory {
+                    path: path.to_path_buf(),
+                    dir: a.to_path_buf(),
+                });
+            }
+            Err(e) if absent(&e) => {}
+            Err(e) => return Err(OutputError::io(path, e)),
+        }
+    }
+    Err(OutputError::io(path, io::ErrorKind::NotFound.into()))
+}
+
+fn refuse_directory(file: &Path, path: &Path) -> Result<(), OutputError> {
+    match fs::symlink_metadata(file) {
+        Ok(m) if m.is_dir() => Err(OutputError::DirectoryInTheWay(path.to_path_buf())),
+        _ => Ok(()),
+    }
+}
+
+/// Flush a directory's entries to disk, where the platform can (not on Windows): a rename is
+/// durable only once its directory is.
+fn sync_dir(dir: &Path) {
+    if let Ok(d) = File::open(dir) {
+        let _ = d.sync_all();
+    }
+}
+
+impl Stage {
+    /// Create the staging directory for `target` (an output `path` names it in errors).
+    fn open(target: PathBuf, key: PathBuf, path: &Path) -> Result<Stage, OutputError> {
+        let base = locate(&target, path)?.unwrap_or_else(|| target.clone());
+        let n = NEXT_STAGE.fetch_add(1, Ordering::Relaxed);
+        let dir = base.join(format!(".lidarsim-staging-{}-{n}", std::process::id()));
+        fs::create_dir(&dir).map_err(|e| OutputError::io(path, e))?;
+        let stage = Stage {
+            target,
+            key,
+            dir,
+            files: Vec::new(),
+            keep: false,
+        };
+        fs::create_dir(stage.dir.join("new")).map_err(|e| OutputError::io(path, e))?;
+        Ok(stage)
+    }
+}
+
+/// What a commit did, in order, to undo it.
+enum Step {
+    /// A staged directory became the target; `created` are the parents made for it.
+    Dir { stage: usize, created: Vec<PathBuf> },
+    /// A staged file was moved to `dest`, over the file kept at `prior` if any.
+    File {
+        stage: usize,
+        path: PathBuf,
+        dest: PathBuf,
+        prior: Prior,
+    },
+}
+
+/// One file's move into an existing target directory.
+struct Move {
+    /// The output as the caller spelled it.
+    path: PathBuf,
+    /// Its staged file.
+    from: PathBuf,
+    /// Where it goes.
+    dest: PathBuf,
+    /// What it replaces.
+    prior: Prior,
+}
+
+/// What a file replaced.
+enum Prior {
+    /// Nothing: undo removes the new file.
+    Absent,
+    /// An old file, kept at this path (a hard link or a copy).
+    Kept(PathBuf),
+    /// An old file that could not be kept: the move cannot be undone.
+    Lost,
+}
+
+impl OutputSet {
+    /// An empty set.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Stage `bytes` as the file `path`.
+    pub fn write(
+        &mut self,
+        path: impl AsRef<Path>,
+        bytes: impl AsRef<[u8]>,
+    ) -> Result<(), OutputError> {
+        self.write_with(path, |f| f.write_all(bytes.as_ref()))
+    }
+
+    /// Stage the file `path`, written by `write` into the file it is given.
+    pub fn write_with(
+        &mut self,
+        path: impl AsRef<Path>,
+        write: impl FnOnce(&mut File) -> io::Result<()>,
+    ) -> Result<(), OutputError> {
+        let path = path.as_ref();
+        self.stage(path, |staged| {
+            let mut f = File::create(staged).map_err(|e| OutputError::io(path, e))?;
+            write(&mut f).map_err(|e| OutputError::io(path, e))?;
+            f.sync_all().map_err(|e| OutputError::io(path, e))
+        })
+    }
+
+    /// Stage the file `path`, written by `produce` to the path it is given (which keeps the
+    /// output's extension: plotting backends choose the format by it).
+    pub fn write_via<E: Display>(
+        &mut self,
+        path: impl AsRef<Path>,
+        produce: impl FnOnce(&Path) -> Result<(), E>,
+    ) -> Result<(), OutputError> {
+        let path = path.as_ref();
+        self.stage(path, |staged| {
+            produce(staged).map_err(|e| OutputError::Produce {
+                path: path.to_path_buf(),
+                message: e.to_string(),
+            })?;
+            let f = File::open(staged).map_err(|e| OutputError::io(path, e))?;
+            f.sync_all().map_err(|e| OutputError::io(path, e))
+        })
+    }
+
+    /// Check `path`, have `write` write its staged file, and record it.
+    fn stage(
+        &mut self,
+        path: &Path,
+        write: impl FnOnce(&Path) -> Result<(), OutputError>,
+    ) -> Result<(), OutputError> {
+        let (target, name) = split(path)?;
+        let key = absolute(&target, path)?;
+        let i = match self.stages.iter().position(|s| s.key == key) {
+            Some(i) => i,
+            None => {
+                let s = Stage::open(target.clone(), key, path)?;
+                self.stages.push(s);
+                self.stages.len() - 1
+            }
+        };
+        let stage = &mut self.stages[i];
+        if stage.files.iter().any(|(n, _)| *n == name) {
+            return Err(OutputError::Twice(path.to_path_buf()));
+        }
+        refuse_directory(&target.join(&name), path)?;
+        let staged = stage.dir.join("new").join(&name);
+        if let Err(e) = write(&staged) {
+            // The set may still be committed: a failed file must not be part of it.
+            let _ = fs::remove_file(&staged);
+            return Err(e);
+        }
+        stage.files.push((name, path.to_path_buf()));
+        self.order.push(path.to_path_buf());
+        Ok(())
+    }
+
+    /// Move every staged file into place (see the module documentation for the guarantee);
+    /// returns the outputs in the order they were staged.
+    pub fn commit(mut self) -> Result<Vec<PathBuf>, OutputError> {
+        self.commit_with(&mut |from, to| fs::rename(from, to))?;
+        Ok(std::mem::take(&mut self.order))
+    }
+
+    /// [`Self::commit`] with the rename it uses given, so that tests can make it fail.
+    fn commit_with(
+        &mut self,
+        rename: &mut dyn FnMut(&Path, &Path) -> io::Result<()>,
+    ) -> Result<(), OutputError> {
+        // Parents first: a new directory must exist before a directory inside it moves in.
+        self.stages.sort_by_key(|s| s.key.components().count());
+        for s in &self.stages {
+            sync_dir(&s.dir.join("new"));
+        }
+        // Every check and every copy of an old file before the first rename.
+        let mut plan = Vec::new();
+        for s in &self.stages {
+            plan.push(Self::prepare(s)?);
+        }
+        let mut done: Vec<Step> = Vec::new();
+        for (i, p) in plan.into_iter().enumerate() {
+            match p {
+                None => {
+                    let target = self.stages[i].target.clone();
+                    let created = missing_parents(&target);
+                    let r = created
+                        .iter()
+                        .rev()
+                        .try_for_each(fs::create_dir)
+                        .and_then(|()| rename(&self.stages[i].dir.join("new"), &target));
+                    if let Err(e) = r {
+                        remove_created(&created);
+                        return Err(self.undo(done, &target, e, rename));
+                    }
+                    done.push(Step::Dir { stage: i, created });
+                }
+                Some(moves) => {
+                    for m in moves {
+                        if let Err(e) = rename(&m.from, &m.dest) {
+                            return Err(self.undo(done, &m.path, e, rename));
+                        }
+                        done.push(Step::File {
+                            stage: i,
+                            path: m.path,
+                            dest: m.dest,
+                            prior: m.prior,
+                        });
+                    }
+                }
+            }
+        }
+        for s in &self.stages {
+            sync_dir(&s.target);
+            if let Some(parent) = s.target.parent() {
+                sync_dir(parent);
+            }
+        }
+        Ok(())
+    }
+
+    /// For a target that does not exist: `None` (the staging directory will be renamed to it).
+    /// For one that exists: the move of each file, the old files kept in the staging
+    /// directory's `old/`.
+    fn prepare(s: &Stage) -> Result<Option<Vec<Move>>, OutputError> {
+        let first = s.files.first().map_or(&s.target, |(_, p)| p);
+        match fs::metadata(&s.target) {
+            Ok(m) if m.is_dir() => {}
+            Ok(_) => {
+                return Err(OutputError::NotADirectory {
+                    path: first.clone(),
+                    dir: s.target.clone(),
+                });
+            }
+            Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(None),
+            Err(e) => return Err(OutputError::io(first, e)),
+        }
+        let old = s.dir.join("old");
+        let mut files = Vec::new();
+        for (name, path) in &s.files {
+            let dest = s.target.join(name);
+            let prior = match fs::symlink_metadata(&dest) {
+                Ok(m) if m.is_dir() => return Err(OutputError::DirectoryInTheWay(path.clone())),
+                Ok(_) => {
+                    if !old.exists() {
+                        fs::create_dir(&old).map_err(|e| OutputError::io(path, e))?;
+                    }
+                    let keep = old.join(name);
+                    // A hard link costs nothing; a copy serves filesystems without links.
+                    match fs::hard_link(&dest, &keep).or_else(|_| fs::copy(&dest, &keep).map(drop))
+                    {
+                        Ok(()) => Prior::Kept(keep),
+                        Err(_) => Prior::Lost,
+                    }
+                }
+                Err(_) => Prior::Absent,
+            };
+            files.push(Move {
+                path: path.clone(),
+                from: s.dir.join("new").join(name),
+                dest,
+                prior,
+            });
+        }
+        Ok(Some(files))
+    }
+
+    /// Undo the steps `done` after moving `path` failed with `error`; the error to report.
+    fn undo(
+        &mut self,
+        done: Vec<Step>,
+        path: &Path,
+        error: io::Error,
+        rename: &mut dyn FnMut(&Path, &Path) -> io::Result<()>,
+    ) -> OutputError {
+        let mut new = Vec::new();
+        let mut kept = Vec::new();
+        for step in done.into_iter().rev() {
+            match step {
+                Step::Dir { stage, created } => {
+                    let s = &self.stages[stage];
+                    if rename(&s.target, &s.dir.join("new")).is_ok() {
+                        remove_created(&created);
+                    } else {
+                        new.push(s.target.clone());
+                    }
+                }
+                Step::File {
+                    stage,
+                    path,
+                    dest,
+                    prior,
+                } => {
+                    let ok = match &prior {
+                        Prior::Absent => fs::remove_file(&dest).is_ok(),
+                        Prior::Kept(k) => rename(k, &dest).is_ok(),
+                        Prior::Lost => false,
+                    };
+                    if !ok {
+                        if let Prior::Kept(k) = prior {
+                            self.stages[stage].keep = true;
+                            kept.push(k);
+                        }
+                        new.push(path);
+                    }
+                }
+            }
+        }
+        if new.is_empty() {
+            OutputError::Commit {
+                path: path.to_path_buf(),
+                error,
+            }
+        } else {
+            new.reverse();
+            OutputError::PartlyCommitted {
+                path: path.to_path_buf(),
+                error,
+                new,
+                kept,
+            }
+        }
+    }
+}
+
+/// The parents of `dir` that do not exist, innermost first.
+fn missing_parents(dir: &Path) -> Vec<PathBuf> {
+    dir.ancestors()
+        .skip(1)
+        .take_while(|a| !a.as_os_str().is_empty() && !a.exists())
+        .map(Path::to_path_buf)
+        .collect()
+}
+
+/// Remove the parents made for a new directory (innermost first), if they are empty.
+fn remove_created(created: &[PathBuf]) {
+    for d in created {
+        let _ = fs::remove_dir(d);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every entry under `dir`, recursively, with the contents of files: what a test compares
+    /// before and after.
+    fn snapshot(dir: &Path) -> Vec<(PathBuf, Option<Vec<u8>>)> {
+        let mut out = Vec::new();
+        let mut todo = vec![dir.to_path_buf()];
+        while let Some(d) = todo.pop() {
+            for e in fs::read_dir(&d).unwrap() {
+                let p = e.unwrap().path();
+                if p.is_dir() {
+                    todo.push(p.clone());
+                    out.push((p, None));
+                } else {
+                    out.push((p.clone(), Some(fs::read(&p).unwrap())));
+                }
+            }
+        }
+        out.sort();
+        out
+    }
+
+    fn hidden(dir: &Path) -> Vec<PathBuf> {
+        snapshot(dir)
+            .into_iter()
+            .map(|(p, _)| p)
+            .filter(|p| p.to_string_lossy().contains(".lidarsim-staging"))
+            .collect()
+    }
+
+    /// A target directory holding an earlier run's two outputs and a file of the user's.
+    fn earlier_run(root: &Path) -> PathBuf {
+        earlier_run_in(&root.join("out"))
+    }
+
+    fn earlier_run_in(out: &Path) -> PathBuf {
+        let out = out.to_path_buf();
+        fs::create_dir_all(&out).unwrap();
+        fs::write(out.join("a.csv"), "old a\n").unwrap();
+        fs::write(out.join("b.csv"), "old b\n").unwrap();
+        fs::write(out.join("notes.txt"), "mine\n").unwrap();
+        out
+    }
+
+    #[test]
+    fn csv_field_quotes_only_what_needs_it() {
+        assert_eq!(csv_field("on-line 1"), "on-line 1");
+        assert_eq!(csv_field(""), "");
+        assert_eq!(csv_field("a,b"), "\"a,b\"");
+        assert_eq!(csv_field("say \"hi\""), "\"say \"\"hi\"\"\"");
+        assert_eq!(csv_field("two\nlines"), "\"two\nlines\"");
+        assert_eq!(csv_field("cr\r"), "\"cr\r\"");
+    }
+
+    #[test]
+    fn a_new_directory_appears_with_all_its_files() {
+        let root = tempfile::tempdir().unwrap();
+        let out = root.path().join("deep/new/out");
+        let mut set = OutputSet::new();
+        set.write(out.join("a.csv"), "a\n").unwrap();
+        set.write_via(out.join("b.png"), |p| fs::write(p, "png"))
+            .unwrap();
+        assert!(
+            !root.path().join("deep").exists(),
+            "nothing before the commit"
+        );
+        let paths = set.commit().unwrap();
+        assert_eq!(paths, [out.join("a.csv"), out.join("b.png")]);
+        assert_eq!(fs::read_to_string(out.join("a.csv")).unwrap(), "a\n");
+        assert_eq!(fs::read_to_string(out.join("b.png")).unwrap(), "png");
+        assert_eq!(fs::read_dir(&out).unwrap().count(), 2);
+        assert_eq!(hidden(root.path()), Vec::<PathBuf>::new());
+    }
+
+    #[test]
+    fn a_commit_replaces_an_earlier_runs_files_and_keeps_the_others() {
+        let root = tempfile::tempdir().unwrap();
+        let out = earlier_run(root.path());
+        let mut set = OutputSet::new();
+        set.write(out.join("a.csv"), "new a\n").unwrap();
+        set.write(out.join("c.csv"), "new c\n").unwrap();
+        assert_eq!(fs::read_to_string(out.join("a.csv")).unwrap(), "old a\n");
+        set.commit().unwrap();
+        assert_eq!(fs::read_to_string(out.join("a.csv")).unwrap(), "new a\n");
+        assert_eq!(fs::read_to_string(out.join("b.csv")).unwrap(), "old b\n");
+        assert_eq!(fs::read_to_string(out.join("c.csv")).unwrap(), "new c\n");
+        assert_eq!(fs::read_to_string(out.join("notes.txt")).unwrap(), "mine\n");
+        assert_eq!(hidden(root.path()), Vec::<PathBuf>::new());
+    }
+
+    #[test]
+    fn a_failed_file_leaves_everything_as_it_was() {
+        let root = tempfile::tempdir().unwrap();
+        let out = earlier_run(root.path());
+        let before = snapshot(root.path());
+        let mut set = OutputSet::new();
+        set.write(out.join("a.csv"), "new a\n").unwrap();
+        // A plotting backend that fails after writing part of its file.
+        let e = set
+            .write_via(out.join("b.png"), |p| {
+                fs::write(p, "half").unwrap();
+                Err("out of fonts")
+            })
+            .unwrap_err();
+        assert!(matches!(e, OutputError::Produce { .. }), "{e}");
+        assert!(e.to_string().contains("b.png") && e.to_string().contains("out of fonts"));
+        drop(set);
+        assert_eq!(snapshot(root.path()), before);
+    }
+
+    #[test]
+    fn a_full_disk_leaves_everything_as_it_was() {
+        for fresh in [false, true] {
+            let root = tempfile::tempdir().unwrap();
+            let out = if fresh {
+                root.path().join("new")
+            } else {
+                earlier_run(root.path())
+            };
+            let before = snapshot(root.path());
+            let mut set = OutputSet::new();
+            set.write(out.join("a.csv"), "new a\n").unwrap();
+            // What a full disk does to a writer: part of the bytes, then ENOSPC.
+            let e = set
+                .write_with(out.join("b.csv"), |f| {
+                    f.write_all(b"new b, first half")?;
+                    Err(io::Error::from(io::ErrorKind::StorageFull))
+                })
+                .unwrap_err();
+            match &e {
+                OutputError::Io { path, error } => {
+                    assert_eq!(path, &out.join("b.csv"));
+                    assert_eq!(error.kind(), io::ErrorKind::StorageFull);
+                }
+                other => panic!("{other}"),
+            }
+            drop(set);
+            assert_eq!(snapshot(root.path()), before);
+        }
+    }
+
+    #[test]
+    fn a_failed_file_is_not_committed() {
+        let root = tempfile::tempdir().unwrap();
+        let out = root.path().join("out");
+        let mut set = OutputSet::new();
+        set.write(out.join("a.csv"), "a").unwrap();
+        assert!(set.write_via(out.join("b.png"), |_| Err("no")).is_err());
+        set.commit().unwrap();
+        assert_eq!(fs::read_dir(&out).unwrap().count(), 1);
+        assert!(out.join("a.csv").is_file());
+    }
+
+    #[test]
+    fn a_directory_named_like_an_output_is_refused_before_writing() {
+        let root = tempfile::tempdir().unwrap();
+        let out = earlier_run(root.path());
+        fs::create_dir(out.join("d.csv")).unwrap();
+        let before = snapshot(root.path());
+        let e = check_paths(&[out.join("a.csv"), out.join("d.csv")]).unwrap_err();
+        assert!(matches!(&e, OutputError::DirectoryInTheWay(p) if p == &out.join("d.csv")));
+        let mut set = OutputSet::new();
+        set.write(out.join("a.csv"), "new a\n").unwrap();
+        let mut called = false;
+        let e = set
+            .write_with(out.join("d.csv"), |_| {
+                called = true;
+                Ok(())
+            })
+            .unwrap_err();
+        assert!(!called, "nothing is written for a blocked name");
+        assert_eq!(
+            e.to_string(),
+            format!(
+                "cannot write {}: a directory of that name is in the way",
+                out.join("d.csv").display()
+            )
+        );
+        drop(set);
+        assert_eq!(snapshot(root.path()), before);
+    }
+
+    #[test]
+    fn a_directory_that_appears_before_the_commit_is_refused_by_it() {
+        let root = tempfile::tempdir().unwrap();
+        let out = earlier_run(root.path());
+        let mut set = OutputSet::new();
+        set.write(out.join("a.csv"), "new a\n").unwrap();
+        set.write(out.join("c.csv"), "new c\n").unwrap();
+        fs::create_dir(out.join("c.csv")).unwrap();
+        let before: Vec<_> = snapshot(root.path())
+            .into_iter()
+            .filter(|(p, _)| !p.to_string_lossy().contains(".lidarsim-staging"))
+            .collect();
+        let e = set.commit().unwrap_err();
+        assert!(matches!(&e, OutputError::DirectoryInTheWay(p) if p == &out.join("c.csv")));
+        assert_eq!(snapshot(root.path()), before);
+    }
+
+    #[test]
+    fn paths_that_cannot_be_files_are_refused() {
+        let root = tempfile::tempdir().unwrap();
+        let file = root.path().join("file");
+        fs::write(&file, "x").unwrap();
+        let e = check_paths(&[file.join("sub/a.csv")]).unwrap_err();
+        assert!(
+            matches!(&e, OutputError::NotADirectory { dir, .. } if dir == &file),
+            "{e}"
+        );
+        let mut set = OutputSet::new();
+        assert!(matches!(
+            set.write(file.join("a.csv"), "a"),
+            Err(OutputError::NotADirectory { .. })
+        ));
+        assert!(matches!(
+            check_paths(&[Path::new("..")]),
+            Err(OutputError::NotAFileName(_))
+        ));
+        let a = root.path().join("out/a.csv");
+        let again = root.path().join("out/./a.csv");
+        assert!(matches!(
+            check_paths(&[&a, &again]),
+            Err(OutputError::Twice(_))
+        ));
+        set.write(&a, "a").unwrap();
+        assert!(matches!(set.write(&again, "b"), Err(OutputError::Twice(_))));
+        drop(set);
+        assert_eq!(fs::read_dir(root.path()).unwrap().count(), 1);
+    }
+
+    #[test]
+    fn a_rename_that_fails_midway_is_undone() {
+        let root = tempfile::tempdir().unwrap();
+        let out = earlier_run(root.path());
+        let before = snapshot(root.path());
+        let mut set = OutputSet::new();
+        set.write(out.join("c.csv"), "new c\n").unwrap();
+        set.write(out.join("a.csv"), "new a\n").unwrap();
+        set.write(out.join("b.csv"), "new b\n").unwrap();
+        let mut n = 0;
+        let e = set
+            .commit_with(&mut |from, to| {
+                n += 1;
+                if n == 3 {
+                    return Err(io::ErrorKind::StorageFull.into());
+                }
+                fs::rename(from, to)
+            })
+            .unwrap_err();
+        assert!(matches!(&e, OutputError::Commit { path, .. } if path == &out.join("b.csv")));
+        assert!(e.to_string().ends_with("no output was changed"), "{e}");
+        drop(set);
+        assert_eq!(snapshot(root.path()), before);
+    }
+
+    #[test]
+    fn a_new_directory_is_taken_back_when_a_later_one_fails() {
+        let root = tempfile::tempdir().unwrap();
+        let out = earlier_run_in(&root.path().join("runs/2026/out"));
+        // Shallower, so committed first; its parent `new` is made for it.
+        let fresh = root.path().join("new/figures");
+        let before = snapshot(root.path());
+        let mut set = OutputSet::new();
+        set.write(out.join("a.csv"), "new a\n").unwrap();
+        set.write(fresh.join("f.png"), "png").unwrap();
+        let mut moved_fresh = false;
+        let e = set
+            .commit_with(&mut |from, to| {
+                if to.starts_with(&out) {
+                    return Err(io::ErrorKind::PermissionDenied.into());
+                }
+                moved_fresh |= to == fresh;
+                fs::rename(from, to)
+            })
+            .unwrap_err();
+        assert!(
+            moved_fresh,
+            "the new directory was moved before the failure"
+        );
+        assert!(matches!(e, OutputError::Commit { .. }), "{e}");
+        drop(set);
+        assert_eq!(snapshot(root.path()), before);
+    }
+
+    #[test]
+    fn an_undo_that_fails_names_the_new_files_and_keeps_the_old_ones() {
+        let root = tempfile::tempdir().unwrap();
+        let out = earlier_run(root.path());
+        let mut set = OutputSet::new();
+        set.write(out.join("a.csv"), "new a\n").unwrap();
+        set.write(out.join("b.csv"), "new b\n").unwrap();
+        let mut n = 0;
+        // The second move fails, and so does putting the old a.csv back.
+        let e = set
+            .commit_with(&mut |from, to| {
+                n += 1;
+                if n >= 2 {
+                    return Err(io::ErrorKind::StorageFull.into());
+                }
+                fs::rename(from, to)
+            })
+            .unwrap_err();
+        let OutputError::PartlyCommitted {
+            path, new, kept, ..
+        } = &e
+        else {
+            panic!("{e}");
+        };
+        assert_eq!(path, &out.join("b.csv"));
+        assert_eq!(new, &[out.join("a.csv")]);
+        assert_eq!(fs::read_to_string(out.join("a.csv")).unwrap(), "new a\n");
+        assert_eq!(fs::read_to_string(out.join("b.csv")).unwrap(), "old b\n");
+        let msg = e.to_string();
+        assert!(msg.contains(&format!("{} is from this run", out.join("a.csv").display())));
+        drop(set);
+        // The only copy of the old a.csv is not deleted.
+        assert_eq!(fs::read_to_string(&kept[0]).unwrap(), "old a\n");
+    }
+
+    #[test]
+    fn write_file_replaces_one_file() {
+        let root = tempfile::tempdir().unwrap();
+        let out = earlier_run(root.path());
+        write_file(out.join("a.csv"), b"new a\n").unwrap();
+        assert_eq!(fs::read_to_string(out.join("a.csv")).unwrap(), "new a\n");
+        assert_eq!(hidden(root.path()), Vec::<PathBuf>::new());
+    }
 }

@@ -5,8 +5,8 @@
 //! `source,channel,fov_full_angle_mrad,range_m,order,energy_j,stderr_j`.
 
 use std::fmt::Write as _;
-use std::io;
-use std::path::Path;
+
+use crate::output::csv_field;
 
 /// Where a set of returns comes from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -248,6 +248,7 @@ impl Returns {
         let src = self.source.label();
         let labels: Vec<String> = self.orders.iter().map(|o| o.label()).collect();
         for (c, ch) in self.channels.iter().enumerate() {
+            let ch = csv_field(ch);
             for (f, fov) in self.fov_full_angle_mrad.iter().enumerate() {
                 for (g, r) in self.range_m.iter().enumerate() {
                     for (o, label) in labels.iter().enumerate() {
@@ -267,14 +268,13 @@ impl Returns {
 /// The header line of `returns.csv`.
 pub const CSV_HEADER: &str = "source,channel,fov_full_angle_mrad,range_m,order,energy_j,stderr_j";
 
-/// Write several sets of returns to one CSV file, through a temporary file and a rename so that
-/// a failed run never leaves a half-written file.
-pub fn write_csv(path: &Path, sets: &[&Returns]) -> io::Result<()> {
+/// Several sets of returns as the text of one CSV file (header and rows).
+pub fn to_csv(sets: &[&Returns]) -> String {
     let mut s = String::with_capacity(1 << 20);
     s.push_str(CSV_HEADER);
     s.push('\n');
     for r in sets {
         r.csv_rows(&mut s);
     }
-    crate::output::write_atomically(path, s.as_bytes())
+    s
 }

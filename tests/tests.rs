@@ -9,6 +9,8 @@ mod atmosphere;
 mod beyond_voigt;
 /// The command line.
 mod cli;
+/// Output written whole or not at all; CSV quoting.
+mod output;
 /// Particles: Mie, size distributions, phase-function tables and sampling.
 mod particles;
 /// Instrument and retrieval: line shapes, noise, retrievals against the truth.

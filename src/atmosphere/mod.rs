@@ -113,13 +113,8 @@ pub enum AtmosphereError {
     #[error("covariance: {0}")]
     Covariance(String),
     /// An output file could not be written.
-    #[error("cannot write {path}: {message}")]
-    Write {
-        /// The file.
-        path: std::path::PathBuf,
-        /// The I/O error.
-        message: String,
-    },
+    #[error(transparent)]
+    Write(#[from] crate::output::OutputError),
 }
 
 /// One atmospheric column on levels ordered bottom to top.
@@ -448,17 +443,6 @@ pub fn parse_afgl(path: &str, text: &str) -> Result<Profile, InputError> {
         .validate()
         .map_err(|e| InputError::file(path, e.to_string()))?;
     Ok(profile)
-}
-
-/// Write `contents` to `path` whole or not at all ([`crate::output::write_atomically`]).
-pub(crate) fn write_atomically(
-    path: &std::path::Path,
-    contents: &[u8],
-) -> Result<(), AtmosphereError> {
-    crate::output::write_atomically(path, contents).map_err(|e| AtmosphereError::Write {
-        path: path.to_path_buf(),
-        message: e.to_string(),
-    })
 }
 
 #[cfg(test)]

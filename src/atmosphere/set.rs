@@ -39,7 +39,7 @@ use std::str::FromStr;
 use super::humidity::{vmr_from_dry_mole_ratio, vmr_from_specific_humidity};
 use super::hydrostatic::hydrostatic_altitudes_m;
 use super::interp::{HYBRID_TOP_PA, hybrid_shift_pa};
-use super::{AtmosphereError, GasProfile, Profile, write_atomically};
+use super::{AtmosphereError, GasProfile, Profile};
 use crate::input::{CsvTable, InputError, parse_f64, read_to_string};
 
 /// Latitude classes of the seed paper: high (|φ| > 50°), mid (30° ≤ |φ| ≤ 50°), tropical
@@ -440,9 +440,9 @@ impl ProfileSet {
         Ok(out)
     }
 
-    /// Write the set to `path` (through a temporary file and a rename).
+    /// Write the set to `path`, whole or not at all ([`crate::output`]).
     pub fn write(&self, path: &Path) -> Result<(), AtmosphereError> {
-        write_atomically(path, self.to_csv()?.as_bytes())
+        Ok(crate::output::write_file(path, self.to_csv()?.as_bytes())?)
     }
 }
 

@@ -16,6 +16,7 @@ use anyhow::Context;
 use std::path::{Path, PathBuf};
 
 use lidarsim::optics::OpticalAtmosphere;
+use lidarsim::output::write_file;
 use lidarsim::returns::Order;
 use lidarsim::scene::Scene;
 use lidarsim::stats;
@@ -138,7 +139,7 @@ fn study_bench(n: usize, args: &Args) -> anyhow::Result<()> {
         }));
     }
     if let Some(path) = &args.json {
-        std::fs::write(path, serde_json::to_string_pretty(&rows)?)?;
+        write_file(path, serde_json::to_string_pretty(&rows)?.as_bytes())?;
     }
     Ok(())
 }
@@ -158,6 +159,8 @@ pub fn c1_scene() -> anyhow::Result<Scene> {
 
 /// Run the subcommand.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    // Before the work, which takes minutes.
+    lidarsim::output::check_paths(&args.json.iter().collect::<Vec<_>>())?;
     if let Some(n) = args.study {
         return study_bench(n, &args);
     }
@@ -222,7 +225,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }));
     }
     if let Some(path) = &args.json {
-        std::fs::write(path, serde_json::to_string_pretty(&rows)?)?;
+        write_file(path, serde_json::to_string_pretty(&rows)?.as_bytes())?;
     }
     Ok(())
 }

@@ -3,12 +3,12 @@
 
 use std::fmt::Write as _;
 use std::io::Write;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 
 use lidarsim::atmosphere::{LatitudeClass, ProfileSet, class_ensemble, read_profile_set};
-use lidarsim::output::write_atomically;
+use lidarsim::output::{self, OutputSet, csv_field};
 use lidarsim::scene::Scene;
 use lidarsim::study::dial::{
     self, BudgetSteps, N_SOURCES, ProfileOutcome, Source, StudyOptions, StudyResult, Summary,
@@ -72,8 +72,22 @@ pub struct Args {
     pub no_plots: bool,
 }
 
+/// Every file `dial` may write into its directory.
+const FILES: [&str; 8] = [
+    "profiles.csv",
+    "summary.csv",
+    "budget.csv",
+    "failed.csv",
+    "ensemble.png",
+    "errors.png",
+    "budget.png",
+    "summary.json",
+];
+
 /// Run the subcommand.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    // Before the work: a study must not fail at its end on a name it could have refused now.
+    output::check_paths(&FILES.map(|f| args.out.join(f)))?;
     let scene = match &args.scene {
         Some(p) => Scene::read(p)?,
         None => Scene::default_scene()?,
@@ -153,26 +167,23 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     bar.finish();
     let summaries = dial::summarise(&result.outcomes);
 
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("cannot create the output directory {}", args.out.display()))?;
-    let mut written = vec![
-        write(&args.out.join("profiles.csv"), &profiles_csv(&result))?,
-        write(&args.out.join("summary.csv"), &summary_csv(&summaries))?,
-        write(
-            &args.out.join("budget.csv"),
-            &budget_csv(&summaries, &steps, &scene),
-        )?,
-        write(&args.out.join("failed.csv"), &failed_csv(&result.outcomes))?,
-    ];
+    let mut files = OutputSet::new();
+    let dir = &args.out;
+    files.write(dir.join("profiles.csv"), profiles_csv(&result))?;
+    files.write(dir.join("summary.csv"), summary_csv(&summaries))?;
+    files.write(
+        dir.join("budget.csv"),
+        budget_csv(&summaries, &steps, &scene),
+    )?;
+    files.write(dir.join("failed.csv"), failed_csv(&result.outcomes))?;
     if !args.no_plots {
-        written.extend(super::study_figures::draw(
-            &args.out, &set, &result, &summaries,
-        )?);
+        super::study_figures::draw(&mut files, dir, &set, &result, &summaries)?;
     }
-    written.push(write(
-        &args.out.join("summary.json"),
-        &summary_json(&scene, &set, &options, &result),
-    )?);
+    files.write(
+        dir.join("summary.json"),
+        summary_json(&scene, &set, &options, &result),
+    )?;
+    let written = files.commit()?;
 
     let mut out = std::io::stdout().lock();
     print_report(&mut out, &set, &result, &summaries, photons)?;
@@ -234,12 +245,6 @@ fn profile_set(args: &Args, classes: &[LatitudeClass], seed: u64) -> anyhow::Res
     Ok(set)
 }
 
-fn write(path: &Path, text: &str) -> anyhow::Result<PathBuf> {
-    write_atomically(path, text.as_bytes())
-        .with_context(|| format!("cannot write {}", path.display()))?;
-    Ok(path.to_path_buf())
-}
-
 /// Header of `profiles.csv`, one row per profile, line pair and retrieved quantity.
 pub const PROFILES_HEADER: &str = "profile_id,class,pair,method,altitude_bottom_m,altitude_top_m,truth_ppm,retrieved_ppm,error_ppm,retrieved_noisy_ppm,error_noisy_ppm,retrieved_own_profile_ppm";
 
@@ -255,9 +260,9 @@ fn profiles_csv(result: &StudyResult) -> String {
             let _ = write!(
                 s,
                 "{},{},{},{},{},{},{},{},{},{},{},{}",
-                o.id,
+                csv_field(&o.id),
                 o.class,
-                r.pair,
+                csv_field(&r.pair),
                 r.method.label(),
                 r.altitude_m.0,
                 r.altitude_m.1,
@@ -287,8 +292,8 @@ fn summary_csv(summaries: &[Summary]) -> String {
         let _ = writeln!(
             s,
             "{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
-            m.class,
-            m.pair,
+            csv_field(&m.class),
+            csv_field(&m.pair),
             m.method.label(),
             m.altitude_m.0,
             m.altitude_m.1,
@@ -317,14 +322,14 @@ fn budget_csv(summaries: &[Summary], steps: &BudgetSteps, scene: &Scene) -> Stri
             let st = &m.sources[j];
             let _ = writeln!(
                 s,
-                "{},{},{},{},{},{},\"{}\",{},{},{},{}",
-                m.class,
-                m.pair,
+                "{},{},{},{},{},{},{},{},{},{},{}",
+                csv_field(&m.class),
+                csv_field(&m.pair),
                 m.method.label(),
                 m.altitude_m.0,
                 m.altitude_m.1,
                 src.label(),
-                src.describe(steps, &scene.laser),
+                csv_field(&src.describe(steps, &scene.laser)),
                 st.bias_ppm,
                 st.sd_ppm,
                 st.rms_ppm,
@@ -339,7 +344,7 @@ fn failed_csv(outcomes: &[ProfileOutcome]) -> String {
     let mut s = String::from("profile_id,class,reason\n");
     for o in outcomes {
         if let Err(e) = &o.records {
-            let _ = writeln!(s, "{},{},\"{}\"", o.id, o.class, e.replace('"', "\"\""));
+            let _ = writeln!(s, "{},{},{}", csv_field(&o.id), o.class, csv_field(e));
         }
     }
     s

@@ -1,13 +1,12 @@
 //! Figures of a run: on/off returns against range (`returns.png`) and, with a DIAL retrieval,
 //! the retrieved mixing-ratio profile with its error bars against the truth (`dial.png`).
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-use anyhow::Context;
 use plotters::prelude::*;
 
 use super::plot::{FONT, init_font};
-use lidarsim::output::write_via;
+use lidarsim::output::{OutputError, OutputSet};
 use lidarsim::pipeline::RunOutput;
 use lidarsim::retrieval::{Method, Product, Quantity};
 use lidarsim::returns::{Order, Returns, Source};
@@ -15,32 +14,27 @@ use lidarsim::scene::Scene;
 
 type DrawResult = Result<(), Box<dyn std::error::Error>>;
 
-/// Draw every figure the run has data for; returns the files written.
-pub fn draw(dir: &Path, scene: &Scene, run: &RunOutput) -> anyhow::Result<Vec<PathBuf>> {
+/// Draw every figure the run has data for into `files`, for the directory `dir`.
+pub fn draw(
+    files: &mut OutputSet,
+    dir: &Path,
+    scene: &Scene,
+    run: &RunOutput,
+) -> Result<(), OutputError> {
     init_font();
-    let mut written = Vec::new();
-    let path = dir.join("returns.png");
     let mc = run.mc_lines.as_ref().map(|m| &m.mean);
-    write_via(&path, |tmp| {
-        returns_figure(tmp, scene, &run.analytic_lines.mean, mc)
-            .map_err(|e| std::io::Error::other(e.to_string()))
-    })
-    .with_context(|| format!("cannot draw {}", path.display()))?;
-    written.push(path);
+    files.write_via(dir.join("returns.png"), |p| {
+        returns_figure(p, scene, &run.analytic_lines.mean, mc)
+    })?;
     let dial: Vec<&Product> = run
         .products
         .iter()
         .filter(|p| p.method == Method::Dial && p.quantity == Quantity::MixingRatio)
         .collect();
     if !dial.is_empty() {
-        let path = dir.join("dial.png");
-        write_via(&path, |tmp| {
-            dial_figure(tmp, &dial).map_err(|e| std::io::Error::other(e.to_string()))
-        })
-        .with_context(|| format!("cannot draw {}", path.display()))?;
-        written.push(path);
+        files.write_via(dir.join("dial.png"), |p| dial_figure(p, &dial))?;
     }
-    Ok(written)
+    Ok(())
 }
 
 /// log10 of the returns of the first field of view: analytic order 1 as lines, Monte Carlo

@@ -7,13 +7,13 @@
 //! wavenumber and layer with the Curtis-Godson p and T, the vertical and the slant optical
 //! depth (vertical / |cos θ|, plane-parallel).
 
-use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use plotters::prelude::*;
 
 use lidarsim::atmosphere::{Profile, StandardAtmosphere, parse_afgl};
+use lidarsim::output::{self, OutputSet};
 use lidarsim::spectroscopy::isotopologues::molecule_name;
 use lidarsim::spectroscopy::xsec::GasState;
 use lidarsim::spectroscopy::{
@@ -110,6 +110,12 @@ pub struct LayerArgs {
 
 /// Run the subcommand.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    let outputs: Vec<&PathBuf> = [Some(&args.out), args.plot.as_ref()]
+        .into_iter()
+        .chain([args.layer.save_table.as_ref()])
+        .flatten()
+        .collect();
+    output::check_paths(&outputs)?;
     let grid = WavenumberGrid::new(args.start_cm1, args.end_cm1, args.step_cm1)?;
     let mut opts = LblOptions {
         wing_cm1: args.wing_cm1,
@@ -206,13 +212,15 @@ fn run_cross_sections(
         }
         text.push('\n');
     }
-    write_text(&args.out, &text)?;
+    let mut files = OutputSet::new();
+    files.write(&args.out, text)?;
     if let Some(png) = &args.plot {
         let series: Vec<(String, Vec<f64>)> = columns
             .iter()
             .map(|(n, s)| (format!("σ {n}"), s.clone()))
             .collect();
         plot(
+            &mut files,
             png,
             &format!("{} at {p_atm} atm, {t_k} K", lines.source),
             "cross-section [cm²/molecule]",
@@ -220,6 +228,7 @@ fn run_cross_sections(
             &series,
         )?;
     }
+    files.commit()?;
     Ok(())
 }
 
@@ -270,8 +279,12 @@ fn run_layers(
     let mu = los.mu()?;
     let edges = los.layer_edges(&prof, args.layer.layer_m)?;
     let table = GasOpticalDepthTable::compute(&prof, lines, &edges, grid, opts)?;
+    let mut files = OutputSet::new();
     if let Some(path) = &args.layer.save_table {
-        table.save(path)?;
+        let bytes = table
+            .to_bytes()
+            .with_context(|| format!("cannot write {}", path.display()))?;
+        files.write(path, bytes)?;
     }
     let mut text = format!(
         "# lidarsim lbl: gas absorption optical depth per layer (vertical, and slant = vertical/|cos zenith|, plane-parallel)\n\
@@ -296,9 +309,10 @@ fn run_layers(
             ));
         }
     }
-    write_text(&args.out, &text)?;
+    files.write(&args.out, text)?;
     if let Some(png) = &args.plot {
         plot(
+            &mut files,
             png,
             &format!(
                 "{}, {} m to {} m",
@@ -311,34 +325,13 @@ fn run_layers(
             &[("τ (whole path)".into(), column_slant)],
         )?;
     }
+    files.commit()?;
     Ok(())
 }
 
-/// Write through a temporary file and a rename.
-fn write_text(path: &Path, text: &str) -> anyhow::Result<()> {
-    let tmp = tmp_sibling(path, "tmp");
-    let r = (|| -> std::io::Result<()> {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(text.as_bytes())?;
-        f.sync_all()?;
-        std::fs::rename(&tmp, path)
-    })();
-    if r.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    r.with_context(|| format!("cannot write {}", path.display()))
-}
-
-fn tmp_sibling(path: &Path, ext: &str) -> PathBuf {
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "out".into());
-    path.with_file_name(format!(".{name}.{}.{ext}", std::process::id()))
-}
-
-/// Line plot with a logarithmic y axis (positive values only).
+/// Line plot with a logarithmic y axis (positive values only), staged in `files` as `path`.
 fn plot(
+    files: &mut OutputSet,
     path: &Path,
     title: &str,
     y_label: &str,
@@ -346,7 +339,6 @@ fn plot(
     series: &[(String, Vec<f64>)],
 ) -> anyhow::Result<()> {
     init_font();
-    let tmp = tmp_sibling(path, "png");
     let (x0, x1) = (x[0], x[x.len() - 1].max(x[0] + 1e-9));
     let pos = series
         .iter()
@@ -357,8 +349,8 @@ fn plot(
         bail!("nothing to plot: every value is zero");
     }
     let lo = lo.max(hi * 1e-8);
-    let r = (|| -> Result<(), Box<dyn std::error::Error>> {
-        let root = BitMapBackend::new(&tmp, (1000, 600)).into_drawing_area();
+    let draw = |tmp: &Path| -> Result<(), Box<dyn std::error::Error>> {
+        let root = BitMapBackend::new(tmp, (1000, 600)).into_drawing_area();
         root.fill(&WHITE)?;
         let mut chart = ChartBuilder::on(&root)
             .caption(title, (FONT, 18))
@@ -388,14 +380,6 @@ fn plot(
         super::plot::draw_legend(&mut chart)?;
         root.present()?;
         Ok(())
-    })();
-    match r {
-        Ok(()) => {
-            std::fs::rename(&tmp, path).with_context(|| format!("cannot write {}", path.display()))
-        }
-        Err(e) => {
-            let _ = std::fs::remove_file(&tmp);
-            bail!("cannot draw {}: {e}", path.display())
-        }
-    }
+    };
+    Ok(files.write_via(path, draw)?)
 }

@@ -333,9 +333,7 @@ fn finish(
     distribution: String,
 ) -> anyhow::Result<()> {
     if let Some(path) = &args.out {
-        b.phase
-            .write(path)
-            .with_context(|| format!("cannot write {}", path.display()))?;
+        b.phase.write(path)?;
     }
     let out = json!({
         "wavelength_nm": wavelength_nm,

@@ -1,12 +1,10 @@
 //! `lidarsim run [SCENE] [--out DIR] [--photons N] [--seed S] [--threads T] [--no-plots]`
 
 use std::io::Write;
-use std::path::{Path, PathBuf};
-
-use anyhow::Context;
+use std::path::PathBuf;
 
 use lidarsim::instrument::signals;
-use lidarsim::output::write_atomically;
+use lidarsim::output::{self, OutputSet};
 use lidarsim::pipeline::{self, RunOutput};
 use lidarsim::retrieval::{self, Method, Product, Quantity};
 use lidarsim::returns::{self, Order, Returns, Source};
@@ -41,6 +39,16 @@ pub struct Args {
     pub no_plots: bool,
 }
 
+/// Every file `run` may write into its directory.
+const FILES: [&str; 6] = [
+    "returns.csv",
+    "signals.csv",
+    "retrieval.csv",
+    "returns.png",
+    "dial.png",
+    "summary.json",
+];
+
 /// Run the subcommand.
 pub fn run(args: Args) -> anyhow::Result<()> {
     let mut scene = match &args.scene {
@@ -55,31 +63,29 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "--ddis-epsilon {} must lie in [0, 1)",
         args.ddis_epsilon
     );
+    // Before the work: a run must not fail at its end on a name it could have refused now.
+    output::check_paths(&FILES.map(|f| args.out.join(f)))?;
     let mut opts = TransportOptions::from_scene(&scene);
     opts.progress = true;
     opts.ddis_epsilon = args.ddis_epsilon;
     let run = pipeline::run(&scene, &opts)?;
 
-    // Everything is computed; now write, each file whole or not at all.
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("cannot create the output directory {}", args.out.display()))?;
-    let mut written = Vec::new();
-    let csv = args.out.join("returns.csv");
+    // Everything is computed; now write all files together or none (`lidarsim::output`).
+    let mut files = OutputSet::new();
     let sets: Vec<&Returns> = run
         .mc_lines
         .iter()
         .map(|m| &m.mean)
         .chain([&run.analytic_lines.mean])
         .collect();
-    returns::write_csv(&csv, &sets).with_context(|| format!("cannot write {}", csv.display()))?;
-    written.push(csv);
+    files.write(args.out.join("returns.csv"), returns::to_csv(&sets))?;
     if !run.signals.is_empty() {
         let mut s = String::from(signals::CSV_HEADER);
         s.push('\n');
         for sig in &run.signals {
             sig.csv_rows(&mut s);
         }
-        written.push(write(&args.out.join("signals.csv"), s.as_bytes())?);
+        files.write(args.out.join("signals.csv"), s)?;
     }
     if !run.products.is_empty() {
         let mut s = String::from(retrieval::products::CSV_HEADER);
@@ -88,14 +94,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             s.push_str(&p.csv_row());
             s.push('\n');
         }
-        written.push(write(&args.out.join("retrieval.csv"), s.as_bytes())?);
+        files.write(args.out.join("retrieval.csv"), s)?;
     }
     if !args.no_plots && scene.retrieval.is_some() {
-        written.extend(super::figures::draw(&args.out, &scene, &run)?);
+        super::figures::draw(&mut files, &args.out, &scene, &run)?;
     }
-    let summary = args.out.join("summary.json");
-    write(&summary, summary_json(&scene, &run).as_bytes())?;
-    written.push(summary);
+    files.write(args.out.join("summary.json"), summary_json(&scene, &run))?;
+    let written = files.commit()?;
 
     let mut out = std::io::stdout().lock();
     print_summary(&mut out, &scene, &run)?;
@@ -105,11 +110,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let names: Vec<String> = written.iter().map(|p| p.display().to_string()).collect();
     writeln!(out, "wrote {}", names.join(", "))?;
     Ok(())
-}
-
-fn write(path: &Path, bytes: &[u8]) -> anyhow::Result<PathBuf> {
-    write_atomically(path, bytes).with_context(|| format!("cannot write {}", path.display()))?;
-    Ok(path.to_path_buf())
 }
 
 fn print_summary(out: &mut impl Write, scene: &Scene, run: &RunOutput) -> std::io::Result<()> {

@@ -10,7 +10,7 @@ use anyhow::{Context, bail};
 use plotters::prelude::*;
 
 use lidarsim::atmosphere::{LatitudeClass, SetMember, StandardAtmosphere, read_profile_set};
-use lidarsim::output::{write_atomically, write_via};
+use lidarsim::output::{self, OutputError, OutputSet};
 use lidarsim::scene::Scene;
 use lidarsim::spectroscopy::{LblOptions, LineFilter, LineList};
 use lidarsim::study::select::{
@@ -352,8 +352,8 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     };
 
     let groups = groups(&a)?;
-    std::fs::create_dir_all(&a.out)
-        .with_context(|| format!("cannot create --out {}", a.out.display()))?;
+    // Before the work; the figures' names depend on the groups and are checked when written.
+    output::check_paths(&[a.out.join("sensitivities.csv")])?;
     println!(
         "select-lines: {} on-line positions, off-line {} cm-1, lines {} ({} lines), grid {} m to {} km",
         cfg.positions.len(),
@@ -448,17 +448,16 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     }
     bar.finish();
     rows.extend(per_profile);
-    let path = a.out.join("sensitivities.csv");
-    write_atomically(&path, select::to_csv(&rows).as_bytes())
-        .with_context(|| format!("cannot write {}", path.display()))?;
-    println!("wrote {}", path.display());
+    let mut files = OutputSet::new();
+    files.write(a.out.join("sensitivities.csv"), select::to_csv(&rows))?;
     if !a.no_plots {
         init_font();
         for g in &figures {
-            for p in draw_figures(&a.out, g, &cfg, &unc)? {
-                println!("wrote {}", p.display());
-            }
+            draw_figures(&mut files, &a.out, g, &cfg, &unc)?;
         }
+    }
+    for p in files.commit()? {
+        println!("wrote {}", p.display());
     }
     Ok(())
 }
@@ -477,21 +476,18 @@ struct GroupFigures {
     members: usize,
 }
 
+/// Stage the figures of one group in `files`, for the directory `dir`.
 fn draw_figures(
+    files: &mut OutputSet,
     dir: &Path,
     g: &GroupFigures,
     cfg: &StudyConfig,
     unc: &Uncertainties,
-) -> anyhow::Result<Vec<PathBuf>> {
+) -> Result<(), OutputError> {
     let (name, rows, stats, members) = (g.name.as_str(), &g.rows, &g.stats, g.members);
-    let mut written = Vec::new();
-    let path = dir.join(format!("transmission_{name}.png"));
-    write_via(&path, |tmp| {
-        transmission_figure(tmp, name, rows, cfg, stats, members)
-            .map_err(|e| std::io::Error::other(e.to_string()))
-    })
-    .with_context(|| format!("cannot draw {}", path.display()))?;
-    written.push(path);
+    files.write_via(dir.join(format!("transmission_{name}.png")), |p| {
+        transmission_figure(p, name, rows, cfg, stats, members)
+    })?;
     let labels: Vec<&str> = cfg.spectra.iter().map(|w| w.label.as_str()).collect();
     if rows.iter().any(|r| {
         r.position
@@ -499,17 +495,13 @@ fn draw_figures(
             .as_deref()
             .is_some_and(|l| labels.contains(&l))
     }) {
-        let path = dir.join(format!("errors_{name}.png"));
-        write_via(&path, |tmp| {
-            errors_figure(tmp, name, rows, &labels, unc)
-                .map_err(|e| std::io::Error::other(e.to_string()))
-        })
-        .with_context(|| format!("cannot draw {}", path.display()))?;
-        written.push(path);
+        files.write_via(dir.join(format!("errors_{name}.png")), |p| {
+            errors_figure(p, name, rows, &labels, unc)
+        })?;
     } else {
         println!("{name}: no on-line position on {labels:?}: no error figure");
     }
-    Ok(written)
+    Ok(())
 }
 
 /// The best-ranked position on a line, if any.

@@ -2,14 +2,13 @@
 //! class (`errors.png`) and the error budget per line pair (`budget.png`, the seed paper's
 //! Figure 5 in kind).
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-use anyhow::Context;
 use plotters::prelude::*;
 
 use super::plot::{FONT, draw_legend, init_font};
 use lidarsim::atmosphere::{LatitudeClass, ProfileSet};
-use lidarsim::output::write_via;
+use lidarsim::output::{OutputError, OutputSet};
 use lidarsim::retrieval::Method;
 use lidarsim::study::dial::{N_SOURCES, Source, StudyResult, Summary};
 
@@ -24,36 +23,27 @@ fn class_colour(c: &str) -> RGBColor {
     }
 }
 
-/// Draw every figure; returns the files written.
+/// Draw every figure into `files`, for the directory `dir`.
 pub fn draw(
+    files: &mut OutputSet,
     dir: &Path,
     set: &ProfileSet,
     result: &StudyResult,
     summaries: &[Summary],
-) -> anyhow::Result<Vec<PathBuf>> {
+) -> Result<(), OutputError> {
     init_font();
-    let mut written = Vec::new();
-    let mut one = |name: &str, f: &dyn Fn(&Path) -> DrawResult| -> anyhow::Result<()> {
-        let path = dir.join(name);
-        write_via(&path, |tmp| {
-            f(tmp).map_err(|e| std::io::Error::other(e.to_string()))
-        })
-        .with_context(|| format!("cannot draw {}", path.display()))?;
-        written.push(path);
-        Ok(())
-    };
-    one("ensemble.png", &|p| ensemble_figure(p, set))?;
+    files.write_via(dir.join("ensemble.png"), |p| ensemble_figure(p, set))?;
     if result
         .outcomes
         .iter()
         .any(|o| o.records.as_ref().is_ok_and(|r| !r.is_empty()))
     {
-        one("errors.png", &|p| errors_figure(p, result))?;
+        files.write_via(dir.join("errors.png"), |p| errors_figure(p, result))?;
     }
     if summaries.iter().any(|m| m.method == Method::Ipda) {
-        one("budget.png", &|p| budget_figure(p, summaries))?;
+        files.write_via(dir.join("budget.png"), |p| budget_figure(p, summaries))?;
     }
-    Ok(written)
+    Ok(())
 }
 
 /// (mean pressure \[Pa\], T standard deviation \[K\], relative H2O standard deviation \[%\]).

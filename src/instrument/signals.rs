@@ -264,7 +264,7 @@ impl Signals {
                     let _ = writeln!(
                         out,
                         "{src},{order},{},{fov},{r},{:.9e},{:.9e},{:.9e},{:.9e},{:.9e}",
-                        line.name,
+                        crate::output::csv_field(&line.name),
                         n.signal_pe,
                         n.background_pe,
                         n.dark_pe,

@@ -16,6 +16,7 @@ use super::distribution::{
 };
 use super::table::PhaseTable;
 use crate::input::parse_f64;
+use crate::output::OutputError;
 
 /// What a scene needs of a particle population at one wavelength.
 #[derive(Debug, Clone, PartialEq)]
@@ -81,7 +82,9 @@ pub fn layer_optics(
     });
     if let (Some(dir), Some(f)) = (cache_dir, &file) {
         // A cache that cannot be written only costs time next run; the result stands.
-        let _ = std::fs::create_dir_all(dir).and_then(|_| write_entry(f, &key, &optics));
+        // Made first: threads that compute entries at once then do not race to create it.
+        let _ = std::fs::create_dir_all(dir);
+        let _ = write_entry(f, &key, &optics);
     }
     if let Ok(mut m) = memory().lock() {
         m.insert(key, optics.clone());
@@ -89,7 +92,7 @@ pub fn layer_optics(
     Ok((optics, CacheUse::Computed))
 }
 
-fn write_entry(path: &Path, key: &str, o: &LayerOptics) -> std::io::Result<()> {
+fn write_entry(path: &Path, key: &str, o: &LayerOptics) -> Result<(), OutputError> {
     let mut t = o.phase.clone();
     t.meta.retain(|(k, _)| {
         !matches!(

@@ -205,11 +205,9 @@ impl PhaseTable {
         s
     }
 
-    /// Write the table to `path` (through a temporary file, so nothing is half-written).
-    pub fn write(&self, path: &Path) -> std::io::Result<()> {
-        let tmp = path.with_extension("tmp");
-        std::fs::write(&tmp, self.to_text())?;
-        std::fs::rename(&tmp, path)
+    /// Write the table to `path`, whole or not at all ([`crate::output`]).
+    pub fn write(&self, path: &Path) -> Result<(), crate::output::OutputError> {
+        crate::output::write_file(path, self.to_text().as_bytes())
     }
 }
 

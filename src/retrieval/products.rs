@@ -153,7 +153,7 @@ impl Product {
             self.method.label(),
             self.source.label(),
             self.order.label(),
-            self.channel_pair,
+            crate::output::csv_field(&self.channel_pair),
             self.fov_full_angle_mrad,
             self.range_m.0,
             self.range_m.1,

@@ -706,8 +706,9 @@ impl Validator<'_> {
                     format!("channel `{}` is given twice", c.name),
                 ));
             }
-            if c.name.is_empty() || c.name.contains(',') {
-                return Err(self.err(&sec.key("name"), "must be non-empty and without commas"));
+            // Any other text is a name: CSV files quote it (`crate::output::csv_field`).
+            if c.name.is_empty() {
+                return Err(self.err(&sec.key("name"), "must not be empty"));
             }
             out.push(Channel {
                 name: c.name.clone(),

@@ -112,22 +112,6 @@ pub enum SpectroscopyError {
     #[error("gas {0}")]
     Gas(String),
     /// Writing a file failed.
-    #[error("cannot write {path}: {source}")]
-    Write {
-        /// The file.
-        path: std::path::PathBuf,
-        /// The I/O error.
-        source: std::io::Error,
-    },
-}
-
-/// Write `bytes` to `path` whole or not at all ([`crate::output::write_atomically`]).
-pub(crate) fn write_atomically(
-    path: &std::path::Path,
-    bytes: &[u8],
-) -> Result<(), SpectroscopyError> {
-    crate::output::write_atomically(path, bytes).map_err(|source| SpectroscopyError::Write {
-        path: path.to_path_buf(),
-        source,
-    })
+    #[error(transparent)]
+    Write(#[from] crate::output::OutputError),
 }

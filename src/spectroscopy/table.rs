@@ -311,8 +311,19 @@ impl GasOpticalDepthTable {
         Ok(())
     }
 
-    /// Save to `path` (temporary file + rename; format in the module docs).
+    /// Save to `path`, whole or not at all ([`crate::output`]; format in the module docs).
     pub fn save(&self, path: &Path) -> Result<(), SpectroscopyError> {
+        let bytes = self
+            .to_bytes()
+            .map_err(|error| crate::output::OutputError::Io {
+                path: path.to_path_buf(),
+                error,
+            })?;
+        Ok(crate::output::write_file(path, &bytes)?)
+    }
+
+    /// The table in its file format (module docs), as [`Self::save`] writes it.
+    pub fn to_bytes(&self) -> std::io::Result<Vec<u8>> {
         let header = Header {
             format: "lidarsim gas optical-depth table v1".into(),
             profile_name: self.profile_name.clone(),
@@ -323,10 +334,7 @@ impl GasOpticalDepthTable {
             layers: self.layers.clone(),
             fingerprint: self.fingerprint,
         };
-        let json = serde_json::to_vec(&header).map_err(|e| SpectroscopyError::Write {
-            path: path.to_path_buf(),
-            source: std::io::Error::other(e),
-        })?;
+        let json = serde_json::to_vec(&header).map_err(std::io::Error::other)?;
         let mut bytes = Vec::with_capacity(24 + json.len() + 8 * self.tau.len());
         bytes.extend_from_slice(MAGIC);
         bytes.extend_from_slice(&(json.len() as u64).to_le_bytes());
@@ -334,7 +342,7 @@ impl GasOpticalDepthTable {
         for v in &self.tau {
             bytes.extend_from_slice(&v.to_le_bytes());
         }
-        super::write_atomically(path, &bytes)
+        Ok(bytes)
     }
 
     /// Load a table saved by [`Self::save`]; a damaged file is an error naming the file.

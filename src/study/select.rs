@@ -922,7 +922,7 @@ pub fn to_csv(rows: &[Row]) -> String {
         let _ = writeln!(
             s,
             "{},{:.6},{:.6},{:.6e},{:.2},{:.6e},{:.6e},{:.6e},{:.6e},{},{},{:.6e},{:.6e},{:.6e},{:.6e},{},{}",
-            r.atmosphere,
+            crate::output::csv_field(&r.atmosphere),
             r.position.nu_cm1,
             r.off_cm1,
             r.daod_one_way,
@@ -931,7 +931,7 @@ pub fn to_csv(rows: &[Row]) -> String {
             r.dxco2_per_mhz_ppm,
             r.dxco2_per_hpa_ppm,
             r.dxco2_per_10pct_h2o_ppm,
-            r.position.line.as_deref().unwrap_or(""),
+            crate::output::csv_field(r.position.line.as_deref().unwrap_or("")),
             if r.position.offset_ghz.is_nan() {
                 String::new()
             } else {

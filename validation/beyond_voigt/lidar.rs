@@ -16,7 +16,7 @@
 use std::path::{Path, PathBuf};
 
 use lidarsim::atmosphere::StandardAtmosphere;
-use lidarsim::output::write_atomically;
+use lidarsim::output::write_file;
 use lidarsim::retrieval::LayerColumns;
 use lidarsim::spectroscopy::{
     LblOptions, LineFilter, LineList, LineShapeModel, layer_optical_depths_at,
@@ -135,7 +135,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         );
         csv.push_str(&format!("{o},{},{d},{da},{db},{ba},{bb}\n", nus[k]));
     }
-    write_atomically(Path::new(&out), csv.as_bytes())?;
+    write_file(Path::new(&out), csv.as_bytes())?;
     println!("wrote {}", out.display());
     Ok(())
 }

@@ -22,7 +22,7 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail, ensure};
 
 use lidarsim::constants::{BOLTZMANN_J_PER_K, STANDARD_ATMOSPHERE_PA};
-use lidarsim::output::write_atomically;
+use lidarsim::output::OutputSet;
 use lidarsim::spectroscopy::{
     GasState, LblOptions, LineFilter, LineList, LineShapeModel, WavenumberGrid, cross_section,
 };
@@ -441,7 +441,8 @@ fn run() -> Result<()> {
     for (name, r) in [("voigt_hitran2016", &fv), ("beyond_voigt_nist", &fb)] {
         writeln!(csv, "{name},{:.8},{:.6e}", r.amount_scale, r.rms)?;
     }
-    write_atomically(&out_dir.join("residuals.csv"), csv.as_bytes())?;
+    let mut files = OutputSet::new();
+    files.write(out_dir.join("residuals.csv"), csv)?;
 
     let mut per_line = String::from(
         "line,nu0_cm1,nu_centre_meas_cm1,residual_centre_voigt,max_abs_residual_voigt,residual_centre_beyond,max_abs_residual_beyond\n",
@@ -454,7 +455,8 @@ fn run() -> Result<()> {
             r.label, r.nu0, r.nu_centre, r.centre[0], r.max_abs[0], r.centre[1], r.max_abs[1]
         )?;
     }
-    write_atomically(&out_dir.join("line_residuals.csv"), per_line.as_bytes())?;
+    files.write(out_dir.join("line_residuals.csv"), per_line)?;
+    files.commit()?;
     let worse = line_rows
         .iter()
         .filter(|r| r.max_abs[1] < r.max_abs[0])

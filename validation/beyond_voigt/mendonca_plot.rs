@@ -69,7 +69,7 @@ fn panel(
     Ok(())
 }
 
-/// Draw the figure to `path` (through a temporary file, `lidarsim::output::write_via`).
+/// Draw the figure to `path`, whole or not at all (`lidarsim::output::OutputSet`).
 pub fn figure(
     path: &Path,
     meas: &Measurement,
@@ -93,7 +93,8 @@ pub fn figure(
     let black = RGBColor(0, 0, 0);
     let blue = RGBColor(30, 90, 220);
     let red = RGBColor(220, 30, 30);
-    lidarsim::output::write_via(path, |tmp: &Path| -> Result<()> {
+    let mut files = lidarsim::output::OutputSet::new();
+    files.write_via(path, |tmp: &Path| -> Result<()> {
         let root = BitMapBackend::new(tmp, (1800, 1200)).into_drawing_area();
         let draw = || -> Result<(), Box<dyn std::error::Error>> {
             root.fill(&WHITE)?;
@@ -146,6 +147,8 @@ pub fn figure(
             root.present()?;
             Ok(())
         };
-        draw().map_err(|e| anyhow!("cannot draw {}: {e}", path.display()))
-    })
+        draw().map_err(|e| anyhow!("cannot draw: {e}"))
+    })?;
+    files.commit()?;
+    Ok(())
 }

@@ -326,14 +326,17 @@ fn main() -> anyhow::Result<()> {
          retrieval-grade work."
     )?;
 
-    std::fs::write(
+    // The constants and their report change together or not at all.
+    let mut files = lidarsim::output::OutputSet::new();
+    files.write(
         root.join("data/co2_band_model/co2_30012_band.toml"),
         format!(
             "# CO2 30012<-00001 band model constants (lidarsim); written by\n# `cargo run --release --example co2_band_model_fit`; formulas in src/spectroscopy/band_model.rs\n{}",
             toml::to_string(&model)?
         ),
     )?;
-    std::fs::write(root.join("validation/co2_band_model/fit_report.md"), &rep)?;
+    files.write(root.join("validation/co2_band_model/fit_report.md"), &rep)?;
+    files.commit()?;
     println!("{rep}");
     Ok(())
 }

@@ -86,7 +86,7 @@ fn main() -> anyhow::Result<()> {
     };
     if let Some(p) = out {
         let bytes: Vec<u8> = sigma1.iter().flat_map(|v| v.to_le_bytes()).collect();
-        std::fs::write(p, bytes)?;
+        lidarsim::output::write_file(p, &bytes)?;
     }
     let med = |t: &[f64]| t[t.len() / 2];
     println!(
