@@ -143,15 +143,27 @@ impl HenyeyGreenstein {
         self.g
     }
 
-    /// P(μ) = (1 − g²)/(1 + g² − 2gμ)^{3/2}.
+    /// P(μ) = (1 − g²)/(1 + g² − 2gμ)^{3/2}, written without cancellation as |g| → 1:
+    /// 1 − g² = (1 − g)(1 + g) and 1 + g² − 2gμ = (1 − g)² + 2g(1 − μ) for g ≥ 0
+    /// ((1 + g)² − 2g(1 + μ) for g < 0), sums of non-negative terms. Accurate to rounding for
+    /// |g| up to 1 − 1e-12 (unit test `hg_at_extreme_asymmetry`, against 60-digit values),
+    /// where P(1) ≈ 2e24.
     #[inline]
     pub fn eval(&self, mu: f64) -> f64 {
         let g = self.g;
-        let d = 1.0 + g * g - 2.0 * g * mu;
-        (1.0 - g * g) / (d * d.sqrt())
+        let d = if g >= 0.0 {
+            (1.0 - g) * (1.0 - g) + 2.0 * g * (1.0 - mu)
+        } else {
+            (1.0 + g) * (1.0 + g) - 2.0 * g * (1.0 + mu)
+        };
+        (1.0 - g) * (1.0 + g) / (d * d.sqrt())
     }
 
-    /// Exact inverse of the CDF in μ: μ = [1 + g² − ((1 − g²)/(1 − g + 2gu))²]/(2g).
+    /// Exact inverse of the CDF in μ: μ = [1 + g² − s²]/(2g), s = (1 − g²)/(1 − g + 2gu),
+    /// evaluated for g > 0 as μ = 1 − (1 − g)(1 − u)(s + 1 − g)/(1 − g + 2gu) (the same
+    /// number, with no difference of nearly equal terms as g → 1), and for g < 0 through the
+    /// symmetry μ_g(u) = −μ_{−g}(1 − u). μ is then right to the double's resolution for |g| up to
+    /// 1 − 1e-12 (`hg_at_extreme_asymmetry`).
     #[inline]
     pub fn sample(&self, u: f64) -> f64 {
         let g = self.g;
@@ -160,8 +172,11 @@ impl HenyeyGreenstein {
             // first-order correction is below 1e-6 in μ.
             return 2.0 * u - 1.0;
         }
-        let s = (1.0 - g * g) / (1.0 - g + 2.0 * g * u);
-        ((1.0 + g * g - s * s) / (2.0 * g)).clamp(-1.0, 1.0)
+        let (a, v) = if g > 0.0 { (g, u) } else { (-g, 1.0 - u) };
+        let q = 1.0 - a + 2.0 * a * v;
+        let s = (1.0 - a) * (1.0 + a) / q;
+        let mu = 1.0 - (1.0 - a) * (1.0 - v) * (s + 1.0 - a) / q;
+        (if g > 0.0 { mu } else { -mu }).clamp(-1.0, 1.0)
     }
 }
 
@@ -593,6 +608,88 @@ mod tests {
             TabulatedPhase::from_angles(&[0.0, 180.0], &[0.0, 0.0]),
             Err(PhaseError::EmptyTable)
         );
+    }
+
+    // 60-digit values from validation/hg_extremes/hg_reference.py (mpmath).
+    const HG_VALUES: [(f64, f64, f64); 25] = [
+        (0.999999999999, 1.0, 2.0000884898157956e+24),
+        (0.999999999999, 0.9999999999990905, 815220.5796029889),
+        (0.999999999999, 0.999, 2.2360185118320516e-08),
+        (0.999999999999, 0.0, 7.070911387689452e-13),
+        (0.999999999999, -1.0, 2.4999446957021964e-13),
+        (-0.999999999999, 1.0, 2.4999446957021964e-13),
+        (-0.999999999999, 0.9999999999990905, 2.4999446957039013e-13),
+        (-0.999999999999, 0.999, 2.501820826757012e-13),
+        (-0.999999999999, 0.0, 7.070911387689452e-13),
+        (-0.999999999999, -1.0, 2.0000884898157956e+24),
+        (0.99999999, 1.0, 1.999999969900963e+16),
+        (0.99999999, 0.9999999999990905, 8151714036.240659),
+        (0.99999999, 0.999, 0.00022360680110960026),
+        (0.99999999, 0.0, 7.071067918106568e-09),
+        (0.99999999, -1.0, 2.5000000375618986e-09),
+        (-0.99999999, 1.0, 2.5000000375618986e-09),
+        (-0.99999999, 0.9999999999990905, 2.500000037563604e-09),
+        (-0.99999999, 0.999, 2.501876210149066e-09),
+        (-0.99999999, 0.0, 7.071067918106568e-09),
+        (-0.99999999, -1.0, 1.999999969900963e+16),
+        (0.9999, 1.0, 199990000.00004405),
+        (0.9999, 0.9999999999990905, 199935450.90509298),
+        (0.9999, 0.999, 2.2362748356962396),
+        (0.9999, 0.0, 7.07177494516062e-05),
+        (0.9999, -1.0, 2.5002500187509747e-05),
+    ];
+    const HG_SAMPLES: [(f64, f64, f64); 20] = [
+        (0.999999999999, 0.1, 4.949780997353133e-23),
+        (0.999999999999, 0.5, 1.4999336355731913e-24),
+        (0.999999999999, 0.9, 1.172787616292673e-25),
+        (0.999999999999, 0.999999, 9.999572570140175e-31),
+        (-0.999999999999, 0.1, 1.1727876162926735e-25),
+        (-0.999999999999, 0.5, 1.4999336355731913e-24),
+        (-0.999999999999, 0.9, 4.949780997353136e-23),
+        (-0.999999999999, 0.999999, 4.999773785298662e-13),
+        (0.99999999, 0.1, 4.949999649245135e-15),
+        (0.99999999, 0.5, 1.5000000100742778e-16),
+        (0.99999999, 0.9, 1.1728395228289962e-17),
+        (0.99999999, 0.999999, 1.0000015150802895e-22),
+        (-0.99999999, 0.1, 1.1728395228289965e-17),
+        (-0.99999999, 0.5, 1.5000000100742778e-16),
+        (-0.99999999, 0.9, 4.949999649245137e-15),
+        (-0.99999999, 0.999999, 4.9503726632597405e-05),
+        (0.9999, 0.1, 4.945997410710755e-07),
+        (0.9999, 0.5, 1.4999499999996696e-08),
+        (0.9999, 0.9, 1.172888205029545e-09),
+        (0.9999, 0.999999, 1.0000515025306581e-14),
+    ];
+
+    /// HG at |g| up to 1 − 1e-12, against 60-digit arithmetic: P(μ) to 1e-12 relative (the
+    /// textbook form gives NaN or garbage near the peak: 1 + g² − 2g cancels to rounding), and
+    /// the sampled μ to two units of the double's last place at 1 (where 1 − μ can be 1e-24 and
+    /// rounds to 0; the angle it stands for is 1e-12 rad), 1 − μ to 1e-12 relative where
+    /// it is representable.
+    #[test]
+    fn hg_at_extreme_asymmetry() {
+        for (g, mu, want) in HG_VALUES {
+            let p = HenyeyGreenstein::new(g).unwrap().eval(mu);
+            assert!(
+                (p / want - 1.0).abs() < 1e-12,
+                "g {g} μ {mu}: P {p:e}, want {want:e}"
+            );
+        }
+        for (g, u, want) in HG_SAMPLES {
+            let mu = HenyeyGreenstein::new(g).unwrap().sample(u);
+            // want = 1 − μ for g > 0, 1 + μ for g < 0.
+            let side = if g > 0.0 { 1.0 - mu } else { 1.0 + mu };
+            assert!(
+                (side - want).abs() <= 2.0 * f64::EPSILON,
+                "g {g} u {u}: 1 ∓ μ = {side:e}, want {want:e}"
+            );
+            if want > 1e-3 {
+                assert!(
+                    (side / want - 1.0).abs() < 1e-12,
+                    "g {g} u {u}: {side:e} vs {want:e}"
+                );
+            }
+        }
     }
 
     /// Closed-form CDF in μ of HG (independent of the sampler's algebra).
