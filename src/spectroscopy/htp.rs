@@ -172,6 +172,26 @@ impl HtProfile {
         )
     }
 
+    /// [`HtProfile::eval_fast`] at two wavenumbers, their four Faddeeva functions evaluated
+    /// together ([`super::voigt::w_quad_fast`]): the same numbers, faster where the profile is
+    /// evaluated node after node.
+    pub fn eval_fast_pair(&self, nu_a: f64, nu_b: f64) -> (Complex64, Complex64) {
+        match self.speed {
+            None => (self.eval_fast(nu_a), self.eval_fast(nu_b)),
+            Some(ref s) => {
+                let (z1a, z2a) = self.arguments(s, nu_a);
+                let (z1b, z2b) = self.arguments(s, nu_b);
+                let i = Complex64::new(0.0, 1.0);
+                let [w1a, w2a, w1b, w2b] =
+                    super::voigt::w_quad_fast([i * z1a, i * z2a, i * z1b, i * z2b]);
+                (
+                    self.combine(s, z1a, z2a, w1a, w2a),
+                    self.combine(s, z1b, z2b, w1b, w2b),
+                )
+            }
+        }
+    }
+
     /// The profile with given Faddeeva functions: `w` at one argument (the Voigt limit), `w2`
     /// at the two, w(iZ₁) and w(iZ₂), together.
     #[inline]
@@ -181,42 +201,67 @@ impl HtProfile {
         w: fn(Complex64) -> Complex64,
         w2: fn(Complex64, Complex64) -> (Complex64, Complex64),
     ) -> Complex64 {
-        // i(ν₀ − ν) + C̃₀
-        let shifted = Complex64::new(self.c0t.re, self.c0t.im + (self.nu0 - nu));
-        let i = Complex64::new(0.0, 1.0);
-        // A and η C₂ B.
-        let (a, b) = match self.speed {
+        match self.speed {
             // No speed dependence: the Voigt's own argument, z = c (i(ν₀ − ν) + C̃₀); B is
             // multiplied by C₂ = 0.
-            None => (self.sqrt_pi_c * w(i * (shifted * self.c)), None),
-            Some(ref s) => {
-                let x = shifted * s.inv_c2t;
-                // Principal √(X + Y), as published. Z₁ = √(X+Y) − √Y = X/(√(X+Y) + √Y): the
-                // second form where the first would cancel (always, as Re √Y ≥ 0 and
-                // Re √(X+Y) ≥ 0 when Γ₂ > 0).
-                let root = principal_sqrt(x + s.y);
-                let sum = root + s.sqrt_y;
-                let diff = root - s.sqrt_y;
-                let z1 = if sum.norm_sqr() >= diff.norm_sqr() {
-                    x / sum
-                } else {
-                    diff
-                };
-                let z2 = sum;
-                let (w1, w2) = w2(i * z1, i * z2);
-                let a = self.sqrt_pi_c * (w1 - w2);
-                // η C₂ B, only where η ≠ 0.
-                let eta_c2_b = self.narrowing.and_then(|n| n.eta_c2).map(|eta_c2| {
-                    let b = (-1.0 + s.k * (1.0 - z1 * z1) * w1 - s.k * (1.0 - z2 * z2) * w2)
-                        * s.inv_c2t;
-                    eta_c2 * b
-                });
-                (a, eta_c2_b)
+            None => {
+                let shifted = Complex64::new(self.c0t.re, self.c0t.im + (self.nu0 - nu));
+                let i = Complex64::new(0.0, 1.0);
+                self.finish(self.sqrt_pi_c * w(i * (shifted * self.c)), None)
             }
+            Some(ref s) => {
+                let (z1, z2) = self.arguments(s, nu);
+                let i = Complex64::new(0.0, 1.0);
+                let (w1, w2) = w2(i * z1, i * z2);
+                self.combine(s, z1, z2, w1, w2)
+            }
+        }
+    }
+
+    /// Z₁ and Z₂ at ν (speed dependence).
+    #[inline]
+    fn arguments(&self, s: &Speed, nu: f64) -> (Complex64, Complex64) {
+        // X = (i(ν₀ − ν) + C̃₀)/C̃₂
+        let x = Complex64::new(self.c0t.re, self.c0t.im + (self.nu0 - nu)) * s.inv_c2t;
+        // Principal √(X + Y), as published. Z₁ = √(X+Y) − √Y = X/(√(X+Y) + √Y): the second
+        // form where the first would cancel (always, as Re √Y ≥ 0 and Re √(X+Y) ≥ 0 when
+        // Γ₂ > 0).
+        let root = principal_sqrt(x + s.y);
+        let sum = root + s.sqrt_y;
+        let diff = root - s.sqrt_y;
+        let z1 = if sum.norm_sqr() >= diff.norm_sqr() {
+            x / sum
+        } else {
+            diff
         };
+        (z1, sum)
+    }
+
+    /// I from Z₁, Z₂ and w(iZ₁), w(iZ₂) (speed dependence).
+    #[inline]
+    fn combine(
+        &self,
+        s: &Speed,
+        z1: Complex64,
+        z2: Complex64,
+        w1: Complex64,
+        w2: Complex64,
+    ) -> Complex64 {
+        let a = self.sqrt_pi_c * (w1 - w2);
+        // η C₂ B, only where η ≠ 0.
+        let eta_c2_b = self.narrowing.and_then(|n| n.eta_c2).map(|eta_c2| {
+            let b = (-1.0 + s.k * (1.0 - z1 * z1) * w1 - s.k * (1.0 - z2 * z2) * w2) * s.inv_c2t;
+            eta_c2 * b
+        });
+        self.finish(a, eta_c2_b)
+    }
+
+    /// I = (1/π) A/(1 − (ν_VC − η (C₀ − 3C₂/2)) A + η C₂ B).
+    #[inline]
+    fn finish(&self, a: Complex64, eta_c2_b: Option<Complex64>) -> Complex64 {
         let i = match self.narrowing {
             None => a,
-            Some(n) => a / (1.0 - n.vc * a + b.unwrap_or_default()),
+            Some(n) => a / (1.0 - n.vc * a + eta_c2_b.unwrap_or_default()),
         };
         i * std::f64::consts::FRAC_1_PI
     }
