@@ -21,6 +21,8 @@ mod scene;
 mod select_lines;
 /// Line-by-line gas absorption against HAPI.
 mod spectroscopy;
+/// Extreme physical scenes: finite, conserved, bounded.
+mod stress;
 /// Ensemble studies: `lidarsim dial` and its error budget.
 mod study;
 /// Monte Carlo transport against the analytic lidar equation and conservation laws.

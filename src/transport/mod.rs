@@ -57,6 +57,8 @@ pub struct RunStats {
     pub escaped: u64,
     /// Photons ended with zero weight (a range-stratified collision where nothing scatters).
     pub zero_weight: u64,
+    /// Copies made by splitting heavy photons.
+    pub splits: u64,
 }
 
 impl RunStats {
@@ -69,6 +71,7 @@ impl RunStats {
         self.cut += o.cut;
         self.escaped += o.escaped;
         self.zero_weight += o.zero_weight;
+        self.splits += o.splits;
     }
 }
 

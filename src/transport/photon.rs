@@ -45,6 +45,20 @@ const MIN_COLLISION_PROBABILITY: f64 = 0.5;
 /// Direction cosines below this are treated as horizontal (the flight stays in its layer).
 const HORIZONTAL: f64 = 1e-12;
 
+/// Weight above which a photon is split ([`Tracer::split_heavy`]).
+const SPLIT_ABOVE: f64 = 2.0;
+/// Most copies waiting at once (a bound on memory; beyond it no more splitting, still unbiased).
+const MAX_SPLIT_STACK: usize = 256;
+
+/// A copy made by splitting, waiting to be followed.
+struct PhotonCopy {
+    pos: DVec3,
+    dir: DVec3,
+    path: f64,
+    order: u32,
+    w: Vec<f64>,
+}
+
 /// Per-batch state: buffers reused by every photon of the batch.
 pub(crate) struct Tracer<'a> {
     s: &'a Setup<'a>,
@@ -59,6 +73,8 @@ pub(crate) struct Tracer<'a> {
     /// probability), then scratch for the optical depth to the collision.
     cls_tau: Vec<f64>,
     cls_p: Vec<f64>,
+    /// Copies made by splitting, not yet followed.
+    split: Vec<PhotonCopy>,
     pub bins: Vec<f64>,
     pub flux: Flux,
     pub stats: RunStats,
@@ -85,6 +101,7 @@ impl<'a> Tracer<'a> {
             tmp: vec![0.0; nch],
             cls_tau: vec![0.0; s.classes.len()],
             cls_p: vec![0.0; s.classes.len()],
+            split: Vec::new(),
             bins: vec![0.0; s.shape.len()],
             flux: Flux::zeros(nch),
             stats: RunStats::default(),
@@ -102,19 +119,32 @@ impl<'a> Tracer<'a> {
         }
     }
 
-    /// Follow one photon from emission to its end.
+    /// Follow one photon from emission to its end, and every copy splitting made of it.
     pub fn trace(&mut self, rng: &mut Rng) {
+        self.stats.photons += 1;
+        // Emit: from the receiver position into the divergence cone around the axis.
+        let dir = self.s.emit_direction(rng.random(), rng.random());
+        self.w.iter_mut().for_each(|w| *w = 1.0);
+        self.follow(self.s.receiver, dir, 0.0, 0, rng);
+        while let Some(copy) = self.split.pop() {
+            self.w.copy_from_slice(&copy.w);
+            self.follow(copy.pos, copy.dir, copy.path, copy.order, rng);
+        }
+    }
+
+    /// Follow a photon (weights in `self.w`) from `pos` along `dir` after a path `path` and
+    /// `order` scatterings, to its end.
+    fn follow(
+        &mut self,
+        mut pos: DVec3,
+        mut dir: DVec3,
+        mut path: f64,
+        mut order: u32,
+        rng: &mut Rng,
+    ) {
         let s = self.s;
         let atm = s.atm;
         let nch = self.w.len();
-        self.stats.photons += 1;
-
-        // Emit: from the receiver position into the divergence cone around the axis.
-        let mut pos = s.receiver;
-        let mut dir = s.emit_direction(rng.random(), rng.random());
-        let mut path = 0.0;
-        let mut order = 0u32;
-        self.w.iter_mut().for_each(|w| *w = 1.0);
         self.set_altitude(pos.z);
 
         loop {
@@ -478,7 +508,36 @@ impl<'a> Tracer<'a> {
                 }
             }
             dir = new_dir;
+            self.split_heavy(pos, dir, path, order);
         }
+    }
+
+    /// Splitting, the upper side of the weight window whose lower side is Russian roulette:
+    /// a photon whose largest weight exceeds [`SPLIT_ABOVE`] continues as n copies of 1/n its
+    /// weight (n = ⌈w_max⌉), the others stacked to be followed after it. Unbiased; it keeps the
+    /// weights bounded where the factors of detector-directed sampling (up to 1/(1 − ε) a
+    /// scattering) would otherwise multiply, over hundreds of scatterings deep in a thick cloud,
+    /// into rare huge weights: a heavy tail whose mean is underestimated, with too small an
+    /// error bar, by any practical number of photons.
+    #[inline]
+    fn split_heavy(&mut self, pos: DVec3, dir: DVec3, path: f64, order: u32) {
+        let w_max = self.w.iter().fold(0.0f64, |m, w| m.max(*w));
+        if !(w_max > SPLIT_ABOVE) || self.split.len() >= MAX_SPLIT_STACK {
+            return;
+        }
+        let n = (w_max.ceil() as usize).min(MAX_SPLIT_STACK - self.split.len() + 1);
+        let f = 1.0 / n as f64;
+        self.w.iter_mut().for_each(|w| *w *= f);
+        for _ in 1..n {
+            self.split.push(PhotonCopy {
+                pos,
+                dir,
+                path,
+                order,
+                w: self.w.clone(),
+            });
+        }
+        self.stats.splits += (n - 1) as u64;
     }
 
     /// Several scattering classes: the weights of a collision at `pos` (in `layer`, reached
