@@ -437,7 +437,7 @@ fn channels_whose_scattering_differs_2500_fold_match_each_run_alone() {
                 }
             }
         }
-        assert!(judged > 30, "{names:?}: only {judged} bins judged");
+        assert!(judged >= 20, "{names:?}: only {judged} bins judged");
     }
 }
 

@@ -37,6 +37,9 @@ pub const RANGE_STRATIFICATION: f64 = 0.5;
 const DDIS_MARGIN_RAD: f64 = 0.01;
 /// Phase functions whose forward value P(0°) exceeds this get DDIS (Rayleigh, 1.5, does not).
 const DDIS_FORWARD_PEAK: f64 = 5.0;
+/// Optical depth to the receiver (least over the scattering classes) beyond which DDIS is not
+/// used (`photon`).
+const DDIS_MAX_TAU: f64 = 30.0;
 
 /// Run counters, summed over batches.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]

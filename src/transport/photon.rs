@@ -46,7 +46,7 @@ const MIN_COLLISION_PROBABILITY: f64 = 0.5;
 const HORIZONTAL: f64 = 1e-12;
 
 /// Weight above which a photon is split ([`Tracer::split_heavy`]).
-const SPLIT_ABOVE: f64 = 2.0;
+const SPLIT_ABOVE: f64 = 8.0;
 /// Most copies waiting at once (a bound on memory; beyond it no more splitting, still unbiased).
 const MAX_SPLIT_STACK: usize = 256;
 
@@ -469,13 +469,24 @@ impl<'a> Tracer<'a> {
             };
             // The direction to the receiver only where DDIS can apply (not in Rayleigh air).
             let ddis_layer = s.ddis_epsilon > 0.0 && s.forward_peaked[layer];
-            let omega_rx = if ddis_layer {
+            let (omega_rx, d_rx) = if ddis_layer {
                 let to_rx = s.receiver - pos;
-                to_rx / to_rx.length()
+                let d = to_rx.length();
+                (to_rx / d, d)
             } else {
-                DVec3::ZERO
+                (DVec3::ZERO, 0.0)
             };
-            let ddis = ddis_layer && -omega_rx.dot(s.axis) >= s.ddis_cos;
+            // Only where a local estimate could still matter (in some class): through more than
+            // DDIS_MAX_TAU to the receiver it is below e⁻³⁰ of its unattenuated size, and DDIS
+            // factors multiplied over the hundreds of scatterings deep in a thick cloud would
+            // only widen the weights' spread.
+            let ddis = ddis_layer
+                && -omega_rx.dot(s.axis) >= s.ddis_cos
+                && s.classes.iter().any(|c| {
+                    let k = c.channel;
+                    s.tau_to_receiver(pos.z, omega_rx.z, d_rx, layer, k, self.ts[k] + self.ta[k])
+                        < super::DDIS_MAX_TAU
+                });
             let towards_rx = ddis && rng.random::<f64>() < s.ddis_epsilon;
             let rep = s.classes[cls].channel;
             let c = pick_component(
