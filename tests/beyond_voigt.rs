@@ -128,19 +128,10 @@ fn correlated_profiles_match_hapi() {
     let mut cases: BTreeMap<String, (HtParameters, Vec<[f64; 3]>)> = BTreeMap::new();
     for (row, (_, f)) in t.rows().enumerate() {
         let v: Vec<f64> = (2..13).map(|c| t.f64_at(row, c).unwrap()).collect();
-        let case = cases.entry(f[0].clone()).or_insert_with(|| {
-            let p = HtParameters {
-                nu0: v[0],
-                gamma_d: v[1],
-                gamma0: v[2],
-                gamma2: v[3],
-                delta0: v[4],
-                delta2: v[5],
-                nu_vc: v[6],
-                eta: v[7],
-            };
-            (p, Vec::new())
-        });
+        // nu0 … eta in the order `ht_of` reads them.
+        let case = cases
+            .entry(f[0].clone())
+            .or_insert_with(|| (ht_of(&v, "ht"), Vec::new()));
         case.1.push([v[8], v[9], v[10]]);
     }
     assert_eq!(cases.len(), 4);
