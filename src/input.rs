@@ -134,6 +134,15 @@ impl Bounds {
         }
     }
 
+    /// The same interval in another unit: both ends times `factor` (> 0).
+    pub fn scaled(self, factor: f64) -> Self {
+        Bounds {
+            lo: self.lo * factor,
+            hi: self.hi * factor,
+            ..self
+        }
+    }
+
     /// Whether `v` lies inside (false for NaN).
     pub fn contains(&self, v: f64) -> bool {
         let lo_ok = if self.lo_closed {
