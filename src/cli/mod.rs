@@ -50,6 +50,12 @@ pub fn count_usize(
     move |text| c(text).map(|v| v as usize)
 }
 
+/// [`count`] for options held as `u32`.
+pub fn count_u32(lo: u32, hi: u32) -> impl Fn(&str) -> Result<u32, String> + Clone + Send + Sync {
+    let c = count(lo.into(), hi.into());
+    move |text| c(text).map(|v| v as u32)
+}
+
 /// Worker threads of a run: 0 (all cores) to [`lidarsim::limits::MAX_THREADS`].
 pub fn threads() -> impl Fn(&str) -> Result<usize, String> + Clone + Send + Sync {
     count_usize(0, lidarsim::limits::MAX_THREADS)
