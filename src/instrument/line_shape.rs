@@ -29,7 +29,7 @@ use std::path::{Path, PathBuf};
 
 use nalgebra::{DMatrix, SymmetricEigen};
 
-use crate::input::{Bounds, CsvTable, InputError, parse_f64, parse_f64_in, read_to_string};
+use crate::input::{CsvTable, InputError, parse_f64, read_to_string};
 
 /// MHz per cm⁻¹: 1 cm⁻¹ = c · 1 cm⁻¹ = 29 979.2458 MHz.
 ///
@@ -369,14 +369,7 @@ impl LineShapeTable {
         let mut relative_intensity = Vec::with_capacity(table.len());
         // `CsvTable` gives every row as many fields as the header: here exactly two.
         for (line, fields) in table.rows() {
-            // Beyond 1 THz from the line centre it is another line, not its shape.
-            offset_mhz.push(parse_f64_in(
-                path,
-                line,
-                OFFSET_COLUMN,
-                &fields[0],
-                Bounds::closed(-1e6, 1e6),
-            )?);
+            offset_mhz.push(parse_f64(path, line, OFFSET_COLUMN, &fields[0])?);
             relative_intensity.push(parse_f64(path, line, INTENSITY_COLUMN, &fields[1])?);
         }
         if let Err(fault) = TableCdf::new(&offset_mhz, &relative_intensity) {
