@@ -801,10 +801,11 @@ impl Validator<'_> {
             return Err(self.err(&fov_at, "needs at least one field of view"));
         }
         self.range_all(&fov_at, &fov_full_angle_mrad, FOV_MRAD)?;
-        for (i, f) in fov_full_angle_mrad.iter().enumerate() {
-            if fov_full_angle_mrad[..i].contains(f) {
-                return Err(self.err(&fov_at, format!("{f} mrad is given twice")));
-            }
+        // Sorted, so that a list of any length is checked in n log n.
+        let mut sorted = fov_full_angle_mrad.clone();
+        sorted.sort_by(f64::total_cmp);
+        if let Some(w) = sorted.windows(2).find(|w| w[0] == w[1]) {
+            return Err(self.err(&fov_at, format!("{} mrad is given twice", w[0])));
         }
         Ok((
             Lidar {
@@ -828,6 +829,7 @@ impl Validator<'_> {
             return Err(self.err(&KeyPath::root(), "needs at least one [[channel]]"));
         }
         let mut out: Vec<Channel> = Vec::new();
+        let mut names = std::collections::HashSet::new();
         for (i, c) in raw.channel.iter().enumerate() {
             let sec = KeyPath::array("channel", i);
             let wavenumber_cm1 = match (c.wavelength_nm, c.wavenumber_cm1) {
@@ -843,7 +845,7 @@ impl Validator<'_> {
                     return Err(self.err(&sec, "needs `wavelength_nm` or `wavenumber_cm1`"));
                 }
             };
-            if out.iter().any(|o| o.name == c.name) {
+            if !names.insert(c.name.as_str()) {
                 return Err(self.err(
                     &sec.key("name"),
                     format!("channel `{}` is given twice", c.name),
