@@ -7,6 +7,10 @@
 //! [`CsvTable`] reads the project's text tables: `#` comment lines anywhere, one header line of
 //! column names, then comma-separated rows. Values keep their line numbers so a bad number can be
 //! reported where it stands.
+//!
+//! [`check_finite_range`] is the one check every numeric input passes through (scene keys,
+//! command-line options, file fields): finite and inside its physical [`Bounds`], or a message
+//! saying which bounds.
 
 use std::fmt;
 use std::path::{Path, PathBuf};
@@ -66,10 +70,158 @@ impl fmt::Display for InputError {
 
 impl std::error::Error for InputError {}
 
-/// Read a file to a string, mapping an I/O failure to an [`InputError`] naming the file.
+/// The interval a numeric input must lie in, each end closed or open.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Bounds {
+    /// Lower end.
+    pub lo: f64,
+    /// Upper end.
+    pub hi: f64,
+    /// Whether `lo` itself is allowed.
+    pub lo_closed: bool,
+    /// Whether `hi` itself is allowed.
+    pub hi_closed: bool,
+}
+
+impl Bounds {
+    /// `[lo, hi]`.
+    pub const fn closed(lo: f64, hi: f64) -> Self {
+        Bounds {
+            lo,
+            hi,
+            lo_closed: true,
+            hi_closed: true,
+        }
+    }
+
+    /// `(lo, hi)`.
+    pub const fn open(lo: f64, hi: f64) -> Self {
+        Bounds {
+            lo,
+            hi,
+            lo_closed: false,
+            hi_closed: false,
+        }
+    }
+
+    /// `(0, hi]`: a strictly positive quantity.
+    pub const fn positive(hi: f64) -> Self {
+        Bounds {
+            lo: 0.0,
+            hi,
+            lo_closed: false,
+            hi_closed: true,
+        }
+    }
+
+    /// `(lo, hi]`.
+    pub const fn above(lo: f64, hi: f64) -> Self {
+        Bounds {
+            lo,
+            hi,
+            lo_closed: false,
+            hi_closed: true,
+        }
+    }
+
+    /// `[lo, hi)`.
+    pub const fn below(lo: f64, hi: f64) -> Self {
+        Bounds {
+            lo,
+            hi,
+            lo_closed: true,
+            hi_closed: false,
+        }
+    }
+
+    /// The same interval in another unit: both ends times `factor` (> 0).
+    pub fn scaled(self, factor: f64) -> Self {
+        Bounds {
+            lo: self.lo * factor,
+            hi: self.hi * factor,
+            ..self
+        }
+    }
+
+    /// Whether `v` lies inside (false for NaN).
+    pub fn contains(&self, v: f64) -> bool {
+        let lo_ok = if self.lo_closed {
+            v >= self.lo
+        } else {
+            v > self.lo
+        };
+        let hi_ok = if self.hi_closed {
+            v <= self.hi
+        } else {
+            v < self.hi
+        };
+        lo_ok && hi_ok
+    }
+}
+
+/// A number as people write a bound: `1e8` rather than `100000000`, `1e-9` rather than
+/// `0.000000001` (the shortest form that reads back to the same value).
+pub fn fmt_bound(v: f64) -> String {
+    let a = v.abs();
+    if a != 0.0 && !(1e-3..1e5).contains(&a) {
+        format!("{v:e}")
+    } else {
+        format!("{v}")
+    }
+}
+
+impl fmt::Display for Bounds {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "{}{}, {}{}",
+            if self.lo_closed { '[' } else { '(' },
+            fmt_bound(self.lo),
+            fmt_bound(self.hi),
+            if self.hi_closed { ']' } else { ')' }
+        )
+    }
+}
+
+/// `value` if it is finite and inside `bounds`, else a message saying why (the caller adds
+/// where: file, line and key, or the option's name).
+pub fn check_finite_range(value: f64, bounds: Bounds) -> Result<f64, String> {
+    if !value.is_finite() {
+        Err(format!("{value} is not a finite number"))
+    } else if !bounds.contains(value) {
+        Err(format!("{} must lie in {bounds}", fmt_bound(value)))
+    } else {
+        Ok(value)
+    }
+}
+
+/// A count (photons, members, threads…) if it lies in `lo..=hi`, else a message saying why.
+pub fn check_count(value: u64, lo: u64, hi: u64) -> Result<u64, String> {
+    if (lo..=hi).contains(&value) {
+        Ok(value)
+    } else {
+        Err(format!(
+            "{value} must lie in {lo}..={}",
+            fmt_bound(hi as f64)
+        ))
+    }
+}
+
+/// The UTF-8 byte-order mark some editors put at the start of a text file; it is not part of
+/// the first line's content.
+pub fn strip_bom(text: &str) -> &str {
+    text.strip_prefix('\u{feff}').unwrap_or(text)
+}
+
+/// Read a file to a string (without a leading byte-order mark), mapping an I/O failure to an
+/// [`InputError`] naming the file.
 pub fn read_to_string(path: &Path) -> Result<String, InputError> {
-    std::fs::read_to_string(path)
-        .map_err(|e| InputError::file(path, format!("cannot read the file: {e}")))
+    let mut text = std::fs::read_to_string(path)
+        .map_err(|e| InputError::file(path, format!("cannot read the file: {e}")))?;
+    if text.starts_with('\u{feff}') {
+        text.drain(..'\u{feff}'.len_utf8());
+    }
+    Ok(text)
 }
 
 /// A comma-separated table: a header of column names, then rows, with `#` comment lines.
@@ -91,7 +243,7 @@ impl CsvTable {
         let mut header: Option<(usize, Vec<String>)> = None;
         let mut rows = Vec::new();
         let mut comments = Vec::new();
-        for (i, raw) in text.lines().enumerate() {
+        for (i, raw) in strip_bom(text).lines().enumerate() {
             let line_no = i + 1;
             let line = raw.trim();
             if line.is_empty() {
@@ -136,6 +288,11 @@ impl CsvTable {
     /// The file this table came from.
     pub fn path(&self) -> &Path {
         &self.path
+    }
+
+    /// Line number of the header.
+    pub fn header_line(&self) -> usize {
+        self.header_line
     }
 
     /// Column names, in order.
@@ -184,6 +341,20 @@ impl CsvTable {
         parse_f64(&self.path, *line, &self.header[col], &fields[col])
     }
 
+    /// Parse field `col` of row `row` as a finite f64 inside `bounds`.
+    pub fn f64_in(&self, row: usize, col: usize, bounds: Bounds) -> Result<f64, InputError> {
+        let (line, fields) = &self.rows[row];
+        parse_f64_in(&self.path, *line, &self.header[col], &fields[col], bounds)
+    }
+
+    /// A whole column parsed as finite f64 values inside `bounds`.
+    pub fn f64_column_in(&self, name: &str, bounds: Bounds) -> Result<Vec<f64>, InputError> {
+        let col = self.column(name)?;
+        (0..self.rows.len())
+            .map(|r| self.f64_in(r, col, bounds))
+            .collect()
+    }
+
     /// A whole column parsed as finite f64 values.
     pub fn f64_column(&self, name: &str) -> Result<Vec<f64>, InputError> {
         let col = self.column(name)?;
@@ -213,6 +384,18 @@ pub fn parse_f64(path: &Path, line: usize, field: &str, text: &str) -> Result<f6
     Ok(v)
 }
 
+/// Parse a finite f64 inside `bounds`, naming file, line and field on failure.
+pub fn parse_f64_in(
+    path: &Path,
+    line: usize,
+    field: &str,
+    text: &str,
+    bounds: Bounds,
+) -> Result<f64, InputError> {
+    let v = parse_f64(path, line, field, text)?;
+    check_finite_range(v, bounds).map_err(|m| InputError::at(path, line, field, m))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -231,6 +414,30 @@ mod tests {
         let t = CsvTable::parse("x.csv", "a,b\n1,zz\n").unwrap();
         let e = t.f64_column("b").unwrap_err();
         assert_eq!(e.to_string(), "x.csv:2: `b`: `zz` is not a number");
+    }
+
+    #[test]
+    fn a_byte_order_mark_is_not_part_of_the_first_line() {
+        let t = CsvTable::parse("x.csv", "\u{feff}# c\na,b\n1,2\n").unwrap();
+        assert_eq!(t.header(), ["a", "b"]);
+        let t = CsvTable::parse("x.csv", "\u{feff}a,b\n1,2\n").unwrap();
+        assert_eq!(t.header(), ["a", "b"]);
+    }
+
+    #[test]
+    fn bounds_refuse_nan_infinity_and_both_sides() {
+        let b = Bounds::positive(10.0);
+        assert!(check_finite_range(f64::NAN, b).is_err());
+        assert!(check_finite_range(f64::INFINITY, Bounds::closed(0.0, f64::MAX)).is_err());
+        assert!(check_finite_range(0.0, b).is_err());
+        assert!(check_finite_range(10.0, b).is_ok());
+        assert!(check_finite_range(10.000001, b).is_err());
+        assert!(check_finite_range(-0.0, Bounds::closed(0.0, 1.0)).is_ok());
+        assert!(check_finite_range(1.0, Bounds::below(0.0, 1.0)).is_err());
+        assert_eq!(b.to_string(), "(0, 10]");
+        assert_eq!(Bounds::closed(-1e4, 1e8).to_string(), "[-10000, 1e8]");
+        assert!(check_count(0, 1, 5).is_err());
+        assert!(check_count(5, 1, 5).is_ok());
     }
 
     #[test]

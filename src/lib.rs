@@ -24,6 +24,7 @@ pub mod constants;
 pub mod input;
 pub mod instrument;
 pub mod lidar_eq;
+pub mod limits;
 pub mod optics;
 pub mod output;
 pub mod particles;

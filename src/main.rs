@@ -36,7 +36,16 @@ enum Command {
 }
 
 fn main() -> ExitCode {
-    let cli = Cli::parse();
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => match invalid_value(&e) {
+            Some(m) => {
+                eprintln!("lidarsim: error: {m}");
+                return ExitCode::from(2);
+            }
+            None => e.exit(),
+        },
+    };
     let result = match cli.command {
         Command::Run(a) => cli::run::run(a),
         Command::Lbl(a) => cli::lbl::run(a),
@@ -56,8 +65,67 @@ fn main() -> ExitCode {
             ExitCode::SUCCESS
         }
         Err(e) => {
-            eprintln!("lidarsim: error: {e:#}");
+            eprintln!("lidarsim: error: {}", message(&e));
             ExitCode::from(2)
         }
+    }
+}
+
+/// An option's value refused by its range check, as one line like every other input error
+/// (`--step-cm1 -0.01 must lie in (0, 100]`); other command-line errors keep clap's usage help.
+fn invalid_value(e: &clap::Error) -> Option<String> {
+    use clap::error::{ContextKind, ContextValue, ErrorKind};
+    if e.kind() != ErrorKind::ValueValidation {
+        return None;
+    }
+    let ContextValue::String(arg) = e.get(ContextKind::InvalidArg)? else {
+        return None;
+    };
+    let option = arg.split_whitespace().next()?;
+    let why = std::error::Error::source(e)?;
+    Some(format!("{option} {why}"))
+}
+
+/// The error and its causes joined by ": ", leaving out a cause whose text the message already
+/// ends with: an error type that shows its source in its own message (`"gas absorption: {0}"`)
+/// would otherwise have it printed twice.
+fn message(e: &anyhow::Error) -> String {
+    let mut text = e.to_string();
+    for cause in e.chain().skip(1) {
+        let c = cause.to_string();
+        if !text.ends_with(&c) {
+            text.push_str(": ");
+            text.push_str(&c);
+        }
+    }
+    text
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_cause_already_in_the_message_is_not_repeated() {
+        let e = anyhow::Error::new(std::io::Error::other("disk full"))
+            .context("cannot write x: disk full");
+        assert_eq!(message(&e), "cannot write x: disk full");
+        let e = anyhow::Error::new(std::io::Error::other("disk full")).context("cannot write x");
+        assert_eq!(message(&e), "cannot write x: disk full");
+    }
+
+    #[test]
+    fn a_refused_option_value_is_one_line_naming_the_option() {
+        let e = Cli::try_parse_from(["lidarsim", "run", "--threads", "100000"])
+            .err()
+            .expect("refused");
+        assert_eq!(
+            invalid_value(&e).as_deref(),
+            Some("--threads 100000 must lie in 0..=1024")
+        );
+        let e = Cli::try_parse_from(["lidarsim", "run", "--bogus"])
+            .err()
+            .expect("refused");
+        assert_eq!(invalid_value(&e), None);
     }
 }

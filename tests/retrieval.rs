@@ -714,7 +714,7 @@ fn malformed_instrument_and_retrieval_keys_name_file_line_and_key() {
             "linewidth_fwhm_mhz = 30.0",
             "linewidth_fwhm_mhz = -3.0",
             "laser.linewidth_fwhm_mhz",
-            "must be > 0",
+            "must lie in (0,",
             "linewidth_fwhm_mhz",
         ),
         (
@@ -794,7 +794,7 @@ fn malformed_instrument_and_retrieval_keys_name_file_line_and_key() {
             "quantum_efficiency = 0.8",
             "quantum_efficiency = 0.0",
             "receiver.quantum_efficiency",
-            "must be > 0",
+            "must lie in (0,",
             "quantum_efficiency",
         ),
         (

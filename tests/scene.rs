@@ -96,7 +96,7 @@ const CASES: &[(&str, &str, &str, usize, &str, &str)] = &[
         "pulse_energy_j = -0.1",
         5,
         "lidar.pulse_energy_j",
-        "must be > 0",
+        "must lie in (0,",
     ),
     (
         "zenith out of range",
@@ -168,7 +168,7 @@ const CASES: &[(&str, &str, &str, usize, &str, &str)] = &[
         "start_m = 0.0",
         17,
         "gates.start_m",
-        "must be > 0",
+        "must lie in (0,",
     ),
     (
         "layer upside down",

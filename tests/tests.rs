@@ -27,3 +27,6 @@ mod stress;
 mod study;
 /// Monte Carlo transport against the analytic lidar equation and conservation laws.
 mod transport;
+/// Every input validated: hostile scene values, options and file fields refused at their file,
+/// line and key; problem sizes refused before allocating (issue 11, item 1).
+mod validation_inputs;

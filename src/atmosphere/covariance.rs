@@ -22,7 +22,7 @@ use nalgebra::{DMatrix, SymmetricEigen};
 use super::interp::hybrid_shift_pa;
 use super::set::{LatitudeClass, ProfileSet};
 use super::{AtmosphereError, Profile};
-use crate::input::{CsvTable, InputError, parse_f64, read_to_string};
+use crate::input::{Bounds, CsvTable, InputError, parse_f64, read_to_string};
 
 /// One variable of the state vector.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
@@ -678,11 +678,17 @@ impl ErrorModel {
                 ));
             }
         }
-        let p: Vec<f64> = t.f64_column("p_hPa")?.iter().map(|p| p * 100.0).collect();
-        let ts = t.f64_column("T_std_K")?;
-        let qs = t.f64_column("lnq_std")?;
+        // Each value in its physical range where it stands (standard deviations ≥ 0 and far
+        // below what would make the perturbed profiles meaningless).
+        let p: Vec<f64> = t
+            .f64_column_in("p_hPa", super::PRESSURE_PA.scaled(1e-2))?
+            .iter()
+            .map(|p| p * 100.0)
+            .collect();
+        let ts = t.f64_column_in("T_std_K", Bounds::closed(0.0, 100.0))?;
+        let qs = t.f64_column_in("lnq_std", Bounds::closed(0.0, 10.0))?;
         let cs = match t.column_opt("CO2_std_ppmv") {
-            Some(_) => t.f64_column("CO2_std_ppmv")?,
+            Some(_) => t.f64_column_in("CO2_std_ppmv", Bounds::closed(0.0, 1e3))?,
             None => vec![0.0; p.len()],
         };
         if p.is_empty() {
@@ -697,20 +703,6 @@ impl ErrorModel {
                     "p_hPa",
                     "pressures must be positive and strictly decreasing",
                 ));
-            }
-            for (name, v) in [
-                ("T_std_K", ts[r]),
-                ("lnq_std", qs[r]),
-                ("CO2_std_ppmv", cs[r]),
-            ] {
-                if v < 0.0 {
-                    return Err(InputError::at(
-                        path,
-                        line,
-                        name,
-                        "a standard deviation cannot be negative",
-                    ));
-                }
             }
         }
         Ok(ErrorModel {

@@ -104,6 +104,12 @@ pub fn generate_ensemble(
 ) -> Result<(ProfileSet, EnsembleReport), AtmosphereError> {
     let prof = &mean.profile;
     prof.validate()?;
+    crate::limits::check_product(
+        "the ensemble",
+        &[("profiles", cfg.n as u64), ("levels", prof.len() as u64)],
+        crate::limits::MAX_ENSEMBLE_LEVELS,
+    )
+    .map_err(AtmosphereError::InvalidArgument)?;
     if !cov.fits(prof) {
         return Err(AtmosphereError::Covariance(format!(
             "its {} elements are not those of profile `{}` ({} levels): project it with on_profile",

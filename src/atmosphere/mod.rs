@@ -26,7 +26,17 @@
 use std::str::FromStr;
 
 use crate::constants::BOLTZMANN_J_PER_K;
-use crate::input::{CsvTable, InputError};
+use crate::input::{Bounds, CsvTable, InputError};
+
+/// Temperatures a profile may hold \[K\]: below the coldest mesopause (about 100 K) up to the
+/// end of the embedded TIPS-2021 partition sums (1000 K), which also covers the thermosphere
+/// to about 200 km. A file beyond is refused where the value stands.
+pub const TEMPERATURE_K: Bounds = Bounds::closed(50.0, 1000.0);
+/// Pressures a profile may hold \[Pa\]: above 0 and at most 1200 hPa (the highest surface
+/// pressures on Earth are near 1085 hPa).
+pub const PRESSURE_PA: Bounds = Bounds::positive(1.2e5);
+/// Altitudes of profile levels \[m\].
+pub const ALTITUDE_M: Bounds = Bounds::closed(-1e4, 1e6);
 
 pub mod column;
 pub mod covariance;
@@ -264,10 +274,10 @@ impl Profile {
             .temperature_k
             .iter()
             .enumerate()
-            .find(|(_, t)| !(t.is_finite() && **t > 0.0))
+            .find(|(_, t)| !TEMPERATURE_K.contains(**t))
         {
             return Err(bad(format!(
-                "temperature {t} K at level {k} is not positive"
+                "temperature {t} K at level {k} is outside {TEMPERATURE_K} K"
             )));
         }
         for g in &self.gases {
@@ -419,13 +429,26 @@ impl FromStr for StandardAtmosphere {
 /// The tabulated `n_air_cm-3` column is not used: number densities are always p/(kT).
 pub fn parse_afgl(path: &str, text: &str) -> Result<Profile, InputError> {
     let t = CsvTable::parse(path, text)?;
-    let altitude_m = t.f64_column("z_km")?.iter().map(|z| z * 1e3).collect();
-    let pressure_pa = t.f64_column("p_hPa")?.iter().map(|p| p * 100.0).collect();
-    let temperature_k = t.f64_column("T_K")?;
+    // Each value in its range where it stands; `validate` then checks the order of levels.
+    let altitude_m = t
+        .f64_column_in("z_km", ALTITUDE_M.scaled(1e-3))?
+        .iter()
+        .map(|z| z * 1e3)
+        .collect();
+    let pressure_pa = t
+        .f64_column_in("p_hPa", PRESSURE_PA.scaled(1e-2))?
+        .iter()
+        .map(|p| p * 100.0)
+        .collect();
+    let temperature_k = t.f64_column_in("T_K", TEMPERATURE_K)?;
     let mut gases = Vec::new();
     for h in t.header() {
         if let Some(name) = h.strip_suffix("_ppmv") {
-            let vmr = t.f64_column(h)?.iter().map(|v| v * 1e-6).collect();
+            let vmr = t
+                .f64_column_in(h, Bounds::closed(0.0, 1e6))?
+                .iter()
+                .map(|v| v * 1e-6)
+                .collect();
             gases.push(GasProfile {
                 name: name.to_string(),
                 vmr,

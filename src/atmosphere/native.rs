@@ -26,7 +26,8 @@ use super::humidity::{
 use super::hydrostatic::hydrostatic_altitudes_m;
 use super::set::{ProfileMeta, ProfileSet, SetMember};
 use super::{GasProfile, Profile, molar_mass_kg_per_mol};
-use crate::input::{CsvTable, InputError};
+use super::{PRESSURE_PA, TEMPERATURE_K};
+use crate::input::{Bounds, CsvTable, InputError};
 
 /// Rows of a native level file grouped by profile id, in file order: (line, fields).
 type Grouped<'a> = BTreeMap<i64, Vec<(usize, &'a [String])>>;
@@ -52,6 +53,25 @@ fn num(t: &CsvTable, line: usize, f: &[String], col: &str) -> Result<f64, InputE
     let c = t.column(col)?;
     crate::input::parse_f64(t.path(), line, col, &f[c])
 }
+
+/// A field inside its physical range, refused where it stands.
+fn num_in(
+    t: &CsvTable,
+    line: usize,
+    f: &[String],
+    col: &str,
+    bounds: Bounds,
+) -> Result<f64, InputError> {
+    let c = t.column(col)?;
+    crate::input::parse_f64_in(t.path(), line, col, &f[c], bounds)
+}
+
+/// Latitude \[deg\].
+const LATITUDE_DEG: Bounds = Bounds::closed(-90.0, 90.0);
+/// Longitude \[deg\].
+const LONGITUDE_DEG: Bounds = Bounds::closed(-360.0, 360.0);
+/// A mole fraction or a mass fraction.
+const FRACTION: Bounds = Bounds::closed(0.0, 1.0);
 
 /// (pressure \[Pa\], temperature \[K\], per-quantity values), bottom-up.
 type LevelColumns = (Vec<f64>, Vec<f64>, Vec<Vec<f64>>);
@@ -165,12 +185,12 @@ pub fn read_ecmwf83(levels_path: &Path, meta_path: &Path) -> Result<ProfileSet, 
         );
         let meta = ProfileMeta {
             id: id.to_string(),
-            latitude_deg: num(&m, line, f, "lat_deg")?,
-            longitude_deg: num(&m, line, f, "lon_deg")?,
+            latitude_deg: num_in(&m, line, f, "lat_deg", LATITUDE_DEG)?,
+            longitude_deg: num_in(&m, line, f, "lon_deg", LONGITUDE_DEG)?,
             time_utc: format!("{:04}-{:02}-{:02}", y as i64, mo as i64, d as i64),
             weight: None,
         };
-        let ps = num(&m, line, f, "psurf_hPa")? * 100.0;
+        let ps = num_in(&m, line, f, "psurf_hPa", PRESSURE_PA.scaled(1e-2))? * 100.0;
         let rows = groups.get(&id).ok_or_else(|| {
             InputError::at(
                 meta_path,
@@ -183,12 +203,12 @@ pub fn read_ecmwf83(levels_path: &Path, meta_path: &Path) -> Result<ProfileSet, 
         for (l, r) in rows {
             let mut v = Vec::with_capacity(gases.len());
             for g in gases {
-                v.push(num(&t, *l, r, &format!("{g}_ppmv"))? * 1e-6);
+                v.push(num_in(&t, *l, r, &format!("{g}_ppmv"), FRACTION.scaled(1e6))? * 1e-6);
             }
             levels.push((
                 *l,
-                num(&t, *l, r, "p_hPa")? * 100.0,
-                num(&t, *l, r, "T_K")?,
+                num_in(&t, *l, r, "p_hPa", PRESSURE_PA.scaled(1e-2))? * 100.0,
+                num_in(&t, *l, r, "T_K", TEMPERATURE_K)?,
                 v,
             ));
         }
@@ -255,8 +275,8 @@ pub fn read_ecmwf52(levels_path: &Path, meta_path: &Path) -> Result<ProfileSet, 
         }
         let meta = ProfileMeta {
             id: id.to_string(),
-            latitude_deg: num(&m, line, f, "lat_deg")?,
-            longitude_deg: num(&m, line, f, "lon_deg")?,
+            latitude_deg: num_in(&m, line, f, "lat_deg", LATITUDE_DEG)?,
+            longitude_deg: num_in(&m, line, f, "lon_deg", LONGITUDE_DEG)?,
             time_utc: format!(
                 "{}-{}-{}T{}:00Z",
                 &dt[0..4],
@@ -266,7 +286,7 @@ pub fn read_ecmwf52(levels_path: &Path, meta_path: &Path) -> Result<ProfileSet, 
             ),
             weight: None,
         };
-        let ps = num(&m, line, f, "psurf_hPa")? * 100.0;
+        let ps = num_in(&m, line, f, "psurf_hPa", PRESSURE_PA.scaled(1e-2))? * 100.0;
         let rows = groups.get(&id).ok_or_else(|| {
             InputError::at(
                 meta_path,
@@ -277,12 +297,12 @@ pub fn read_ecmwf52(levels_path: &Path, meta_path: &Path) -> Result<ProfileSet, 
         })?;
         let mut levels = Vec::with_capacity(rows.len());
         for (l, r) in rows {
-            let q = num(&t, *l, r, "q_kgkg")?;
-            let o3 = num(&t, *l, r, "O3_kgkg")?;
+            let q = num_in(&t, *l, r, "q_kgkg", FRACTION)?;
+            let o3 = num_in(&t, *l, r, "O3_kgkg", FRACTION)?;
             levels.push((
                 *l,
-                num(&t, *l, r, "p_hPa")? * 100.0,
-                num(&t, *l, r, "T_K")?,
+                num_in(&t, *l, r, "p_hPa", PRESSURE_PA.scaled(1e-2))? * 100.0,
+                num_in(&t, *l, r, "T_K", TEMPERATURE_K)?,
                 vec![q, o3],
             ));
         }
@@ -399,10 +419,16 @@ pub fn read_rfmip(layers_path: &Path, meta_path: &Path) -> Result<ProfileSet, In
         let day = num(&m, line, f, "day_of_2014")?;
         let meta = ProfileMeta {
             id: id.to_string(),
-            latitude_deg: num(&m, line, f, "lat_deg")?,
-            longitude_deg: num(&m, line, f, "lon_deg")?,
+            latitude_deg: num_in(&m, line, f, "lat_deg", LATITUDE_DEG)?,
+            longitude_deg: num_in(&m, line, f, "lon_deg", LONGITUDE_DEG)?,
             time_utc: time_from_days_2014(day),
-            weight: Some(num(&m, line, f, "profile_weight")?),
+            weight: Some(num_in(
+                &m,
+                line,
+                f,
+                "profile_weight",
+                Bounds::closed(0.0, 1e12),
+            )?),
         };
         let rows = groups.get(&id).ok_or_else(|| {
             InputError::at(meta_path, line, "site", format!("site {id} has no layers"))
@@ -412,13 +438,13 @@ pub fn read_rfmip(layers_path: &Path, meta_path: &Path) -> Result<ProfileSet, In
         for (l, r) in rows {
             layers.push((
                 *l,
-                num(&t, *l, r, "p_layer_Pa")?,
-                num(&t, *l, r, "H2O_molefrac")?,
-                num(&t, *l, r, "O3_molefrac")?,
-                num(&t, *l, r, "p_bottom_edge_Pa")?,
-                num(&t, *l, r, "T_bottom_edge_K")?,
-                num(&t, *l, r, "p_top_edge_Pa")?,
-                num(&t, *l, r, "T_top_edge_K")?,
+                num_in(&t, *l, r, "p_layer_Pa", PRESSURE_PA)?,
+                num_in(&t, *l, r, "H2O_molefrac", FRACTION)?,
+                num_in(&t, *l, r, "O3_molefrac", FRACTION)?,
+                num_in(&t, *l, r, "p_bottom_edge_Pa", PRESSURE_PA)?,
+                num_in(&t, *l, r, "T_bottom_edge_K", TEMPERATURE_K)?,
+                num_in(&t, *l, r, "p_top_edge_Pa", PRESSURE_PA)?,
+                num_in(&t, *l, r, "T_top_edge_K", TEMPERATURE_K)?,
             ));
         }
         layers.sort_by(|a, b| b.1.total_cmp(&a.1));

@@ -39,8 +39,8 @@ use std::str::FromStr;
 use super::humidity::{vmr_from_dry_mole_ratio, vmr_from_specific_humidity};
 use super::hydrostatic::hydrostatic_altitudes_m;
 use super::interp::{HYBRID_TOP_PA, hybrid_shift_pa};
-use super::{AtmosphereError, GasProfile, Profile};
-use crate::input::{CsvTable, InputError, parse_f64, read_to_string};
+use super::{ALTITUDE_M, AtmosphereError, GasProfile, PRESSURE_PA, Profile, TEMPERATURE_K};
+use crate::input::{Bounds, CsvTable, InputError, parse_f64, parse_f64_in, read_to_string};
 
 /// Latitude classes of the seed paper: high (|φ| > 50°), mid (30° ≤ |φ| ≤ 50°), tropical
 /// (|φ| < 30°).
@@ -549,11 +549,10 @@ fn parse_gas_column(h: &str) -> Option<(String, GasUnit)> {
 pub fn parse_profile_set(path: &Path, text: &str) -> Result<ProfileSet, InputError> {
     let t = CsvTable::parse(path, text)?;
     let header = t.header().to_vec();
-    // Header line number: the line before the first data row is not reliable (comments), so
-    // errors about columns use the first data row's line or the file.
+    // Errors about columns name the header line.
     let col_err = |name: &str, msg: String| InputError {
         path: path.to_path_buf(),
-        line: None,
+        line: Some(t.header_line()),
         field: Some(name.to_string()),
         message: msg,
     };
@@ -727,8 +726,8 @@ fn parse_member(
 ) -> Result<SetMember, InputError> {
     let header = t.header();
     let (line0, f0) = all[0];
-    let num = |line: usize, fields: &[String], col: usize| {
-        parse_f64(path, line, &header[col], &fields[col])
+    let num = |line: usize, fields: &[String], col: usize, bounds: Bounds| {
+        parse_f64_in(path, line, &header[col], &fields[col], bounds)
     };
     // Per-profile metadata: from the first row, identical on all rows.
     for (line, f) in &all[1..] {
@@ -749,20 +748,17 @@ fn parse_member(
             }
         }
     }
-    let latitude_deg = num(line0, f0, c_lat)?;
-    if latitude_deg.abs() > 90.0 {
-        return Err(InputError::at(
-            path,
-            line0,
-            "latitude_deg",
-            format!("{latitude_deg} is not in [−90, 90]"),
-        ));
-    }
-    let longitude_deg = num(line0, f0, c_lon)?;
+    let latitude_deg = num(line0, f0, c_lat, Bounds::closed(-90.0, 90.0))?;
+    let longitude_deg = num(line0, f0, c_lon, Bounds::closed(-360.0, 360.0))?;
     let time_utc = c_time.map(|c| f0[c].clone()).unwrap_or_default();
     check_time(&time_utc).map_err(|m| InputError::at(path, line0, "time_utc", m))?;
-    let weight = c_weight.map(|c| num(line0, f0, c)).transpose()?;
-    let surface_altitude_m = c_zs.map(|c| num(line0, f0, c)).transpose()?.unwrap_or(0.0);
+    let weight = c_weight
+        .map(|c| num(line0, f0, c, Bounds::closed(0.0, 1e12)))
+        .transpose()?;
+    let surface_altitude_m = c_zs
+        .map(|c| num(line0, f0, c, ALTITUDE_M))
+        .transpose()?
+        .unwrap_or(0.0);
 
     // Levels in file order, then bottom-up.
     struct Level {
@@ -774,31 +770,15 @@ fn parse_member(
     }
     let mut levels = Vec::with_capacity(all.len());
     for (line, f) in all {
-        let p = num(*line, f, c_p)? * p_scale;
-        if !(p > 0.0) {
-            return Err(InputError::at(
-                path,
-                *line,
-                &header[c_p],
-                "pressure must be positive",
-            ));
-        }
-        let temp = num(*line, f, c_t)?;
-        if !(temp > 0.0) {
-            return Err(InputError::at(
-                path,
-                *line,
-                &header[c_t],
-                "temperature must be positive (K)",
-            ));
-        }
+        let p = num(*line, f, c_p, PRESSURE_PA.scaled(1.0 / p_scale))? * p_scale;
+        let temp = num(*line, f, c_t, TEMPERATURE_K)?;
         let z = c_z
-            .map(|(c, s)| num(*line, f, c).map(|v| v * s))
+            .map(|(c, s)| num(*line, f, c, ALTITUDE_M.scaled(1.0 / s)).map(|v| v * s))
             .transpose()?;
         let mut gas = Vec::with_capacity(gas_cols.len());
         let mut x_h2o = 0.0;
         for (c, g, u) in gas_cols {
-            let v = num(*line, f, *c)?;
+            let v = parse_f64(path, *line, &header[*c], &f[*c])?;
             let x = if u.specific_humidity {
                 if !(0.0..1.0).contains(&v) {
                     return Err(InputError::at(

@@ -15,6 +15,7 @@ use std::io::Write;
 use anyhow::Context;
 use std::path::{Path, PathBuf};
 
+use lidarsim::input::Bounds;
 use lidarsim::optics::OpticalAtmosphere;
 use lidarsim::output::write_file;
 use lidarsim::returns::Order;
@@ -30,28 +31,28 @@ const C1_TABLE_BUILTIN: &str = r#"builtin = "bissonnette_c1_1064nm""#;
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// Photon packets per run.
-    #[arg(long, default_value_t = 1_000_000)]
+    #[arg(long, default_value_t = 1_000_000, allow_negative_numbers = true, value_parser = super::count(1, lidarsim::limits::MAX_PHOTONS))]
     pub photons: u64,
     /// Thread counts to measure, comma-separated.
-    #[arg(long, value_delimiter = ',', default_value = "1,2")]
+    #[arg(long, value_delimiter = ',', default_value = "1,2", allow_negative_numbers = true, value_parser = super::threads())]
     pub threads: Vec<usize>,
     /// Runs per thread count; the fastest is reported (the least disturbed by other load).
-    #[arg(long, default_value_t = 3)]
+    #[arg(long, default_value_t = 3, allow_negative_numbers = true, value_parser = super::count_usize(1, 1000))]
     pub repeat: usize,
     /// Random seed.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Probability of detector-directed importance sampling (0: off).
-    #[arg(long, default_value_t = lidarsim::transport::DDIS_EPSILON)]
+    #[arg(long, default_value_t = lidarsim::transport::DDIS_EPSILON, allow_negative_numbers = true, value_parser = super::real(Bounds::below(0.0, 1.0)))]
     pub ddis_epsilon: f64,
     /// Probability of drawing the first collision uniformly in range (0: off).
-    #[arg(long, default_value_t = lidarsim::transport::RANGE_STRATIFICATION)]
+    #[arg(long, default_value_t = lidarsim::transport::RANGE_STRATIFICATION, allow_negative_numbers = true, value_parser = super::real(Bounds::below(0.0, 1.0)))]
     pub range_stratification: f64,
     /// Write the figures as JSON here as well.
     #[arg(long)]
     pub json: Option<PathBuf>,
     /// Instead of the transport: time the clear-sky ensemble study with N profiles per class.
-    #[arg(long, value_name = "N")]
+    #[arg(long, value_name = "N", allow_negative_numbers = true, value_parser = super::count_usize(1, lidarsim::limits::MAX_ENSEMBLE_LEVELS))]
     pub study: Option<usize>,
 }
 
@@ -62,10 +63,6 @@ fn study_bench(n: usize, args: &Args) -> anyhow::Result<()> {
     use lidarsim::atmosphere::{LatitudeClass, ProfileSet, class_ensemble};
     use lidarsim::study::dial::{self, StudyOptions};
     use std::time::Instant;
-    anyhow::ensure!(
-        (1..=100_000).contains(&n),
-        "--study {n}: give 1 to 100000 profiles per class"
-    );
     let scene = Scene::from_toml(
         Path::new("<embedded scenes/study_co2_ipda.toml>"),
         STUDY_SCENE,
@@ -112,7 +109,7 @@ fn study_bench(n: usize, args: &Args) -> anyhow::Result<()> {
             .num_threads(threads)
             .build()?;
         let mut best: Option<dial::Timing> = None;
-        for _ in 0..args.repeat.max(1) {
+        for _ in 0..args.repeat {
             let r = pool.install(|| dial::run(&scene, &set, &options, &|| {}))?;
             let failed = r.outcomes.iter().filter(|o| o.records.is_err()).count();
             anyhow::ensure!(failed == 0, "{failed} profiles failed");
@@ -188,7 +185,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut rows = Vec::new();
     for &threads in &args.threads {
         let mut best: Option<transport::McResult> = None;
-        for _ in 0..args.repeat.max(1) {
+        for _ in 0..args.repeat {
             let mut opts = TransportOptions::from_scene(&scene);
             opts.threads = threads;
             opts.ddis_epsilon = args.ddis_epsilon;

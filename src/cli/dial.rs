@@ -8,6 +8,7 @@ use std::path::PathBuf;
 use anyhow::{Context, bail};
 
 use lidarsim::atmosphere::{LatitudeClass, ProfileSet, class_ensemble, read_profile_set};
+use lidarsim::input::Bounds;
 use lidarsim::output::{self, OutputSet, csv_field};
 use lidarsim::scene::Scene;
 use lidarsim::study::dial::{
@@ -30,7 +31,7 @@ pub struct Args {
     /// Instead of a set: N members per class drawn around the class's AFGL mean with the
     /// representative NWP forecast-error covariance (as `profiles generate --class C`; class i
     /// of tropical, mid, high takes seed S + i).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true, value_parser = super::count_usize(2, lidarsim::limits::MAX_ENSEMBLE_LEVELS))]
     pub ensemble: Option<usize>,
     /// Seed of a generated ensemble and of the instrument noise (default: the scene's).
     #[arg(long)]
@@ -44,25 +45,25 @@ pub struct Args {
     pub on: Vec<String>,
     /// Photons per profile; 0 (default for a scene without particle layers) uses the analytic
     /// lidar equation. Default with particle layers: the scene's `simulation.photons`.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true, value_parser = super::count(0, lidarsim::limits::MAX_PHOTONS))]
     pub photons: Option<u64>,
     /// Worker threads, 0 for all cores.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, allow_negative_numbers = true, value_parser = super::threads())]
     pub threads: usize,
     /// Budget: temperature knowledge error [K].
-    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true, value_parser = super::real(Bounds::closed(-100.0, 100.0)))]
     pub budget_temperature_k: f64,
     /// Budget: humidity knowledge error [%].
-    #[arg(long, default_value_t = 10.0, allow_negative_numbers = true)]
+    #[arg(long, default_value_t = 10.0, allow_negative_numbers = true, value_parser = super::real(Bounds::above(-100.0, 1000.0)))]
     pub budget_humidity_percent: f64,
     /// Budget: surface-pressure knowledge error [hPa].
-    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true, value_parser = super::real(Bounds::closed(-100.0, 100.0)))]
     pub budget_surface_pressure_hpa: f64,
     /// Budget: on-line frequency offset [MHz].
-    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true, value_parser = super::real(Bounds::closed(-1e5, 1e5)))]
     pub budget_frequency_offset_mhz: f64,
     /// Budget: line-width error [%].
-    #[arg(long, default_value_t = 10.0, allow_negative_numbers = true)]
+    #[arg(long, default_value_t = 10.0, allow_negative_numbers = true, value_parser = super::real(Bounds::above(-100.0, 1000.0)))]
     pub budget_linewidth_percent: f64,
     /// Output directory (created if needed).
     #[arg(long, default_value = "dial_study")]
@@ -102,24 +103,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     let seed = args.seed.unwrap_or(scene.simulation.seed);
     let set = profile_set(&args, &classes, seed)?;
+    // Each step was checked by the argument parser (finite, signed where a sign means a
+    // direction of the error).
     let steps = BudgetSteps {
-        temperature_k: finite("--budget-temperature-k", args.budget_temperature_k)?,
-        humidity_fraction: finite("--budget-humidity-percent", args.budget_humidity_percent)?
-            / 100.0,
-        surface_pressure_hpa: finite(
-            "--budget-surface-pressure-hpa",
-            args.budget_surface_pressure_hpa,
-        )?,
-        frequency_offset_mhz: finite(
-            "--budget-frequency-offset-mhz",
-            args.budget_frequency_offset_mhz,
-        )?,
-        linewidth_fraction: finite("--budget-linewidth-percent", args.budget_linewidth_percent)?
-            / 100.0,
+        temperature_k: args.budget_temperature_k,
+        humidity_fraction: args.budget_humidity_percent / 100.0,
+        surface_pressure_hpa: args.budget_surface_pressure_hpa,
+        frequency_offset_mhz: args.budget_frequency_offset_mhz,
+        linewidth_fraction: args.budget_linewidth_percent / 100.0,
     };
-    if steps.humidity_fraction <= -1.0 || steps.linewidth_fraction <= -1.0 {
-        bail!("--budget-humidity-percent and --budget-linewidth-percent must be above -100");
-    }
     let line = |name: &str| -> anyhow::Result<usize> {
         scene
             .lines
@@ -192,13 +184,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn finite(name: &str, v: f64) -> anyhow::Result<f64> {
-    if !v.is_finite() {
-        bail!("{name} {v} must be a finite number");
-    }
-    Ok(v)
-}
-
 /// The profiles to run: a set's members of the chosen classes, or generated ensembles.
 fn profile_set(args: &Args, classes: &[LatitudeClass], seed: u64) -> anyhow::Result<ProfileSet> {
     if let Some(path) = &args.profiles {
@@ -219,13 +204,6 @@ fn profile_set(args: &Args, classes: &[LatitudeClass], seed: u64) -> anyhow::Res
     let n = args
         .ensemble
         .context("give --profiles SET or --ensemble N")?;
-    if n < 2 {
-        bail!("--ensemble {n}: an ensemble needs at least 2 members");
-    }
-    // 10⁵ members of ~50 levels is ~100 MB of profiles: beyond that, shard the study.
-    if n > 100_000 {
-        bail!("--ensemble {n}: at most 100000 members per class");
-    }
     let mut set = ProfileSet {
         name: format!("{n} members per class, seed {seed}"),
         members: Vec::new(),

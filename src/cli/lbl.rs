@@ -13,6 +13,8 @@ use anyhow::{Context, bail};
 use plotters::prelude::*;
 
 use lidarsim::atmosphere::{Profile, StandardAtmosphere, parse_afgl};
+use lidarsim::input::Bounds;
+use lidarsim::limits::{MAX_LBL_ROWS, MAX_PATH_LAYERS, check_product};
 use lidarsim::output::{self, OutputSet};
 use lidarsim::spectroscopy::isotopologues::molecule_name;
 use lidarsim::spectroscopy::xsec::GasState;
@@ -22,6 +24,7 @@ use lidarsim::spectroscopy::{
 };
 
 use super::plot::{FONT, init_font};
+use super::real;
 
 /// Arguments of `lidarsim lbl`.
 #[derive(clap::Args, Debug)]
@@ -40,28 +43,28 @@ pub struct Args {
     line_mixing: bool,
     /// Mole fraction of the absorbing gas, for self broadening (cross-section mode; 0: pure air
     /// broadening).
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true, value_parser = real(Bounds::closed(0.0, 1.0)))]
     vmr: f64,
     /// Pressure [atm] (cross-section mode).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true, value_parser = real(Bounds::closed(0.0, 100.0)))]
     pressure_atm: Option<f64>,
     /// Temperature \[K\] (cross-section mode).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true, value_parser = real(lidarsim::atmosphere::TEMPERATURE_K))]
     temperature_k: Option<f64>,
     /// First wavenumber [cm⁻¹].
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true, value_parser = real(Bounds::positive(1e6)))]
     start_cm1: f64,
     /// Last wavenumber [cm⁻¹] (inclusive).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true, value_parser = real(Bounds::positive(1e6)))]
     end_cm1: f64,
     /// Grid step [cm⁻¹].
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true, value_parser = real(Bounds::positive(100.0)))]
     step_cm1: f64,
     /// Output CSV.
     #[arg(long, value_name = "OUT.csv")]
     out: PathBuf,
     /// Line wing cutoff [cm⁻¹], measured from the unshifted centre unless --shifted-wing.
-    #[arg(long, default_value_t = 25.0)]
+    #[arg(long, default_value_t = 25.0, allow_negative_numbers = true, value_parser = real(Bounds::positive(1e3)))]
     wing_cm1: f64,
     /// Centre the wing cutoff on the pressure-shifted line centre.
     #[arg(long)]
@@ -89,19 +92,19 @@ pub struct LayerArgs {
     profile: Option<PathBuf>,
     /// Layer mode: scale the CO2 profile so that its surface value is this [ppmv] (AFGL tables
     /// carry 330; the shape, which falls above 80 km, is kept).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true, value_parser = real(Bounds::below(0.0, 1e6)))]
     co2_ppmv: Option<f64>,
     /// Layer mode: sensor altitude \[m\].
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true, value_parser = real(Bounds::closed(-1e4, 1e8)))]
     sensor_altitude_m: Option<f64>,
     /// Layer mode: zenith angle of the line of sight \[deg\] (0 up, 180 nadir).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true, value_parser = real(Bounds::closed(0.0, 180.0)))]
     zenith_deg: Option<f64>,
     /// Layer mode: surface altitude \[m\].
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true, value_parser = real(Bounds::closed(-1e4, 1e8)))]
     surface_altitude_m: f64,
     /// Layer mode: layer thickness \[m\].
-    #[arg(long, default_value_t = 1000.0)]
+    #[arg(long, default_value_t = 1000.0, allow_negative_numbers = true, value_parser = real(Bounds::positive(1e6)))]
     layer_m: f64,
     /// Layer mode: also save the optical-depth table (binary, reloadable) here.
     #[arg(long, value_name = "FILE")]
@@ -117,6 +120,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .collect();
     output::check_paths(&outputs)?;
     let grid = WavenumberGrid::new(args.start_cm1, args.end_cm1, args.step_cm1)?;
+    check_product(
+        "the output",
+        &[("wavenumbers", grid.len as u64)],
+        MAX_LBL_ROWS,
+    )
+    .map_err(anyhow::Error::msg)?;
     let mut opts = LblOptions {
         wing_cm1: args.wing_cm1,
         line_shape: args.line_shape,
@@ -162,12 +171,6 @@ fn run_cross_sections(
     p_atm: f64,
     t_k: f64,
 ) -> anyhow::Result<()> {
-    if !(p_atm.is_finite() && p_atm >= 0.0) {
-        bail!("--pressure-atm must be finite and ≥ 0 (got {p_atm})");
-    }
-    if !(0.0..=1.0).contains(&args.vmr) {
-        bail!("--vmr must lie in [0, 1] (got {})", args.vmr);
-    }
     let state = GasState {
         pressure_pa: p_atm * lidarsim::constants::STANDARD_ATMOSPHERE_PA,
         temperature_k: t_k,
@@ -243,9 +246,6 @@ fn load_profile(args: &Args) -> anyhow::Result<Profile> {
         _ => bail!("give one of --atmosphere or --profile"),
     };
     if let Some(ppmv) = args.layer.co2_ppmv {
-        if !(0.0..1e6).contains(&ppmv) {
-            bail!("--co2-ppmv must be within [0, 1e6) (got {ppmv})");
-        }
         let g = prof
             .gases
             .iter_mut()
@@ -277,6 +277,18 @@ fn run_layers(
         surface_altitude_m: args.layer.surface_altitude_m,
     };
     let mu = los.mu()?;
+    // The layers and the table rows they make, before any is computed.
+    let (lo, hi) = los.vertical_extent(&prof)?;
+    let layers = ((hi - lo) / args.layer.layer_m).ceil().max(1.0) as u64;
+    check_product("--layer-m", &[("layers", layers)], MAX_PATH_LAYERS)
+        .and_then(|_| {
+            check_product(
+                "the output",
+                &[("wavenumbers", grid.len as u64), ("layers", layers)],
+                MAX_LBL_ROWS,
+            )
+        })
+        .map_err(anyhow::Error::msg)?;
     let edges = los.layer_edges(&prof, args.layer.layer_m)?;
     let table = GasOpticalDepthTable::compute(&prof, lines, &edges, grid, opts)?;
     let mut files = OutputSet::new();

@@ -5,10 +5,11 @@ use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use clap::ValueEnum;
+use lidarsim::input::{Bounds, check_finite_range};
 use lidarsim::particles::distribution::{
     BulkOptions, SizeDistribution, bulk_optics, format_refractive_index,
 };
-use lidarsim::particles::mie::{MieCoefficients, parse_refractive_index};
+use lidarsim::particles::mie::{MAX_SIZE_PARAMETER, MieCoefficients, parse_refractive_index};
 use lidarsim::particles::opac::{OpacComponent, OpacType};
 use serde_json::json;
 
@@ -45,19 +46,19 @@ pub struct Args {
     #[arg(long, allow_hyphen_values = true)]
     refractive_index: Option<String>,
     /// Size parameter x = 2 pi r / lambda of a single sphere.
-    #[arg(long, conflicts_with = "distribution")]
+    #[arg(long, conflicts_with = "distribution", allow_negative_numbers = true, value_parser = super::real(Bounds::positive(MAX_SIZE_PARAMETER)))]
     size_parameter: Option<f64>,
     /// Scattering angles \[deg\] at which to print S1, S2 for a single sphere (comma-separated).
-    #[arg(long, value_delimiter = ',', requires = "size_parameter")]
+    #[arg(long, value_delimiter = ',', requires = "size_parameter", allow_negative_numbers = true, value_parser = super::real(Bounds::closed(0.0, 180.0)))]
     angles_deg: Vec<f64>,
     /// Size distribution (instead of --size-parameter).
     #[arg(long, value_enum)]
     distribution: Option<Distribution>,
     /// Wavelength in the medium \[nm\] (distributions).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true, value_parser = super::real(Bounds::positive(1e7)))]
     wavelength_nm: Option<f64>,
     /// Log-normal (or single OPAC component) total number density [cm^-3].
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true, value_parser = super::real(Bounds::positive(1e10)))]
     number_density_per_cm3: f64,
     /// OPAC aerosol type (dry components): continental-clean, continental-average,
     /// continental-polluted, urban, maritime-clean, maritime-polluted, maritime-tropical, arctic.
@@ -67,37 +68,37 @@ pub struct Args {
     #[arg(long)]
     opac_component: Option<String>,
     /// Log-normal median (number mode) radius [um].
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true, value_parser = super::real(Bounds::positive(1e4)))]
     median_radius_um: Option<f64>,
     /// Log-normal geometric standard deviation (> 1).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true, value_parser = super::real(Bounds::above(1.0, 10.0)))]
     sigma_g: Option<f64>,
     /// A log-normal mode N_per_cm3,r_g_um,sigma_g; repeat for a multimodal distribution.
     #[arg(long = "mode", value_name = "N,R_G,SIGMA_G")]
     modes: Vec<String>,
     /// Modified gamma: a [cm^-3 um^-(alpha+1)].
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true, value_parser = super::real(Bounds::positive(1e30)))]
     a: Option<f64>,
     /// Modified gamma: alpha.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true, value_parser = super::real(Bounds::above(-1.0, 100.0)))]
     alpha: Option<f64>,
     /// Modified gamma: b [um^-gamma].
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true, value_parser = super::real(Bounds::positive(1e4)))]
     b: Option<f64>,
     /// Modified gamma: gamma.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true, value_parser = super::real(Bounds::above(0.0, 10.0)))]
     gamma: Option<f64>,
     /// Truncate every mode below this radius [um].
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true, value_parser = super::real(Bounds::closed(0.0, 1e4)))]
     r_min_um: Option<f64>,
     /// Truncate every mode above this radius [um].
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true, value_parser = super::real(Bounds::positive(1e4)))]
     r_max_um: Option<f64>,
     /// Fraction of the geometric cross-section left outside the integrated radius range.
-    #[arg(long, default_value_t = 1e-5)]
+    #[arg(long, default_value_t = 1e-5, allow_negative_numbers = true, value_parser = super::real(Bounds::open(0.0, 0.1)))]
     tail_fraction: f64,
     /// Relative convergence tolerance of the size integration (two successive halvings).
-    #[arg(long, default_value_t = 1e-3)]
+    #[arg(long, default_value_t = 1e-3, allow_negative_numbers = true, value_parser = super::real(Bounds::open(0.0, 0.5)))]
     rel_tol: f64,
     /// Write the phase-function table here (distributions).
     #[arg(long)]
@@ -116,12 +117,21 @@ fn parse_mode(text: &str) -> anyhow::Result<SizeDistribution> {
     if parts.len() != 3 {
         bail!("--mode `{text}`: expected N_per_cm3,r_g_um,sigma_g");
     }
+    // The same ranges as --number-density-per-cm3, --median-radius-um and --sigma-g.
+    let bounds = [
+        ("N_per_cm3", Bounds::positive(1e10)),
+        ("r_g_um", Bounds::positive(1e4)),
+        ("sigma_g", Bounds::above(1.0, 10.0)),
+    ];
     let v: Vec<f64> = parts
         .iter()
-        .map(|p| {
-            p.trim()
+        .zip(bounds)
+        .map(|(p, (name, b))| {
+            let v = p
+                .trim()
                 .parse::<f64>()
-                .with_context(|| format!("--mode `{text}`: `{p}` is not a number"))
+                .with_context(|| format!("--mode `{text}`: `{p}` is not a number"))?;
+            check_finite_range(v, b).map_err(|m| anyhow::anyhow!("--mode `{text}`: {name} {m}"))
         })
         .collect::<Result<_, _>>()?;
     SizeDistribution::lognormal(v[0], v[1], v[2]).with_context(|| format!("--mode `{text}`"))
@@ -155,9 +165,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             "n_terms": e.n_terms,
         });
         if !args.angles_deg.is_empty() {
-            if let Some(t) = args.angles_deg.iter().find(|t| !(0.0..=180.0).contains(*t)) {
-                bail!("--angles-deg: {t} is outside [0, 180]");
-            }
             let mu: Vec<f64> = args
                 .angles_deg
                 .iter()

@@ -11,3 +11,52 @@ pub mod progress;
 pub mod run;
 pub mod select_lines;
 pub mod study_figures;
+
+use lidarsim::input::{Bounds, check_count, check_finite_range};
+
+/// A clap value parser for a real option: a finite number inside `bounds` (unit as the
+/// option's name says), so that a bad value is refused by the parser with the option named.
+/// Options using it also set `allow_negative_numbers`, so that `-0.01` reaches the check
+/// instead of being taken for an unknown flag.
+pub fn real(
+    bounds: Bounds,
+) -> impl Fn(&str) -> Result<f64, String> + Clone + Send + Sync + 'static {
+    move |text| {
+        let v: f64 = text
+            .trim()
+            .parse()
+            .map_err(|_| format!("`{text}` is not a number"))?;
+        check_finite_range(v, bounds)
+    }
+}
+
+/// A clap value parser for a count in `lo..=hi`.
+pub fn count(lo: u64, hi: u64) -> impl Fn(&str) -> Result<u64, String> + Clone + Send + Sync {
+    move |text| {
+        let v: u64 = text
+            .trim()
+            .parse()
+            .map_err(|_| format!("`{text}` is not a whole number ≥ 0"))?;
+        check_count(v, lo, hi)
+    }
+}
+
+/// [`count`] for options held as `usize`.
+pub fn count_usize(
+    lo: u64,
+    hi: u64,
+) -> impl Fn(&str) -> Result<usize, String> + Clone + Send + Sync {
+    let c = count(lo, hi);
+    move |text| c(text).map(|v| v as usize)
+}
+
+/// [`count`] for options held as `u32`.
+pub fn count_u32(lo: u32, hi: u32) -> impl Fn(&str) -> Result<u32, String> + Clone + Send + Sync {
+    let c = count(lo.into(), hi.into());
+    move |text| c(text).map(|v| v as u32)
+}
+
+/// Worker threads of a run: 0 (all cores) to [`lidarsim::limits::MAX_THREADS`].
+pub fn threads() -> impl Fn(&str) -> Result<usize, String> + Clone + Send + Sync {
+    count_usize(0, lidarsim::limits::MAX_THREADS)
+}

@@ -3,6 +3,7 @@
 use std::io::Write;
 use std::path::PathBuf;
 
+use lidarsim::input::Bounds;
 use lidarsim::instrument::signals;
 use lidarsim::output::{self, OutputSet};
 use lidarsim::pipeline::{self, RunOutput};
@@ -22,17 +23,17 @@ pub struct Args {
     pub out: PathBuf,
     /// Photon packets (overrides the scene's `simulation.photons`); 0 runs only the analytic
     /// single-scatter lidar equation.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true, value_parser = super::count(0, lidarsim::limits::MAX_PHOTONS))]
     pub photons: Option<u64>,
     /// Random seed (overrides `simulation.seed`).
     #[arg(long)]
     pub seed: Option<u64>,
     /// Worker threads, 0 for all cores (overrides `simulation.threads`).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true, value_parser = super::threads())]
     pub threads: Option<usize>,
     /// Probability of detector-directed importance sampling near the line of sight (0 turns
     /// this variance reduction off; results are unbiased either way).
-    #[arg(long, default_value_t = lidarsim::transport::DDIS_EPSILON)]
+    #[arg(long, default_value_t = lidarsim::transport::DDIS_EPSILON, allow_negative_numbers = true, value_parser = super::real(Bounds::below(0.0, 1.0)))]
     pub ddis_epsilon: f64,
     /// Do not draw the figures (returns.png, dial.png).
     #[arg(long)]
@@ -58,11 +59,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     scene
         .override_simulation(args.photons, args.seed, args.threads)
         .map_err(anyhow::Error::msg)?;
-    anyhow::ensure!(
-        (0.0..1.0).contains(&args.ddis_epsilon),
-        "--ddis-epsilon {} must lie in [0, 1)",
-        args.ddis_epsilon
-    );
     // Before the work: a run must not fail at its end on a name it could have refused now.
     output::check_paths(&FILES.map(|f| args.out.join(f)))?;
     let mut opts = TransportOptions::from_scene(&scene);

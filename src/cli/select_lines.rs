@@ -10,6 +10,7 @@ use anyhow::{Context, bail};
 use plotters::prelude::*;
 
 use lidarsim::atmosphere::{LatitudeClass, SetMember, StandardAtmosphere, read_profile_set};
+use lidarsim::input::Bounds;
 use lidarsim::output::{self, OutputError, OutputSet};
 use lidarsim::scene::Scene;
 use lidarsim::spectroscopy::{LblOptions, LineFilter, LineList};
@@ -38,7 +39,7 @@ pub struct Args {
     /// Instead of a set: N members per class around the class's AFGL mean with the
     /// representative NWP forecast-error covariance (as `lidarsim dial --ensemble`: class i of
     /// tropical, mid, high takes seed S + i).
-    #[arg(long, value_name = "N")]
+    #[arg(long, value_name = "N", allow_negative_numbers = true, value_parser = super::count_usize(2, lidarsim::limits::MAX_ENSEMBLE_LEVELS))]
     ensemble: Option<usize>,
     /// Seed of --ensemble.
     #[arg(long, default_value_t = 1, requires = "ensemble")]
@@ -56,51 +57,52 @@ pub struct Args {
     lines: Vec<PathBuf>,
     /// On-line positions [cm⁻¹], comma-separated. Without: scan the band's lines (--max-j,
     /// --offsets-ghz).
-    #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
+    #[arg(long, value_delimiter = ',', allow_negative_numbers = true, value_parser = super::real(Bounds::positive(1e6)))]
     on_cm1: Vec<f64>,
     /// The off-line [cm⁻¹].
-    #[arg(long, allow_negative_numbers = true)]
+    #[arg(long, allow_negative_numbers = true, value_parser = super::real(Bounds::positive(1e6)))]
     off_cm1: f64,
     /// CO2 dry-air column average of every profile [ppm] (rescaled, or set if absent).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true, value_parser = super::real(Bounds::open(0.0, 1e6)))]
     co2_ppm: f64,
     /// Output directory.
     #[arg(long)]
     out: PathBuf,
     /// Scan: largest J″ of the band's lines.
-    #[arg(long, default_value_t = 40)]
+    #[arg(long, default_value_t = 40, allow_negative_numbers = true, value_parser = super::count_u32(0, 200))]
     max_j: u32,
     /// Scan: offsets from each line's centre [GHz], comma-separated.
     #[arg(
         long,
         value_delimiter = ',',
         allow_negative_numbers = true,
-        default_value = "-3,-2.5,-2,-1.5,-1,-0.5,0,0.5,1,1.5,2,2.5,3"
+        default_value = "-3,-2.5,-2,-1.5,-1,-0.5,0,0.5,1,1.5,2,2.5,3",
+        value_parser = super::real(Bounds::closed(-1e3, 1e3)),
     )]
     offsets_ghz: Vec<f64>,
     /// Layer thickness of the grid [m].
-    #[arg(long, default_value_t = 250.0)]
+    #[arg(long, default_value_t = 250.0, allow_negative_numbers = true, value_parser = super::real(Bounds::positive(1e5)))]
     layer_m: f64,
     /// Top of the grid [km] (clipped to the lowest top of the profiles).
-    #[arg(long, default_value_t = 60.0)]
+    #[arg(long, default_value_t = 60.0, allow_negative_numbers = true, value_parser = super::real(Bounds::positive(1e3)))]
     top_km: f64,
     /// Line wing cutoff [cm⁻¹].
-    #[arg(long, default_value_t = 25.0)]
+    #[arg(long, default_value_t = 25.0, allow_negative_numbers = true, value_parser = super::real(Bounds::positive(1e3)))]
     wing_cm1: f64,
     /// Scene whose instrument sets the random error (default: the embedded default scene).
     #[arg(long, value_name = "FILE")]
     scene: Option<PathBuf>,
     /// Uncertainty of the assumed temperature [K] (total error).
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true, value_parser = super::real(Bounds::closed(0.0, 100.0)))]
     temperature_uncertainty_k: f64,
     /// Uncertainty of the laser frequency [MHz] (total error).
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true, value_parser = super::real(Bounds::closed(0.0, 1e5)))]
     frequency_uncertainty_mhz: f64,
     /// Uncertainty of the assumed surface pressure [hPa] (total error).
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true, value_parser = super::real(Bounds::closed(0.0, 100.0)))]
     surface_pressure_uncertainty_hpa: f64,
     /// Uncertainty of the assumed humidity [%] (total error).
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(long, default_value_t = 10.0, allow_negative_numbers = true, value_parser = super::real(Bounds::closed(0.0, 1000.0)))]
     h2o_uncertainty_percent: f64,
     /// Lines drawn in the figures, comma-separated labels.
     #[arg(long, value_delimiter = ',', default_value = "R16e,R26e")]
@@ -137,22 +139,12 @@ fn read_lines(paths: &[PathBuf], filter: &LineFilter) -> anyhow::Result<LineList
     Ok(out)
 }
 
-fn check_positive(name: &str, v: f64) -> anyhow::Result<()> {
-    if !(v.is_finite() && v > 0.0) {
-        bail!("{name} {v}: must be a positive number");
-    }
-    Ok(())
-}
-
 /// The groups of members: (atmosphere name, members).
 fn groups(a: &Args) -> anyhow::Result<Vec<(String, Vec<SetMember>)>> {
     if a.profiles.is_some() || a.ensemble.is_some() {
         let set = match (&a.profiles, a.ensemble) {
             (Some(path), _) => read_profile_set(path)?,
             (None, Some(n)) => {
-                if !(2..=100_000).contains(&n) {
-                    bail!("--ensemble {n}: give 2 to 100000 members per class");
-                }
                 let mut set = lidarsim::atmosphere::ProfileSet::default();
                 for (i, c) in LatitudeClass::ALL.iter().enumerate() {
                     if a.class == "all" || a.class.parse::<LatitudeClass>().ok() == Some(*c) {
@@ -210,27 +202,13 @@ fn groups(a: &Args) -> anyhow::Result<Vec<(String, Vec<SetMember>)>> {
 
 /// `lidarsim select-lines`.
 pub fn run(a: Args) -> anyhow::Result<()> {
-    check_positive("--off-cm1", a.off_cm1)?;
-    check_positive("--co2-ppm", a.co2_ppm)?;
-    check_positive("--layer-m", a.layer_m)?;
-    check_positive("--top-km", a.top_km)?;
-    check_positive("--wing-cm1", a.wing_cm1)?;
-    if let Some(v) = a.on_cm1.iter().find(|v| !(v.is_finite() && **v > 0.0)) {
-        bail!("--on-cm1 {v}: must be a positive number");
-    }
-    for (name, v) in [
-        ("--temperature-uncertainty-k", a.temperature_uncertainty_k),
-        ("--frequency-uncertainty-mhz", a.frequency_uncertainty_mhz),
-        (
-            "--surface-pressure-uncertainty-hpa",
-            a.surface_pressure_uncertainty_hpa,
-        ),
-        ("--h2o-uncertainty-percent", a.h2o_uncertainty_percent),
-    ] {
-        if !(v.is_finite() && v >= 0.0) {
-            bail!("{name} {v}: must be a number ≥ 0");
-        }
-    }
+    // Each number was checked by the argument parser; here the size of the grid.
+    lidarsim::limits::check_product(
+        "--layer-m",
+        &[("layers", (a.top_km * 1e3 / a.layer_m).ceil() as u64)],
+        lidarsim::limits::MAX_PATH_LAYERS,
+    )
+    .map_err(anyhow::Error::msg)?;
     let wing = a.wing_cm1;
 
     // Candidate positions: the band's lines (626 only) first when scanning.
@@ -242,8 +220,8 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         },
     )?);
     let positions: Vec<OnPosition> = if a.on_cm1.is_empty() {
-        if a.offsets_ghz.is_empty() || a.offsets_ghz.iter().any(|o| !o.is_finite()) {
-            bail!("--offsets-ghz: give finite offsets");
+        if a.offsets_ghz.is_empty() {
+            bail!("--offsets-ghz: give at least one offset");
         }
         let p = select::scan_positions(&band_all, a.max_j, &a.offsets_ghz);
         if p.is_empty() {

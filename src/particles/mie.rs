@@ -38,6 +38,11 @@
 
 use num_complex::Complex64;
 
+/// Largest real and imaginary parts of a refractive index accepted: beyond any material at
+/// optical and infrared wavelengths (metals in the far infrared reach a few tens), and a range
+/// where the solver is checked to give finite results.
+pub const MAX_REFRACTIVE_INDEX_PART: f64 = 100.0;
+
 /// Largest size parameter accepted (the solver is tested to 2·10⁴; memory and time grow as x).
 pub const MAX_SIZE_PARAMETER: f64 = 1.0e5;
 
@@ -48,9 +53,10 @@ pub enum MieError {
     /// The size parameter is not a finite number in (0, [`MAX_SIZE_PARAMETER`]].
     #[error("size parameter x = {0} must be finite, > 0 and ≤ {MAX_SIZE_PARAMETER:e}")]
     SizeParameter(f64),
-    /// The refractive index is not finite, has a real part ≤ 0 or an imaginary part < 0.
+    /// The refractive index is not finite, has a real part outside (0, 100] or an imaginary
+    /// part outside [0, 100] ([`MAX_REFRACTIVE_INDEX_PART`]).
     #[error(
-        "refractive index {re}{im:+}i must be finite with real part > 0 and imaginary part ≥ 0 (≥ 0 means absorbing)",
+        "refractive index {re}{im:+}i must be finite with real part in (0, 100] and imaginary part in [0, 100] (≥ 0 means absorbing)",
         re = .0.re,
         im = .0.im
     )]
@@ -119,7 +125,11 @@ fn check_x(x: f64) -> Result<(), MieError> {
 
 /// Check a refractive index against the conventions of this module.
 pub fn check_refractive_index(m: Complex64) -> Result<(), MieError> {
-    if m.re.is_finite() && m.im.is_finite() && m.re > 0.0 && m.im >= 0.0 {
+    if m.re > 0.0
+        && m.re <= MAX_REFRACTIVE_INDEX_PART
+        && m.im >= 0.0
+        && m.im <= MAX_REFRACTIVE_INDEX_PART
+    {
         Ok(())
     } else {
         Err(MieError::RefractiveIndex(m))
@@ -451,6 +461,12 @@ pub fn parse_refractive_index(text: &str) -> Result<Complex64, String> {
             "`{text}`: the imaginary part must be ≥ 0 (lidarsim writes m = n + ik with k ≥ 0 for absorption; MIEV0/miepython write the same index as n − ik)"
         ));
     }
+    // Each part against its range, so that the message names the part at fault.
+    use crate::input::{Bounds, check_finite_range};
+    check_finite_range(m.re, Bounds::positive(MAX_REFRACTIVE_INDEX_PART))
+        .map_err(|e| format!("`{text}`: the real part {e}"))?;
+    check_finite_range(m.im, Bounds::closed(0.0, MAX_REFRACTIVE_INDEX_PART))
+        .map_err(|e| format!("`{text}`: the imaginary part {e}"))?;
     check_refractive_index(m).map_err(|e| format!("`{text}`: {e}"))?;
     Ok(m)
 }

@@ -29,7 +29,7 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use crate::input::{CsvTable, InputError, parse_f64, read_to_string};
+use crate::input::{Bounds, CsvTable, InputError, parse_f64_in, read_to_string};
 
 /// Metadata keys every table must carry.
 pub const REQUIRED_KEYS: [&str; 3] = ["wavelength_nm", "refractive_index", "distribution"];
@@ -86,15 +86,8 @@ impl PhaseTable {
             && v != "none"
         {
             let line = line_of_key(text, "wavelength_nm");
-            let w = parse_f64(path, line, "wavelength_nm", v)?;
-            if w <= 0.0 {
-                return Err(InputError::at(
-                    path,
-                    line,
-                    "wavelength_nm",
-                    "must be positive",
-                ));
-            }
+            // 10 nm to 1 cm: any wavelength a phase function of particles is computed for.
+            parse_f64_in(path, line, "wavelength_nm", v, Bounds::closed(10.0, 1e7))?;
         }
         let t = CsvTable::parse(path, text)?;
         if t.header() != ["theta_deg", "phase_4pi"] {
@@ -106,8 +99,9 @@ impl PhaseTable {
                 ),
             ));
         }
-        let theta_deg = t.f64_column("theta_deg")?;
-        let phase_4pi = t.f64_column("phase_4pi")?;
+        let theta_deg = t.f64_column_in("theta_deg", Bounds::closed(0.0, 180.0))?;
+        // The forward peak of droplets at size parameter 10⁵ is near 10¹⁰ (∝ x²).
+        let phase_4pi = t.f64_column_in("phase_4pi", Bounds::closed(0.0, 1e12))?;
         if theta_deg.len() < 2 {
             return Err(InputError::file(
                 path,
@@ -122,14 +116,6 @@ impl PhaseTable {
                     line,
                     "theta_deg",
                     "angles must strictly increase",
-                ));
-            }
-            if phase_4pi[r] < 0.0 {
-                return Err(InputError::at(
-                    path,
-                    line,
-                    "phase_4pi",
-                    "must not be negative",
                 ));
             }
         }

@@ -371,6 +371,59 @@ impl KeyPath {
     }
 }
 
+/// The first float in the scene text that is not finite (`nan`, `inf`, or a literal beyond
+/// the f64 range such as `1e400`), as an error at its own line and key: a NaN must be named
+/// where it stands, not where a later comparison with it first fails.
+pub(super) fn non_finite_value(path: &Path, text: &str) -> Result<(), InputError> {
+    use toml::de::{DeTable, DeValue};
+    type Found = (String, std::ops::Range<usize>, String);
+    fn walk(key: &str, v: &toml::Spanned<DeValue<'_>>, out: &mut Vec<Found>) {
+        match v.get_ref() {
+            DeValue::Float(f) => {
+                let raw = f.as_str().to_string();
+                let finite = raw
+                    .replace('_', "")
+                    .parse::<f64>()
+                    .is_ok_and(f64::is_finite);
+                if !finite {
+                    out.push((key.to_string(), v.span(), raw));
+                }
+            }
+            DeValue::Array(items) => items.iter().for_each(|i| walk(key, i, out)),
+            DeValue::Table(t) => {
+                for (k, v) in t.iter() {
+                    let name = if key.is_empty() {
+                        k.get_ref().to_string()
+                    } else {
+                        format!("{key}.{}", k.get_ref())
+                    };
+                    walk(&name, v, out);
+                }
+            }
+            _ => {}
+        }
+    }
+    // The text has already been parsed by serde; a failure here cannot add anything.
+    let Ok(doc) = DeTable::parse(text) else {
+        return Ok(());
+    };
+    let mut all = Vec::new();
+    for (k, v) in doc.get_ref().iter() {
+        walk(k.get_ref(), v, &mut all);
+    }
+    // The table is sorted by key; report the first in the file.
+    let found = all.into_iter().min_by_key(|(_, span, _)| span.start);
+    match found {
+        None => Ok(()),
+        Some((key, span, raw)) => Err(InputError {
+            path: path.to_path_buf(),
+            line: Some(text[..span.start.min(text.len())].matches('\n').count() + 1),
+            field: Some(key),
+            message: format!("`{raw}` is not a finite number"),
+        }),
+    }
+}
+
 /// Turn a TOML/serde error into an [`InputError`] with the line and the key.
 pub(super) fn toml_error(path: &Path, text: &str, e: &toml::de::Error) -> InputError {
     let message = e.message().trim().to_string();

@@ -5,8 +5,9 @@ use std::path::Path;
 use std::sync::Arc;
 
 use super::file::{self, KeyPath, SceneFile};
+use super::ranges::*;
 use super::{Atmosphere, Channel, GasAbsorption, Gates, Layer, Lidar, Surface, Validator};
-use crate::input::InputError;
+use crate::input::{Bounds, InputError};
 use crate::instrument::detector::{self, Detector};
 use crate::instrument::laser::{Filter, Laser};
 use crate::instrument::line_shape::{LineShape, LineShapeTable, MHZ_PER_CM1};
@@ -40,7 +41,7 @@ impl Validator<'_> {
                     "missing: the lidar needs `pulse_energy_j` (or a [laser] section with it)",
                 )
             })?;
-            return Ok(Laser::ideal(self.positive(&lidar_key, e)?, n));
+            return Ok(Laser::ideal(self.range(&lidar_key, e, PULSE_ENERGY_J)?, n));
         };
         if lidar_pulse_energy_j.is_some() {
             return Err(self.err(
@@ -51,11 +52,12 @@ impl Validator<'_> {
         let sec = KeyPath::table("laser");
         let at = sec.key("pulse_energy_j");
         let pulse_energy_j = self.per_channel(&at, &l.pulse_energy_j, n)?;
-        for e in &pulse_energy_j {
-            self.positive(&at, *e)?;
-        }
-        let repetition_rate_hz =
-            self.positive(&sec.key("repetition_rate_hz"), l.repetition_rate_hz)?;
+        self.range_all(&at, &pulse_energy_j, PULSE_ENERGY_J)?;
+        let repetition_rate_hz = self.range(
+            &sec.key("repetition_rate_hz"),
+            l.repetition_rate_hz,
+            REPETITION_RATE_HZ,
+        )?;
         let shape_at = sec.key("line_shape");
         let width_at = sec.key("linewidth_fwhm_mhz");
         let file_at = sec.key("line_shape_file");
@@ -64,7 +66,7 @@ impl Validator<'_> {
             let w = w.ok_or_else(|| {
                 self.err(&shape_at, format!("`{kind}` needs `linewidth_fwhm_mhz`"))
             })?;
-            self.positive(&width_at, w)
+            self.range(&width_at, w, LINEWIDTH_MHZ)
         };
         let line_shape = match kind {
             "monochromatic" | "table" if l.linewidth_fwhm_mhz.is_some() => {
@@ -119,36 +121,23 @@ impl Validator<'_> {
             Some(v) => {
                 let at = sec.key("frequency_offset_mhz");
                 let o = self.per_channel(&at, v, n)?;
-                for x in &o {
-                    // Beyond 100 GHz it is another line, not an offset.
-                    self.in_range(&at, *x, -1e5, 1e5)?;
-                }
+                self.range_all(&at, &o, FREQUENCY_OFFSET_MHZ)?;
                 o
             }
             None => vec![0.0; n],
         };
-        let frequency_jitter_rms_mhz = self.non_negative(
+        let frequency_jitter_rms_mhz = self.range(
             &sec.key("frequency_jitter_rms_mhz"),
             l.frequency_jitter_rms_mhz.unwrap_or(0.0),
+            FREQUENCY_JITTER_MHZ,
         )?;
-        if frequency_jitter_rms_mhz > 1e4 {
-            return Err(self.err(
-                &sec.key("frequency_jitter_rms_mhz"),
-                format!("{frequency_jitter_rms_mhz} MHz: must be below 10 GHz"),
-            ));
-        }
         let purity_at = sec.key("spectral_purity");
-        let spectral_purity = l.spectral_purity.unwrap_or(1.0);
-        if !(spectral_purity > 0.0 && spectral_purity <= 1.0) {
-            return Err(self.err(&purity_at, format!("{spectral_purity} must lie in (0, 1]")));
-        }
+        let spectral_purity = self.range(&purity_at, l.spectral_purity.unwrap_or(1.0), PURITY)?;
         let imp_at = sec.key("impurity_wavenumber_cm1");
         let impurity_wavenumber_cm1 = match (&l.impurity_wavenumber_cm1, spectral_purity < 1.0) {
             (Some(v), true) => {
                 let w = self.per_channel(&imp_at, v, n)?;
-                for x in &w {
-                    self.positive(&imp_at, *x)?;
-                }
+                self.range_all(&imp_at, &w, WAVENUMBER_CM1)?;
                 w
             }
             (None, true) => {
@@ -163,13 +152,7 @@ impl Validator<'_> {
             (None, false) => vec![f64::NAN; n],
         };
         let fraction = |key: &str, v: Option<f64>| -> Result<f64, InputError> {
-            let at = sec.key(key);
-            let x = v.unwrap_or(0.0);
-            if (0.0..1.0).contains(&x) {
-                Ok(x)
-            } else {
-                Err(self.err(&at, format!("{x} must lie in [0, 1)")))
-            }
+            self.range(&sec.key(key), v.unwrap_or(0.0), FRACTION_BELOW_1)
         };
         Ok(Laser {
             line_shape,
@@ -210,56 +193,64 @@ impl Validator<'_> {
         let bandwidth_cm1 = match (r.filter_bandwidth_nm, r.filter_bandwidth_ghz) {
             (None, None) => f64::INFINITY,
             _ => {
-                let (at, nm) = self.one_of(
+                let (_, nm) = self.one_of(
                     &sec,
-                    ("filter_bandwidth_nm", r.filter_bandwidth_nm, 1.0),
+                    (
+                        "filter_bandwidth_nm",
+                        r.filter_bandwidth_nm,
+                        1.0,
+                        FILTER_WIDTH_NM,
+                    ),
                     // Δλ = λ² Δν: GHz → cm⁻¹ → nm at the mean wavenumber.
                     (
                         "filter_bandwidth_ghz",
                         r.filter_bandwidth_ghz,
                         1e3 / MHZ_PER_CM1 * 1e7 / (nu * nu),
+                        FILTER_WIDTH_GHZ,
                     ),
                 )?;
-                self.positive(&at, nm)?;
                 nm * nu * nu * 1e-7
             }
         };
         let t_at = sec.key("filter_transmission");
-        let transmission = self.in_range(&t_at, r.filter_transmission.unwrap_or(1.0), 0.0, 1.0)?;
-        self.positive(&t_at, transmission)?;
-        let qe_at = sec.key("quantum_efficiency");
-        let quantum_efficiency = self.in_range(&qe_at, r.quantum_efficiency, 0.0, 1.0)?;
-        self.positive(&qe_at, quantum_efficiency)?;
-        let gain_at = sec.key("gain");
-        let gain = r.gain.unwrap_or(1.0);
-        if !(1.0..=1e8).contains(&gain) {
-            return Err(self.err(&gain_at, format!("{gain} must lie in [1, 1e8]")));
-        }
+        let transmission = self.range(&t_at, r.filter_transmission.unwrap_or(1.0), EFFICIENCY)?;
+        let quantum_efficiency = self.range(
+            &sec.key("quantum_efficiency"),
+            r.quantum_efficiency,
+            EFFICIENCY,
+        )?;
+        let gain = self.range(&sec.key("gain"), r.gain.unwrap_or(1.0), GAIN)?;
         let excess_noise_factor = match (r.excess_noise_factor, r.ionization_ratio) {
             (None, None) => 1.0,
             _ => {
-                let (at, v) = self.one_of(
+                let (_, v) = self.one_of(
                     &sec,
-                    ("excess_noise_factor", r.excess_noise_factor, 1.0),
-                    ("ionization_ratio", r.ionization_ratio, 1.0),
+                    (
+                        "excess_noise_factor",
+                        r.excess_noise_factor,
+                        1.0,
+                        EXCESS_NOISE,
+                    ),
+                    ("ionization_ratio", r.ionization_ratio, 1.0, FRACTION),
                 )?;
                 if r.ionization_ratio.is_some() {
-                    detector::excess_noise_factor(gain, self.in_range(&at, v, 0.0, 1.0)?)
-                } else if v >= 1.0 && v.is_finite() {
-                    v
+                    detector::excess_noise_factor(gain, v)
                 } else {
-                    return Err(self.err(&at, format!("{v} must be ≥ 1")));
+                    v
                 }
             }
         };
-        let opt = |key: &str, v: Option<f64>| self.non_negative(&sec.key(key), v.unwrap_or(0.0));
-        let nep = opt("nep_w_per_sqrt_hz", r.nep_w_per_sqrt_hz)?;
+        let opt = |key: &str, v: Option<f64>, bounds: Bounds| {
+            self.range(&sec.key(key), v.unwrap_or(0.0), bounds)
+        };
+        let nep = opt("nep_w_per_sqrt_hz", r.nep_w_per_sqrt_hz, NOISE_DENSITY)?;
         let amp = opt(
             "amplifier_noise_a_per_sqrt_hz",
             r.amplifier_noise_a_per_sqrt_hz,
+            NOISE_DENSITY,
         )?;
         let bandwidth_hz = match r.bandwidth_mhz {
-            Some(b) => self.positive(&sec.key("bandwidth_mhz"), b)? * 1e6,
+            Some(b) => self.range(&sec.key("bandwidth_mhz"), b, BANDWIDTH_MHZ)? * 1e6,
             None if nep > 0.0 || amp > 0.0 => {
                 return Err(self.err(
                     &sec,
@@ -272,10 +263,14 @@ impl Validator<'_> {
             quantum_efficiency,
             gain,
             excess_noise_factor,
-            dark_current_a: opt("dark_current_a", r.dark_current_a)?,
+            dark_current_a: opt("dark_current_a", r.dark_current_a, DARK_CURRENT_A)?,
             nep_w_per_sqrt_hz: nep,
             amplifier_noise_a_per_sqrt_hz: amp,
-            readout_noise_electrons: opt("readout_noise_electrons", r.readout_noise_electrons)?,
+            readout_noise_electrons: opt(
+                "readout_noise_electrons",
+                r.readout_noise_electrons,
+                READOUT_NOISE_E,
+            )?,
             bandwidth_hz,
         };
         detector.validate().map_err(|m| self.err(&sec, m))?;
@@ -312,20 +307,20 @@ impl Validator<'_> {
             || b.solar_zenith_angle_deg.is_some()
             || b.reflectance.is_some();
         match (b.radiance_w_per_m2_sr_um, solar) {
-            (Some(l), false) => self.non_negative(&sec.key("radiance_w_per_m2_sr_um"), l),
+            (Some(l), false) => self.range(&sec.key("radiance_w_per_m2_sr_um"), l, RADIANCE),
             (None, true) => {
                 let e_at = sec.key("solar_irradiance_w_per_m2_um");
                 let e = b
                     .solar_irradiance_w_per_m2_um
                     .ok_or_else(|| self.err(&sec, "sunlight needs `solar_irradiance_w_per_m2_um`"))?;
-                let e = self.non_negative(&e_at, e)?;
+                let e = self.range(&e_at, e, IRRADIANCE)?;
                 let z_at = sec.key("solar_zenith_angle_deg");
                 let z = b
                     .solar_zenith_angle_deg
                     .ok_or_else(|| self.err(&sec, "sunlight needs `solar_zenith_angle_deg`"))?;
-                let z = self.in_range(&z_at, z, 0.0, 90.0)?;
+                let z = self.range(&z_at, z, SOLAR_ZENITH_DEG)?;
                 let rho = match (b.reflectance, surface_albedo) {
-                    (Some(r), _) => self.in_range(&sec.key("reflectance"), r, 0.0, 1.0)?,
+                    (Some(r), _) => self.range(&sec.key("reflectance"), r, FRACTION)?,
                     (None, Some(a)) => a,
                     (None, None) => {
                         return Err(self.err(
@@ -433,8 +428,8 @@ impl Validator<'_> {
                 (n, format!("{n} shot pairs"))
             }
             (None, Some(len), Some(v)) => {
-                let len = self.positive(&sec.key("averaging_length_km"), len)?;
-                let v = self.positive(&sec.key("platform_speed_m_per_s"), v)?;
+                let len = self.range(&sec.key("averaging_length_km"), len, AVERAGING_LENGTH_KM)?;
+                let v = self.range(&sec.key("platform_speed_m_per_s"), v, SPEED_M_PER_S)?;
                 if !laser.repetition_rate_hz.is_finite() {
                     return Err(self.err(
                         &sec.key("averaging_length_km"),
@@ -629,7 +624,7 @@ impl Validator<'_> {
         };
         let w_at = KeyPath::table("retrieval").key("target_window_m");
         let window_m = match r.target_window_m {
-            Some(w) => self.non_negative(&w_at, w)?,
+            Some(w) => self.range(&w_at, w, PATH_LENGTH_M)?,
             None => window_m,
         };
         let first = gate_of(range_m).unwrap_or(0);
@@ -675,7 +670,7 @@ impl Validator<'_> {
             return Ok(None);
         };
         let at = sec.key("dial_cell_m");
-        let cell = self.positive(&at, cell)?;
+        let cell = self.range(&at, cell, Bounds::positive(PATH_LENGTH_M.hi))?;
         if cell < gates.width_m * (1.0 - 1e-9) {
             return Err(self.err(
                 &at,

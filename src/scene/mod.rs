@@ -12,12 +12,13 @@
 
 mod file;
 mod instrument;
+mod ranges;
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use crate::atmosphere::{Profile, StandardAtmosphere};
-use crate::input::InputError;
+use crate::input::{Bounds, InputError, check_count, check_finite_range};
 use crate::instrument::laser::{Filter, Laser, Line, SpectralSampling};
 use crate::instrument::signals::Receiver;
 use crate::particles::phase::{HenyeyGreenstein, PhaseFunction, RayleighPhase, TabulatedPhase};
@@ -27,6 +28,7 @@ use crate::retrieval::RetrievalConfig;
 use crate::spectroscopy::{LblOptions, LineFilter, LineList, isotopologues};
 
 use file::{KeyPath, PerChannel, PhaseSpecFile, SceneFile};
+use ranges::*;
 
 /// The scene run when `lidarsim run` gets no file.
 pub const DEFAULT_SCENE_TOML: &str = include_str!("../../scenes/spaceborne_co2_ipda.toml");
@@ -263,6 +265,7 @@ impl Scene {
     /// paths (phase-function tables) at its directory.
     pub fn from_toml(path: &Path, text: &str) -> Result<Scene, InputError> {
         let raw: SceneFile = toml::from_str(text).map_err(|e| file::toml_error(path, text, &e))?;
+        file::non_finite_value(path, text)?;
         let v = Validator { path, text };
         v.scene(raw)
     }
@@ -283,40 +286,36 @@ impl Validator<'_> {
         }
     }
 
-    fn positive(&self, at: &KeyPath, v: f64) -> Result<f64, InputError> {
-        if v > 0.0 && v.is_finite() {
-            Ok(v)
-        } else {
-            Err(self.err(at, format!("{v} must be > 0")))
-        }
+    /// `v` if it is finite and inside `bounds` (in the unit of the key's name), else an error
+    /// at the key: the one check of every number in a scene.
+    fn range(&self, at: &KeyPath, v: f64, bounds: Bounds) -> Result<f64, InputError> {
+        check_finite_range(v, bounds).map_err(|m| self.err(at, m))
     }
 
-    fn non_negative(&self, at: &KeyPath, v: f64) -> Result<f64, InputError> {
-        if v >= 0.0 && v.is_finite() {
-            Ok(v)
-        } else {
-            Err(self.err(at, format!("{v} must be ≥ 0")))
+    /// Every value of a per-channel list inside `bounds`.
+    fn range_all(&self, at: &KeyPath, v: &[f64], bounds: Bounds) -> Result<(), InputError> {
+        for x in v {
+            self.range(at, *x, bounds)?;
         }
+        Ok(())
     }
 
-    fn in_range(&self, at: &KeyPath, v: f64, lo: f64, hi: f64) -> Result<f64, InputError> {
-        if v >= lo && v <= hi {
-            Ok(v)
-        } else {
-            Err(self.err(at, format!("{v} must lie in [{lo}, {hi}]")))
-        }
-    }
-
-    /// Exactly one of two alternative keys, scaled to a common unit.
+    /// Exactly one of two alternative keys, each checked against its own bounds in its own
+    /// unit, then scaled to a common unit.
     fn one_of(
         &self,
         section: &KeyPath,
-        a: (&str, Option<f64>, f64),
-        b: (&str, Option<f64>, f64),
+        a: (&str, Option<f64>, f64, Bounds),
+        b: (&str, Option<f64>, f64, Bounds),
     ) -> Result<(KeyPath, f64), InputError> {
+        let pick = |(name, v, scale, bounds): (&str, f64, f64, Bounds)| {
+            let at = section.key(name);
+            let v = self.range(&at, v, bounds)?;
+            Ok((at, v * scale))
+        };
         match (a.1, b.1) {
-            (Some(x), None) => Ok((section.key(a.0), x * a.2)),
-            (None, Some(x)) => Ok((section.key(b.0), x * b.2)),
+            (Some(x), None) => pick((a.0, x, a.2, a.3)),
+            (None, Some(x)) => pick((b.0, x, b.2, b.3)),
             (Some(_), Some(_)) => Err(self.err(
                 &section.key(b.0),
                 format!("give `{}` or `{}`, not both", a.0, b.0),
@@ -358,6 +357,20 @@ impl Validator<'_> {
         // The transport runs with the first line's energy; combinations scale the others.
         lidar.pulse_energy_j = laser.pulse_energy_j[0];
         let gates = self.gates(&raw)?;
+        let simulation = self.simulation(&raw)?;
+        // A first look at the size with what is known (each line is at least one channel and
+        // one line sum), so that a huge problem is refused before Mie theory and line-by-line
+        // work on each of its channels.
+        self.problem_size(
+            &raw,
+            &lidar,
+            &gates,
+            &simulation,
+            2 * channels.len() as u64,
+            channels.len() as u64,
+            None,
+            0,
+        )?;
         let atmosphere = match &raw.atmosphere {
             Some(a) => Some(self.atmosphere(a, &channels)?),
             None => None,
@@ -370,14 +383,10 @@ impl Validator<'_> {
         let surface = match &raw.surface {
             Some(s) => {
                 let sec = KeyPath::table("surface");
+                let altitude_m = self.range(&sec.key("altitude_m"), s.altitude_m, ALTITUDE_M)?;
                 let albedo = self.per_channel(&sec.key("albedo"), &s.albedo, nch)?;
-                for a in &albedo {
-                    self.in_range(&sec.key("albedo"), *a, 0.0, 1.0)?;
-                }
-                Some(Surface {
-                    altitude_m: s.altitude_m,
-                    albedo,
-                })
+                self.range_all(&sec.key("albedo"), &albedo, FRACTION)?;
+                Some(Surface { altitude_m, albedo })
             }
             None => None,
         };
@@ -405,6 +414,20 @@ impl Validator<'_> {
                     ));
                 }
             }
+            // A beam that meets the surface ends there: gates that all start beyond it can
+            // receive nothing.
+            let mu = lidar.axis().z;
+            if mu < 0.0 {
+                let surface_range_m = (lidar.altitude_m - s.altitude_m) / -mu;
+                if gates.start_m > surface_range_m {
+                    return Err(self.err(
+                        &KeyPath::table("gates").key("start_m"),
+                        format!(
+                            "every gate lies beyond the surface, which the beam meets at {surface_range_m:.1} m range"
+                        ),
+                    ));
+                }
+            }
         }
         let receiver = self.receiver(&raw, &channels, surface.as_ref().map(|s| s.albedo[0]))?;
         let (sampling, sampled) = sample_lines(&laser, &channels, receiver.as_ref());
@@ -418,7 +441,17 @@ impl Validator<'_> {
             Some(g) => Some(self.gas(g, &sampled, atmosphere.as_ref())?),
             None => None,
         };
-        let simulation = self.simulation(&raw)?;
+        let n_lines = channels.len() as u64;
+        self.problem_size(
+            &raw,
+            &lidar,
+            &gates,
+            &simulation,
+            (sampled.len() + sampling.combinations().len()) as u64,
+            n_lines,
+            atmosphere.as_ref(),
+            layers.len(),
+        )?;
         let retrieval = self.retrieval(
             &raw,
             &channels,
@@ -453,20 +486,96 @@ impl Validator<'_> {
         Ok(scene)
     }
 
+    /// The whole problem against the limits of memory and time ([`crate::limits`]), before
+    /// anything large is allocated; an error names the key of the largest factor.
+    #[allow(clippy::too_many_arguments)]
+    fn problem_size(
+        &self,
+        raw: &SceneFile,
+        lidar: &Lidar,
+        gates: &Gates,
+        simulation: &Simulation,
+        channels_and_sums: u64,
+        n_lines: u64,
+        atmosphere: Option<&Atmosphere>,
+        n_particle_layers: usize,
+    ) -> Result<(), InputError> {
+        use crate::limits::{MAX_OPTICAL_CELLS, MAX_RETURN_BINS, check_product};
+        // Every channel, every line sum (and its derivatives) and every pair of lines whose
+        // covariance is kept has its own returns.
+        let series = channels_and_sums + n_lines * n_lines.saturating_sub(1) / 2;
+        let n_channels = channels_and_sums.saturating_sub(n_lines);
+        let gates_n = gates.count as u64;
+        let fovs = lidar.fov_full_angle_mrad.len() as u64;
+        let order_bins = u64::from(simulation.max_order) + 2;
+        let blame = [
+            (gates_n, KeyPath::table("gates").key("width_m")),
+            (fovs, KeyPath::table("lidar").key("fov_full_angle_mrad")),
+            (order_bins, KeyPath::table("simulation").key("max_order")),
+            (
+                series,
+                if raw.laser.is_some() && n_channels > n_lines {
+                    KeyPath::table("laser").key("line_shape_nodes")
+                } else {
+                    KeyPath::array("channel", raw.channel.len().saturating_sub(1))
+                },
+            ),
+        ];
+        check_product(
+            "the returns",
+            &[
+                ("gates", gates_n),
+                ("fields of view", fovs),
+                ("order bins", order_bins),
+                ("channels, line sums and line pairs", series),
+            ],
+            MAX_RETURN_BINS,
+        )
+        .map_err(|m| {
+            let at = &blame
+                .iter()
+                .max_by_key(|(n, _)| *n)
+                .expect("four factors")
+                .1;
+            self.err(at, m)
+        })?;
+        if let Some(a) = atmosphere {
+            // Molecular layers, split again at every particle-layer boundary.
+            let layers = molecular_layer_count(a) + 2 * n_particle_layers as u64 + 2;
+            check_product(
+                "the optical atmosphere",
+                &[("layers", layers), ("channels", n_channels)],
+                MAX_OPTICAL_CELLS,
+            )
+            .map_err(|m| self.err(&KeyPath::table("atmosphere").key("layer_thickness_m"), m))?;
+        }
+        Ok(())
+    }
+
     /// The cache table of a `[gas_absorption]` section, if one is asked for.
     fn gas_table(
         &self,
         sec: &KeyPath,
         g: &file::GasAbsorptionFile,
+        atm: &Atmosphere,
         lo: f64,
         hi: f64,
     ) -> Result<Option<GasTable>, InputError> {
         Ok(match &g.table {
             Some(f) => {
-                let start = g.table_start_cm1.unwrap_or(lo - 1.0);
-                let end = g.table_end_cm1.unwrap_or(hi + 1.0);
-                let step =
-                    self.positive(&sec.key("table_step_cm1"), g.table_step_cm1.unwrap_or(5e-4))?;
+                let start = match g.table_start_cm1 {
+                    Some(v) => self.range(&sec.key("table_start_cm1"), v, WAVENUMBER_CM1)?,
+                    None => lo - 1.0,
+                };
+                let end = match g.table_end_cm1 {
+                    Some(v) => self.range(&sec.key("table_end_cm1"), v, WAVENUMBER_CM1)?,
+                    None => hi + 1.0,
+                };
+                let step = self.range(
+                    &sec.key("table_step_cm1"),
+                    g.table_step_cm1.unwrap_or(5e-4),
+                    TABLE_STEP_CM1,
+                )?;
                 // The table interpolates with 6 points: 3 grid steps of room beyond each channel.
                 if !(start <= lo - 3.0 * step && end >= hi + 3.0 * step) {
                     return Err(self.err(
@@ -474,12 +583,15 @@ impl Validator<'_> {
                         format!("the table grid {start}–{end} cm⁻¹ must contain every channel ({lo}–{hi} cm⁻¹) with 3 steps of room to interpolate"),
                     ));
                 }
-                if (end - start) / step > 5e7 {
-                    return Err(self.err(
-                        &sec.key("table_step_cm1"),
-                        "makes more than 5e7 grid points",
-                    ));
-                }
+                // The table holds every grid point of every molecular layer.
+                let points = ((end - start) / step).ceil() as u64 + 1;
+                let layers = molecular_layer_count(atm);
+                crate::limits::check_product(
+                    "the gas optical-depth table",
+                    &[("grid points", points), ("molecular layers", layers)],
+                    crate::limits::MAX_GAS_TABLE_VALUES,
+                )
+                .map_err(|m| self.err(&sec.key("table_step_cm1"), m))?;
                 Some(GasTable {
                     path: self.path.parent().unwrap_or(Path::new(".")).join(f),
                     start_cm1: start,
@@ -518,7 +630,7 @@ impl Validator<'_> {
         })?;
         let mut options = LblOptions::default();
         if let Some(w) = g.wing_cm1 {
-            options.wing_cm1 = self.positive(&sec.key("wing_cm1"), w)?;
+            options.wing_cm1 = self.range(&sec.key("wing_cm1"), w, WING_CM1)?;
         }
         if let Some(shape) = &g.line_shape {
             options.line_shape = shape
@@ -553,7 +665,7 @@ impl Validator<'_> {
             }
             None => None,
         };
-        let table = self.gas_table(&sec, g, lo, hi)?;
+        let table = self.gas_table(&sec, g, atm, lo, hi)?;
         // Every line that reaches a channel, or any point of a table's grid (a later run may
         // take channels anywhere inside it).
         let (w_lo, w_hi) = match &table {
@@ -575,6 +687,43 @@ impl Validator<'_> {
             // The built-in approximate CO2 band (docs/spectroscopy.md), cut like a file.
             None => LineList::co2_30012_band_model().filtered(&filter),
         };
+        // Absorption asked for but no line to give it is a mistake (a file of another
+        // molecule, or of another band), not a transparent atmosphere.
+        let window = format!(
+            "{:.4}–{:.4} cm⁻¹ (the channels ± the {} cm⁻¹ wing)",
+            w_lo - options.wing_cm1,
+            w_hi + options.wing_cm1,
+            options.wing_cm1
+        );
+        let source = match &g.lines {
+            Some(f) => format!("the line file `{f}`"),
+            None => "the built-in CO2 band model".to_string(),
+        };
+        match &g.molecules {
+            Some(names) => {
+                let present = lines.molecules();
+                for n in names {
+                    let id = isotopologues::molecule_id(n).unwrap_or(0);
+                    if !present.contains(&id) {
+                        return Err(self.err(
+                            &sec.key("molecules"),
+                            format!("{source} has no {n} line in {window}"),
+                        ));
+                    }
+                }
+            }
+            None if lines.is_empty() => {
+                return Err(self.err(
+                    &sec.key(if g.lines.is_some() {
+                        "lines"
+                    } else {
+                        "molecules"
+                    }),
+                    format!("{source} has no line in {window}"),
+                ));
+            }
+            None => {}
+        }
         options.check_lines(&lines).map_err(|e| {
             let key = if g.line_shape.is_some() {
                 "line_shape"
@@ -605,26 +754,24 @@ impl Validator<'_> {
         let sec = KeyPath::table("lidar");
         let (_, altitude_m) = self.one_of(
             &sec,
-            ("altitude_m", l.altitude_m, 1.0),
-            ("altitude_km", l.altitude_km, 1e3),
+            ("altitude_m", l.altitude_m, 1.0, ALTITUDE_M),
+            ("altitude_km", l.altitude_km, 1e3, ALTITUDE_KM),
         )?;
         let zenith_angle_deg =
-            self.in_range(&sec.key("zenith_angle_deg"), l.zenith_angle_deg, 0.0, 180.0)?;
-        let azimuth_deg = l.azimuth_deg.unwrap_or(0.0);
+            self.range(&sec.key("zenith_angle_deg"), l.zenith_angle_deg, ZENITH_DEG)?;
+        let azimuth_deg = match l.azimuth_deg {
+            Some(a) => self.range(&sec.key("azimuth_deg"), a, AZIMUTH_DEG)?,
+            None => 0.0,
+        };
         let pulse_energy_j = match l.pulse_energy_j {
-            Some(e) => Some(self.positive(&sec.key("pulse_energy_j"), e)?),
+            Some(e) => Some(self.range(&sec.key("pulse_energy_j"), e, PULSE_ENERGY_J)?),
             None => None,
         };
-        let div = self.non_negative(
+        let div = self.range(
             &sec.key("beam_divergence_full_angle_mrad"),
             l.beam_divergence_full_angle_mrad,
+            DIVERGENCE_MRAD,
         )?;
-        if div >= 1000.0 {
-            return Err(self.err(
-                &sec.key("beam_divergence_full_angle_mrad"),
-                "must be below 1000 mrad (a lidar beam, not a lamp)",
-            ));
-        }
         let beam_profile = match l.beam_profile.as_deref() {
             None | Some("uniform") => BeamProfile::Uniform,
             Some("gaussian") => BeamProfile::Gaussian,
@@ -635,11 +782,16 @@ impl Validator<'_> {
                 ));
             }
         };
-        let telescope_diameter_m =
-            self.positive(&sec.key("telescope_diameter_m"), l.telescope_diameter_m)?;
-        let eff_at = sec.key("optical_efficiency");
-        let optical_efficiency = self.in_range(&eff_at, l.optical_efficiency, 0.0, 1.0)?;
-        self.positive(&eff_at, optical_efficiency)?;
+        let telescope_diameter_m = self.range(
+            &sec.key("telescope_diameter_m"),
+            l.telescope_diameter_m,
+            TELESCOPE_DIAMETER_M,
+        )?;
+        let optical_efficiency = self.range(
+            &sec.key("optical_efficiency"),
+            l.optical_efficiency,
+            EFFICIENCY,
+        )?;
         let fov_at = sec.key("fov_full_angle_mrad");
         let fov_full_angle_mrad = match &l.fov_full_angle_mrad {
             PerChannel::One(x) => vec![*x],
@@ -648,16 +800,12 @@ impl Validator<'_> {
         if fov_full_angle_mrad.is_empty() {
             return Err(self.err(&fov_at, "needs at least one field of view"));
         }
-        for f in &fov_full_angle_mrad {
-            self.positive(&fov_at, *f)?;
-            if *f >= 1000.0 {
-                return Err(self.err(&fov_at, format!("{f} mrad: must be below 1000 mrad")));
-            }
-        }
-        for (i, f) in fov_full_angle_mrad.iter().enumerate() {
-            if fov_full_angle_mrad[..i].contains(f) {
-                return Err(self.err(&fov_at, format!("{f} mrad is given twice")));
-            }
+        self.range_all(&fov_at, &fov_full_angle_mrad, FOV_MRAD)?;
+        // Sorted, so that a list of any length is checked in n log n.
+        let mut sorted = fov_full_angle_mrad.clone();
+        sorted.sort_by(f64::total_cmp);
+        if let Some(w) = sorted.windows(2).find(|w| w[0] == w[1]) {
+            return Err(self.err(&fov_at, format!("{} mrad is given twice", w[0])));
         }
         Ok((
             Lidar {
@@ -681,14 +829,12 @@ impl Validator<'_> {
             return Err(self.err(&KeyPath::root(), "needs at least one [[channel]]"));
         }
         let mut out: Vec<Channel> = Vec::new();
+        let mut names = std::collections::HashSet::new();
         for (i, c) in raw.channel.iter().enumerate() {
             let sec = KeyPath::array("channel", i);
-            let (at, wavenumber_cm1) = match (c.wavelength_nm, c.wavenumber_cm1) {
-                (Some(w), None) => (
-                    sec.key("wavelength_nm"),
-                    1e7 / self.positive(&sec.key("wavelength_nm"), w)?,
-                ),
-                (None, Some(k)) => (sec.key("wavenumber_cm1"), k),
+            let wavenumber_cm1 = match (c.wavelength_nm, c.wavenumber_cm1) {
+                (Some(w), None) => 1e7 / self.range(&sec.key("wavelength_nm"), w, WAVELENGTH_NM)?,
+                (None, Some(k)) => self.range(&sec.key("wavenumber_cm1"), k, WAVENUMBER_CM1)?,
                 (Some(_), Some(_)) => {
                     return Err(self.err(
                         &sec.key("wavenumber_cm1"),
@@ -699,8 +845,7 @@ impl Validator<'_> {
                     return Err(self.err(&sec, "needs `wavelength_nm` or `wavenumber_cm1`"));
                 }
             };
-            self.positive(&at, wavenumber_cm1)?;
-            if out.iter().any(|o| o.name == c.name) {
+            if !names.insert(c.name.as_str()) {
                 return Err(self.err(
                     &sec.key("name"),
                     format!("channel `{}` is given twice", c.name),
@@ -722,25 +867,31 @@ impl Validator<'_> {
         let g = &raw.gates;
         let sec = KeyPath::table("gates");
         // r = 0 is excluded: the single-scatter return diverges as 1/r² at the lidar.
-        let start_m = self.positive(&sec.key("start_m"), g.start_m)?;
-        let width_m = self.positive(&sec.key("width_m"), g.width_m)?;
-        if !(g.end_m > start_m) {
+        let start_m = self.range(&sec.key("start_m"), g.start_m, RANGE_M)?;
+        let width_m = self.range(&sec.key("width_m"), g.width_m, GATE_WIDTH_M)?;
+        let end_m = self.range(&sec.key("end_m"), g.end_m, RANGE_M)?;
+        if !(end_m > start_m) {
             return Err(self.err(&sec.key("end_m"), "must be greater than `start_m`"));
         }
-        let n = (g.end_m - start_m) / width_m;
+        let n = (end_m - start_m) / width_m;
         let count = n.round();
         if (n - count).abs() > 1e-6 * n.max(1.0) {
             return Err(self.err(
                 &sec.key("end_m"),
                 format!(
                     "end_m − start_m = {} m is not a whole number of {width_m} m gates",
-                    g.end_m - start_m
+                    end_m - start_m
                 ),
             ));
         }
-        if count > 10_000_000.0 {
-            return Err(self.err(&sec.key("width_m"), format!("{count} gates is too many")));
-        }
+        // The gates alone must fit in the returns; with channels, fields of view and orders
+        // they are checked again once all are known.
+        crate::limits::check_product(
+            "the range gates",
+            &[("gates", count as u64)],
+            crate::limits::MAX_RETURN_BINS,
+        )
+        .map_err(|m| self.err(&sec.key("width_m"), m))?;
         Ok(Gates {
             start_m,
             width_m,
@@ -785,7 +936,7 @@ impl Validator<'_> {
         }
         if let Some(ppm) = a.co2_ppm {
             let at = sec.key("co2_ppm");
-            self.positive(&at, ppm)?;
+            self.range(&at, ppm, CO2_PPM)?;
             profile
                 .rescale_gas("CO2", ppm * 1e-6)
                 .map_err(|e| self.err(&at, e.to_string()))?;
@@ -794,6 +945,7 @@ impl Validator<'_> {
         let top_m = match a.top_m {
             Some(t) => {
                 let at = sec.key("top_m");
+                let t = self.range(&at, t, ALTITUDE_M)?;
                 if t > z_top || t <= profile.altitude_m[0] {
                     return Err(self.err(
                         &at,
@@ -807,16 +959,18 @@ impl Validator<'_> {
             }
             None => z_top,
         };
-        let layer_thickness_m = self.positive(
+        let layer_thickness_m = self.range(
             &sec.key("layer_thickness_m"),
             a.layer_thickness_m.unwrap_or(100.0),
+            LAYER_THICKNESS_M,
         )?;
-        if (top_m - profile.altitude_m[0]) / layer_thickness_m > 1e6 {
-            return Err(self.err(
-                &sec.key("layer_thickness_m"),
-                "makes more than a million layers",
-            ));
-        }
+        let layers = ((top_m - profile.altitude_m[0]) / layer_thickness_m).ceil() as u64;
+        crate::limits::check_product(
+            "the molecular grid",
+            &[("layers", layers)],
+            crate::limits::MAX_PATH_LAYERS,
+        )
+        .map_err(|m| self.err(&sec.key("layer_thickness_m"), m))?;
         let rayleigh_on = a.rayleigh.unwrap_or(true);
         // Bucholtz's depolarisation and cross-section are needed only with Rayleigh scattering
         // on; a channel outside their range is an error then, and only then.
@@ -824,9 +978,7 @@ impl Validator<'_> {
             Some(v) => {
                 let at = sec.key("depolarization_factor");
                 let d = self.per_channel(&at, v, channels.len())?;
-                for x in &d {
-                    self.in_range(&at, *x, 0.0, 0.49)?;
-                }
+                self.range_all(&at, &d, DEPOLARISATION)?;
                 d
             }
             None if rayleigh_on => channels
@@ -903,11 +1055,10 @@ impl Validator<'_> {
         if z.len() != n.len() || z.len() < 2 {
             return Err(self.err(&at_n, "needs as many values as `altitude_m`, at least two"));
         }
+        self.range_all(&at_z, z, ALTITUDE_M)?;
+        self.range_all(&at_n, n, AIR_NUMBER_DENSITY_PER_M3)?;
         if z.windows(2).any(|w| w[1] <= w[0]) {
             return Err(self.err(&at_z, "must strictly increase"));
-        }
-        if n.iter().any(|v| !(*v > 0.0)) {
-            return Err(self.err(&at_n, "values must be > 0"));
         }
         // Only the number density matters for Rayleigh scattering: carry it as p = n k T at a
         // nominal 273.15 K.
@@ -934,6 +1085,8 @@ impl Validator<'_> {
         let nch = channels.len();
         let sec = KeyPath::array("layer", i);
         let name = l.name.clone().unwrap_or_else(|| format!("layer {}", i + 1));
+        self.range(&sec.key("base_m"), l.base_m, ALTITUDE_M)?;
+        self.range(&sec.key("top_m"), l.top_m, ALTITUDE_M)?;
         if !(l.top_m > l.base_m) {
             return Err(self.err(&sec.key("top_m"), "must be above `base_m`"));
         }
@@ -944,8 +1097,8 @@ impl Validator<'_> {
             return Err(self.err(&sec.key("number_density_per_cm3"), "goes with `particles`"));
         }
         let ext = match (&l.extinction_per_m, &l.extinction_per_km) {
-            (Some(v), None) => Some((sec.key("extinction_per_m"), v, 1.0)),
-            (None, Some(v)) => Some((sec.key("extinction_per_km"), v, 1e-3)),
+            (Some(v), None) => Some((sec.key("extinction_per_m"), v, 1.0, COEFFICIENT_PER_M)),
+            (None, Some(v)) => Some((sec.key("extinction_per_km"), v, 1e-3, COEFFICIENT_PER_KM)),
             (Some(_), Some(_)) => {
                 return Err(self.err(
                     &sec.key("extinction_per_km"),
@@ -956,11 +1109,10 @@ impl Validator<'_> {
         };
         let has_particles = ext.is_some();
         let (extinction_per_m, single_scattering_albedo, phase) = match ext {
-            Some((at, v, scale)) => {
+            Some((at, v, scale, bounds)) => {
                 let mut e = self.per_channel(&at, v, nch)?;
                 for x in e.iter_mut() {
-                    self.non_negative(&at, *x)?;
-                    *x *= scale;
+                    *x = self.range(&at, *x, bounds)? * scale;
                 }
                 let ssa_at = sec.key("single_scattering_albedo");
                 let ssa_raw = l.single_scattering_albedo.as_ref().ok_or_else(|| {
@@ -970,9 +1122,7 @@ impl Validator<'_> {
                     )
                 })?;
                 let ssa = self.per_channel(&ssa_at, ssa_raw, nch)?;
-                for x in &ssa {
-                    self.in_range(&ssa_at, *x, 0.0, 1.0)?;
-                }
+                self.range_all(&ssa_at, &ssa, FRACTION)?;
                 let phase_at = sec.key("phase");
                 let specs = l
                     .phase
@@ -1048,9 +1198,7 @@ impl Validator<'_> {
         };
         let at = sec.key("absorption_per_m");
         let a = self.per_channel(&at, v, nch)?;
-        for x in &a {
-            self.non_negative(&at, *x)?;
-        }
+        self.range_all(&at, &a, COEFFICIENT_PER_M)?;
         Ok(a)
     }
 
@@ -1075,9 +1223,37 @@ impl Validator<'_> {
                 "a layer of `particles` gets its single-scattering albedo and phase function from Mie theory: remove `single_scattering_albedo` and `phase`",
             ));
         }
-        let need = |v: Option<f64>, key: &str| {
-            v.ok_or_else(|| self.err(&at, format!("`{}` needs `{key}`", p.distribution)))
+        let need = |v: Option<f64>, key: &str, bounds: Bounds| {
+            let v =
+                v.ok_or_else(|| self.err(&at, format!("`{}` needs `{key}`", p.distribution)))?;
+            check_finite_range(v, bounds).map_err(|m| self.err(&at, format!("`{key}`: {m}")))
         };
+        // The amount's own range first: Mie theory below is the slow part.
+        if let Some(n) = l.number_density_per_cm3 {
+            self.range(
+                &sec.key("number_density_per_cm3"),
+                n,
+                PARTICLE_DENSITY_PER_CM3,
+            )?;
+        }
+        for (key, v, b) in [
+            ("extinction_per_m", &l.extinction_per_m, COEFFICIENT_PER_M),
+            (
+                "extinction_per_km",
+                &l.extinction_per_km,
+                COEFFICIENT_PER_KM,
+            ),
+        ] {
+            if let Some(PerChannel::One(e)) = v {
+                self.range(&sec.key(key), *e, Bounds::positive(b.hi))?;
+            }
+        }
+        for (key, v) in [("r_min_um", p.r_min_um), ("r_max_um", p.r_max_um)] {
+            if let Some(r) = v {
+                check_finite_range(r, Bounds::closed(0.0, RADIUS_UM.hi))
+                    .map_err(|m| self.err(&at, format!("`{key}`: {m}")))?;
+            }
+        }
         let mie_err = |e: String| self.err(&at, e);
         // Per channel, the components of the population (one, or an OPAC mixture).
         let components: Vec<Vec<Component>> = if p.distribution == "opac" {
@@ -1113,14 +1289,14 @@ impl Validator<'_> {
             let mut dist = match p.distribution.as_str() {
                 "lognormal" => SizeDistribution::lognormal(
                     1.0,
-                    need(p.median_radius_um, "median_radius_um")?,
-                    need(p.sigma_g, "sigma_g")?,
+                    need(p.median_radius_um, "median_radius_um", RADIUS_UM)?,
+                    need(p.sigma_g, "sigma_g", SIGMA_G)?,
                 ),
                 "modified_gamma" => SizeDistribution::modified_gamma(
                     1.0,
-                    need(p.alpha, "alpha")?,
-                    need(p.b, "b")?,
-                    need(p.gamma, "gamma")?,
+                    need(p.alpha, "alpha", GAMMA_SHAPE)?,
+                    need(p.b, "b", GAMMA_SHAPE)?,
+                    need(p.gamma, "gamma", GAMMA_SHAPE)?,
                 ),
                 other => {
                     return Err(self.err(
@@ -1195,10 +1371,8 @@ impl Validator<'_> {
             }
         };
         let number_density_per_m3 = match (l.number_density_per_cm3, ext0) {
-            (Some(n), None) => self.positive(&sec.key("number_density_per_cm3"), n)? * 1e6,
-            (None, Some((key, e))) => {
-                self.positive(&key, e)? / optics[0].extinction_cross_section_m2
-            }
+            (Some(n), None) => n * 1e6,
+            (None, Some((_, e))) => e / optics[0].extinction_cross_section_m2,
             _ => {
                 return Err(self.err(
                     &at,
@@ -1290,15 +1464,18 @@ impl Validator<'_> {
             batches: s.batches.unwrap_or(100),
             cache_dir: self.cache_dir(raw),
         };
-        if sim.max_order < 1 || sim.max_order > 1000 {
-            return Err(self.err(&sec.key("max_order"), "must lie in 1..=1000"));
-        }
-        if sim.batches < 2 {
-            return Err(self.err(
+        check_count(sim.max_order.into(), 1, 1000)
+            .map_err(|m| self.err(&sec.key("max_order"), m))?;
+        check_count(sim.batches as u64, 2, crate::limits::MAX_BATCHES).map_err(|m| {
+            self.err(
                 &sec.key("batches"),
-                "needs at least 2 batches for error bars",
-            ));
-        }
+                format!("{m} (at least 2 for error bars)"),
+            )
+        })?;
+        check_count(sim.photons, 0, crate::limits::MAX_PHOTONS)
+            .map_err(|m| self.err(&sec.key("photons"), m))?;
+        check_count(sim.threads as u64, 0, crate::limits::MAX_THREADS)
+            .map_err(|m| self.err(&sec.key("threads"), format!("{m} (0: all cores)")))?;
         // 0 photons: the analytic lidar equation only.
         if sim.photons != 0 && sim.photons < sim.batches as u64 {
             return Err(self.err(
@@ -1498,6 +1675,7 @@ impl Scene {
         threads: Option<usize>,
     ) -> Result<(), String> {
         if let Some(p) = photons {
+            check_count(p, 0, crate::limits::MAX_PHOTONS).map_err(|m| format!("--photons {m}"))?;
             if p != 0 && p < self.simulation.batches as u64 {
                 return Err(format!(
                     "--photons {p} is fewer than the {} batches (0 runs the analytic equation only)",
@@ -1510,10 +1688,20 @@ impl Scene {
             self.simulation.seed = s;
         }
         if let Some(t) = threads {
+            check_count(t as u64, 0, crate::limits::MAX_THREADS)
+                .map_err(|m| format!("--threads {m} (0: all cores)"))?;
             self.simulation.threads = t;
         }
         Ok(())
     }
+}
+
+/// Layers of the molecular grid of `a` from the profile's bottom (at most one more than from a
+/// surface above it).
+fn molecular_layer_count(a: &Atmosphere) -> u64 {
+    ((a.top_m - a.profile.altitude_m[0]) / a.layer_thickness_m)
+        .ceil()
+        .max(1.0) as u64
 }
 
 /// The channels that sample `laser`'s `lines` through the receiver's filter (none without a

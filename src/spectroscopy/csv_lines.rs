@@ -18,7 +18,18 @@
 
 use std::path::{Path, PathBuf};
 
-use super::hitran::{Broadener, Line, LineFilter, LineList, ShapeColumns, ShapeParameters};
+use super::hitran::{Broadener, Line, LineFilter, LineList, ShapeColumns, ShapeParameters, ranges};
+use crate::input::Bounds;
+
+/// `SD_gamma`: the speed dependence Γ₂/Γ₀ (typical 0.05–0.15; 1 would make the narrowest
+/// speed class's width vanish).
+const SD_RATIO: Bounds = Bounds::below(-1.0, 1.0);
+/// `SD_delta`: Δ₂/Δ₀.
+const SD_SHIFT_RATIO: Bounds = Bounds::closed(-10.0, 10.0);
+/// `eta`: the correlation parameter of the Hartmann-Tran profile.
+const ETA: Bounds = Bounds::below(0.0, 1.0);
+/// `y`: first-order line mixing \[1/atm\] (typical |y| < 0.1).
+const LINE_MIXING_Y: Bounds = Bounds::closed(-10.0, 10.0);
 use super::isotopologues::Isotopologue;
 use crate::input::{CsvTable, InputError};
 
@@ -189,7 +200,7 @@ impl LineList {
             if !filter.keeps_species(molecule_id, iso_id) {
                 continue;
             }
-            let nu_cm1 = get(c_nu)?;
+            let nu_cm1 = t.f64_in(row, c_nu, ranges::NU_CM1)?;
             if !filter.keeps_nu(nu_cm1) {
                 continue;
             }
@@ -207,31 +218,56 @@ impl LineList {
             let s = own.read(&get, Some(&a))?;
             let sw = get(c_sw)?;
             let elower = get(c_el)?;
-            for (v, name) in [
-                (sw, "sw"),
-                (a.gamma0, "gamma0_air"),
-                (s.gamma0, "gamma0_self"),
-                (a.nu_vc, "nuVC_air"),
-                (s.nu_vc, "nuVC_self"),
-            ] {
-                if v < 0.0 {
-                    return Err(InputError::at(
-                        &path,
-                        line_no,
-                        name,
-                        format!("{v} must be ≥ 0"),
-                    ));
-                }
-            }
-            for (v, name) in [(a.eta, "eta_air"), (s.eta, "eta_self")] {
-                if !(0.0..1.0).contains(&v) {
-                    return Err(InputError::at(
-                        &path,
-                        line_no,
-                        name,
-                        format!("{v} must lie in [0, 1)"),
-                    ));
-                }
+            // Each parameter in its range, named by the column it came from (or, for a
+            // `_self` value taken from air, by the air column).
+            let name_of = |c: Option<usize>, fallback: &str| -> String {
+                c.map_or(fallback.to_string(), |c| t.header()[c].clone())
+            };
+            let check = |v: f64, name: String, bounds| {
+                crate::input::check_finite_range(v, bounds)
+                    .map(|_| ())
+                    .map_err(|m| InputError::at(&path, line_no, name, m))
+            };
+            check(sw, "sw".into(), ranges::SW)?;
+            check(elower, "elower".into(), ranges::ELOWER_CM1)?;
+            for (b, cols, side) in [(&a, &air, "air"), (&s, &own, "self")] {
+                let fb = |n: &str| format!("{n}_{side}");
+                check(b.gamma0, name_of(cols.gamma0, &fb("gamma0")), ranges::GAMMA)?;
+                check(
+                    b.n_gamma0,
+                    name_of(cols.n_gamma0, &fb("n_gamma0")),
+                    ranges::EXPONENT,
+                )?;
+                check(b.delta0, name_of(cols.delta0, &fb("delta0")), ranges::DELTA)?;
+                check(
+                    b.n_delta0,
+                    name_of(cols.n_delta0, &fb("n_delta0")),
+                    ranges::DELTA,
+                )?;
+                check(
+                    b.sd_gamma,
+                    name_of(cols.sd_gamma, &fb("SD_gamma")),
+                    SD_RATIO,
+                )?;
+                check(
+                    b.n_gamma2,
+                    name_of(cols.n_gamma2, &fb("n_gamma2")),
+                    ranges::EXPONENT,
+                )?;
+                check(
+                    b.sd_delta,
+                    name_of(cols.sd_delta, &fb("SD_delta")),
+                    SD_SHIFT_RATIO,
+                )?;
+                check(b.nu_vc, name_of(cols.nu_vc, &fb("nuVC")), ranges::GAMMA)?;
+                check(
+                    b.n_nu_vc,
+                    name_of(cols.n_nu_vc, &fb("n_nuVC")),
+                    ranges::EXPONENT,
+                )?;
+                check(b.eta, name_of(cols.eta, &fb("eta")), ETA)?;
+                check(b.y, name_of(cols.y, &fb("y")), LINE_MIXING_Y)?;
+                check(b.n_y, name_of(cols.n_y, &fb("n_y")), ranges::EXPONENT)?;
             }
             let mut quanta = [b' '; 60];
             for (k, c) in quanta_cols.iter().enumerate() {

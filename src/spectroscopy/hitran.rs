@@ -316,6 +316,26 @@ const F_ELOWER: (usize, usize, &str) = (45, 55, "elower");
 const F_NAIR: (usize, usize, &str) = (55, 59, "n_air");
 const F_DAIR: (usize, usize, &str) = (59, 67, "delta_air");
 
+/// The physical range of each line parameter lidarsim uses, shared by the `.par` and CSV
+/// readers; a value outside is refused at its file, line and field.
+pub(crate) mod ranges {
+    use crate::input::Bounds;
+    /// Line position \[cm⁻¹\] (HITRAN reaches about 1e5).
+    pub const NU_CM1: Bounds = Bounds::positive(1e6);
+    /// Intensity at 296 K \[cm/molecule\] (the strongest lines are near 1e-17).
+    pub const SW: Bounds = Bounds::closed(0.0, 1e-10);
+    /// Einstein A coefficient \[1/s\].
+    pub const EINSTEIN_A: Bounds = Bounds::closed(0.0, 1e12);
+    /// Lorentz half widths \[cm⁻¹/atm\] (typical 0.01–0.5).
+    pub const GAMMA: Bounds = Bounds::closed(0.0, 10.0);
+    /// Lower-state energy \[cm⁻¹\]; HITRAN writes −1 where it is unknown.
+    pub const ELOWER_CM1: Bounds = Bounds::closed(-1.0, 1e5);
+    /// Temperature exponents (of widths, shifts, line mixing).
+    pub const EXPONENT: Bounds = Bounds::closed(-10.0, 10.0);
+    /// Pressure shifts \[cm⁻¹/atm\] (typical −0.01).
+    pub const DELTA: Bounds = Bounds::closed(-1.0, 1.0);
+}
+
 fn parse_record(
     path: &Path,
     line_no: usize,
@@ -361,7 +381,7 @@ fn parse_record(
     if !filter.keeps_species(molecule_id, iso_id) {
         return Ok(None);
     }
-    let num = |(a, z, name): (usize, usize, &str)| -> Result<f64, InputError> {
+    let num_in = |(a, z, name): (usize, usize, &str), bounds| -> Result<f64, InputError> {
         let s = &rec[a..z];
         let v: f64 = s.trim().parse().map_err(|_| {
             InputError::at(
@@ -371,18 +391,16 @@ fn parse_record(
                 format!("`{s}` (columns {}-{}) is not a number", a + 1, z),
             )
         })?;
-        if v.is_finite() {
-            Ok(v)
-        } else {
-            Err(InputError::at(
+        crate::input::check_finite_range(v, bounds).map_err(|m| {
+            InputError::at(
                 path,
                 line_no,
                 name,
-                format!("`{s}` is not finite"),
-            ))
-        }
+                format!("`{}` (columns {}-{}): {m}", s.trim(), a + 1, z),
+            )
+        })
     };
-    let nu_cm1 = num(F_NU)?;
+    let nu_cm1 = num_in(F_NU, ranges::NU_CM1)?;
     if !filter.keeps_nu(nu_cm1) {
         return Ok(None);
     }
@@ -401,38 +419,16 @@ fn parse_record(
         molecule_id,
         iso_id,
         nu_cm1,
-        sw_cm_per_molecule: num(F_SW)?,
-        einstein_a_per_s: num(F_A)?,
-        gamma_air_cm1_per_atm: num(F_GAIR)?,
-        gamma_self_cm1_per_atm: num(F_GSELF)?,
-        elower_cm1: num(F_ELOWER)?,
-        n_air: num(F_NAIR)?,
-        delta_air_cm1_per_atm: num(F_DAIR)?,
+        sw_cm_per_molecule: num_in(F_SW, ranges::SW)?,
+        einstein_a_per_s: num_in(F_A, ranges::EINSTEIN_A)?,
+        gamma_air_cm1_per_atm: num_in(F_GAIR, ranges::GAMMA)?,
+        gamma_self_cm1_per_atm: num_in(F_GSELF, ranges::GAMMA)?,
+        elower_cm1: num_in(F_ELOWER, ranges::ELOWER_CM1)?,
+        n_air: num_in(F_NAIR, ranges::EXPONENT)?,
+        delta_air_cm1_per_atm: num_in(F_DAIR, ranges::DELTA)?,
         quanta: b[67..127].try_into().unwrap_or([b' '; 60]),
         shape: None,
     };
-    for (v, (a, z, name)) in [
-        (line.sw_cm_per_molecule, F_SW),
-        (line.gamma_air_cm1_per_atm, F_GAIR),
-        (line.gamma_self_cm1_per_atm, F_GSELF),
-    ] {
-        if v < 0.0 {
-            return Err(InputError::at(
-                path,
-                line_no,
-                name,
-                format!(
-                    "`{}` (columns {}-{}) must not be negative",
-                    &rec[a..z],
-                    a + 1,
-                    z
-                ),
-            ));
-        }
-    }
-    if line.nu_cm1 <= 0.0 {
-        return Err(InputError::at(path, line_no, "nu", "must be positive"));
-    }
     Ok(Some(line))
 }
 

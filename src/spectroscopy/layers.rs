@@ -335,7 +335,18 @@ impl LineOfSight {
             });
         }
         let (lo, hi) = self.vertical_extent(profile)?;
-        let n = ((hi - lo) / thickness_m - 1e-9).ceil().max(1.0) as usize;
+        let n = ((hi - lo) / thickness_m - 1e-9).ceil().max(1.0);
+        if n > crate::limits::MAX_PATH_LAYERS as f64 {
+            return Err(SpectroscopyError::InvalidArgument {
+                name: "thickness_m",
+                value: thickness_m,
+                reason: format!(
+                    "makes {n:.0} layers along the path, more than the limit of {}",
+                    crate::limits::MAX_PATH_LAYERS
+                ),
+            });
+        }
+        let n = n as usize;
         let mut e: Vec<f64> = (0..n).map(|i| lo + i as f64 * thickness_m).collect();
         e.push(hi);
         Ok(e)

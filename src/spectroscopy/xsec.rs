@@ -234,8 +234,15 @@ impl WavenumberGrid {
             return bad("end_cm1", end_cm1, "must be finite and not below the start");
         }
         let n = ((end_cm1 - start_cm1) / step_cm1 + 1e-6).floor() + 1.0;
-        if n > 5.0e8 {
-            return bad("step_cm1", step_cm1, "gives more than 5e8 grid points");
+        if n > crate::limits::MAX_GRID_POINTS as f64 {
+            return bad(
+                "step_cm1",
+                step_cm1,
+                &format!(
+                    "gives {n:.3e} grid points, more than the limit of {:e}",
+                    crate::limits::MAX_GRID_POINTS as f64
+                ),
+            );
         }
         Ok(WavenumberGrid {
             start_cm1,

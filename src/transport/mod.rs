@@ -392,6 +392,29 @@ pub fn run(
             opts.photons, opts.batches
         )));
     }
+    // The limits a scene is validated against, again for options built by hand.
+    use crate::input::check_count;
+    use crate::limits::{MAX_BATCHES, MAX_PHOTONS, MAX_RETURN_BINS, MAX_THREADS, check_product};
+    check_count(opts.batches as u64, 2, MAX_BATCHES)
+        .and_then(|_| check_count(opts.photons, 1, MAX_PHOTONS))
+        .and_then(|_| check_count(opts.threads as u64, 0, MAX_THREADS))
+        .and_then(|_| check_count(opts.max_order.into(), 1, 1000))
+        .map_err(TransportError::Options)?;
+    let n_series = scene.channels.len() + opts.combinations.len() + opts.combination_pairs.len();
+    check_product(
+        "the returns",
+        &[
+            ("gates", scene.gates.count as u64),
+            (
+                "fields of view",
+                scene.lidar.fov_full_angle_mrad.len() as u64,
+            ),
+            ("order bins", u64::from(opts.max_order) + 2),
+            ("channels, combinations and pairs", n_series as u64),
+        ],
+        MAX_RETURN_BINS,
+    )
+    .map_err(TransportError::Options)?;
     let lidar = &scene.lidar;
     let nch = scene.channels.len();
     if let Some(c) = opts
@@ -517,8 +540,11 @@ pub fn run(
     );
     let show_bar = opts.progress && std::io::stderr().is_terminal();
 
-    // Chunks keep at most a few batch buffers alive; their size does not change the numbers.
-    let chunk = (4 * threads).max(1);
+    // Chunks keep at most a few batch buffers alive, and no more than the memory limit allows;
+    // their size does not change the numbers.
+    let chunk = (4 * threads)
+        .min(crate::limits::MAX_LIVE_TALLY_VALUES / shape.len().max(1))
+        .max(1);
     let mut start = 0;
     while start < batches {
         let end = (start + chunk).min(batches);

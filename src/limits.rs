@@ -1,0 +1,94 @@
+//! Limits that protect memory and time, in one place (README: "Limits").
+//!
+//! Each limit bounds the size of a whole problem (a product such as gates × channels × fields of
+//! view × orders), not one of its factors, and is checked when the inputs are validated: before
+//! any large allocation, so that a scene or a command line asking for too much is refused in
+//! milliseconds with the product named, instead of exhausting memory or running for days. Every
+//! shipped scene and validation run sits at least a hundredfold below each limit.
+
+/// Worker threads of one run (`--threads`, `simulation.threads`). More threads than this
+/// only add stacks and scheduling; 0 still means "all cores".
+pub const MAX_THREADS: u64 = 1024;
+
+/// Photon packets of one Monte Carlo run (about a day on one core at 10⁷ photons/s, far
+/// beyond any run the validation needs).
+pub const MAX_PHOTONS: u64 = 1_000_000_000_000;
+
+/// Independent batches of one Monte Carlo run: each batch folds every tally bin once, so
+/// batches × bins is the bookkeeping time.
+pub const MAX_BATCHES: u64 = 10_000;
+
+/// Bins of the returns: gates × fields of view × order bins (total, 1…N, N+) × (channels +
+/// line sums + line pairs whose covariance is kept). Each bin is held several times (means,
+/// second moments, one buffer per batch in flight) and written as one CSV row, so 4·10⁶ bins
+/// are a few hundred MB.
+pub const MAX_RETURN_BINS: u64 = 4_000_000;
+
+/// Tally values of the batches in flight at once (each batch fills its own buffer); fewer
+/// batches run together when the buffers are large, which does not change the numbers.
+pub const MAX_LIVE_TALLY_VALUES: usize = 64_000_000;
+
+/// Layers of the molecular grid of a scene, and of a line of sight (`lbl`, `select-lines`):
+/// 1 m layers through 100 km.
+pub const MAX_PATH_LAYERS: u64 = 100_000;
+
+/// Optical layers × channels of a scene's optical atmosphere (each cell carries several
+/// coefficients and the cumulative optical depths).
+pub const MAX_OPTICAL_CELLS: u64 = 10_000_000;
+
+/// Values of a gas optical-depth table: wavenumber grid points × molecular layers (8 bytes
+/// each, held in memory and saved whole).
+pub const MAX_GAS_TABLE_VALUES: u64 = 50_000_000;
+
+/// Points of one wavenumber grid (a cross-section vector of 8-byte values).
+pub const MAX_GRID_POINTS: u64 = 50_000_000;
+
+/// Rows of an `lbl` output table: grid points (cross-sections) or grid points × layers (layer
+/// optical depths); the table is built as text before it is written.
+pub const MAX_LBL_ROWS: u64 = 5_000_000;
+
+/// Values of a generated profile ensemble: profiles × levels (`profiles generate --n`,
+/// `dial --ensemble`, `select-lines --ensemble`, `bench --study`), each member a few values
+/// per level in memory and a CSV row per level.
+pub const MAX_ENSEMBLE_LEVELS: u64 = 2_000_000;
+
+/// The product of `factors` if it is at most `limit`, else a message naming the product, its
+/// factors and the limit. Saturates instead of overflowing, so any input can be checked.
+pub fn check_product(what: &str, factors: &[(&str, u64)], limit: u64) -> Result<u64, String> {
+    let product = factors
+        .iter()
+        .fold(1u64, |acc, (_, f)| acc.saturating_mul(*f));
+    if product <= limit {
+        return Ok(product);
+    }
+    let fmt = |v: u64| crate::input::fmt_bound(v as f64);
+    let names: Vec<String> = factors
+        .iter()
+        .map(|(n, f)| format!("{} {n}", fmt(*f)))
+        .collect();
+    let total = if factors.len() > 1 {
+        format!(" = {}", fmt(product))
+    } else {
+        String::new()
+    };
+    Err(format!(
+        "{what}: {}{total}, more than the limit of {} (README, \"Limits\")",
+        names.join(" × "),
+        fmt(limit)
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn products_saturate_and_name_their_factors() {
+        assert_eq!(check_product("x", &[("a", 3), ("b", 4)], 12), Ok(12));
+        let e = check_product("grid", &[("points", u64::MAX), ("layers", 3)], 10).unwrap_err();
+        assert!(
+            e.contains("points × 3 layers") && e.contains("limit of 10"),
+            "{e}"
+        );
+    }
+}
