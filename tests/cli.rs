@@ -194,3 +194,42 @@ fn impossible_retrieval_exits_2_and_writes_nothing() {
         "{stderr}"
     );
 }
+
+/// A reader that stops early (`lidarsim profiles info SET | head -1`) ends the command quietly:
+/// exit 0, no panic ("failed printing to stdout"). The listing of 3000 profiles is larger than
+/// a pipe's buffer, so the write after the reader has gone fails.
+#[test]
+fn a_closed_pipe_ends_a_listing_quietly() {
+    use std::io::{BufRead, BufReader};
+    use std::process::{Command, Stdio};
+    let dir = tempfile::tempdir().unwrap();
+    let set = dir.path().join("ens.csv");
+    lidarsim_ok([
+        "profiles".as_ref(),
+        "generate".as_ref(),
+        "--n".as_ref(),
+        "3000".as_ref(),
+        "--seed".as_ref(),
+        "1".as_ref(),
+        "--class".as_ref(),
+        "mid".as_ref(),
+        "--out".as_ref(),
+        set.as_os_str(),
+    ]);
+    let mut child = Command::new(crate::util::lidarsim_bin())
+        .args(["profiles".as_ref(), "info".as_ref(), set.as_os_str()])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut first = String::new();
+    BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut first)
+        .unwrap();
+    // The reader (and the pipe) is dropped here, after one line.
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(first.starts_with("id,"), "{first}");
+    assert_eq!(out.status.code(), Some(0), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+}

@@ -179,7 +179,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     .collect::<Vec<_>>()
             );
         }
-        println!("{}", serde_json::to_string_pretty(&out)?);
+        outln!("{}", serde_json::to_string_pretty(&out)?);
         return Ok(());
     }
     let Some(kind) = args.distribution else {
@@ -363,6 +363,6 @@ fn finish(
         })).collect::<Vec<_>>(),
         "table": args.out.as_ref().map(|p| p.display().to_string()),
     });
-    println!("{}", serde_json::to_string_pretty(&out)?);
+    outln!("{}", serde_json::to_string_pretty(&out)?);
     Ok(())
 }

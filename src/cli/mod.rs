@@ -1,5 +1,14 @@
 //! One module per subcommand; each has `Args` (clap) and `run(Args) -> anyhow::Result<()>`.
 
+/// `println!` that hands a write error (a closed pipe: `lidarsim profiles info SET | head`) to
+/// the enclosing command with `?` instead of panicking; `main` ends quietly on a broken pipe.
+macro_rules! outln {
+    ($($t:tt)*) => {{
+        use std::io::Write as _;
+        writeln!(std::io::stdout().lock(), $($t)*)?;
+    }};
+}
+
 pub mod bench;
 pub mod dial;
 pub mod figures;

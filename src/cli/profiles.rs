@@ -279,7 +279,7 @@ fn generate(a: GenerateArgs) -> anyhow::Result<()> {
         let (c, bias) = Covariance::from_pairs(&f, &an, &mean.profile, a.localization_lnp)?;
         let n = mean.profile.len();
         let rms = |s: &[f64]| (s.iter().map(|x| x * x).sum::<f64>() / s.len() as f64).sqrt();
-        println!(
+        outln!(
             "forecast − analysis bias (removed): rms over levels T {:.3} K, ln q {:.3}, CO2 {:.3} ppm; p_s {:.3} hPa",
             rms(&bias[..n]),
             rms(&bias[n..2 * n]),
@@ -325,7 +325,7 @@ fn generate(a: GenerateArgs) -> anyhow::Result<()> {
     let (mut set, report) = generate_ensemble(&mean, &cov, &cfg)?;
     if let Some(r) = &report.repair {
         notes.push(r.to_string());
-        println!("note: {r}");
+        outln!("note: {r}");
     }
     let cap = format!(
         "water vapour capped at {} % relative humidity over {} (Murphy and Koop 2005): {} of {} values in {} of {} members",
@@ -336,7 +336,7 @@ fn generate(a: GenerateArgs) -> anyhow::Result<()> {
         report.capped_members,
         a.n
     );
-    println!("{cap}");
+    outln!("{cap}");
     notes.push(cap);
     if report.mean_levels_above_limit > 0 {
         let w = format!(
@@ -345,11 +345,11 @@ fn generate(a: GenerateArgs) -> anyhow::Result<()> {
             report.mean_levels_above_limit,
             mean.profile.len()
         );
-        println!("warning: {w}");
+        outln!("warning: {w}");
         notes.push(w);
     }
     for n in &cov.notes {
-        println!("covariance: {n}");
+        outln!("covariance: {n}");
     }
     set.notes = notes;
     let mut files = OutputSet::new();
@@ -358,7 +358,7 @@ fn generate(a: GenerateArgs) -> anyhow::Result<()> {
         files.write(path, cov.to_csv())?;
     }
     files.commit()?;
-    println!("wrote {} profiles to {}", set.len(), a.out.display());
+    outln!("wrote {} profiles to {}", set.len(), a.out.display());
     Ok(())
 }
 
@@ -370,7 +370,7 @@ fn convert(a: ConvertArgs) -> anyhow::Result<()> {
     };
     set.write(&a.out)?;
     let [t, m, h] = set.class_counts();
-    println!(
+    outln!(
         "wrote {} profiles ({t} tropical, {m} mid, {h} high) to {}",
         set.len(),
         a.out.display()
@@ -388,7 +388,7 @@ fn info(a: InfoArgs) -> anyhow::Result<()> {
         (Some(p), None) => read_set(p)?,
         (None, None) => bail!("give a profile set or --atmosphere"),
     };
-    println!(
+    outln!(
         "id,latitude_deg,class,levels,surface_p_hPa,top_altitude_km,air_column_per_cm2,precipitable_water_mm,xco2_ppm"
     );
     for m in &set.members {
@@ -401,7 +401,7 @@ fn info(a: InfoArgs) -> anyhow::Result<()> {
             .column_average_dry_vmr("CO2")
             .map(|v| format!("{:.3}", v * 1e6))
             .unwrap_or_default();
-        println!(
+        outln!(
             "{},{},{},{},{:.2},{:.2},{:.5e},{pw},{xco2}",
             output::csv_field(&m.meta.id),
             m.meta.latitude_deg,
@@ -576,6 +576,6 @@ fn plot(a: PlotArgs) -> anyhow::Result<()> {
     let mut files = OutputSet::new();
     files.write_via(&a.out, draw)?;
     files.commit()?;
-    println!("wrote {}", a.out.display());
+    outln!("wrote {}", a.out.display());
     Ok(())
 }

@@ -332,7 +332,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let groups = groups(&a)?;
     // Before the work; the figures' names depend on the groups and are checked when written.
     output::check_paths(&[a.out.join("sensitivities.csv")])?;
-    println!(
+    outln!(
         "select-lines: {} on-line positions, off-line {} cm-1, lines {} ({} lines), grid {} m to {} km",
         cfg.positions.len(),
         cfg.off_cm1,
@@ -366,7 +366,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             }
         }
         for (id, reason) in &failed {
-            println!("{name}: profile {id} excluded: {reason}");
+            outln!("{name}: profile {id} excluded: {reason}");
         }
         if ok.is_empty() {
             bail!("{name}: every profile failed (see above)");
@@ -383,7 +383,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
                 cfg.off_cm1
             );
         }
-        println!(
+        outln!(
             "{name}: {} profiles ({} excluded), XCO2 {:.2} ppm, {} positions kept, {} dropped (DAOD ≤ 0)",
             ok.len(),
             failed.len(),
@@ -392,7 +392,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             dropped.len()
         );
         for r in group_rows.iter().take(5) {
-            println!(
+            outln!(
                 "  #{} {:.4} cm-1 {} {:+.2} GHz: DAOD {:.3}, WF peak {:.0} hPa, per K {:+.3}, per MHz {:+.3}, per hPa {:+.3}, per 10% H2O {:+.3}, random {:.3}, total {:.3} ppm",
                 r.rank,
                 r.position.nu_cm1,
@@ -435,7 +435,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         }
     }
     for p in files.commit()? {
-        println!("wrote {}", p.display());
+        outln!("wrote {}", p.display());
     }
     Ok(())
 }
@@ -477,7 +477,7 @@ fn draw_figures(
             errors_figure(p, name, rows, &labels, unc)
         })?;
     } else {
-        println!("{name}: no on-line position on {labels:?}: no error figure");
+        eprintln!("{name}: no on-line position on {labels:?}: no error figure");
     }
     Ok(())
 }
