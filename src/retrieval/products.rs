@@ -488,31 +488,23 @@ impl Retrieval {
                 var_ind += 0.25 * ind;
                 var_mc += 0.25 * (ind - 2.0 * cov(w) / (p_on * p_off));
             }
-            if let Some(w) = no_signal
-                && signals.source == Source::Analytic
-            {
-                return Err(RetrievalError::NoSignal {
-                    dial: t.method == Method::Dial,
-                    message: format!(
-                        "no {} signal in the gates around {:.0} m: SNR ≤ 0",
-                        if ipda { "hard-target" } else { "atmospheric" },
-                        self.range_m[w.start]
-                    ),
-                });
-            }
-            let (retrieved, slope) = self.value(t, d);
             // Analytic random error per shot pair.
             let mut var_shot = 0.0;
+            // A window whose SNR is so small (a signal of 1e-300 photo-electrons) that 1/SNR²
+            // overflows carries no more usable signal than one with none.
+            let mut weak = None;
             for line_windows in &expected {
                 let mut jitter = 0.0;
                 for (k, id) in ids.iter().enumerate() {
                     let w = &line_windows[*id];
                     let snr = w.noise.snr();
-                    var_shot += if snr > 0.0 {
-                        1.0 / (snr * snr)
+                    let inv = 1.0 / (snr * snr);
+                    if inv.is_finite() {
+                        var_shot += inv;
                     } else {
-                        f64::INFINITY
-                    };
+                        var_shot = f64::INFINITY;
+                        weak.get_or_insert((t.windows[k].clone(), snr));
+                    }
                     jitter += sign(k) * w.jitter_relative(self.laser.frequency_jitter_rms_mhz);
                 }
                 var_shot += jitter * jitter;
@@ -520,6 +512,28 @@ impl Retrieval {
                     var_shot += self.laser.energy_monitor_error_fraction.powi(2);
                 }
             }
+            let what = if ipda { "hard-target" } else { "atmospheric" };
+            let refusal = match (no_signal, weak) {
+                (Some(w), _) => Some(format!(
+                    "no {what} signal in the gates around {:.0} m: SNR ≤ 0",
+                    self.range_m[w.start]
+                )),
+                (None, Some((w, snr))) => Some(format!(
+                    "no usable {what} signal in the gates around {:.0} m: SNR {snr:.1e} is too \
+                     small for a random error",
+                    self.range_m[w.start]
+                )),
+                (None, None) => None,
+            };
+            if let Some(message) = refusal
+                && signals.source == Source::Analytic
+            {
+                return Err(RetrievalError::NoSignal {
+                    dial: t.method == Method::Dial,
+                    message,
+                });
+            }
+            let (retrieved, slope) = self.value(t, d);
             let sd_shot = 0.5 * var_shot.sqrt() * slope.abs();
             // Simulated: the same retrieval of every noisy measurement, of N and of 1 shot pair.
             let retrieve_sim = |m: &Measurement| -> f64 {
