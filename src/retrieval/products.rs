@@ -26,6 +26,9 @@
 //!   measurements of 1 and of N shot pairs, and the mean of the N-shot ones (so the bias that
 //!   noise itself brings through the logarithm shows). Realisations whose signal is not
 //!   positive cannot be retrieved; if more than 10 % of them fail the simulated figures are NaN.
+//!
+//! A product from Monte Carlo returns with no photon scored in one of its windows (too few
+//! photons) has NaN estimates. `retrieval.csv` writes every such NaN as an empty field.
 
 use std::ops::Range;
 
@@ -146,31 +149,40 @@ impl Product {
         self.retrieved - self.truth
     }
 
-    /// The row of `retrieval.csv` (no newline).
+    /// The row of `retrieval.csv` (no newline). A value that cannot be computed (NaN or
+    /// infinite: Monte Carlo returns with no photon scored in a window, simulated figures when
+    /// too many realisations fail) is an empty field, never `NaN` or `inf`.
     pub fn csv_row(&self) -> String {
+        let v = |x: f64| -> String {
+            if x.is_finite() {
+                x.to_string()
+            } else {
+                String::new()
+            }
+        };
         format!(
             "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
             self.method.label(),
             self.source.label(),
             self.order.label(),
             crate::output::csv_field(&self.channel_pair),
-            self.fov_full_angle_mrad,
-            self.range_m.0,
-            self.range_m.1,
-            self.altitude_m.0,
-            self.altitude_m.1,
+            v(self.fov_full_angle_mrad),
+            v(self.range_m.0),
+            v(self.range_m.1),
+            v(self.altitude_m.0),
+            v(self.altitude_m.1),
             self.quantity.label(),
             self.quantity.unit(),
-            self.truth,
-            self.retrieved,
-            self.bias(),
-            self.mc_stderr,
-            self.random_error_per_shot_pair,
-            self.random_error_averaged,
+            v(self.truth),
+            v(self.retrieved),
+            v(self.bias()),
+            v(self.mc_stderr),
+            v(self.random_error_per_shot_pair),
+            v(self.random_error_averaged),
             self.shots_averaged,
-            self.simulated_error_per_shot_pair,
-            self.simulated_error_averaged,
-            self.simulated_mean_averaged - self.truth,
+            v(self.simulated_error_per_shot_pair),
+            v(self.simulated_error_averaged),
+            v(self.simulated_mean_averaged - self.truth),
         )
     }
 }
