@@ -647,6 +647,15 @@ fn impossible_retrievals_name_the_scene_key() {
             "retrieval.target",
             "SNR ≤ 0",
         ),
+        (
+            // Found by the scene fuzz: a positive but subnormal echo made the random error
+            // infinite (`inf` in retrieval.csv, `null` in summary.json).
+            "target signal too weak for a random error",
+            "pulse_energy_j = 0.05",
+            "pulse_energy_j = 1e-290",
+            "retrieval.target",
+            "too small for a random error",
+        ),
     ];
     for (what, from, to, key, words) in cases {
         let text = if *what == "on-line absorbing no more than the off-line" {

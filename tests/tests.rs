@@ -9,6 +9,9 @@ mod atmosphere;
 mod beyond_voigt;
 /// The command line.
 mod cli;
+/// Fuzzing: property tests over the readers, a mutation fuzz of the shipped scenes through the
+/// binary (issue 11, item 4).
+mod fuzz;
 /// Output written whole or not at all; CSV quoting.
 mod output;
 /// Particles: Mie, size distributions, phase-function tables and sampling.

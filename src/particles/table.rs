@@ -74,12 +74,15 @@ impl PhaseTable {
         }
         for key in REQUIRED_KEYS {
             if !meta.iter().any(|(k, _)| k == key) {
-                return Err(InputError::file(
-                    path,
-                    format!(
-                        "missing metadata line `# {key} = ...` (write `none` if it does not apply)"
-                    ),
-                ));
+                return Err(InputError {
+                    field: Some(key.to_string()),
+                    ..InputError::file(
+                        path,
+                        format!(
+                            "missing metadata line `# {key} = ...` (write `none` if it does not apply)"
+                        ),
+                    )
+                });
             }
         }
         if let Some((_, v)) = meta.iter().find(|(k, _)| k == "wavelength_nm")
@@ -91,8 +94,10 @@ impl PhaseTable {
         }
         let t = CsvTable::parse(path, text)?;
         if t.header() != ["theta_deg", "phase_4pi"] {
-            return Err(InputError::file(
+            return Err(InputError::at(
                 path,
+                t.header_line(),
+                "header",
                 format!(
                     "header must be `theta_deg,phase_4pi`, found `{}`",
                     t.header().join(",")
@@ -243,6 +248,16 @@ mod tests {
         let text = iso(3).to_text().replace("# distribution = none\n", "");
         let e = PhaseTable::parse(Path::new("p.txt"), &text).unwrap_err();
         assert!(e.message.contains("distribution"), "{e}");
+        assert_eq!(e.field.as_deref(), Some("distribution"));
+
+        // A wrong header is named at its line.
+        let text = iso(3)
+            .to_text()
+            .replace("theta_deg,phase_4pi", "theta,phase_4pi");
+        let e = PhaseTable::parse(Path::new("p.txt"), &text).unwrap_err();
+        let header_line = text.lines().position(|l| l.starts_with("theta,")).unwrap() + 1;
+        assert_eq!(e.line, Some(header_line), "{e}");
+        assert_eq!(e.field.as_deref(), Some("header"));
 
         let text = iso(3).to_text().replace("\n90,", "\n190,");
         let e = PhaseTable::parse(Path::new("p.txt"), &text).unwrap_err();

@@ -26,6 +26,9 @@
 //!   measurements of 1 and of N shot pairs, and the mean of the N-shot ones (so the bias that
 //!   noise itself brings through the logarithm shows). Realisations whose signal is not
 //!   positive cannot be retrieved; if more than 10 % of them fail the simulated figures are NaN.
+//!
+//! A product from Monte Carlo returns with no photon scored in one of its windows (too few
+//! photons) has NaN estimates. `retrieval.csv` writes every such NaN as an empty field.
 
 use std::ops::Range;
 
@@ -146,31 +149,40 @@ impl Product {
         self.retrieved - self.truth
     }
 
-    /// The row of `retrieval.csv` (no newline).
+    /// The row of `retrieval.csv` (no newline). A value that cannot be computed (NaN or
+    /// infinite: Monte Carlo returns with no photon scored in a window, simulated figures when
+    /// too many realisations fail) is an empty field, never `NaN` or `inf`.
     pub fn csv_row(&self) -> String {
+        let v = |x: f64| -> String {
+            if x.is_finite() {
+                x.to_string()
+            } else {
+                String::new()
+            }
+        };
         format!(
             "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
             self.method.label(),
             self.source.label(),
             self.order.label(),
             crate::output::csv_field(&self.channel_pair),
-            self.fov_full_angle_mrad,
-            self.range_m.0,
-            self.range_m.1,
-            self.altitude_m.0,
-            self.altitude_m.1,
+            v(self.fov_full_angle_mrad),
+            v(self.range_m.0),
+            v(self.range_m.1),
+            v(self.altitude_m.0),
+            v(self.altitude_m.1),
             self.quantity.label(),
             self.quantity.unit(),
-            self.truth,
-            self.retrieved,
-            self.bias(),
-            self.mc_stderr,
-            self.random_error_per_shot_pair,
-            self.random_error_averaged,
+            v(self.truth),
+            v(self.retrieved),
+            v(self.bias()),
+            v(self.mc_stderr),
+            v(self.random_error_per_shot_pair),
+            v(self.random_error_averaged),
             self.shots_averaged,
-            self.simulated_error_per_shot_pair,
-            self.simulated_error_averaged,
-            self.simulated_mean_averaged - self.truth,
+            v(self.simulated_error_per_shot_pair),
+            v(self.simulated_error_averaged),
+            v(self.simulated_mean_averaged - self.truth),
         )
     }
 }
@@ -488,31 +500,23 @@ impl Retrieval {
                 var_ind += 0.25 * ind;
                 var_mc += 0.25 * (ind - 2.0 * cov(w) / (p_on * p_off));
             }
-            if let Some(w) = no_signal
-                && signals.source == Source::Analytic
-            {
-                return Err(RetrievalError::NoSignal {
-                    dial: t.method == Method::Dial,
-                    message: format!(
-                        "no {} signal in the gates around {:.0} m: SNR ≤ 0",
-                        if ipda { "hard-target" } else { "atmospheric" },
-                        self.range_m[w.start]
-                    ),
-                });
-            }
-            let (retrieved, slope) = self.value(t, d);
             // Analytic random error per shot pair.
             let mut var_shot = 0.0;
+            // A window whose SNR is so small (a signal of 1e-300 photo-electrons) that 1/SNR²
+            // overflows carries no more usable signal than one with none.
+            let mut weak = None;
             for line_windows in &expected {
                 let mut jitter = 0.0;
                 for (k, id) in ids.iter().enumerate() {
                     let w = &line_windows[*id];
                     let snr = w.noise.snr();
-                    var_shot += if snr > 0.0 {
-                        1.0 / (snr * snr)
+                    let inv = 1.0 / (snr * snr);
+                    if inv.is_finite() {
+                        var_shot += inv;
                     } else {
-                        f64::INFINITY
-                    };
+                        var_shot = f64::INFINITY;
+                        weak.get_or_insert((t.windows[k].clone(), snr));
+                    }
                     jitter += sign(k) * w.jitter_relative(self.laser.frequency_jitter_rms_mhz);
                 }
                 var_shot += jitter * jitter;
@@ -520,6 +524,28 @@ impl Retrieval {
                     var_shot += self.laser.energy_monitor_error_fraction.powi(2);
                 }
             }
+            let what = if ipda { "hard-target" } else { "atmospheric" };
+            let refusal = match (no_signal, weak) {
+                (Some(w), _) => Some(format!(
+                    "no {what} signal in the gates around {:.0} m: SNR ≤ 0",
+                    self.range_m[w.start]
+                )),
+                (None, Some((w, snr))) => Some(format!(
+                    "no usable {what} signal in the gates around {:.0} m: SNR {snr:.1e} is too \
+                     small for a random error",
+                    self.range_m[w.start]
+                )),
+                (None, None) => None,
+            };
+            if let Some(message) = refusal
+                && signals.source == Source::Analytic
+            {
+                return Err(RetrievalError::NoSignal {
+                    dial: t.method == Method::Dial,
+                    message,
+                });
+            }
+            let (retrieved, slope) = self.value(t, d);
             let sd_shot = 0.5 * var_shot.sqrt() * slope.abs();
             // Simulated: the same retrieval of every noisy measurement, of N and of 1 shot pair.
             let retrieve_sim = |m: &Measurement| -> f64 {

@@ -426,13 +426,21 @@ pub(super) fn non_finite_value(path: &Path, text: &str) -> Result<(), InputError
 
 /// Turn a TOML/serde error into an [`InputError`] with the line and the key.
 pub(super) fn toml_error(path: &Path, text: &str, e: &toml::de::Error) -> InputError {
-    let message = e.message().trim().to_string();
+    // One line: serde adds the inner key of an inline table on a line of its own
+    // ("unknown variant `x`, expected …\nin `kind`").
+    let message = e
+        .message()
+        .lines()
+        .map(str::trim)
+        .filter(|l| !l.is_empty())
+        .collect::<Vec<_>>()
+        .join(" ");
     let line = e
         .span()
         .map(|s| text[..s.start.min(text.len())].matches('\n').count() + 1);
     // The key: quoted in messages about unknown or missing fields, otherwise the key of the
-    // line the span starts on.
-    let quoted = ["unknown field `", "missing field `", "unknown variant `"]
+    // line the span starts on (an unknown variant quotes the value, not the key).
+    let quoted = ["unknown field `", "missing field `"]
         .iter()
         .find_map(|p| message.split(p).nth(1).and_then(|r| r.split('`').next()))
         .map(str::to_string);
