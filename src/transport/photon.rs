@@ -212,7 +212,7 @@ impl<'a> Tracer<'a> {
                 };
             }
             let p_collide = self.cls_p[0];
-            // Probability that some class collides, averaged over the classes (one class: its own).
+            // ΣP_c over the classes (one class: its own P); its mean decides the surface branch.
             let p_any: f64 = self.cls_p[..ncls].iter().sum();
             let scatters = self.cls_tau[..ncls].iter().any(|t| *t > 0.0);
             // Per-channel extinction to the end of the flight (into tmp), only where needed.
