@@ -145,7 +145,7 @@ const WEIDEMAN_A: [f64; 24] = [
     2.197_858_936_531_541_7,
 ];
 
-/// Weideman's w(z) for Im z ≥ 0 ([`WEIDEMAN_A`]).
+/// Weideman's w(z) for Im z ≥ 0 (the N = 24 series above).
 #[inline]
 pub fn w_weideman(z: Complex64) -> Complex64 {
     w_weideman_lanes([z])[0]
