@@ -43,9 +43,13 @@ fn require(t: &CsvTable, names: &[&str]) -> Result<usize, InputError> {
     find(t, names).ok_or_else(|| {
         let missing = names.join("` or `");
         t.column(names[0])
-            .map_err(|e| InputError {
-                message: format!("missing column `{missing}` ({})", e.message),
-                ..e
+            .map_err(|e| {
+                // `column`'s message is "missing column (the header has: …)": name them instead.
+                let message = match e.message.strip_prefix("missing column") {
+                    Some(rest) => format!("missing column `{missing}`{rest}"),
+                    None => format!("missing column `{missing}` ({})", e.message),
+                };
+                InputError { message, ..e }
             })
             .err()
             .unwrap_or_else(|| InputError::file(t.path(), format!("missing column `{missing}`")))
