@@ -89,7 +89,7 @@ fn run_broken_default_scene(from: &str, to: &str) -> String {
 fn bad_scene_exits_2_naming_file_line_and_key_and_writes_nothing() {
     let stderr = run_broken_default_scene("pulse_energy_j = 0.03", "pulse_energy_j = -1");
     assert!(
-        stderr.contains("`laser.pulse_energy_j`: -1 must lie in (0, 1000]"),
+        stderr.contains("`laser.pulse_energy_j`: -1 must lie in [1e-15, 1000]"),
         "{stderr}"
     );
 }

@@ -96,7 +96,7 @@ const CASES: &[(&str, &str, &str, usize, &str, &str)] = &[
         "pulse_energy_j = -0.1",
         5,
         "lidar.pulse_energy_j",
-        "must lie in (0,",
+        "must lie in [1e-15, 1000]",
     ),
     (
         "zenith out of range",

@@ -16,16 +16,19 @@ pub(super) const ALTITUDE_KM: Bounds = Bounds::closed(-10.0, 1e5);
 pub(super) const ZENITH_DEG: Bounds = Bounds::closed(0.0, 180.0);
 /// Azimuth of the pointing \[deg\].
 pub(super) const AZIMUTH_DEG: Bounds = Bounds::closed(-360.0, 360.0);
-/// Pulse energy \[J\].
-pub(super) const PULSE_ENERGY_J: Bounds = Bounds::positive(1e3);
+/// Pulse energy \[J\]: from a femtojoule (a million times below the microjoule pulses of
+/// photon-counting lidars; smaller pulses would only give energies near the end of the double
+/// range, subnormal, with meaningless error bars) to a kilojoule.
+pub(super) const PULSE_ENERGY_J: Bounds = Bounds::closed(1e-15, 1e3);
 /// Full divergence angle of the beam \[mrad\]: a lidar beam, not a lamp.
 pub(super) const DIVERGENCE_MRAD: Bounds = Bounds::below(0.0, 1000.0);
 /// Full angle of a field of view \[mrad\].
 pub(super) const FOV_MRAD: Bounds = Bounds::open(0.0, 1000.0);
-/// Telescope diameter \[m\].
-pub(super) const TELESCOPE_DIAMETER_M: Bounds = Bounds::positive(100.0);
-/// Efficiencies and transmissions that must pass some light: (0, 1].
-pub(super) const EFFICIENCY: Bounds = Bounds::positive(1.0);
+/// Telescope diameter \[m\]: from 0.1 mm.
+pub(super) const TELESCOPE_DIAMETER_M: Bounds = Bounds::closed(1e-4, 100.0);
+/// Efficiencies and transmissions that must pass some light: [1e-9, 1] (any real optics passes
+/// more than a billionth; below, energies again reach the subnormal range).
+pub(super) const EFFICIENCY: Bounds = Bounds::closed(1e-9, 1.0);
 /// Fractions, albedos, single-scattering albedos, reflectances: [0, 1].
 pub(super) const FRACTION: Bounds = Bounds::closed(0.0, 1.0);
 /// Vacuum wavelength of a channel \[nm\] (100 nm to 100 µm).
