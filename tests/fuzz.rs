@@ -350,6 +350,19 @@ fn replace(text: &[u8], (a, z): (usize, usize), with: &[u8]) -> Vec<u8> {
     out
 }
 
+/// `text` with the number at `t` replaced by `v`; in a fixed-width HITRAN record, right-aligned
+/// and cut to the field's width so that the other fields stay in place.
+fn put_number(text: &[u8], t: (usize, usize), v: &str, format: Format) -> Vec<u8> {
+    if format == Format::Par {
+        let w = t.1 - t.0;
+        let mut s = format!("{v:>w$}");
+        s.truncate(w);
+        replace(text, t, s.as_bytes())
+    } else {
+        replace(text, t, v.as_bytes())
+    }
+}
+
 /// The number at `token` scaled, negated or nudged (choice `b`), as the text of the same kind
 /// (an integer stays an integer).
 fn scaled(token: &[u8], b: u64) -> String {
@@ -399,14 +412,7 @@ fn mutate_once(text: &[u8], format: Format, m: Mutation) -> Vec<u8> {
                 return text.to_vec();
             };
             let v = SPECIALS[(m.b % SPECIALS.len() as u64) as usize];
-            if format == Format::Par {
-                let w = t.1 - t.0;
-                let mut s = format!("{v:>w$}");
-                s.truncate(w);
-                replace(text, t, s.as_bytes())
-            } else {
-                replace(text, t, v.as_bytes())
-            }
+            put_number(text, t, v, format)
         }
         // A number scaled by a power of ten, negated or nudged.
         1 => {
@@ -414,14 +420,7 @@ fn mutate_once(text: &[u8], format: Format, m: Mutation) -> Vec<u8> {
                 return text.to_vec();
             };
             let v = scaled(&text[t.0..t.1], m.b);
-            if format == Format::Par {
-                let w = t.1 - t.0;
-                let mut s = format!("{v:>w$}");
-                s.truncate(w);
-                replace(text, t, s.as_bytes())
-            } else {
-                replace(text, t, v.as_bytes())
-            }
+            put_number(text, t, &v, format)
         }
         // One digit of a number changed.
         2 => {
