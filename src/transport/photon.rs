@@ -380,18 +380,8 @@ impl<'a> Tracer<'a> {
                     (s.class_tau_at(0, pos.z) - self.ts[0]).abs() / mu.abs()
                 };
                 for k in 0..nch {
-                    let (ts_new, ta_new) = atm.cumulative_tau(pos.z, k);
-                    let (dts, dta) = if horizontal {
-                        (
-                            atm.sigma_s_per_m[i + k] * s_coll,
-                            atm.sigma_a_per_m[i + k] * s_coll,
-                        )
-                    } else {
-                        (
-                            (ts_new - self.ts[k]).abs() / mu.abs(),
-                            (ta_new - self.ta[k]).abs() / mu.abs(),
-                        )
-                    };
+                    let (ts_new, ta_new, dts, dta) =
+                        self.channel_step(k, pos.z, mu, horizontal, s_coll, i + k);
                     let mut f = collide_factor;
                     if dta > 0.0 {
                         f *= (-dta).exp();
@@ -605,16 +595,8 @@ impl<'a> Tracer<'a> {
             return false;
         }
         for k in 0..nch {
-            let (ts_new, ta_new) = atm.cumulative_tau(pos.z, k);
             let i = layer * nch + k;
-            let (dts, dta) = if horizontal {
-                (atm.sigma_s_per_m[i] * s_coll, atm.sigma_a_per_m[i] * s_coll)
-            } else {
-                (
-                    (ts_new - self.ts[k]).abs() / mu.abs(),
-                    (ta_new - self.ta[k]).abs() / mu.abs(),
-                )
-            };
+            let (ts_new, ta_new, dts, dta) = self.channel_step(k, pos.z, mu, horizontal, s_coll, i);
             let sigma_k = atm.sigma_s_per_m[i];
             // σ_k = 0: this channel cannot scatter here (and e^{τ_min − τ_k} may be huge).
             self.w[k] *= if sigma_k > 0.0 && in_layers {
@@ -626,6 +608,32 @@ impl<'a> Tracer<'a> {
             self.ta[k] = ta_new;
         }
         true
+    }
+
+    /// Channel k over a flight of length `s_coll` ending at altitude z (index `i` of its layer
+    /// and channel): the cumulative scattering and absorption optical depths there, and the
+    /// flight's scattering and absorption optical depths.
+    #[inline]
+    fn channel_step(
+        &self,
+        k: usize,
+        z: f64,
+        mu: f64,
+        horizontal: bool,
+        s_coll: f64,
+        i: usize,
+    ) -> (f64, f64, f64, f64) {
+        let atm = self.s.atm;
+        let (ts_new, ta_new) = atm.cumulative_tau(z, k);
+        let (dts, dta) = if horizontal {
+            (atm.sigma_s_per_m[i] * s_coll, atm.sigma_a_per_m[i] * s_coll)
+        } else {
+            (
+                (ts_new - self.ts[k]).abs() / mu.abs(),
+                (ta_new - self.ta[k]).abs() / mu.abs(),
+            )
+        };
+        (ts_new, ta_new, dts, dta)
     }
 
     /// Russian roulette on the largest channel weight; false if the photon dies.
