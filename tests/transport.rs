@@ -341,6 +341,39 @@ fn identical_results_at_one_and_two_threads() {
     assert_eq!(a.stats, b.stats);
 }
 
+/// Batches traced one by one in any order (as shards or ranks would) and folded in batch order
+/// give the run's numbers bit for bit; a fold refuses a batch out of order or an incomplete run.
+#[test]
+fn batches_traced_apart_and_folded_in_order_equal_the_run() {
+    let scene = scene_text(TWO_CHANNELS);
+    let atm = OpticalAtmosphere::build(&scene).expect("optics");
+    let mut opts = TransportOptions::from_scene(&scene);
+    opts.photons = 4_000;
+    opts.batches = 8;
+    opts.flux_tally = true;
+    let whole = transport::run(&scene, &atm, &opts).expect("transport");
+    let plan = transport::Plan::new(&scene, &atm, &opts).expect("plan");
+    let mut tallies: Vec<_> = (0..plan.batches())
+        .rev()
+        .map(|b| plan.trace_batch(b))
+        .collect();
+    tallies.reverse();
+    let mut fold = plan.fold();
+    assert!(
+        fold.add(tallies[1].clone()).is_err(),
+        "batch 1 before batch 0"
+    );
+    for t in tallies {
+        fold.add(t).expect("in order");
+    }
+    let parts = fold.finish(0.0, 1).expect("all batches");
+    assert_eq!(parts.returns, whole.returns);
+    assert_eq!(parts.flux, whole.flux);
+    assert_eq!(parts.flux_stderr, whole.flux_stderr);
+    assert_eq!(parts.stats, whole.stats);
+    assert!(plan.fold().finish(0.0, 1).is_err(), "no batch folded");
+}
+
 /// A cloud 300 m thick whose extinction differs 2500-fold between two channels: optical depth
 /// 750 in one, 0.3 in the other.
 const DISPARATE_PAIR: &str = r#"

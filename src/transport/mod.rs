@@ -380,155 +380,331 @@ impl Setup<'_> {
     }
 }
 
+/// One batch's raw tallies, before normalisation: what a shard stores and a rank sends. Folding
+/// these in batch order ([`Fold`]) gives the same numbers however they were computed.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BatchTally {
+    /// Batch index, 0-based.
+    pub index: usize,
+    /// Annulus × exact-order bins (gate × order bin × annulus × channel, channel fastest), in
+    /// units of weight × geometric factor per photon of the batch, summed.
+    pub bins: Vec<f64>,
+    /// Flux tally of the batch (zeros unless asked for), summed weights.
+    pub flux: Flux,
+    /// Counters of the batch.
+    pub stats: RunStats,
+}
+
+/// A validated transport run, ready to trace any of its batches: the read-only set-up shared by
+/// all batches plus what is needed to fold them. [`run`] is `Plan::new`, every batch in parallel,
+/// and a [`Fold`] in batch order; sharded and distributed runs use the same three steps.
+pub struct Plan<'a> {
+    setup: Setup<'a>,
+    fov_order: Vec<usize>,
+    batches: usize,
+    per_batch: u64,
+    seed: u64,
+    threads: usize,
+    progress: bool,
+    /// Energy per photon reaching the detector, per unit weight × geometric factor.
+    scale: f64,
+    flux_scale: f64,
+    combinations: Vec<Combination>,
+    combination_pairs: Vec<(usize, usize)>,
+    channels: Vec<String>,
+    fov_full_angle_mrad: Vec<f64>,
+    range_m: Vec<f64>,
+}
+
+impl<'a> Plan<'a> {
+    /// Check the options against the scene and build the shared set-up.
+    pub fn new(
+        scene: &Scene,
+        atm: &'a OpticalAtmosphere,
+        opts: &TransportOptions,
+    ) -> Result<Self, TransportError> {
+        if opts.batches < 2 || opts.photons < opts.batches as u64 {
+            return Err(TransportError::Options(format!(
+                "{} photons in {} batches: need at least 2 batches and one photon per batch",
+                opts.photons, opts.batches
+            )));
+        }
+        // The limits a scene is validated against, again for options built by hand.
+        use crate::input::check_count;
+        use crate::limits::{
+            MAX_BATCHES, MAX_PHOTONS, MAX_RETURN_BINS, MAX_THREADS, check_product,
+        };
+        check_count(opts.batches as u64, 2, MAX_BATCHES)
+            .and_then(|_| check_count(opts.photons, 1, MAX_PHOTONS))
+            .and_then(|_| check_count(opts.threads as u64, 0, MAX_THREADS))
+            .and_then(|_| check_count(opts.max_order.into(), 1, 1000))
+            .map_err(TransportError::Options)?;
+        let n_series =
+            scene.channels.len() + opts.combinations.len() + opts.combination_pairs.len();
+        check_product(
+            "the returns",
+            &[
+                ("gates", scene.gates.count as u64),
+                (
+                    "fields of view",
+                    scene.lidar.fov_full_angle_mrad.len() as u64,
+                ),
+                ("order bins", u64::from(opts.max_order) + 2),
+                ("channels, combinations and pairs", n_series as u64),
+            ],
+            MAX_RETURN_BINS,
+        )
+        .map_err(TransportError::Options)?;
+        let lidar = &scene.lidar;
+        let nch = scene.channels.len();
+        if let Some(c) = opts
+            .combinations
+            .iter()
+            .find(|c| c.terms.iter().any(|(k, w)| *k >= nch || !w.is_finite()))
+        {
+            return Err(TransportError::Options(format!(
+                "combination `{}` refers to a channel beyond the {nch} channels or has a non-finite coefficient",
+                c.name
+            )));
+        }
+        let n_combos = opts.combinations.len();
+        if let Some((a, b)) = opts
+            .combination_pairs
+            .iter()
+            .find(|(a, b)| !(a < b && *b < n_combos))
+        {
+            return Err(TransportError::Options(format!(
+                "combination pair ({a}, {b}) is not two distinct combinations of the {n_combos}"
+            )));
+        }
+        let axis = lidar.axis();
+        let (axis_e1, axis_e2) = axis.any_orthonormal_pair();
+        let receiver = DVec3::new(0.0, 0.0, lidar.altitude_m);
+
+        // FOV annuli: narrowest first.
+        let mut fov_order: Vec<usize> = (0..lidar.fov_full_angle_mrad.len()).collect();
+        fov_order.sort_by(|a, b| {
+            lidar.fov_full_angle_mrad[*a].total_cmp(&lidar.fov_full_angle_mrad[*b])
+        });
+        let fov_cos: Vec<f64> = fov_order
+            .iter()
+            .map(|i| (0.5e-3 * lidar.fov_full_angle_mrad[*i]).cos())
+            .collect();
+
+        let shape = TallyShape {
+            n_gates: scene.gates.count,
+            n_order_bins: opts.max_order as usize + 1,
+            n_fov: fov_order.len(),
+            n_channels: nch,
+        };
+        let n_layers = atm.n_layers();
+        let widest = fov_cos.last().copied().unwrap_or(1.0);
+        let widest_fov_mrad = lidar
+            .fov_full_angle_mrad
+            .iter()
+            .fold(0.0f64, |m, f| m.max(*f));
+        let setup = Setup {
+            atm,
+            fov_cos_widest_sq: widest * widest,
+            has_layers: atm.n_layers() > 0,
+            bottom_m: atm.bottom_m(),
+            top_m: atm.top_m(),
+            receiver,
+            axis,
+            axis_e1,
+            axis_e2,
+            beam_half_angle_rad: 0.5e-3 * lidar.beam_divergence_full_angle_mrad,
+            beam_profile: lidar.beam_profile,
+            fov_cos,
+            shape,
+            gate_start_m: scene.gates.start_m,
+            gate_width_m: scene.gates.width_m,
+            r_end_m: scene.gates.end_m(),
+            max_order: opts.max_order,
+            surface: scene.surface.as_ref().map(|s| s.albedo.clone()),
+            flux_tally: opts.flux_tally,
+            tau_rx: (0..nch)
+                .map(|k| {
+                    let (s, a) = atm.cumulative_tau(receiver.z, k);
+                    s + a
+                })
+                .collect(),
+            classes: scatter_classes(atm)
+                .into_iter()
+                .map(|k| ScatterClass::of_channel(atm, k))
+                .collect(),
+            ddis_epsilon: opts.ddis_epsilon,
+            ddis_cos: (0.5e-3 * widest_fov_mrad + DDIS_MARGIN_RAD)
+                .min(std::f64::consts::PI)
+                .cos(),
+            forward_peaked: vec![false; n_layers],
+            stratify: opts.range_stratification,
+        };
+        // Which layers get DDIS: a forward-peaked scatterer mixture (in any class).
+        let mut setup = setup;
+        setup.forward_peaked = (0..n_layers)
+            .map(|l| {
+                !atm.components[l].is_empty()
+                    && setup
+                        .classes
+                        .iter()
+                        .any(|c| setup.mixture_phase(l, c.channel, 1.0) > DDIS_FORWARD_PEAK)
+            })
+            .collect();
+        let setup = setup;
+
+        let batches = opts.batches;
+        let per_batch = opts.photons.div_ceil(batches as u64);
+        Ok(Plan {
+            setup,
+            fov_order,
+            batches,
+            per_batch,
+            seed: opts.seed,
+            threads: opts.threads,
+            progress: opts.progress,
+            scale: lidar.pulse_energy_j * lidar.optical_efficiency * lidar.telescope_area_m2()
+                / per_batch as f64,
+            flux_scale: 1.0 / per_batch as f64,
+            combinations: opts.combinations.clone(),
+            combination_pairs: opts.combination_pairs.clone(),
+            channels: scene.channels.iter().map(|c| c.name.clone()).collect(),
+            fov_full_angle_mrad: lidar.fov_full_angle_mrad.clone(),
+            range_m: (0..scene.gates.count)
+                .map(|i| scene.gates.centre_m(i))
+                .collect(),
+        })
+    }
+
+    /// Number of batches.
+    pub fn batches(&self) -> usize {
+        self.batches
+    }
+
+    /// Photons traced per batch.
+    pub fn photons_per_batch(&self) -> u64 {
+        self.per_batch
+    }
+
+    /// Trace batch `index` from its own random stream: the same tallies on any thread, process
+    /// or machine.
+    pub fn trace_batch(&self, index: usize) -> BatchTally {
+        let mut rng = rng::stream(self.seed, Stream::Transport, index);
+        self.trace_batch_with(index, &mut rng)
+    }
+
+    fn trace_batch_with(&self, index: usize, rng: &mut rng::Rng) -> BatchTally {
+        let mut tracer = photon::Tracer::new(&self.setup);
+        for _ in 0..self.per_batch {
+            tracer.trace(rng);
+        }
+        BatchTally {
+            index,
+            bins: tracer.bins,
+            flux: tracer.flux,
+            stats: tracer.stats,
+        }
+    }
+
+    /// An empty fold of this plan's batches.
+    pub fn fold(&self) -> Fold<'_> {
+        Fold {
+            acc: Accumulator::new(self.setup.shape, self.fov_order.clone())
+                .with_combinations(self.combinations.clone(), self.combination_pairs.clone()),
+            plan: self,
+            stats: RunStats::default(),
+            next: 0,
+        }
+    }
+}
+
+/// Batches folded in order into running means and second moments.
+pub struct Fold<'p> {
+    plan: &'p Plan<'p>,
+    acc: Accumulator,
+    stats: RunStats,
+    next: usize,
+}
+
+impl Fold<'_> {
+    /// Index of the batch expected next.
+    pub fn next_index(&self) -> usize {
+        self.next
+    }
+
+    /// Fold the next batch. Batches must come in order, each once, with this plan's shape.
+    pub fn add(&mut self, mut batch: BatchTally) -> Result<(), TransportError> {
+        let shape = self.plan.setup.shape;
+        let n = shape.n_channels;
+        if batch.index != self.next {
+            return Err(TransportError::Options(format!(
+                "batch {} folded where batch {} was expected",
+                batch.index, self.next
+            )));
+        }
+        if batch.bins.len() != shape.len() || batch.flux.parts().iter().any(|p| p.len() != n) {
+            return Err(TransportError::Options(format!(
+                "batch {} has {} bins where the run has {}",
+                batch.index,
+                batch.bins.len(),
+                shape.len()
+            )));
+        }
+        let (scale, flux_scale) = (self.plan.scale, self.plan.flux_scale);
+        batch.bins.iter_mut().for_each(|v| *v *= scale);
+        for part in batch.flux.parts_mut() {
+            part.iter_mut().for_each(|v| *v *= flux_scale);
+        }
+        self.acc.add_batch(&batch.bins, &batch.flux);
+        self.stats.add(&batch.stats);
+        self.next += 1;
+        Ok(())
+    }
+
+    /// Means and standard errors once every batch is in; `wall_s` and `threads` describe how
+    /// the batches were computed.
+    pub fn finish(self, wall_s: f64, threads: usize) -> Result<McResult, TransportError> {
+        let plan = self.plan;
+        if self.next != plan.batches {
+            return Err(TransportError::Options(format!(
+                "{} of {} batches folded",
+                self.next, plan.batches
+            )));
+        }
+        let (returns, flux, flux_stderr, combined) = self.acc.finish(
+            plan.channels.clone(),
+            plan.fov_full_angle_mrad.clone(),
+            plan.range_m.clone(),
+        );
+        Ok(McResult {
+            returns,
+            combined,
+            flux,
+            flux_stderr,
+            stats: self.stats,
+            wall_s,
+            photons: plan.per_batch * plan.batches as u64,
+            threads,
+        })
+    }
+}
+
 /// Run the Monte Carlo transport of a scene through its optical atmosphere.
 pub fn run(
     scene: &Scene,
     atm: &OpticalAtmosphere,
     opts: &TransportOptions,
 ) -> Result<McResult, TransportError> {
-    if opts.batches < 2 || opts.photons < opts.batches as u64 {
-        return Err(TransportError::Options(format!(
-            "{} photons in {} batches: need at least 2 batches and one photon per batch",
-            opts.photons, opts.batches
-        )));
-    }
-    // The limits a scene is validated against, again for options built by hand.
-    use crate::input::check_count;
-    use crate::limits::{MAX_BATCHES, MAX_PHOTONS, MAX_RETURN_BINS, MAX_THREADS, check_product};
-    check_count(opts.batches as u64, 2, MAX_BATCHES)
-        .and_then(|_| check_count(opts.photons, 1, MAX_PHOTONS))
-        .and_then(|_| check_count(opts.threads as u64, 0, MAX_THREADS))
-        .and_then(|_| check_count(opts.max_order.into(), 1, 1000))
-        .map_err(TransportError::Options)?;
-    let n_series = scene.channels.len() + opts.combinations.len() + opts.combination_pairs.len();
-    check_product(
-        "the returns",
-        &[
-            ("gates", scene.gates.count as u64),
-            (
-                "fields of view",
-                scene.lidar.fov_full_angle_mrad.len() as u64,
-            ),
-            ("order bins", u64::from(opts.max_order) + 2),
-            ("channels, combinations and pairs", n_series as u64),
-        ],
-        MAX_RETURN_BINS,
-    )
-    .map_err(TransportError::Options)?;
-    let lidar = &scene.lidar;
-    let nch = scene.channels.len();
-    if let Some(c) = opts
-        .combinations
-        .iter()
-        .find(|c| c.terms.iter().any(|(k, w)| *k >= nch || !w.is_finite()))
-    {
-        return Err(TransportError::Options(format!(
-            "combination `{}` refers to a channel beyond the {nch} channels or has a non-finite coefficient",
-            c.name
-        )));
-    }
-    let n_combos = opts.combinations.len();
-    if let Some((a, b)) = opts
-        .combination_pairs
-        .iter()
-        .find(|(a, b)| !(a < b && *b < n_combos))
-    {
-        return Err(TransportError::Options(format!(
-            "combination pair ({a}, {b}) is not two distinct combinations of the {n_combos}"
-        )));
-    }
-    let axis = lidar.axis();
-    let (axis_e1, axis_e2) = axis.any_orthonormal_pair();
-    let receiver = DVec3::new(0.0, 0.0, lidar.altitude_m);
-
-    // FOV annuli: narrowest first.
-    let mut fov_order: Vec<usize> = (0..lidar.fov_full_angle_mrad.len()).collect();
-    fov_order
-        .sort_by(|a, b| lidar.fov_full_angle_mrad[*a].total_cmp(&lidar.fov_full_angle_mrad[*b]));
-    let fov_cos: Vec<f64> = fov_order
-        .iter()
-        .map(|i| (0.5e-3 * lidar.fov_full_angle_mrad[*i]).cos())
-        .collect();
-
-    let shape = TallyShape {
-        n_gates: scene.gates.count,
-        n_order_bins: opts.max_order as usize + 1,
-        n_fov: fov_order.len(),
-        n_channels: nch,
-    };
-    let n_layers = atm.n_layers();
-    let widest = fov_cos.last().copied().unwrap_or(1.0);
-    let widest_fov_mrad = lidar
-        .fov_full_angle_mrad
-        .iter()
-        .fold(0.0f64, |m, f| m.max(*f));
-    let setup = Setup {
-        atm,
-        fov_cos_widest_sq: widest * widest,
-        has_layers: atm.n_layers() > 0,
-        bottom_m: atm.bottom_m(),
-        top_m: atm.top_m(),
-        receiver,
-        axis,
-        axis_e1,
-        axis_e2,
-        beam_half_angle_rad: 0.5e-3 * lidar.beam_divergence_full_angle_mrad,
-        beam_profile: lidar.beam_profile,
-        fov_cos,
-        shape,
-        gate_start_m: scene.gates.start_m,
-        gate_width_m: scene.gates.width_m,
-        r_end_m: scene.gates.end_m(),
-        max_order: opts.max_order,
-        surface: scene.surface.as_ref().map(|s| s.albedo.clone()),
-        flux_tally: opts.flux_tally,
-        tau_rx: (0..nch)
-            .map(|k| {
-                let (s, a) = atm.cumulative_tau(receiver.z, k);
-                s + a
-            })
-            .collect(),
-        classes: scatter_classes(atm)
-            .into_iter()
-            .map(|k| ScatterClass::of_channel(atm, k))
-            .collect(),
-        ddis_epsilon: opts.ddis_epsilon,
-        ddis_cos: (0.5e-3 * widest_fov_mrad + DDIS_MARGIN_RAD)
-            .min(std::f64::consts::PI)
-            .cos(),
-        forward_peaked: vec![false; n_layers],
-        stratify: opts.range_stratification,
-    };
-    // Which layers get DDIS: a forward-peaked scatterer mixture (in any class).
-    let mut setup = setup;
-    setup.forward_peaked = (0..n_layers)
-        .map(|l| {
-            !atm.components[l].is_empty()
-                && setup
-                    .classes
-                    .iter()
-                    .any(|c| setup.mixture_phase(l, c.channel, 1.0) > DDIS_FORWARD_PEAK)
-        })
-        .collect();
-    let setup = setup;
-
-    let batches = opts.batches;
-    let per_batch = opts.photons.div_ceil(batches as u64);
-    let streams = rng::streams(opts.seed, Stream::Transport, batches);
-    // Energy per photon reaching the detector, per unit weight × geometric factor.
-    let scale = lidar.pulse_energy_j * lidar.optical_efficiency * lidar.telescope_area_m2()
-        / per_batch as f64;
-    let flux_scale = 1.0 / per_batch as f64;
-
+    let plan = Plan::new(scene, atm, opts)?;
+    let batches = plan.batches;
+    let streams = rng::streams(plan.seed, Stream::Transport, batches);
     let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(opts.threads)
+        .num_threads(plan.threads)
         .build()
-        .map_err(|e| TransportError::Threads(opts.threads, e.to_string()))?;
+        .map_err(|e| TransportError::Threads(plan.threads, e.to_string()))?;
     let threads = pool.current_num_threads();
 
-    let mut acc = Accumulator::new(shape, fov_order)
-        .with_combinations(opts.combinations.clone(), opts.combination_pairs.clone());
-    let mut stats = RunStats::default();
+    let mut fold = plan.fold();
     let started = Instant::now();
     let bar = indicatif::ProgressBar::hidden();
     bar.set_length(batches as u64);
@@ -538,42 +714,28 @@ pub fn run(
         )
         .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
     );
-    let show_bar = opts.progress && std::io::stderr().is_terminal();
+    let show_bar = plan.progress && std::io::stderr().is_terminal();
 
     // Chunks keep at most a few batch buffers alive, and no more than the memory limit allows;
     // their size does not change the numbers.
     let chunk = (4 * threads)
-        .min(crate::limits::MAX_LIVE_TALLY_VALUES / shape.len().max(1))
+        .min(crate::limits::MAX_LIVE_TALLY_VALUES / plan.setup.shape.len().max(1))
         .max(1);
     let mut start = 0;
     while start < batches {
         let end = (start + chunk).min(batches);
-        let results: Vec<(Vec<f64>, Flux, RunStats)> = pool.install(|| {
+        let results: Vec<BatchTally> = pool.install(|| {
             (start..end)
                 .into_par_iter()
                 .map(|b| {
-                    let mut rng = streams[b].clone();
-                    let mut tracer = photon::Tracer::new(&setup);
-                    for _ in 0..per_batch {
-                        tracer.trace(&mut rng);
-                    }
+                    let t = plan.trace_batch_with(b, &mut streams[b].clone());
                     bar.inc(1);
-                    (tracer.bins, tracer.flux, tracer.stats)
+                    t
                 })
                 .collect()
         });
-        for (mut bins, mut flux, st) in results {
-            bins.iter_mut().for_each(|v| *v *= scale);
-            for part in [
-                &mut flux.up,
-                &mut flux.down,
-                &mut flux.absorbed,
-                &mut flux.cut,
-            ] {
-                part.iter_mut().for_each(|v| *v *= flux_scale);
-            }
-            acc.add_batch(&bins, &flux);
-            stats.add(&st);
+        for t in results {
+            fold.add(t)?;
         }
         if show_bar && bar.is_hidden() && started.elapsed() > Duration::from_secs(1) {
             bar.set_draw_target(indicatif::ProgressDrawTarget::stderr());
@@ -581,24 +743,5 @@ pub fn run(
         start = end;
     }
     bar.finish_and_clear();
-    let wall_s = started.elapsed().as_secs_f64();
-
-    let range_m = (0..scene.gates.count)
-        .map(|i| scene.gates.centre_m(i))
-        .collect();
-    let (returns, flux, flux_stderr, combined) = acc.finish(
-        scene.channels.iter().map(|c| c.name.clone()).collect(),
-        lidar.fov_full_angle_mrad.clone(),
-        range_m,
-    );
-    Ok(McResult {
-        returns,
-        combined,
-        flux,
-        flux_stderr,
-        stats,
-        wall_s,
-        photons: per_batch * batches as u64,
-        threads,
-    })
+    fold.finish(started.elapsed().as_secs_f64(), threads)
 }

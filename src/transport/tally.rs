@@ -56,11 +56,11 @@ impl Flux {
         }
     }
 
-    fn parts(&self) -> [&Vec<f64>; 4] {
+    pub(crate) fn parts(&self) -> [&Vec<f64>; 4] {
         [&self.up, &self.down, &self.absorbed, &self.cut]
     }
 
-    fn parts_mut(&mut self) -> [&mut Vec<f64>; 4] {
+    pub(crate) fn parts_mut(&mut self) -> [&mut Vec<f64>; 4] {
         [
             &mut self.up,
             &mut self.down,
