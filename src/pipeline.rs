@@ -84,6 +84,17 @@ pub enum RunError {
 /// analytic lidar equation only). Its `combinations` and `combination_pairs` are set here from
 /// the scene's laser.
 pub fn run(scene: &Scene, transport: &TransportOptions) -> Result<RunOutput, RunError> {
+    run_with(scene, transport, &mut |plan| transport::run_plan(plan))
+}
+
+/// [`run`], with the Monte Carlo's batches computed by `monte_carlo` from the validated plan:
+/// all on this machine's threads ([`transport::run_plan`]), folded from shard files, or spread
+/// over MPI ranks. Everything before and after the transport is the same.
+pub fn run_with(
+    scene: &Scene,
+    transport: &TransportOptions,
+    monte_carlo: &mut dyn FnMut(&transport::Plan) -> Result<McResult, TransportError>,
+) -> Result<RunOutput, RunError> {
     let atmosphere = OpticalAtmosphere::build(scene)?;
     let analytic = lidar_eq::single_scatter(scene, &atmosphere);
     let analytic_lines = scene.sampling.combine(&analytic);
@@ -106,7 +117,7 @@ pub fn run(scene: &Scene, transport: &TransportOptions) -> Result<RunOutput, Run
         let mut opts = transport.clone();
         opts.combinations = scene.sampling.combinations();
         opts.combination_pairs = scene.sampling.covariance_pairs();
-        let mc = transport::run(scene, &atmosphere, &opts)?;
+        let mc = monte_carlo(&transport::Plan::new(scene, &atmosphere, &opts)?)?;
         let lines = mc.combined.as_ref().map(|c| scene.sampling.split(c));
         (Some(mc), lines)
     } else {

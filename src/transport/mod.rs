@@ -695,7 +695,11 @@ pub fn run(
     atm: &OpticalAtmosphere,
     opts: &TransportOptions,
 ) -> Result<McResult, TransportError> {
-    let plan = Plan::new(scene, atm, opts)?;
+    run_plan(&Plan::new(scene, atm, opts)?)
+}
+
+/// Trace every batch of a plan on its thread pool and fold them in order.
+pub fn run_plan(plan: &Plan) -> Result<McResult, TransportError> {
     let batches = plan.batches;
     let streams = rng::streams(plan.seed, Stream::Transport, batches);
     let pool = rayon::ThreadPoolBuilder::new()
