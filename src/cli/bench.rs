@@ -48,12 +48,28 @@ pub struct Args {
     /// Probability of drawing the first collision uniformly in range (0: off).
     #[arg(long, default_value_t = lidarsim::transport::RANGE_STRATIFICATION, allow_negative_numbers = true, value_parser = super::real(Bounds::below(0.0, 1.0)))]
     pub range_stratification: f64,
+    /// Score orders ≥ 2 with the cone estimate (false: ordinary local estimates only).
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    pub cone_estimate: bool,
     /// Write the figures as JSON here as well.
     #[arg(long)]
     pub json: Option<PathBuf>,
     /// Instead of the transport: time the clear-sky ensemble study with N profiles per class.
     #[arg(long, value_name = "N", allow_negative_numbers = true, value_parser = super::count_usize(1, lidarsim::limits::MAX_ENSEMBLE_LEVELS))]
     pub study: Option<usize>,
+    /// Instead: the figure of merit of C.1's multiple scattering at every gate 50–300 m into the
+    /// cloud and FOV 0.5–10 mrad, against the plain local estimate; CSV and PNG into DIR
+    /// (photons and the first thread count of `--threads`).
+    #[arg(long, value_name = "DIR")]
+    pub depth: Option<PathBuf>,
+    /// With `--depth`: the plain estimator's per-photon variance from a long run (a file written
+    /// by `--write-plain`).
+    #[arg(long, value_name = "FILE", requires = "depth")]
+    pub plain: Option<PathBuf>,
+    /// Instead: run the plain local estimate of C.1 with `--photons` (≥ 1e8 to catch its spikes)
+    /// on the largest of `--threads` and write its per-photon variance per gate and FOV.
+    #[arg(long, value_name = "FILE", conflicts_with = "depth")]
+    pub write_plain: Option<PathBuf>,
 }
 
 const STUDY_SCENE: &str = include_str!("../../scenes/study_co2_ipda.toml");
@@ -161,6 +177,43 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(n) = args.study {
         return study_bench(n, &args);
     }
+    let first_threads = args.threads.first().copied().unwrap_or(1);
+    if let Some(dir) = &args.depth {
+        return super::bench_depth::run(
+            dir,
+            args.photons,
+            first_threads,
+            args.repeat,
+            args.seed,
+            args.plain.as_ref(),
+            |o| {
+                o.ddis_epsilon = args.ddis_epsilon;
+                o.range_stratification = args.range_stratification;
+                o.cone_estimate = args.cone_estimate;
+            },
+        );
+    }
+    if let Some(path) = &args.write_plain {
+        use super::bench_depth as d;
+        let mut scene = d::scene()?;
+        scene.simulation.photons = args.photons;
+        scene.simulation.seed = args.seed;
+        let atm = OpticalAtmosphere::build(&scene)?;
+        let threads = args.threads.iter().copied().max().unwrap_or(0);
+        let r = d::fastest(&scene, &atm, threads, 1, |o| {
+            d::plain(o);
+            o.progress = true;
+        })?;
+        d::write_reference(path, &d::cells(&scene, &r), r.photons)?;
+        println!(
+            "plain local estimate, {} photons in {:.1} s on {} threads: wrote {}",
+            r.photons,
+            r.wall_s,
+            r.threads,
+            path.display()
+        );
+        return Ok(());
+    }
     let mut scene = c1_scene()?;
     scene.simulation.photons = args.photons;
     scene.simulation.seed = args.seed;
@@ -190,6 +243,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             opts.threads = threads;
             opts.ddis_epsilon = args.ddis_epsilon;
             opts.range_stratification = args.range_stratification;
+            opts.cone_estimate = args.cone_estimate;
             let r = transport::run(&scene, &atm, &opts)?;
             if best.as_ref().is_none_or(|b| r.wall_s < b.wall_s) {
                 best = Some(r);

@@ -10,6 +10,7 @@ macro_rules! outln {
 }
 
 pub mod bench;
+pub mod bench_depth;
 pub mod dial;
 pub mod figures;
 pub mod lbl;

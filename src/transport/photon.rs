@@ -32,6 +32,7 @@ use std::f64::consts::PI;
 use glam::DVec3;
 use rand::RngExt;
 
+use super::cone::Prev;
 use super::tally::{Flux, TallyShape};
 use super::{RunStats, Setup};
 use crate::rng::Rng;
@@ -57,6 +58,8 @@ struct PhotonCopy {
     path: f64,
     order: u32,
     w: Vec<f64>,
+    /// The scattering that made it (at `pos`).
+    prev: Prev,
 }
 
 /// Per-batch state: buffers reused by every photon of the batch.
@@ -125,21 +128,31 @@ impl<'a> Tracer<'a> {
         // Emit: from the receiver position into the divergence cone around the axis.
         let dir = self.s.emit_direction(rng.random(), rng.random());
         self.w.iter_mut().for_each(|w| *w = 1.0);
-        self.follow(self.s.receiver, dir, 0.0, 0, rng);
+        self.follow(self.s.receiver, dir, 0.0, 0, None, rng);
         while let Some(copy) = self.split.pop() {
             self.w.copy_from_slice(&copy.w);
-            self.follow(copy.pos, copy.dir, copy.path, copy.order, rng);
+            // Copies are made right after a scattering at their position.
+            self.follow(
+                copy.pos,
+                copy.dir,
+                copy.path,
+                copy.order,
+                Some(copy.prev),
+                rng,
+            );
         }
     }
 
     /// Follow a photon (weights in `self.w`) from `pos` along `dir` after a path `path` and
-    /// `order` scatterings, to its end.
+    /// `order` scatterings, the last of them in the atmosphere at `prev` (`None` after emission
+    /// or a surface reflection), to its end.
     fn follow(
         &mut self,
         mut pos: DVec3,
         mut dir: DVec3,
         mut path: f64,
         mut order: u32,
+        mut prev: Option<Prev>,
         rng: &mut Rng,
     ) {
         let s = self.s;
@@ -260,6 +273,7 @@ impl<'a> Tracer<'a> {
                     path += s_end;
                     order += 1;
                     self.stats.surface_reflections += 1;
+                    prev = None;
                     self.set_altitude(pos.z);
                     dir = lambertian(rng.random(), rng.random());
                     if !self.roulette(rng) {
@@ -409,8 +423,49 @@ impl<'a> Tracer<'a> {
                 return;
             }
 
-            // Local estimate toward the receiver, every field of view.
-            self.score_collision(pos, dir, path, order, layer);
+            // Whether the scattering here will use DDIS (decided now: the cone estimate's MIS
+            // weights need it). The direction to the receiver only where DDIS can apply (not in
+            // Rayleigh air). Only where a local estimate could still matter (in some class):
+            // through more than DDIS_MAX_TAU to the receiver it is below e⁻³⁰ of its
+            // unattenuated size, and DDIS factors multiplied over the hundreds of scatterings
+            // deep in a thick cloud would only widen the weights' spread.
+            let ddis_layer = s.ddis_epsilon > 0.0 && s.forward_peaked[layer];
+            let (omega_rx, d_rx) = if ddis_layer {
+                let to_rx = s.receiver - pos;
+                let d = to_rx.length();
+                (to_rx / d, d)
+            } else {
+                (DVec3::ZERO, 0.0)
+            };
+            let ddis = ddis_layer
+                && -omega_rx.dot(s.axis) >= s.ddis_cos
+                && s.classes.iter().any(|c| {
+                    let k = c.channel;
+                    s.tau_to_receiver(pos.z, omega_rx.z, d_rx, layer, k, self.ts[k] + self.ta[k])
+                        < super::DDIS_MAX_TAU
+                });
+            let here = Prev {
+                pos,
+                dir_in: dir,
+                path,
+                eps: if ddis { s.ddis_epsilon } else { 0.0 },
+                layer,
+            };
+
+            // Local estimate toward the receiver, every field of view; with the cone estimate,
+            // weighted against the cone estimate from the previous collision, which is made
+            // here for the next order.
+            self.score_collision(
+                pos,
+                dir,
+                path,
+                order,
+                layer,
+                if s.cone { prev.as_ref() } else { None },
+            );
+            if s.cone {
+                self.score_cone(&here, order, rng);
+            }
 
             if !self.roulette(rng) {
                 return;
@@ -457,26 +512,6 @@ impl<'a> Tracer<'a> {
                     .sum::<f64>()
                     / n_here as f64
             };
-            // The direction to the receiver only where DDIS can apply (not in Rayleigh air).
-            let ddis_layer = s.ddis_epsilon > 0.0 && s.forward_peaked[layer];
-            let (omega_rx, d_rx) = if ddis_layer {
-                let to_rx = s.receiver - pos;
-                let d = to_rx.length();
-                (to_rx / d, d)
-            } else {
-                (DVec3::ZERO, 0.0)
-            };
-            // Only where a local estimate could still matter (in some class): through more than
-            // DDIS_MAX_TAU to the receiver it is below e⁻³⁰ of its unattenuated size, and DDIS
-            // factors multiplied over the hundreds of scatterings deep in a thick cloud would
-            // only widen the weights' spread.
-            let ddis = ddis_layer
-                && -omega_rx.dot(s.axis) >= s.ddis_cos
-                && s.classes.iter().any(|c| {
-                    let k = c.channel;
-                    s.tau_to_receiver(pos.z, omega_rx.z, d_rx, layer, k, self.ts[k] + self.ta[k])
-                        < super::DDIS_MAX_TAU
-                });
             let towards_rx = ddis && rng.random::<f64>() < s.ddis_epsilon;
             let rep = s.classes[cls].channel;
             let c = pick_component(
@@ -509,7 +544,8 @@ impl<'a> Tracer<'a> {
                 }
             }
             dir = new_dir;
-            self.split_heavy(pos, dir, path, order);
+            prev = Some(here);
+            self.split_heavy(pos, dir, path, order, here);
         }
     }
 
@@ -521,7 +557,7 @@ impl<'a> Tracer<'a> {
     /// into rare huge weights: a heavy tail whose mean is underestimated, with too small an
     /// error bar, by any practical number of photons.
     #[inline]
-    fn split_heavy(&mut self, pos: DVec3, dir: DVec3, path: f64, order: u32) {
+    fn split_heavy(&mut self, pos: DVec3, dir: DVec3, path: f64, order: u32, prev: Prev) {
         let w_max = self.w.iter().fold(0.0f64, |m, w| m.max(*w));
         if !(w_max > SPLIT_ABOVE) || self.split.len() >= MAX_SPLIT_STACK {
             return;
@@ -536,6 +572,7 @@ impl<'a> Tracer<'a> {
                 path,
                 order,
                 w: self.w.clone(),
+                prev,
             });
         }
         self.stats.splits += (n - 1) as u64;
@@ -672,7 +709,15 @@ impl<'a> Tracer<'a> {
     }
 
     /// Local estimate from a collision at `x` in `layer` of a photon travelling along `dir`.
-    fn score_collision(&mut self, x: DVec3, dir: DVec3, path: f64, order: u32, layer: usize) {
+    fn score_collision(
+        &mut self,
+        x: DVec3,
+        dir: DVec3,
+        path: f64,
+        order: u32,
+        layer: usize,
+        mis: Option<&Prev>,
+    ) {
         let s = self.s;
         let v = s.receiver - x;
         let d2 = v.length_squared();
@@ -699,7 +744,15 @@ impl<'a> Tracer<'a> {
         } else {
             1.0
         };
-        let geometric = p_ref * (0.25 / PI) * cos_axis / d2;
+        let mut geometric = p_ref * (0.25 / PI) * cos_axis / d2;
+        // Against the cone estimate from the previous collision (balance heuristic).
+        if let Some(p) = mis {
+            let p_cone = s.cone_density(p, x, annulus);
+            if p_cone > 0.0 {
+                let p_walk = s.walk_density(p, x, layer);
+                geometric *= p_walk / (p_walk + p_cone);
+            }
+        }
         let base = self.shape.base(gate, s.order_bin(order), annulus);
         let nch = self.w.len();
         for k in 0..nch {
@@ -712,6 +765,110 @@ impl<'a> Tracer<'a> {
                 e *= s.mixture_phase(layer, k, mu_s);
             }
             self.bins[base + k] += e;
+        }
+    }
+
+    /// Cone estimate (a double local estimate, Marchuk et al. 1980, with the last point drawn
+    /// inside the fields of view; `cone` module): the order-(n + 1) return of a photon that has
+    /// just collided for the n-th time at x (`p`), as the expected value over one more flight
+    /// and a scattering at a point y drawn in each FOV annulus: y = rx + r ω, ω uniform in the
+    /// annulus's solid angle ΔΩ, r from the `cone::ConeRay` densities. Its value
+    ///   f_k = w_k σ_s,k(y) P_x(Θ_xy)/4π e^{−τ_k(x→y)}/|x − y|² · P_y(Θ_y,rx)/4π cos θ e^{−τ_k(y→rx)}/r²
+    /// is weighted against the walk's own collisions by the balance heuristic: f_k/(p_cone +
+    /// p_walk) with p_cone = p_t/(ΔΩ r²). Every collision thus contributes to every field of
+    /// view, however narrow, instead of only the rare ones that land inside it.
+    fn score_cone(&mut self, p: &Prev, order: u32, rng: &mut Rng) {
+        let s = self.s;
+        let atm = s.atm;
+        let nch = self.w.len();
+        let x = p.pos;
+        // Through more than DDIS_MAX_TAU of vertical optical depth to the receiver's altitude
+        // (in every channel) both legs together attenuate by more than e⁻³⁰.
+        if !s.has_layers
+            || (0..nch).all(|k| (self.ts[k] + self.ta[k] - s.tau_rx[k]).abs() > super::DDIS_MAX_TAU)
+        {
+            return;
+        }
+        let grey = atm.grey_scattering;
+        let order_bin = s.order_bin(order + 1);
+        // One of the cone's annuli, chosen uniformly (its probability is in p_cone).
+        let n_cone = s.cone_annuli.len();
+        let pick = ((rng.random::<f64>() * n_cone as f64) as usize).min(n_cone - 1);
+        let a = s.cone_annuli[pick];
+        let d_omega = s.annulus_sr[a];
+        let inner = if a == 0 { 1.0 } else { s.fov_cos[a - 1] };
+        let ct = s.fov_cos[a] + rng.random::<f64>() * (inner - s.fov_cos[a]);
+        let st = (1.0 - ct * ct).max(0.0).sqrt();
+        let (cp, sp) = unit_azimuth(rng);
+        let omega = s.axis * ct + (s.axis_e1 * cp + s.axis_e2 * sp) * st;
+        let Some(ray) = s.cone_ray(x, p.path, omega) else {
+            return;
+        };
+        let t = ray.sample(rng.random(), rng.random());
+        let r = ray.along + t;
+        if !(r > 0.0) {
+            return;
+        }
+        let y = s.receiver + omega * r;
+        let l2 = ray.leg2(t);
+        let l = l2.sqrt();
+        let Some(gate) = self.gate(p.path + l + r) else {
+            return;
+        };
+        if !(l > 0.0) {
+            return;
+        }
+        let e_xy = (y - x) / l;
+        let layer_y = atm.layer_of(y.z);
+        if atm.components[layer_y].is_empty() {
+            return;
+        }
+        let p_cone = ray.density(t) / (d_omega * r * r * n_cone as f64);
+        let p_walk = s.walk_density(p, y, layer_y);
+        // f_k/(p_cone + p_walk), the geometric part of f_k: cos θ/(l² r²) and the 1/4π².
+        let factor = ct / (l2 * r * r) * (0.25 / PI) * (0.25 / PI) / (p_cone + p_walk);
+        if !(factor.is_finite() && factor > 0.0) {
+            return;
+        }
+        let mu_x = p.dir_in.dot(e_xy);
+        let mu_y = -e_xy.dot(omega);
+        let (px0, py0) = if grey {
+            (
+                s.mixture_phase(p.layer, 0, mu_x),
+                s.mixture_phase(layer_y, 0, mu_y),
+            )
+        } else {
+            (1.0, 1.0)
+        };
+        let base = self.shape.base(gate, order_bin, a);
+        let horizontal = e_xy.z.abs() < HORIZONTAL;
+        for k in 0..nch {
+            if self.w[k] == 0.0 {
+                continue;
+            }
+            let iy = layer_y * nch + k;
+            let sigma_y = atm.sigma_s_per_m[iy];
+            if !(sigma_y > 0.0) {
+                continue;
+            }
+            let (tsy, tay) = atm.cumulative_tau(y.z, k);
+            let tau_xy = if horizontal {
+                let ix = p.layer * nch + k;
+                (atm.sigma_s_per_m[ix] + atm.sigma_a_per_m[ix]) * l
+            } else {
+                ((tsy + tay) - (self.ts[k] + self.ta[k])).abs() / e_xy.z.abs()
+            };
+            let tau_back = s.tau_to_receiver(y.z, -omega.z, r, layer_y, k, tsy + tay);
+            let (px, py) = if grey {
+                (px0, py0)
+            } else {
+                (
+                    s.mixture_phase(p.layer, k, mu_x),
+                    s.mixture_phase(layer_y, k, mu_y),
+                )
+            };
+            self.bins[base + k] +=
+                self.w[k] * sigma_y * px * py * factor * (-(tau_xy + tau_back)).exp();
         }
     }
 

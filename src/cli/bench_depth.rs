@@ -1,0 +1,323 @@
+//! `lidarsim bench --depth DIR`: the figure of merit of C.1's multiple-scattering return at every
+//! 10 m gate 50–300 m into the cloud and every field of view 0.5–10 mrad, for lidarsim's
+//! estimator (all variance reductions) and the plain local estimate of the same code (no
+//! detector-directed sampling, range stratification or cone estimate), timed side by side on
+//! the same threads.
+//!
+//! The plain estimate has rare, huge spikes; its per-photon variance from a short run is far too
+//! small. It is therefore taken from a long run (≥ 10⁸ photons) written once with
+//! `--write-plain FILE` and read with `--plain FILE`; only its time per photon comes from the
+//! side-by-side run. FOM = 1/(rel_err² · t) = mean²/(σ₁² · t₁), σ₁² the variance of one photon's
+//! contribution and t₁ the time per photon.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+
+use lidarsim::optics::OpticalAtmosphere;
+use lidarsim::output::OutputSet;
+use lidarsim::returns::Order;
+use lidarsim::scene::Scene;
+use lidarsim::transport::{self, McResult, TransportOptions};
+
+use super::plot::{FONT, draw_legend, init_font};
+
+/// Fields of view of the scan [mrad, full angle].
+pub const FOVS_MRAD: [f64; 5] = [0.5, 1.0, 2.0, 5.0, 10.0];
+/// Depths into the cloud of the first and last gate starts [m].
+const FIRST_DEPTH_M: f64 = 50.0;
+const LAST_DEPTH_M: f64 = 290.0;
+const CLOUD_BASE_M: f64 = 1000.0;
+
+/// One (FOV, gate) cell: the multiple-scattering mean, the variance of one photon's contribution
+/// and the time per photon.
+#[derive(Debug, Clone, Copy)]
+pub struct Cell {
+    pub fov_mrad: f64,
+    pub depth_m: f64,
+    pub mean_j: f64,
+    pub var_per_photon: f64,
+    pub s_per_photon: f64,
+}
+
+impl Cell {
+    /// 1/(rel_err² · t), independent of the number of photons.
+    pub fn fom(&self) -> f64 {
+        if self.var_per_photon > 0.0 && self.s_per_photon > 0.0 {
+            self.mean_j * self.mean_j / (self.var_per_photon * self.s_per_photon)
+        } else {
+            0.0
+        }
+    }
+}
+
+/// The C.1 scene of the scan: five fields of view, orders 1 and 2+.
+pub fn scene() -> anyhow::Result<Scene> {
+    let mut s = super::bench::c1_scene()?;
+    s.lidar.fov_full_angle_mrad = FOVS_MRAD.to_vec();
+    Ok(s)
+}
+
+/// Gate indices of the scan in `scene`.
+fn gates(scene: &Scene) -> Vec<(usize, f64)> {
+    let mut out = Vec::new();
+    let mut depth = FIRST_DEPTH_M;
+    while depth <= LAST_DEPTH_M + 1e-9 {
+        let g = ((CLOUD_BASE_M + depth - scene.gates.start_m) / scene.gates.width_m).round();
+        out.push((g as usize, depth));
+        depth += scene.gates.width_m;
+    }
+    out
+}
+
+/// The cells of a run.
+pub fn cells(scene: &Scene, r: &McResult) -> Vec<Cell> {
+    let n = r.photons as f64;
+    let mut out = Vec::new();
+    for (f, fov) in scene.lidar.fov_full_angle_mrad.iter().enumerate() {
+        for (g, depth) in gates(scene) {
+            let mean = r.returns.energy(0, f, g, Order::AtLeast(2)).unwrap_or(0.0);
+            let se = r.returns.stderr(0, f, g, Order::AtLeast(2)).unwrap_or(0.0);
+            out.push(Cell {
+                fov_mrad: *fov,
+                depth_m: depth,
+                mean_j: mean,
+                var_per_photon: se * se * n,
+                s_per_photon: r.wall_s / n,
+            });
+        }
+    }
+    out
+}
+
+/// Transport options of the plain local estimate.
+pub fn plain(opts: &mut TransportOptions) {
+    opts.ddis_epsilon = 0.0;
+    opts.range_stratification = 0.0;
+    opts.cone_estimate = false;
+}
+
+/// Run `scene` `repeat` times with `configure`; the fastest run (least disturbed by other load).
+pub fn fastest(
+    scene: &Scene,
+    atm: &OpticalAtmosphere,
+    threads: usize,
+    repeat: usize,
+    configure: impl Fn(&mut TransportOptions),
+) -> anyhow::Result<McResult> {
+    let mut best: Option<McResult> = None;
+    for _ in 0..repeat.max(1) {
+        let mut opts = TransportOptions::from_scene(scene);
+        opts.threads = threads;
+        configure(&mut opts);
+        let r = transport::run(scene, atm, &opts)?;
+        if best.as_ref().is_none_or(|b| r.wall_s < b.wall_s) {
+            best = Some(r);
+        }
+    }
+    best.context("at least one run")
+}
+
+const HEADER: &str =
+    "fov_full_angle_mrad,depth_m,ms_energy_j,var_per_photon_j2,s_per_photon,photons";
+
+/// Write the plain estimator's reference cells (from a long run of `photons`).
+pub fn write_reference(path: &Path, cells: &[Cell], photons: u64) -> anyhow::Result<()> {
+    let mut s = format!(
+        "# plain local estimate of C.1, orders >= 2, {photons} photons (lidarsim {})\n{HEADER}\n",
+        env!("CARGO_PKG_VERSION")
+    );
+    for c in cells {
+        writeln!(
+            s,
+            "{},{},{:e},{:e},{:e},{photons}",
+            c.fov_mrad, c.depth_m, c.mean_j, c.var_per_photon, c.s_per_photon
+        )?;
+    }
+    let mut files = OutputSet::new();
+    files.write(path, s)?;
+    files.commit()?;
+    Ok(())
+}
+
+/// Read a reference written by [`write_reference`]: its cells and photon count.
+pub fn read_reference(path: &Path) -> anyhow::Result<(Vec<Cell>, u64)> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("{}", path.display()))?;
+    let mut out = Vec::new();
+    let mut photons = 0;
+    for (i, line) in text.lines().enumerate() {
+        if line.starts_with('#') || line.starts_with("fov") || line.trim().is_empty() {
+            continue;
+        }
+        let f: Vec<&str> = line.split(',').collect();
+        let num = |j: usize| -> anyhow::Result<f64> {
+            f.get(j)
+                .and_then(|v| v.trim().parse::<f64>().ok())
+                .filter(|v| v.is_finite())
+                .with_context(|| {
+                    format!(
+                        "{}:{}: column {} is not a finite number",
+                        path.display(),
+                        i + 1,
+                        j + 1
+                    )
+                })
+        };
+        photons = num(5)? as u64;
+        out.push(Cell {
+            fov_mrad: num(0)?,
+            depth_m: num(1)?,
+            mean_j: num(2)?,
+            var_per_photon: num(3)?,
+            s_per_photon: num(4)?,
+        });
+    }
+    anyhow::ensure!(!out.is_empty(), "{}: no cells", path.display());
+    Ok((out, photons))
+}
+
+/// The scan: lidarsim's estimator and the plain one side by side; writes `fom_depth.csv` and
+/// `fom_depth.png` into `out`.
+pub fn run(
+    out: &Path,
+    photons: u64,
+    threads: usize,
+    repeat: usize,
+    seed: u64,
+    reference: Option<&PathBuf>,
+    method: impl Fn(&mut TransportOptions),
+) -> anyhow::Result<()> {
+    let mut scene = scene()?;
+    scene.simulation.photons = photons;
+    scene.simulation.seed = seed;
+    let atm = OpticalAtmosphere::build(&scene)?;
+    let ours = fastest(&scene, &atm, threads, repeat, method)?;
+    let plain_run = fastest(&scene, &atm, threads, repeat, plain)?;
+    let mine = cells(&scene, &ours);
+    let short = cells(&scene, &plain_run);
+    let (long, long_photons) = match reference {
+        Some(p) => read_reference(p)?,
+        None => (short.clone(), plain_run.photons),
+    };
+    let mut csv = format!(
+        "# C.1 multiple scattering (orders >= 2): lidarsim {} photons in {:.2} s and the plain local \
+         estimate {} photons in {:.2} s on {} thread(s); plain variance from {} photons\n\
+         fov_full_angle_mrad,depth_m,ms_energy_j,rel_err,fom_per_s,plain_ms_energy_j,plain_fom_per_s,fom_ratio\n",
+        ours.photons, ours.wall_s, plain_run.photons, plain_run.wall_s, ours.threads, long_photons
+    );
+    let mut rows = Vec::new();
+    println!(
+        "C.1, orders ≥ 2: FOM ratio lidarsim / plain local estimate (plain variance from {long_photons} photons)"
+    );
+    print!("depth_m");
+    for f in FOVS_MRAD {
+        print!("  {f:>6} mrad");
+    }
+    println!();
+    let mut worst = f64::INFINITY;
+    for (i, c) in mine.iter().enumerate() {
+        let p = long
+            .iter()
+            .find(|p| p.fov_mrad == c.fov_mrad && p.depth_m == c.depth_m)
+            .with_context(|| {
+                format!(
+                    "plain reference has no cell at {} mrad, {} m",
+                    c.fov_mrad, c.depth_m
+                )
+            })?;
+        // The long run's variance with this run's time per photon.
+        let p = Cell {
+            s_per_photon: short[i].s_per_photon,
+            ..*p
+        };
+        let ratio = c.fom() / p.fom();
+        worst = worst.min(ratio);
+        let rel = (c.var_per_photon / ours.photons as f64).sqrt() / c.mean_j;
+        writeln!(
+            csv,
+            "{},{},{:e},{:e},{:e},{:e},{:e},{:e}",
+            c.fov_mrad,
+            c.depth_m,
+            c.mean_j,
+            rel,
+            c.fom(),
+            p.mean_j,
+            p.fom(),
+            ratio
+        )?;
+        rows.push((*c, p, ratio));
+    }
+    let n_depth = gates(&scene).len();
+    for d in 0..n_depth {
+        print!("{:>7}", rows[d].0.depth_m);
+        for f in 0..FOVS_MRAD.len() {
+            print!("  {:>11.1}", rows[f * n_depth + d].2);
+        }
+        println!();
+    }
+    println!("least ratio {worst:.1}");
+    let mut files = OutputSet::new();
+    files.write(out.join("fom_depth.csv"), csv)?;
+    files.write_via(out.join("fom_depth.png"), |path| draw(path, &rows))?;
+    files.commit()?;
+    println!("wrote {}", out.join("fom_depth.{csv,png}").display());
+    Ok(())
+}
+
+/// FOM against depth, one colour per FOV: lidarsim solid, plain dashed (as points).
+fn draw(path: &Path, rows: &[(Cell, Cell, f64)]) -> Result<(), Box<dyn std::error::Error>> {
+    use plotters::prelude::*;
+    init_font();
+    let root = BitMapBackend::new(path, (1000, 650)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let foms = rows.iter().flat_map(|(a, b, _)| [a.fom(), b.fom()]);
+    let (lo, hi) = foms
+        .filter(|v| *v > 0.0)
+        .fold((f64::INFINITY, 0.0f64), |(l, h), v| (l.min(v), h.max(v)));
+    let mut chart = ChartBuilder::on(&root)
+        .caption(
+            "C.1 multiple scattering: figure of merit against depth (solid lidarsim, dashed plain)",
+            (FONT, 20),
+        )
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(70)
+        .build_cartesian_2d(40.0..300.0, (lo / 2.0..hi * 2.0).log_scale())?;
+    chart
+        .configure_mesh()
+        .x_desc("depth into the cloud [m] (gate start)")
+        .y_desc("FOM = 1/(rel. error² · s)")
+        .label_style((FONT, 15))
+        .axis_desc_style((FONT, 17))
+        .draw()?;
+    for (i, fov) in FOVS_MRAD.iter().enumerate() {
+        let colour = Palette99::pick(i).to_rgba();
+        let mine: Vec<(f64, f64)> = rows
+            .iter()
+            .filter(|r| r.0.fov_mrad == *fov && r.0.fom() > 0.0)
+            .map(|r| (r.0.depth_m + 5.0, r.0.fom()))
+            .collect();
+        let plain: Vec<(f64, f64)> = rows
+            .iter()
+            .filter(|r| r.1.fov_mrad == *fov && r.1.fom() > 0.0)
+            .map(|r| (r.1.depth_m + 5.0, r.1.fom()))
+            .collect();
+        chart
+            .draw_series(LineSeries::new(
+                mine,
+                ShapeStyle::from(&colour).stroke_width(2),
+            ))?
+            .label(format!("{fov} mrad"))
+            .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], colour.stroke_width(2)));
+        chart.draw_series(DashedLineSeries::new(
+            plain,
+            6,
+            4,
+            ShapeStyle::from(&colour).stroke_width(1),
+        ))?;
+    }
+    draw_legend(&mut chart)?;
+    root.present()?;
+    Ok(())
+}

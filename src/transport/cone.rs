@@ -1,0 +1,194 @@
+//! Geometry and densities of the cone estimate (`photon::Tracer::score_cone`): a virtual last
+//! scattering at a point y drawn inside a field-of-view annulus, on the ray y = rx + r ω from the
+//! receiver, combined with the ordinary local estimate at the walk's own collisions by multiple
+//! importance sampling (balance heuristic; Veach 1997, ch. 9, as next-event estimation is
+//! combined with BSDF sampling in a path tracer).
+//!
+//! Along the ray, in t = r − r∥ (r∥ the foot of the collision x on the ray, ρ its distance from
+//! the ray), y is drawn from the mixture ½ p_A + ½ p_B of two Cauchy densities: p_A ∝ 1/(t² + ρ²)
+//! = 1/|x − y|², the flight's own fall-off, and p_B ∝ 1/(t² + b²), b = CONE_WIDE_SCALE·max(ρ, ℓ),
+//! for far points where the leg x → y turns into a forward peak. Legs shorter than ℓ
+//! (CONE_MIN_LEG_M) are excluded: there the ordinary local estimate alone scores.
+
+use glam::DVec3;
+
+use super::Setup;
+
+/// The last atmospheric collision x of a photon, as the cone estimate and its MIS weights need
+/// it: where, the direction the photon arrived with, its path there, the DDIS probability used
+/// for the scattering at x (0 without DDIS) and its layer.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Prev {
+    pub pos: DVec3,
+    pub dir_in: DVec3,
+    pub path: f64,
+    pub eps: f64,
+    pub layer: usize,
+}
+
+/// One ray of an annulus as seen from a collision: the allowed part of t and the two densities'
+/// normalisers.
+pub(crate) struct ConeRay {
+    /// r∥: distance along the ray to the foot of x.
+    pub along: f64,
+    rho: f64,
+    b: f64,
+    pieces: [(f64, f64); 2],
+    ma: [f64; 2],
+    mb: [f64; 2],
+    za: f64,
+    zb: f64,
+}
+
+/// atan(b/c) − atan(a/c), without cancellation when c ≪ |a|, |b|.
+#[inline]
+fn arc(a: f64, b: f64, c: f64) -> f64 {
+    if b > a {
+        ((b - a) * c).atan2(c * c + a * b)
+    } else {
+        0.0
+    }
+}
+
+impl ConeRay {
+    /// Draw t from ½ p_A + ½ p_B with two uniform numbers.
+    #[inline]
+    pub fn sample(&self, u1: f64, u2: f64) -> f64 {
+        let (m, c, mut u) = if u1 < 0.5 {
+            (self.ma, self.rho, u2 * (self.ma[0] + self.ma[1]))
+        } else {
+            (self.mb, self.b, u2 * (self.mb[0] + self.mb[1]))
+        };
+        let ta = if u < m[0] {
+            self.pieces[0].0
+        } else {
+            u -= m[0];
+            self.pieces[1].0
+        };
+        // t = c tan(atan(t_a/c) + u), as (t_a + c tan u)/(1 − t_a tan u/c).
+        let tu = u.tan();
+        (ta + c * tu) / (1.0 - ta * tu / c)
+    }
+
+    /// ½ p_A(t) + ½ p_B(t) (0 outside the allowed part).
+    #[inline]
+    pub fn density(&self, t: f64) -> f64 {
+        let inside = self.pieces.iter().any(|(a, b)| t >= *a && t <= *b && b > a);
+        if !inside {
+            return 0.0;
+        }
+        0.5 / (self.za * (t * t + self.rho * self.rho))
+            + 0.5 / (self.zb * (t * t + self.b * self.b))
+    }
+
+    /// |x − y|² at t.
+    #[inline]
+    pub fn leg2(&self, t: f64) -> f64 {
+        t * t + self.rho * self.rho
+    }
+}
+
+impl Setup<'_> {
+    /// The ray rx + r ω seen from a collision at x after a path `path_x`: its part inside the
+    /// layers, reachable before the last gate and at least ℓ from x. `None` if empty.
+    pub(crate) fn cone_ray(&self, x: DVec3, path_x: f64, omega: DVec3) -> Option<ConeRay> {
+        if omega.z.abs() < 1e-12 {
+            return None;
+        }
+        let budget = 2.0 * self.r_end_m - path_x;
+        let v = x - self.receiver;
+        let v2 = v.length_squared();
+        if budget * budget <= v2 {
+            return None;
+        }
+        let r1 = (self.bottom_m - self.receiver.z) / omega.z;
+        let r2 = (self.top_m - self.receiver.z) / omega.z;
+        let along = v.dot(omega);
+        // Ellipsoid with foci x and rx: |x − y| + r = budget.
+        let r_budget = (budget * budget - v2) / (2.0 * (budget - along));
+        let r_lo = r1.min(r2).max(0.0);
+        let r_hi = r1.max(r2).min(r_budget);
+        if !(r_hi > r_lo) {
+            return None;
+        }
+        let lmin = super::CONE_MIN_LEG_M;
+        let rho = (v2 - along * along).max(0.0).sqrt().max(1e-9);
+        let (t_lo, t_hi) = (r_lo - along, r_hi - along);
+        let h = (lmin * lmin - rho * rho).max(0.0).sqrt();
+        let pieces = if h > 0.0 {
+            [(t_lo, t_hi.min(-h)), (t_lo.max(h), t_hi)]
+        } else {
+            [(t_lo, t_hi), (0.0, 0.0)]
+        };
+        let b = super::CONE_WIDE_SCALE * rho.max(lmin);
+        let ma = [
+            arc(pieces[0].0, pieces[0].1, rho),
+            arc(pieces[1].0, pieces[1].1, rho),
+        ];
+        let mb = [
+            arc(pieces[0].0, pieces[0].1, b),
+            arc(pieces[1].0, pieces[1].1, b),
+        ];
+        let (za, zb) = ((ma[0] + ma[1]) / rho, (mb[0] + mb[1]) / b);
+        if !(za > 0.0 && zb > 0.0) {
+            return None;
+        }
+        Some(ConeRay {
+            along,
+            rho,
+            b,
+            pieces,
+            ma,
+            mb,
+            za,
+            zb,
+        })
+    }
+
+    /// Density (per volume) with which the cone estimate from `p` draws the point y in
+    /// annulus `a` (one of the cone's annuli, chosen uniformly, then a point in it).
+    pub(crate) fn cone_density(&self, p: &Prev, y: DVec3, a: usize) -> f64 {
+        let d_omega = self.annulus_sr[a];
+        if !(d_omega > 0.0) || !self.cone_annuli.contains(&a) {
+            return 0.0;
+        }
+        let v = y - self.receiver;
+        let r = v.length();
+        let omega = v / r;
+        match self.cone_ray(p.pos, p.path, omega) {
+            Some(ray) => {
+                ray.density(r - ray.along) / (d_omega * r * r * self.cone_annuli.len() as f64)
+            }
+            None => 0.0,
+        }
+    }
+
+    /// Density (per volume) of the walk's next collision at y after the scattering at `p`, in
+    /// scattering class 0 and without the flight's truncation: the phase function (mixed with
+    /// DDIS's receiver-centred one where that was used) times σ_s e^{−τ_s}/|x − y|². Only the
+    /// MIS weights use it, and any positive function computed alike on both sides keeps them
+    /// summing to one.
+    pub(crate) fn walk_density(&self, p: &Prev, y: DVec3, layer_y: usize) -> f64 {
+        let cls = &self.classes[0];
+        let sigma = cls.sigma[layer_y];
+        if !(sigma > 0.0) {
+            return 0.0;
+        }
+        let leg = y - p.pos;
+        let l2 = leg.length_squared();
+        let l = l2.sqrt();
+        let e = leg / l;
+        let k = cls.channel;
+        let mut phase = self.mixture_phase(p.layer, k, p.dir_in.dot(e));
+        if p.eps > 0.0 {
+            let to_rx = (self.receiver - p.pos).normalize();
+            phase = (1.0 - p.eps) * phase + p.eps * self.mixture_phase(p.layer, k, to_rx.dot(e));
+        }
+        let tau = if e.z.abs() < 1e-12 {
+            cls.sigma[p.layer] * l
+        } else {
+            (self.class_tau_at(0, y.z) - self.class_tau_at(0, p.pos.z)).abs() / e.z.abs()
+        };
+        phase * (0.25 / std::f64::consts::PI) * sigma * (-tau).exp() / l2
+    }
+}
