@@ -162,7 +162,7 @@ fn main() -> Result<()> {
     println!("|---|{}", "---|".repeat(FOVS.len()));
     for d in (0..30)
         .map(|i| 5.0 + 10.0 * i as f64)
-        .filter(|d| (((d - 5.0) / 10.0) as usize).is_multiple_of(3))
+        .filter(|d| (((d - 5.0) / 10.0) as usize).is_multiple_of(3) || *d == 295.0)
     {
         print!("| {d} |");
         for f in 0..FOVS.len() {
