@@ -23,6 +23,8 @@ use cloud_common::{COLOURS, FONT, Returns, attenuated_backscatter, init_font};
 use plotters::prelude::*;
 
 const TOP_M: f64 = 1.0e6; // range of the cloud top from the lidar
+/// Range of the cloud in the lidarmc runs (run.sh): a multiple of its 15 m bins, which start at 0.
+const PEER_TOP_M: f64 = 1.000005e6;
 const WIDTH_M: f64 = 15.0;
 const FOV_MRAD: f64 = 5.0;
 const SIGMA: f64 = 0.04; // extinction of experiments 1-5 [m⁻¹]
@@ -86,7 +88,18 @@ fn read_peer(dir: &Path, exp: usize) -> Result<Option<Vec<(f64, f64, f64)>>> {
             if v.len() != 3 {
                 bail!("{}: expected 3 columns (one FOV)", f.display());
             }
-            rows.push((v[0] - TOP_M, v[2]));
+            // lidarmc's cloud starts at PEER_TOP_M (run.sh): depths below it.
+            rows.push((v[0] - PEER_TOP_M, v[2]));
+        }
+        if let Some(first) = runs.first()
+            && first.len() != rows.len()
+        {
+            bail!(
+                "{}: {} gates, the first seed has {} (an unfinished run?)",
+                f.display(),
+                rows.len(),
+                first.len()
+            );
         }
         runs.push(rows);
     }
@@ -235,9 +248,9 @@ fn report(all: &[Vec<Row>]) {
 
     println!("\n## Pulse stretching (window 0–1500 m; slabs: Hogan only inside the cloud)\n");
     println!(
-        "| exp | mean apparent depth lidarsim [m] | Hogan [m] | peak/10 lidarsim [m] | Hogan [m] | peak/100 lidarsim [m] | Hogan [m] | rms |lidarsim/Hogan − 1| in cloud |"
+        "| exp | peak at, lidarsim [m] | Hogan [m] | mean apparent depth lidarsim [m] | Hogan [m] | peak/10 lidarsim [m] | Hogan [m] | peak/100 lidarsim [m] | Hogan [m] | rms of lidarsim/Hogan − 1 in the cloud |"
     );
-    println!("|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|");
     for (e, rows) in all.iter().enumerate() {
         let d: Vec<f64> = rows.iter().map(|r| r.depth_m).collect();
         let b: Vec<f64> = rows.iter().map(|r| r.mc).collect();
@@ -260,9 +273,17 @@ fn report(all: &[Vec<Row>]) {
             .iter()
             .filter_map(|r| r.hogan.map(|h| (r.mc / h - 1.0).powi(2)))
             .collect();
+        let peak_at = |x: &[f64], y: &[f64]| {
+            let i = (0..y.len())
+                .max_by(|&i, &j| y[i].total_cmp(&y[j]))
+                .unwrap_or(0);
+            x[i]
+        };
         println!(
-            "| {} | {:.0} | {} | {} | {} | {} | {} | {:.3} |",
+            "| {} | {} | {} | {:.0} | {} | {} | {} | {} | {} | {:.3} |",
             e + 1,
+            peak_at(&d, &b),
+            peak_at(&hx, &hy),
             mean_depth(&d, &b),
             if full {
                 format!("{:.0}", mean_depth(&hx, &hy))
