@@ -9,6 +9,9 @@ mod atmosphere;
 mod beyond_voigt;
 /// The command line.
 mod cli;
+/// Multiple scattering in clouds against closed forms (issue 10, item 3): absorption in a
+/// far-viewed cloud, the single-scatter Platt integral.
+mod clouds;
 /// Fuzzing: property tests over the readers, a mutation fuzz of the shipped scenes through the
 /// binary (issue 11, item 4).
 mod fuzz;
