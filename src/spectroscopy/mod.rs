@@ -36,7 +36,7 @@ pub use layers::{CgLayer, LineOfSight};
 pub use table::GasOpticalDepthTable;
 pub use xsec::{
     Conventions, GasState, LblOptions, LineShapeModel, VoigtMethod, WavenumberGrid, WingCentre,
-    cross_section, cross_section_at, layer_optical_depths_at,
+    LayerGasCounts, cross_section, cross_section_at, layer_gas_counts, layer_optical_depths_at,
 };
 
 use crate::input::InputError;
