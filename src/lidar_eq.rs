@@ -211,7 +211,11 @@ impl MultipleScatteringBound {
     /// The bound on all orders ≥ 2 together, K/(1 − K) (each further order gains at most
     /// another factor K by the same argument), ∞ for K ≥ 1.
     pub fn all_orders(k: f64) -> f64 {
-        if k < 1.0 { k / (1.0 - k) } else { f64::INFINITY }
+        if k < 1.0 {
+            k / (1.0 - k)
+        } else {
+            f64::INFINITY
+        }
     }
 }
 
@@ -236,7 +240,10 @@ impl MultipleScatteringBound {
 /// Approximations: the apparent range of an order-2 path exceeds that of its farther point by
 /// at most r tan α (the footprint radius), so a gate's bound holds for returns spread over
 /// neighbouring gates when the gates are narrower than the footprint.
-pub fn multiple_scattering_bound(scene: &Scene, atm: &OpticalAtmosphere) -> MultipleScatteringBound {
+pub fn multiple_scattering_bound(
+    scene: &Scene,
+    atm: &OpticalAtmosphere,
+) -> MultipleScatteringBound {
     let lidar = &scene.lidar;
     let gates = &scene.gates;
     let nch = atm.n_channels;
@@ -256,7 +263,11 @@ pub fn multiple_scattering_bound(scene: &Scene, atm: &OpticalAtmosphere) -> Mult
             .fold(0.0, f64::max);
         p_max = p_max.max(peak);
         let back = p.backscatter();
-        p_ratio = p_ratio.max(if back > 0.0 { peak / back } else { f64::INFINITY });
+        p_ratio = p_ratio.max(if back > 0.0 {
+            peak / back
+        } else {
+            f64::INFINITY
+        });
     }
     if surface_range.is_some() {
         p_ratio = p_ratio.max(1.0 / mu.abs());

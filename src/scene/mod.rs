@@ -1514,11 +1514,9 @@ impl Validator<'_> {
             },
             multiple_scattering_tolerance: match s.multiple_scattering_tolerance {
                 None => MULTIPLE_SCATTERING_TOLERANCE,
-                Some(v) => self.range(
-                    &sec.key("multiple_scattering_tolerance"),
-                    v,
-                    MS_TOLERANCE,
-                )?,
+                Some(v) => {
+                    self.range(&sec.key("multiple_scattering_tolerance"), v, MS_TOLERANCE)?
+                }
             },
         };
         check_count(sim.max_order.into(), 1, 1000)
