@@ -196,10 +196,11 @@ impl MultipleScatteringBound {
     /// The largest bound over every field of view and gate, and the field of view it belongs to.
     pub fn worst(&self) -> (f64, f64) {
         let n = self.range_m.len().max(1);
+        let first = self.fov_full_angle_mrad.first().copied().unwrap_or(0.0);
         self.ratio
             .iter()
             .enumerate()
-            .fold((0.0, 0.0), |(k, f), (i, r)| {
+            .fold((0.0, first), |(k, f), (i, r)| {
                 if *r > k {
                     (*r, self.fov_full_angle_mrad[i / n])
                 } else {

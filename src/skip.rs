@@ -185,7 +185,7 @@ pub fn compare(
                 best = Some((dt, out));
             }
         }
-        best.ok_or_else(|| unreachable_run())
+        best.ok_or_else(unreachable_run)
     };
     let mut optics_s = f64::INFINITY;
     for _ in 0..repeat.max(1) {
