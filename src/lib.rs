@@ -12,6 +12,7 @@
 //! | optical atmosphere | [`optics`] | [`optics::OpticalAtmosphere`], the one input of transport |
 //! | Monte Carlo | [`transport`] | [`returns::Returns`] by channel, FOV, gate and order |
 //! | analytic single scatter | [`lidar_eq`] | [`returns::Returns`], order 1 |
+//! | what a scene does not need | [`skip`] | whether the Monte Carlo runs, and why |
 
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
@@ -33,6 +34,7 @@ pub mod retrieval;
 pub mod returns;
 pub mod rng;
 pub mod scene;
+pub mod skip;
 pub mod spectroscopy;
 pub mod stats;
 pub mod study;

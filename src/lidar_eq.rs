@@ -178,6 +178,131 @@ pub fn single_scatter(scene: &Scene, atm: &OpticalAtmosphere) -> Returns {
     out
 }
 
+/// Upper bound on the multiple-scattering share of a scene's returns, per field of view and
+/// range gate: order-2 energy ≤ `ratio` × the single-scatter energy, higher orders smaller
+/// still. Meant for scenes whose scatterers have no forward peak (molecules, a Lambertian
+/// surface); with particle layers it is valid but far too loose to be useful.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MultipleScatteringBound {
+    /// Fields of view, full angles \[mrad\], as in the scene.
+    pub fov_full_angle_mrad: Vec<f64>,
+    /// Gate centres \[m\].
+    pub range_m: Vec<f64>,
+    /// Bound K on E₂/E₁, index `fov * range_m.len() + gate`, the largest over the channels.
+    pub ratio: Vec<f64>,
+}
+
+impl MultipleScatteringBound {
+    /// The largest bound over every field of view and gate, and the field of view it belongs to.
+    pub fn worst(&self) -> (f64, f64) {
+        let n = self.range_m.len().max(1);
+        let first = self.fov_full_angle_mrad.first().copied().unwrap_or(0.0);
+        self.ratio
+            .iter()
+            .enumerate()
+            .fold((0.0, first), |(k, f), (i, r)| {
+                if *r > k {
+                    (*r, self.fov_full_angle_mrad[i / n])
+                } else {
+                    (k, f)
+                }
+            })
+    }
+
+    /// The bound on all orders ≥ 2 together, K/(1 − K) (each further order gains at most
+    /// another factor K by the same argument), ∞ for K ≥ 1.
+    pub fn all_orders(k: f64) -> f64 {
+        if k < 1.0 {
+            k / (1.0 - k)
+        } else {
+            f64::INFINITY
+        }
+    }
+}
+
+/// The bound of [`MultipleScatteringBound`] (derivation: `docs/transport.md`, "When the Monte
+/// Carlo is skipped", Eqs. S1–S4):
+///
+/// ```text
+/// K(r) = (π/2) · P_max · max(P_max/P_π, 1/|μ|) · σ_max(r) · r · tan α / O(α)
+/// ```
+///
+/// σ_max(r) the largest scattering coefficient on the beam up to range r (the gate's end, at
+/// most the surface), P_max the largest value of any phase function present (normalised to 4π),
+/// P_max/P_π the largest ratio of a phase function's maximum to its backscatter (1 for
+/// Rayleigh, whose extremes are at 0° and 180°), |μ| the cosine of the beam's incidence on the
+/// surface (with a surface), α the field of view's half-angle and O the overlap. The order-2
+/// return at apparent range r comes from pairs of scatterings whose second point lies in the
+/// field-of-view cone; against the single-scatter return it is at most
+/// σ_max P_max/4 ∫₀^∞ ln(1 + (r tan α/u)²) du = (π/4) P_max σ_max r tan α for each ordering
+/// of the two points (forward then back, back then forward; with the surface as either), the
+/// attenuation of the longer path being no smaller. With Rayleigh scattering (P_max ≤ 1.5)
+/// K ≈ 2.4 σ_max r α: e.g. 2e-5 for the space-borne IPDA at 1.57 µm, 0.2 mrad, 450 km.
+/// Approximations: the apparent range of an order-2 path exceeds that of its farther point by
+/// at most r tan α (the footprint radius), so a gate's bound holds for returns spread over
+/// neighbouring gates when the gates are narrower than the footprint.
+pub fn multiple_scattering_bound(
+    scene: &Scene,
+    atm: &OpticalAtmosphere,
+) -> MultipleScatteringBound {
+    let lidar = &scene.lidar;
+    let gates = &scene.gates;
+    let nch = atm.n_channels;
+    let z0 = lidar.altitude_m;
+    let mu = lidar.axis().z;
+    let surface_range = match &scene.surface {
+        Some(s) if mu < -1e-12 => Some((z0 - s.altitude_m) / -mu),
+        _ => None,
+    };
+    // Phase functions: the largest value anywhere, and the largest max/backscatter ratio (a
+    // layer's mixture has at most the largest of its components' ratios).
+    let (mut p_max, mut p_ratio) = (0.0f64, 0.0f64);
+    for p in &atm.phases {
+        let peak = (0..=1800)
+            .map(|i| p.eval((std::f64::consts::PI * i as f64 / 1800.0).cos()))
+            .chain([p.eval(1.0), p.eval(-1.0)])
+            .fold(0.0, f64::max);
+        p_max = p_max.max(peak);
+        let back = p.backscatter();
+        p_ratio = p_ratio.max(if back > 0.0 {
+            peak / back
+        } else {
+            f64::INFINITY
+        });
+    }
+    if surface_range.is_some() {
+        p_ratio = p_ratio.max(1.0 / mu.abs());
+    }
+    let range_m: Vec<f64> = (0..gates.count).map(|i| gates.centre_m(i)).collect();
+    // σ_max over the beam from the lidar to range r, all channels.
+    let sigma_max_to = |r: f64| -> f64 {
+        let z1 = z0 + mu * r;
+        let (lo, hi) = (z0.min(z1), z0.max(z1));
+        (0..atm.n_layers())
+            .filter(|&l| atm.edges_m[l + 1] >= lo && atm.edges_m[l] <= hi)
+            .flat_map(|l| (0..nch).map(move |k| atm.sigma_s_per_m[l * nch + k]))
+            .fold(0.0, f64::max)
+    };
+    let mut ratio = Vec::with_capacity(lidar.fov_full_angle_mrad.len() * gates.count);
+    for fov in &lidar.fov_full_angle_mrad {
+        let tan_alpha = (0.5e-3 * fov).tan();
+        let o = overlap(lidar, *fov);
+        for g in 0..gates.count {
+            let mut r = gates.start_m + (g + 1) as f64 * gates.width_m;
+            if let Some(rs) = surface_range {
+                r = r.min(rs);
+            }
+            let k = 0.5 * std::f64::consts::PI * p_max * p_ratio * sigma_max_to(r) * r * tan_alpha;
+            ratio.push(if k == 0.0 { 0.0 } else { k / o });
+        }
+    }
+    MultipleScatteringBound {
+        fov_full_angle_mrad: lidar.fov_full_angle_mrad.clone(),
+        range_m,
+        ratio,
+    }
+}
+
 /// P(180°) of the scatterer mixture of a layer for channel k.
 fn backscatter_phase(atm: &OpticalAtmosphere, layer: usize, k: usize) -> f64 {
     let total = atm.sigma_s_per_m[layer * atm.n_channels + k];

@@ -28,8 +28,10 @@ pub struct RunOutput {
     pub analytic: Returns,
     /// The same combined into line returns.
     pub analytic_lines: LineReturns,
-    /// The Monte Carlo run, if photons were asked for (channels, and lines in `combined`).
+    /// The Monte Carlo run, if it ran (channels, and lines in `combined`).
     pub mc: Option<McResult>,
+    /// Whether the Monte Carlo ran, and why ([`crate::skip`]).
+    pub monte_carlo: crate::skip::Decision,
     /// Monte Carlo line returns.
     pub mc_lines: Option<LineReturns>,
     /// Signals of each set of returns (analytic order 1; Monte Carlo order 1 and all orders),
@@ -81,7 +83,8 @@ pub enum RunError {
 }
 
 /// Run every stage of `scene`; `transport` says how to run the Monte Carlo (0 photons: the
-/// analytic lidar equation only). Its `combinations` and `combination_pairs` are set here from
+/// analytic lidar equation only), and [`crate::skip::decide`] whether it runs at all (the
+/// scene's `multiple_scattering`). Its `combinations` and `combination_pairs` are set here from
 /// the scene's laser.
 pub fn run(scene: &Scene, transport: &TransportOptions) -> Result<RunOutput, RunError> {
     run_with(scene, transport, &mut |plan| transport::run_plan(plan))
@@ -113,7 +116,8 @@ pub fn run_with(
         &mut signals,
         &mut products,
     )?;
-    let (mc, mc_lines) = if transport.photons > 0 {
+    let decision = crate::skip::decide(scene, &atmosphere, transport.photons);
+    let (mc, mc_lines) = if decision.run {
         let mut opts = transport.clone();
         opts.combinations = scene.sampling.combinations();
         opts.combination_pairs = scene.sampling.covariance_pairs();
@@ -140,6 +144,7 @@ pub fn run_with(
         analytic,
         analytic_lines,
         mc,
+        monte_carlo: decision,
         mc_lines,
         signals,
         retrieval,

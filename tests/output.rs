@@ -208,6 +208,7 @@ layer_thickness_m = 100.0
 
 [simulation]
 photons = 2000
+multiple_scattering = "always"
 seed = 1
 max_order = 2
 "#,

@@ -75,10 +75,19 @@ fn scene(text: &str) -> Scene {
     Scene::from_toml(Path::new("test.toml"), text).expect("test scene")
 }
 
+/// Run `s` with `photons` photons traced whatever `multiple_scattering` says (as `--photons N`
+/// does; the test scene is clear sky, where "auto" would skip the Monte Carlo).
 fn run(s: &Scene, photons: u64) -> RunOutput {
-    let mut opts = TransportOptions::from_scene(s);
+    let s = forced(s);
+    let mut opts = TransportOptions::from_scene(&s);
     opts.photons = photons;
-    pipeline::run(s, &opts).expect("run")
+    pipeline::run(&s, &opts).expect("run")
+}
+
+fn forced(s: &Scene) -> Scene {
+    let mut s = s.clone();
+    s.simulation.multiple_scattering = lidarsim::scene::MultipleScattering::Always;
+    s
 }
 
 /// Surface-gate line return of line `line` from the analytic lidar equation.
@@ -453,6 +462,7 @@ fn retrievals_do_not_depend_on_the_thread_count() {
         "linewidth_fwhm_mhz = 30.0\nfrequency_jitter_rms_mhz = 0.3\npulse_energy_jitter_fraction = 0.05",
         1,
     ));
+    let s = forced(&s);
     let at = |threads: usize| {
         let mut opts = TransportOptions::from_scene(&s);
         opts.photons = 20_000;

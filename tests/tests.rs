@@ -25,6 +25,9 @@ mod retrieval;
 mod scene;
 /// Line selection for CO2 IPDA: sensitivities against hand-made finite differences, the CLI.
 mod select_lines;
+/// What a scene does not need: the Monte Carlo skipped where multiple scattering cannot
+/// matter, no line-by-line work for absent gases (issue 10, item 4).
+mod skip;
 /// Line-by-line gas absorption against HAPI.
 mod spectroscopy;
 /// Extreme physical scenes: finite, conserved, bounded.

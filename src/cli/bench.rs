@@ -1,5 +1,6 @@
 //! `lidarsim bench`: speed and Monte Carlo efficiency of the transport on a fixed workload, or
-//! (`--study N`) the speed of the seed paper's clear-sky ensemble study.
+//! (`--study N`) the speed of the seed paper's clear-sky ensemble study, or (`--scenes FILE…`)
+//! what skipping saves on whole scene runs (`lidarsim::skip::compare`).
 //!
 //! The study workload is `scenes/study_co2_ipda.toml` (compiled in) run by `lidarsim dial` over
 //! N generated profiles per latitude class (3N in all), every one of its 10 on-lines against the
@@ -70,6 +71,71 @@ pub struct Args {
     /// on the largest of `--threads` and write its per-photon variance per gate and FOV.
     #[arg(long, value_name = "FILE", conflicts_with = "depth")]
     pub write_plain: Option<PathBuf>,
+    /// Instead of the transport: time each scene's whole run as the scene asks for it and with
+    /// the Monte Carlo forced on, and the same for the scene without its particle layers.
+    #[arg(long, value_name = "SCENE", num_args = 1.., conflicts_with = "study")]
+    pub scenes: Vec<PathBuf>,
+}
+
+/// Photons of a forced Monte Carlo for a scene that asks for none (the default scene's count).
+const FORCED_PHOTONS: u64 = 200_000;
+
+/// What skipping saves on whole scene runs (module docs).
+fn scenes_bench(args: &Args) -> anyhow::Result<()> {
+    use lidarsim::skip;
+    let mut out = std::io::stdout().lock();
+    writeln!(
+        out,
+        "whole runs (`lidarsim run`, no figures), fastest of {}; forced = multiple_scattering \"always\" ({FORCED_PHOTONS} photons if the scene asks for none)",
+        args.repeat
+    )?;
+    writeln!(
+        out,
+        "| scene | threads | Monte Carlo (auto) | optics s | auto s | forced s | forced transport s | saved s | why |"
+    )?;
+    writeln!(out, "|---|---|---|---|---|---|---|---|---|")?;
+    let mut rows = Vec::new();
+    for path in &args.scenes {
+        let scene = Scene::read(path)?;
+        let mut variants = vec![(path.display().to_string(), scene.clone())];
+        if !scene.layers.is_empty() {
+            let mut clear = scene.clone();
+            clear.layers.clear();
+            variants.push((format!("{} without its layers", path.display()), clear));
+        }
+        for (name, scene) in &variants {
+            for &threads in &args.threads {
+                let c = skip::compare(scene, FORCED_PHOTONS, threads, args.repeat)?;
+                let saved = c.forced_s - c.auto_s;
+                // Both run the Monte Carlo: their difference is only the noise of the machine.
+                let saved_text = if c.decision.run {
+                    "— (both run it)".to_string()
+                } else {
+                    format!("{saved:.3}")
+                };
+                writeln!(
+                    out,
+                    "| {name} | {threads} | {} | {:.3} | {:.3} | {:.3} | {:.3} | {saved_text} | {} |",
+                    if c.decision.run { "run" } else { "skipped" },
+                    c.optics_s,
+                    c.auto_s,
+                    c.forced_s,
+                    c.forced_transport_s,
+                    c.decision.reason
+                )?;
+                rows.push(serde_json::json!({
+                    "scene": name, "threads": threads, "monte_carlo_run": c.decision.run,
+                    "reason": c.decision.reason, "optics_s": c.optics_s, "auto_s": c.auto_s,
+                    "forced_s": c.forced_s, "forced_photons": c.forced_photons,
+                    "forced_transport_s": c.forced_transport_s, "saved_s": saved,
+                }));
+            }
+        }
+    }
+    if let Some(path) = &args.json {
+        write_file(path, serde_json::to_string_pretty(&rows)?.as_bytes())?;
+    }
+    Ok(())
 }
 
 const STUDY_SCENE: &str = include_str!("../../scenes/study_co2_ipda.toml");
@@ -213,6 +279,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             path.display()
         );
         return Ok(());
+    }
+    if !args.scenes.is_empty() {
+        return scenes_bench(&args);
     }
     let mut scene = c1_scene()?;
     scene.simulation.photons = args.photons;

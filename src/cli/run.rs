@@ -115,6 +115,7 @@ fn print_summary(out: &mut impl Write, scene: &Scene, run: &RunOutput) -> std::i
         scene.description.clone()
     };
     writeln!(out, "scene: {name}")?;
+    writeln!(out, "{}", run.monte_carlo.reason)?;
     let analytic = &run.analytic_lines.mean;
     match (&run.mc, &run.mc_lines) {
         (Some(mc), Some(lines)) => {
@@ -132,7 +133,6 @@ fn print_summary(out: &mut impl Write, scene: &Scene, run: &RunOutput) -> std::i
             print_returns(out, &lines.mean, analytic)?;
         }
         _ => {
-            writeln!(out, "analytic single scattering only (0 photons)")?;
             for (k, ch) in analytic.channels.iter().enumerate() {
                 for (f, fov) in analytic.fov_full_angle_mrad.iter().enumerate() {
                     let an: f64 = (0..analytic.range_m.len())
@@ -273,7 +273,17 @@ fn summary_json(scene: &Scene, run: &RunOutput) -> String {
             "name": c.name, "wavenumber_cm1": c.wavenumber_cm1,
         })).collect::<Vec<_>>(),
         "photons": run.mc.as_ref().map_or(0, |m| m.photons),
+        "monte_carlo": {
+            "run": run.monte_carlo.run,
+            "multiple_scattering": run.monte_carlo.mode.label(),
+            "reason": run.monte_carlo.reason,
+        },
     });
+    // Only where computed: summary.json holds no nulls.
+    if let Some((bound, fov)) = run.monte_carlo.bound {
+        json["monte_carlo"]["multiple_scattering_bound"] = bound.into();
+        json["monte_carlo"]["multiple_scattering_bound_fov_full_angle_mrad"] = fov.into();
+    }
     if let Some(mc) = &run.mc {
         let s = &mc.stats;
         json["batches"] = scene.simulation.batches.into();

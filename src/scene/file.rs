@@ -217,6 +217,8 @@ pub(super) struct SimulationFile {
     pub threads: Option<usize>,
     pub batches: Option<usize>,
     pub cache_dir: Option<String>,
+    pub multiple_scattering: Option<String>,
+    pub multiple_scattering_tolerance: Option<f64>,
 }
 
 /// One number for every channel, or a list with one number per channel.

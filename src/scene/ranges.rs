@@ -106,3 +106,6 @@ pub(super) const PATH_LENGTH_M: Bounds = Bounds::closed(0.0, 1e8);
 pub(super) const AVERAGING_LENGTH_KM: Bounds = Bounds::positive(1e5);
 /// Platform speed \[m/s\].
 pub(super) const SPEED_M_PER_S: Bounds = Bounds::positive(1e5);
+/// `simulation.multiple_scattering_tolerance`: a share of the single-scatter return, (0, 1).
+/// Above 1 "auto" would call any multiple scattering negligible.
+pub(super) const MS_TOLERANCE: Bounds = Bounds::open(0.0, 1.0);

@@ -35,8 +35,8 @@ pub use hitran::{Broadener, Line, LineFilter, LineList, ShapeColumns, ShapeParam
 pub use layers::{CgLayer, LineOfSight};
 pub use table::GasOpticalDepthTable;
 pub use xsec::{
-    Conventions, GasState, LblOptions, LineShapeModel, VoigtMethod, WavenumberGrid, WingCentre,
-    cross_section, cross_section_at, layer_optical_depths_at,
+    Conventions, GasState, LayerGasCounts, LblOptions, LineShapeModel, VoigtMethod, WavenumberGrid,
+    WingCentre, cross_section, cross_section_at, layer_gas_counts, layer_optical_depths_at,
 };
 
 use crate::input::InputError;

@@ -150,8 +150,12 @@ impl GasOpticalDepthTable {
         for (l, layer) in layers.iter().enumerate() {
             let row = &mut tau[l * n..(l + 1) * n];
             for &(m, gi) in &gases {
-                let sigma = cross_section(lines, m, &layer.state_for(gi), grid, opts)?;
                 let col = layer.gas_columns_per_cm2[gi];
+                // A layer without the gas adds σ · 0: no line-by-line work.
+                if !super::xsec::count_layer_gas(col) {
+                    continue;
+                }
+                let sigma = cross_section(lines, m, &layer.state_for(gi), grid, opts)?;
                 for (t, s) in row.iter_mut().zip(sigma) {
                     *t += s * col;
                 }

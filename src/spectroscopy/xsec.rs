@@ -1044,6 +1044,43 @@ fn add_line(lv: &Levels, a: &mut [Vec<f64>], buf: &mut Vec<f64>, p: &Prepared, o
     }
 }
 
+/// Cross-sections of one gas in one layer: computed, and skipped for a zero column.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct LayerGasCounts {
+    /// (layer, gas) cross-sections computed line by line.
+    pub computed: u64,
+    /// (layer, gas) pairs skipped because the layer holds none of the gas (a zero mixing
+    /// ratio): σ · 0 adds nothing, so no line is evaluated.
+    pub skipped: u64,
+}
+
+thread_local! {
+    static LAYER_GAS_COUNTS: std::cell::Cell<LayerGasCounts> =
+        const { std::cell::Cell::new(LayerGasCounts { computed: 0, skipped: 0 }) };
+}
+
+/// The (layer, gas) cross-sections computed and skipped by [`layer_optical_depths_at`] and
+/// [`super::GasOpticalDepthTable::compute`] called on this thread so far: the evidence that a
+/// scene without gases, or with a gas of zero mixing ratio, does no line-by-line work for it.
+pub fn layer_gas_counts() -> LayerGasCounts {
+    LAYER_GAS_COUNTS.with(|c| c.get())
+}
+
+/// Count one (layer, gas) pair; true if its column is not zero, i.e. it must be computed.
+pub(super) fn count_layer_gas(column_per_cm2: f64) -> bool {
+    let compute = column_per_cm2 != 0.0;
+    LAYER_GAS_COUNTS.with(|c| {
+        let mut n = c.get();
+        if compute {
+            n.computed += 1;
+        } else {
+            n.skipped += 1;
+        }
+        c.set(n);
+    });
+    compute
+}
+
 /// Vertical gas optical depth of each layer between `edges_m` at each wavenumber, computed
 /// directly (no grid): τ_l(ν) = Σ_gas σ_gas(ν; p̄_l, T̄_l) · U_gas,l with Curtis-Godson p̄, T̄ and
 /// columns U (see [`super::layers`]). Returns `[layer][wavenumber]`.
@@ -1064,6 +1101,9 @@ pub fn layer_optical_depths_at(
         let mut tau = vec![0.0; wavenumbers_cm1.len()];
         for (m, gi) in &gases {
             let col = layer.gas_columns_per_cm2[*gi];
+            if !count_layer_gas(col) {
+                continue;
+            }
             let state = layer.state_for(*gi);
             let sigma = cross_section_at(lines, *m, &state, wavenumbers_cm1, opts)?;
             for (t, s) in tau.iter_mut().zip(sigma) {

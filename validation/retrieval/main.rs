@@ -20,7 +20,9 @@ use lidarsim::scene::{DEFAULT_SCENE_TOML, Scene};
 use lidarsim::transport::TransportOptions;
 
 fn run(text: &str, photons: u64) -> (Scene, RunOutput, f64) {
-    let scene = Scene::from_toml(Path::new("validation.toml"), text).expect("scene");
+    let mut scene = Scene::from_toml(Path::new("validation.toml"), text).expect("scene");
+    // Photons asked for are traced, also through clear sky (as `--photons N` does).
+    scene.simulation.multiple_scattering = lidarsim::scene::MultipleScattering::Always;
     let mut opts = TransportOptions::from_scene(&scene);
     opts.photons = photons;
     let t = Instant::now();
