@@ -33,6 +33,7 @@ pub mod retrieval;
 pub mod returns;
 pub mod rng;
 pub mod scene;
+pub mod shard;
 pub mod spectroscopy;
 pub mod stats;
 pub mod study;

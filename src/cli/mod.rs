@@ -13,6 +13,7 @@ pub mod bench;
 pub mod dial;
 pub mod figures;
 pub mod lbl;
+pub mod merge;
 pub mod mie;
 pub mod plot;
 pub mod profiles;
