@@ -22,6 +22,9 @@ mod retrieval;
 mod scene;
 /// Line selection for CO2 IPDA: sensitivities against hand-made finite differences, the CLI.
 mod select_lines;
+/// Sharded runs: `run --shard I/N` and `merge` against the single run; refused shard sets
+/// (issue 12, item 1).
+mod shard;
 /// Line-by-line gas absorption against HAPI.
 mod spectroscopy;
 /// Extreme physical scenes: finite, conserved, bounded.
