@@ -34,6 +34,7 @@ pub mod retrieval;
 pub mod returns;
 pub mod rng;
 pub mod scene;
+pub mod shard;
 pub mod skip;
 pub mod spectroscopy;
 pub mod stats;

@@ -33,6 +33,8 @@ enum Command {
     /// Line selection for CO2 IPDA: XCO2 sensitivities to T, frequency, surface pressure and
     /// humidity, random error and rank of candidate on-lines; write DIR/sensitivities.csv.
     SelectLines(Box<cli::select_lines::Args>),
+    /// Fold the shard files of `run --shard I/N` into the files a single run writes.
+    Merge(cli::merge::Args),
 }
 
 fn main() -> ExitCode {
@@ -54,6 +56,7 @@ fn main() -> ExitCode {
         Command::Bench(a) => cli::bench::run(a),
         Command::Dial(a) => cli::dial::run(*a),
         Command::SelectLines(a) => cli::select_lines::run(*a),
+        Command::Merge(a) => cli::merge::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -118,9 +118,7 @@ pub fn run_with(
     )?;
     let decision = crate::skip::decide(scene, &atmosphere, transport.photons);
     let (mc, mc_lines) = if decision.run {
-        let mut opts = transport.clone();
-        opts.combinations = scene.sampling.combinations();
-        opts.combination_pairs = scene.sampling.covariance_pairs();
+        let opts = plan_options(scene, transport);
         let mc = monte_carlo(&transport::Plan::new(scene, &atmosphere, &opts)?)?;
         let lines = mc.combined.as_ref().map(|c| scene.sampling.split(c));
         (Some(mc), lines)
@@ -150,6 +148,16 @@ pub fn run_with(
         retrieval,
         products,
     })
+}
+
+/// The transport options a run of `scene` plans with: `transport` with the scene's line
+/// combinations and the pairs whose covariance is folded. The one place they are set, so that a
+/// run, a shard ([`crate::shard`]) and a merge of shards build the same plan.
+pub fn plan_options(scene: &Scene, transport: &TransportOptions) -> TransportOptions {
+    let mut opts = transport.clone();
+    opts.combinations = scene.sampling.combinations();
+    opts.combination_pairs = scene.sampling.covariance_pairs();
+    opts
 }
 
 /// Signals of one set of line returns, and the retrievals from them.

@@ -25,6 +25,9 @@ mod retrieval;
 mod scene;
 /// Line selection for CO2 IPDA: sensitivities against hand-made finite differences, the CLI.
 mod select_lines;
+/// Sharded runs: `run --shard I/N` and `merge` against the single run; refused shard sets
+/// (issue 12, item 1).
+mod shard;
 /// What a scene does not need: the Monte Carlo skipped where multiple scattering cannot
 /// matter, no line-by-line work for absent gases (issue 10, item 4).
 mod skip;

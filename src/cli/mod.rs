@@ -14,6 +14,7 @@ pub mod bench_depth;
 pub mod dial;
 pub mod figures;
 pub mod lbl;
+pub mod merge;
 pub mod mie;
 pub mod plot;
 pub mod profiles;

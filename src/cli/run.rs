@@ -1,7 +1,7 @@
 //! `lidarsim run [SCENE] [--out DIR] [--photons N] [--seed S] [--threads T] [--no-plots]`
 
 use std::io::Write;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use lidarsim::input::Bounds;
 use lidarsim::instrument::signals;
@@ -38,10 +38,14 @@ pub struct Args {
     /// Do not draw the figures (returns.png, dial.png).
     #[arg(long)]
     pub no_plots: bool,
+    /// Trace only shard I of N (0 ≤ I < N) of the Monte Carlo batches and write them raw to
+    /// DIR/shard-I-of-N.lshard; `lidarsim merge` folds the N files into this run's outputs.
+    #[arg(long, value_name = "I/N", value_parser = clap::value_parser!(lidarsim::shard::ShardSpec))]
+    pub shard: Option<lidarsim::shard::ShardSpec>,
 }
 
 /// Every file `run` may write into its directory.
-const FILES: [&str; 6] = [
+pub(super) const FILES: [&str; 6] = [
     "returns.csv",
     "signals.csv",
     "retrieval.csv",
@@ -52,6 +56,9 @@ const FILES: [&str; 6] = [
 
 /// Run the subcommand.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    if let Some(spec) = args.shard {
+        return super::merge::run_shard(&args, spec);
+    }
     let mut scene = match &args.scene {
         Some(p) => Scene::read(p)?,
         None => Scene::default_scene()?,
@@ -65,7 +72,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     opts.progress = true;
     opts.ddis_epsilon = args.ddis_epsilon;
     let run = pipeline::run(&scene, &opts)?;
+    write_outputs(&args.out, args.no_plots, &scene, &run)
+}
 
+/// Write the files of a run into `out` (all together or none) and print its summary: for
+/// `run`, and for `merge`, whose files must be the same.
+pub(super) fn write_outputs(
+    out_dir: &Path,
+    no_plots: bool,
+    scene: &Scene,
+    run: &RunOutput,
+) -> anyhow::Result<()> {
     // Everything is computed; now write all files together or none (`lidarsim::output`).
     let mut files = OutputSet::new();
     let sets: Vec<&Returns> = run
@@ -74,14 +91,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .map(|m| &m.mean)
         .chain([&run.analytic_lines.mean])
         .collect();
-    files.write(args.out.join("returns.csv"), returns::to_csv(&sets))?;
+    files.write(out_dir.join("returns.csv"), returns::to_csv(&sets))?;
     if !run.signals.is_empty() {
         let mut s = String::from(signals::CSV_HEADER);
         s.push('\n');
         for sig in &run.signals {
             sig.csv_rows(&mut s);
         }
-        files.write(args.out.join("signals.csv"), s)?;
+        files.write(out_dir.join("signals.csv"), s)?;
     }
     if !run.products.is_empty() {
         let mut s = String::from(retrieval::products::CSV_HEADER);
@@ -90,16 +107,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             s.push_str(&p.csv_row());
             s.push('\n');
         }
-        files.write(args.out.join("retrieval.csv"), s)?;
+        files.write(out_dir.join("retrieval.csv"), s)?;
     }
-    if !args.no_plots && scene.retrieval.is_some() {
-        super::figures::draw(&mut files, &args.out, &scene, &run)?;
+    if !no_plots && scene.retrieval.is_some() {
+        super::figures::draw(&mut files, out_dir, scene, run)?;
     }
-    files.write(args.out.join("summary.json"), summary_json(&scene, &run))?;
+    files.write(out_dir.join("summary.json"), summary_json(scene, run))?;
     let written = files.commit()?;
 
     let mut out = std::io::stdout().lock();
-    print_summary(&mut out, &scene, &run)?;
+    print_summary(&mut out, scene, run)?;
     if let Some(note) = &run.atmosphere.gas_note {
         writeln!(out, "{note}")?;
     }

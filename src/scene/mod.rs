@@ -1728,6 +1728,11 @@ impl Scene {
         }
     }
 
+    /// The scene text as it was parsed (the embedded default scene's for it).
+    pub fn text(&self) -> &str {
+        &self.text
+    }
+
     /// Override the Monte Carlo settings from the command line (validated like the file).
     pub fn override_simulation(
         &mut self,

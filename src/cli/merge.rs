@@ -1,0 +1,58 @@
+//! `lidarsim run SCENE --shard I/N --out DIR` and `lidarsim merge DIR... [--out DIR]`: the
+//! command-line side of [`lidarsim::shard`].
+
+use std::path::PathBuf;
+
+use lidarsim::output;
+use lidarsim::shard::{self, ShardSpec};
+use lidarsim::transport::TransportOptions;
+
+/// Arguments of `lidarsim merge`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// Directories holding shard files (`*.lshard`, from `lidarsim run --shard I/N`), or the
+    /// files themselves: every shard of one run, each once.
+    #[arg(required = true, value_name = "DIR")]
+    pub inputs: Vec<PathBuf>,
+    /// Output directory: receives the files a single run of the scene writes.
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+    /// Do not draw the figures (returns.png, dial.png).
+    #[arg(long)]
+    pub no_plots: bool,
+}
+
+/// Run the subcommand.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    // Before the work: a merge must not fail at its end on a name it could have refused now.
+    output::check_paths(&super::run::FILES.map(|f| args.out.join(f)))?;
+    let merged = shard::merge(&args.inputs)?;
+    outln!(
+        "merged {} shards of {}",
+        merged.shards,
+        merged.scene.path.display()
+    );
+    super::run::write_outputs(&args.out, args.no_plots, &merged.scene, &merged.run)
+}
+
+/// `lidarsim run … --shard I/N`: trace the shard's batches and write its file.
+pub fn run_shard(args: &super::run::Args, spec: ShardSpec) -> anyhow::Result<()> {
+    let mut scene = shard::read_scene(args.scene.as_deref())?;
+    scene
+        .override_simulation(args.photons, args.seed, args.threads)
+        .map_err(anyhow::Error::msg)?;
+    let mut opts = TransportOptions::from_scene(&scene);
+    opts.ddis_epsilon = args.ddis_epsilon;
+    let r = shard::run(&scene, &opts, spec, &args.out)?;
+    outln!(
+        "shard {spec}: batches {}..{} of {} ({} photons each) in {:.2} s on {} threads; wrote {}",
+        r.batches.start,
+        r.batches.end,
+        r.total_batches,
+        r.photons_per_batch,
+        r.wall_s,
+        r.threads,
+        r.path.display()
+    );
+    Ok(())
+}

@@ -1,0 +1,1153 @@
+//! Sharded Monte Carlo runs: a slice of a run's batches traced on any machine, stored raw in
+//! one file, and the files of all slices folded into the outputs of the single run.
+//!
+//! A run of `B` batches is cut into `N` shards of consecutive batches: batch `b` belongs to
+//! shard `⌊b·N/B⌋` ([`ShardSpec::of_batch`]), so shard `i` holds batches `⌈i·B/N⌉ …
+//! ⌈(i+1)·B/N⌉ − 1` and shard sizes differ by one at most. Each batch draws from its own random
+//! stream (seed, batch index), as in a single run, so a shard gives the same bytes on any
+//! machine and thread count, and folding the shards' batches in batch order ([`merge`]) gives
+//! the single run's numbers bit for bit (its wall time and thread count aside).
+//!
+//! # The shard file (`shard-I-of-N.lshard`, format 1)
+//!
+//! Little-endian throughout:
+//!
+//! | bytes | content |
+//! |---|---|
+//! | 16 | magic `lidarsim shard\n\0` |
+//! | 4 | format version (u32, [`FORMAT`]) |
+//! | 8 | header length `H` (u64) |
+//! | `H` | header: JSON ([`ShardHeader`]; floats that matter as their IEEE-754 bits) |
+//! | per batch, in batch order | batch index (u64), the nine [`RunStats`] counters (u64, in declaration order), `bins_per_batch` tallies (f64), the flux tally up, down, absorbed, cut (`channels` f64 each) |
+//! | 8 | the shard's transport wall time \[s\] (f64) |
+//! | 8 | worker threads it used (u64) |
+//! | 8 | FNV-1a 64 checksum of every byte before it |
+//!
+//! The tallies are the raw per-batch sums of [`BatchTally`] (before normalisation), so no
+//! rounding happens between a shard and the fold. The header holds the lidarsim version, the
+//! scene's path, text and digest ([`scene_digest`]), the seed, photons and batches, the shard
+//! `I/N` and its batch range, and every transport option that changes the numbers.
+//!
+//! A merge reads the scene again from the text stored in the shards (relative paths in it
+//! anchored at the scene's absolute path, as on a cluster's shared filesystem), checks that its
+//! digest is still the shards', and runs every stage of [`pipeline::run_with`] with the
+//! Monte Carlo folded from the files.
+
+use std::fmt::{self, Write as _};
+use std::fs;
+use std::io::{self, BufWriter, Write};
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+use std::str::FromStr;
+use std::time::Instant;
+
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+
+use crate::input::InputError;
+use crate::output::{self, OutputError, OutputSet};
+use crate::pipeline::{self, RunError, RunOutput};
+use crate::scene::Scene;
+use crate::transport::{
+    self, BatchTally, Flux, McResult, RunStats, TransportError, TransportOptions,
+};
+
+/// First bytes of every shard file.
+pub const MAGIC: &[u8; 16] = b"lidarsim shard\n\0";
+/// Version of the shard file layout this lidarsim writes and reads.
+pub const FORMAT: u32 = 1;
+/// Extension of shard files; a merge of a directory reads every file with it.
+pub const EXTENSION: &str = "lshard";
+/// The lidarsim version written into shards; a merge refuses shards of another version, whose
+/// tracer may draw differently.
+pub const VERSION: &str = env!("CARGO_PKG_VERSION");
+/// A header longer than this is taken for a corrupt length field (a scene text is kilobytes).
+const MAX_HEADER_BYTES: u64 = 64 << 20;
+/// Bytes before the header: magic, format, header length.
+const PREAMBLE_BYTES: usize = 16 + 4 + 8;
+/// Bytes after the batch records: wall time, threads, checksum.
+const TRAILER_BYTES: usize = 8 + 8 + 8;
+/// Counters of [`RunStats`] stored per batch.
+const N_COUNTERS: usize = 9;
+
+/// One shard of a run: `index` of `count`, written `I/N` on the command line (0-based, as
+/// Slurm's `SLURM_ARRAY_TASK_ID`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ShardSpec {
+    /// Which shard, `0..count`.
+    pub index: usize,
+    /// Number of shards, at least 1.
+    pub count: usize,
+}
+
+impl FromStr for ShardSpec {
+    type Err = String;
+
+    fn from_str(text: &str) -> Result<Self, String> {
+        let bad = || format!("`{text}` is not I/N: shard I (0 to N − 1) of N shards, e.g. 3/8");
+        let (i, n) = text.trim().split_once('/').ok_or_else(bad)?;
+        let index: usize = i.trim().parse().map_err(|_| bad())?;
+        let count: usize = n.trim().parse().map_err(|_| bad())?;
+        let max = crate::limits::MAX_BATCHES as usize;
+        if count == 0 || count > max {
+            return Err(format!(
+                "`{text}`: the number of shards must lie in 1..={max}"
+            ));
+        }
+        if index >= count {
+            return Err(format!(
+                "`{text}`: shard {index} of {count} does not exist (shards are numbered 0 to {})",
+                count - 1
+            ));
+        }
+        Ok(ShardSpec { index, count })
+    }
+}
+
+impl fmt::Display for ShardSpec {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}/{}", self.index, self.count)
+    }
+}
+
+impl ShardSpec {
+    /// The shard that batch `batch` of `batches` belongs to among `count`: `⌊batch·count /
+    /// batches⌋`.
+    pub fn of_batch(batch: usize, count: usize, batches: usize) -> usize {
+        (batch as u128 * count as u128 / batches.max(1) as u128) as usize
+    }
+
+    /// The batches of this shard in a run of `batches`: `⌈i·B/N⌉ .. ⌈(i+1)·B/N⌉`, the batches
+    /// `b` with [`ShardSpec::of_batch`]`(b) = i`.
+    pub fn batches(&self, batches: usize) -> Range<usize> {
+        let start = |i: usize| (i as u128 * batches as u128).div_ceil(self.count as u128) as usize;
+        start(self.index)..start(self.index + 1)
+    }
+
+    /// The shard's file name, `shard-I-of-N.lshard`, I zero-padded to N's width so that the
+    /// files list in order.
+    pub fn file_name(&self) -> String {
+        let w = self.count.to_string().len();
+        format!(
+            "shard-{:0w$}-of-{}.{EXTENSION}",
+            self.index,
+            self.count,
+            w = w
+        )
+    }
+}
+
+/// The header of a shard file: what it is a slice of, and the options that shape its numbers.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ShardHeader {
+    /// lidarsim version that wrote the shard.
+    pub lidarsim_version: String,
+    /// The scene file's absolute path ([`crate::scene::DEFAULT_SCENE_NAME`] for the default
+    /// scene); relative paths inside the scene are anchored at it when a merge reads it again.
+    pub scene_path: String,
+    /// The scene text.
+    pub scene_text: String,
+    /// [`scene_digest`] of the scene as the shard ran it.
+    pub scene_digest: String,
+    /// Random seed.
+    pub seed: u64,
+    /// Photons asked for (the run traces `photons_per_batch × batches`).
+    pub photons: u64,
+    /// Batches of the whole run.
+    pub batches: u64,
+    /// Photons of each batch.
+    pub photons_per_batch: u64,
+    /// This shard, `0..shard_count`.
+    pub shard_index: u64,
+    /// Shards of the run.
+    pub shard_count: u64,
+    /// First batch of the shard.
+    pub first_batch: u64,
+    /// One past its last batch.
+    pub end_batch: u64,
+    /// Highest order tallied separately.
+    pub max_order: u32,
+    /// Probability of detector-directed importance sampling, as IEEE-754 bits.
+    pub ddis_epsilon_bits: u64,
+    /// Probability of range-stratified first collisions, as IEEE-754 bits.
+    pub range_stratification_bits: u64,
+    /// Whether the flux tally was on.
+    pub flux_tally: bool,
+    /// Tallies per batch (gate × order bin × FOV annulus × channel).
+    pub bins_per_batch: u64,
+    /// Monochromatic channels (values per flux part).
+    pub channels: u64,
+}
+
+impl ShardHeader {
+    fn spec(&self) -> ShardSpec {
+        ShardSpec {
+            index: self.shard_index as usize,
+            count: self.shard_count as usize,
+        }
+    }
+
+    /// Bytes of one batch record.
+    fn record_bytes(&self) -> Option<u64> {
+        let values = (1 + N_COUNTERS as u64)
+            .checked_add(self.bins_per_batch)?
+            .checked_add(self.channels.checked_mul(4)?)?;
+        values.checked_mul(8)
+    }
+}
+
+/// Why a shard could not be written or shards could not be merged. Every variant names the
+/// file(s) concerned.
+#[derive(Debug, Error)]
+#[non_exhaustive]
+pub enum ShardError {
+    /// A file or directory could not be read.
+    #[error("cannot read {}: {error}", path.display())]
+    Io {
+        /// The file or directory.
+        path: PathBuf,
+        /// What the system reported.
+        error: io::Error,
+    },
+    /// A file is not a shard file, or is truncated or corrupt.
+    #[error("{}: {what}", path.display())]
+    Bad {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong with it.
+        what: String,
+    },
+    /// Two shards are not slices of the same run.
+    #[error("{} and {} are not shards of the same run: {what} differs ({first} against {second})", a.display(), b.display())]
+    Mismatch {
+        /// The first shard read.
+        a: PathBuf,
+        /// The shard that differs from it.
+        b: PathBuf,
+        /// What differs.
+        what: &'static str,
+        /// Its value in `a`.
+        first: String,
+        /// Its value in `b`.
+        second: String,
+    },
+    /// The same shard twice.
+    #[error("shard {spec} is given twice: {} and {}", a.display(), b.display())]
+    Duplicate {
+        /// The shard.
+        spec: ShardSpec,
+        /// One file.
+        a: PathBuf,
+        /// The other.
+        b: PathBuf,
+    },
+    /// Shards are missing.
+    #[error("{} of {count} shards missing ({}) among {}", missing.len(), list_indices(missing), list_paths(files))]
+    Missing {
+        /// Shards of the run.
+        count: usize,
+        /// The missing shard indices.
+        missing: Vec<usize>,
+        /// The files that were found.
+        files: Vec<PathBuf>,
+    },
+    /// No shard file among the inputs.
+    #[error("no shard files (*.{EXTENSION}) in {}", list_paths(.0))]
+    NoShards(Vec<PathBuf>),
+    /// The scene read again for the merge is not the scene the shards ran.
+    #[error(
+        "the scene {} as read now is not the one the shards ran (digest {now}, shards {shards}): a file it reads (phase table, line list, profile) has changed since, or is not at the same path",
+        path
+    )]
+    SceneChanged {
+        /// The scene's path.
+        path: String,
+        /// Digest now.
+        now: String,
+        /// Digest in the shards.
+        shards: String,
+    },
+    /// A shard cannot be made of this run.
+    #[error("--shard {spec}: {what}")]
+    Spec {
+        /// The shard asked for.
+        spec: ShardSpec,
+        /// Why not.
+        what: String,
+    },
+    /// The scene stored in the shards could not be read.
+    #[error(transparent)]
+    Scene(#[from] InputError),
+    /// A stage of the run failed.
+    #[error(transparent)]
+    Run(#[from] RunError),
+    /// Output could not be written.
+    #[error(transparent)]
+    Output(#[from] OutputError),
+}
+
+fn list_indices(v: &[usize]) -> String {
+    let mut s: Vec<String> = v.iter().take(20).map(|i| i.to_string()).collect();
+    if v.len() > 20 {
+        s.push(format!("… {} more", v.len() - 20));
+    }
+    s.join(", ")
+}
+
+fn list_paths(v: &[PathBuf]) -> String {
+    let mut s: Vec<String> = v.iter().take(8).map(|p| p.display().to_string()).collect();
+    if v.len() > 8 {
+        s.push(format!("… {} more", v.len() - 8));
+    }
+    s.join(", ")
+}
+
+/// FNV-1a, 64 bit: the shard checksum and the scene digest. Stable across machines and Rust
+/// versions (std's `DefaultHasher` is not), and a change of any single byte changes it (each
+/// step is a bijection of the state).
+#[derive(Debug, Clone, Copy)]
+struct Fnv(u64);
+
+impl Fnv {
+    fn new() -> Self {
+        Fnv(0xcbf2_9ce4_8422_2325)
+    }
+
+    fn update(&mut self, bytes: &[u8]) {
+        for b in bytes {
+            self.0 = (self.0 ^ u64::from(*b)).wrapping_mul(0x0000_0100_0000_01b3);
+        }
+    }
+}
+
+impl fmt::Write for Fnv {
+    fn write_str(&mut self, s: &str) -> fmt::Result {
+        self.update(s.as_bytes());
+        Ok(())
+    }
+}
+
+/// The digest of a scene as parsed: FNV-1a 64 of its `Debug` text, which holds every value
+/// of the scene after validation (floats in their shortest exact form), its text, its path,
+/// the overrides of photons and seed, and the contents of every file it read (phase tables,
+/// line lists, profiles, line shapes) as parsed; the thread count is left out, as it does not
+/// change the numbers. Two scenes with the same digest run the same photons.
+pub fn scene_digest(scene: &Scene) -> String {
+    let mut s = scene.clone();
+    s.simulation.threads = 0;
+    let mut h = Fnv::new();
+    // Writing into the hasher cannot fail.
+    let _ = write!(h, "{s:?}");
+    format!("{:016x}", h.0)
+}
+
+/// Read a scene for a shard: by its absolute path, so that the shards of one scene file have
+/// the same digest whatever directory each started in (`None`: the embedded default scene).
+pub fn read_scene(path: Option<&Path>) -> Result<Scene, ShardError> {
+    match path {
+        Some(p) => {
+            let abs = fs::canonicalize(p).map_err(|error| ShardError::Io {
+                path: p.to_path_buf(),
+                error,
+            })?;
+            Ok(Scene::read(&abs)?)
+        }
+        None => Ok(Scene::default_scene()?),
+    }
+}
+
+/// What a shard run did.
+#[derive(Debug, Clone)]
+pub struct ShardReport {
+    /// The file written.
+    pub path: PathBuf,
+    /// Its batches.
+    pub batches: Range<usize>,
+    /// Batches of the whole run.
+    pub total_batches: usize,
+    /// Photons per batch.
+    pub photons_per_batch: u64,
+    /// Wall time of the tracing \[s\].
+    pub wall_s: f64,
+    /// Worker threads.
+    pub threads: usize,
+}
+
+/// A writer that hashes what passes through it.
+struct Hashing<W: Write> {
+    inner: W,
+    hash: Fnv,
+}
+
+impl<W: Write> Write for Hashing<W> {
+    fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
+        let n = self.inner.write(buf)?;
+        self.hash.update(&buf[..n]);
+        Ok(n)
+    }
+
+    fn flush(&mut self) -> io::Result<()> {
+        self.inner.flush()
+    }
+}
+
+/// Write batch `t` as one record.
+fn write_record(w: &mut impl Write, t: &BatchTally) -> io::Result<()> {
+    // Destructured in full so that a new counter cannot be left out of the format silently.
+    let RunStats {
+        photons,
+        collisions,
+        surface_reflections,
+        local_estimates,
+        roulette_kills,
+        cut,
+        escaped,
+        zero_weight,
+        splits,
+    } = t.stats;
+    let counters: [u64; N_COUNTERS] = [
+        photons,
+        collisions,
+        surface_reflections,
+        local_estimates,
+        roulette_kills,
+        cut,
+        escaped,
+        zero_weight,
+        splits,
+    ];
+    w.write_all(&(t.index as u64).to_le_bytes())?;
+    for c in counters {
+        w.write_all(&c.to_le_bytes())?;
+    }
+    for part in [
+        &t.bins,
+        &t.flux.up,
+        &t.flux.down,
+        &t.flux.absorbed,
+        &t.flux.cut,
+    ] {
+        for v in part {
+            w.write_all(&v.to_le_bytes())?;
+        }
+    }
+    Ok(())
+}
+
+/// Run shard `spec` of `scene` with `transport` and write it as `out_dir/`[`ShardSpec::file_name`]
+/// (whole or not at all).
+///
+/// The shard runs [`pipeline::run_with`] up to the Monte Carlo, so that everything checked
+/// before it in a single run (the optics, the analytic returns, the retrieval's set-up and its
+/// analytic products) is checked here too: a scene a merge would refuse is refused before any
+/// photon is traced. The Monte Carlo step traces the shard's batches on `transport.threads`
+/// threads and writes them; the stages after it are the merge's.
+pub fn run(
+    scene: &Scene,
+    transport: &TransportOptions,
+    spec: ShardSpec,
+    out_dir: &Path,
+) -> Result<ShardReport, ShardError> {
+    if transport.photons == 0 {
+        return Err(ShardError::Spec {
+            spec,
+            what: "a shard needs photons (0 photons runs the analytic lidar equation only)".into(),
+        });
+    }
+    let path = out_dir.join(spec.file_name());
+    output::check_paths(&[&path])?;
+    let mut outcome: Option<Result<ShardReport, ShardError>> = None;
+    let result = pipeline::run_with(scene, transport, &mut |plan| {
+        outcome = Some(write_shard(scene, transport, plan, spec, &path));
+        // Stop the pipeline here: the stages after the Monte Carlo belong to the merge.
+        Err(TransportError::Options("shard written".into()))
+    });
+    match (outcome, result) {
+        (Some(done), _) => done,
+        (None, Err(e)) => Err(e.into()),
+        // `run_with` calls the Monte Carlo whenever photons > 0.
+        (None, Ok(_)) => Err(ShardError::Spec {
+            spec,
+            what: "the scene runs no Monte Carlo".into(),
+        }),
+    }
+}
+
+/// Trace the batches of `spec` from `plan` and write the shard file.
+fn write_shard(
+    scene: &Scene,
+    transport: &TransportOptions,
+    plan: &transport::Plan,
+    spec: ShardSpec,
+    path: &Path,
+) -> Result<ShardReport, ShardError> {
+    let total = plan.batches();
+    if spec.count > total {
+        return Err(ShardError::Spec {
+            spec,
+            what: format!(
+                "{} shards of a run of {total} batches leave some without a batch (at most one shard per batch; `simulation.batches` sets the batches)",
+                spec.count
+            ),
+        });
+    }
+    let range = spec.batches(total);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(transport.threads)
+        .build()
+        .map_err(|e| {
+            RunError::Transport(TransportError::Threads(transport.threads, e.to_string()))
+        })?;
+    let threads = pool.current_num_threads();
+    let started = Instant::now();
+    // The first batch alone: its buffers give the header's sizes and the chunk size.
+    let first = plan.trace_batch(range.start);
+    let header = ShardHeader {
+        lidarsim_version: VERSION.to_string(),
+        scene_path: scene.path.to_string_lossy().into_owned(),
+        scene_text: scene.text().to_string(),
+        scene_digest: scene_digest(scene),
+        seed: transport.seed,
+        photons: transport.photons,
+        batches: total as u64,
+        photons_per_batch: plan.photons_per_batch(),
+        shard_index: spec.index as u64,
+        shard_count: spec.count as u64,
+        first_batch: range.start as u64,
+        end_batch: range.end as u64,
+        max_order: transport.max_order,
+        ddis_epsilon_bits: transport.ddis_epsilon.to_bits(),
+        range_stratification_bits: transport.range_stratification.to_bits(),
+        flux_tally: transport.flux_tally,
+        bins_per_batch: first.bins.len() as u64,
+        channels: first.flux.up.len() as u64,
+    };
+    let json = serde_json::to_vec(&header).map_err(|e| ShardError::Bad {
+        path: path.to_path_buf(),
+        what: format!("cannot encode the header: {e}"),
+    })?;
+    // A few batch buffers per thread at a time, within the memory limit; the size does not
+    // change the bytes.
+    let chunk = (4 * threads)
+        .min(crate::limits::MAX_LIVE_TALLY_VALUES / first.bins.len().max(1))
+        .max(1);
+    let mut wall_s = 0.0;
+    let mut set = OutputSet::new();
+    set.write_with(path, |file| {
+        let mut w = Hashing {
+            inner: BufWriter::new(file),
+            hash: Fnv::new(),
+        };
+        w.write_all(MAGIC)?;
+        w.write_all(&FORMAT.to_le_bytes())?;
+        w.write_all(&(json.len() as u64).to_le_bytes())?;
+        w.write_all(&json)?;
+        write_record(&mut w, &first)?;
+        let mut start = range.start + 1;
+        while start < range.end {
+            let end = (start + chunk).min(range.end);
+            let tallies: Vec<BatchTally> = pool.install(|| {
+                (start..end)
+                    .into_par_iter()
+                    .map(|b| plan.trace_batch(b))
+                    .collect()
+            });
+            for t in &tallies {
+                write_record(&mut w, t)?;
+            }
+            start = end;
+        }
+        wall_s = started.elapsed().as_secs_f64();
+        w.write_all(&wall_s.to_le_bytes())?;
+        w.write_all(&(threads as u64).to_le_bytes())?;
+        let sum = w.hash.0;
+        w.inner.write_all(&sum.to_le_bytes())?;
+        w.inner.flush()
+    })?;
+    set.commit()?;
+    Ok(ShardReport {
+        path: path.to_path_buf(),
+        batches: range,
+        total_batches: total,
+        photons_per_batch: plan.photons_per_batch(),
+        wall_s,
+        threads,
+    })
+}
+
+/// A shard file read and checked: its header, and its bytes for the fold.
+#[derive(Debug, Clone)]
+pub struct ShardFile {
+    /// Where it was read from.
+    pub path: PathBuf,
+    /// Its header.
+    pub header: ShardHeader,
+    /// Transport wall time of the shard \[s\].
+    pub wall_s: f64,
+    /// Worker threads it ran on.
+    pub threads: u64,
+    /// Offset of the first batch record in `bytes`.
+    records_at: usize,
+    bytes: Vec<u8>,
+}
+
+/// Little-endian u64 at `at` (the caller has checked the length).
+fn u64_at(b: &[u8], at: usize) -> u64 {
+    let mut a = [0u8; 8];
+    a.copy_from_slice(&b[at..at + 8]);
+    u64::from_le_bytes(a)
+}
+
+impl ShardFile {
+    /// Read `path` and check that it is a whole shard file of this format, consistent in
+    /// itself.
+    pub fn read(path: &Path) -> Result<ShardFile, ShardError> {
+        let bytes = fs::read(path).map_err(|error| ShardError::Io {
+            path: path.to_path_buf(),
+            error,
+        })?;
+        Self::parse(path, bytes)
+    }
+
+    /// [`ShardFile::read`] on bytes already read.
+    pub fn parse(path: &Path, bytes: Vec<u8>) -> Result<ShardFile, ShardError> {
+        let bad = |what: String| ShardError::Bad {
+            path: path.to_path_buf(),
+            what,
+        };
+        if bytes.len() < MAGIC.len() || &bytes[..MAGIC.len()] != MAGIC {
+            return Err(bad(
+                "not a lidarsim shard file (no `lidarsim shard` magic at its start)".into(),
+            ));
+        }
+        if bytes.len() < PREAMBLE_BYTES + TRAILER_BYTES {
+            return Err(bad(format!(
+                "truncated: {} bytes, too short for a shard file",
+                bytes.len()
+            )));
+        }
+        let format = u32::from_le_bytes([bytes[16], bytes[17], bytes[18], bytes[19]]);
+        if format != FORMAT {
+            return Err(bad(format!(
+                "shard file format {format}; this lidarsim ({VERSION}) reads format {FORMAT}"
+            )));
+        }
+        let header_len = u64_at(&bytes, 20);
+        let available = (bytes.len() - PREAMBLE_BYTES - TRAILER_BYTES) as u64;
+        if header_len > MAX_HEADER_BYTES || header_len > available {
+            return Err(bad(format!(
+                "truncated or corrupt: a header of {header_len} bytes in a file of {} bytes",
+                bytes.len()
+            )));
+        }
+        let records_at = PREAMBLE_BYTES + header_len as usize;
+        // The checksum first: a damaged header should read as damage, not as a mismatch.
+        let body = bytes.len() - 8;
+        let mut h = Fnv::new();
+        h.update(&bytes[..body]);
+        let stored = u64_at(&bytes, body);
+        let header: Result<ShardHeader, _> =
+            serde_json::from_slice(&bytes[PREAMBLE_BYTES..records_at]);
+        let header = match header {
+            Ok(hd) => hd,
+            Err(e) if h.0 == stored => {
+                return Err(bad(format!("its header cannot be read: {e}")));
+            }
+            Err(_) => {
+                return Err(bad("corrupt or truncated: its header cannot be read and its checksum does not match".into()));
+            }
+        };
+        let spec = header.spec();
+        let n_records = header.end_batch.saturating_sub(header.first_batch);
+        let expected = header
+            .record_bytes()
+            .and_then(|r| r.checked_mul(n_records))
+            .and_then(|r| r.checked_add((records_at + TRAILER_BYTES) as u64));
+        match expected {
+            Some(e) if e == bytes.len() as u64 => {}
+            Some(e) if e > bytes.len() as u64 => {
+                return Err(bad(format!(
+                    "truncated: {} bytes where its header announces {e} ({n_records} batches of {} tallies)",
+                    bytes.len(),
+                    header.bins_per_batch
+                )));
+            }
+            Some(e) => {
+                return Err(bad(format!(
+                    "{} bytes where its header announces {e}: bytes beyond the end",
+                    bytes.len()
+                )));
+            }
+            None => {
+                return Err(bad(
+                    "corrupt: its header announces an impossible size".into()
+                ));
+            }
+        }
+        if h.0 != stored {
+            return Err(bad(format!(
+                "corrupt: checksum {:016x} where the file records {stored:016x}",
+                h.0
+            )));
+        }
+        if header.shard_count == 0
+            || header.shard_index >= header.shard_count
+            || header.shard_count > header.batches
+            || header.photons_per_batch != header.photons.div_ceil(header.batches.max(1))
+        {
+            return Err(bad(format!(
+                "inconsistent header: shard {}/{} of {} batches of {} photons for {} photons",
+                header.shard_index,
+                header.shard_count,
+                header.batches,
+                header.photons_per_batch,
+                header.photons
+            )));
+        }
+        let range = spec.batches(header.batches as usize);
+        if (header.first_batch, header.end_batch) != (range.start as u64, range.end as u64) {
+            return Err(bad(format!(
+                "inconsistent header: batches {}..{} where shard {spec} of {} batches holds {}..{}",
+                header.first_batch, header.end_batch, header.batches, range.start, range.end
+            )));
+        }
+        let wall_s = f64::from_bits(u64_at(&bytes, body - 16));
+        let threads = u64_at(&bytes, body - 8);
+        Ok(ShardFile {
+            path: path.to_path_buf(),
+            header,
+            wall_s,
+            threads,
+            records_at,
+            bytes,
+        })
+    }
+
+    /// The shard's batches, in order.
+    pub fn batches(&self) -> impl Iterator<Item = BatchTally> + '_ {
+        let h = &self.header;
+        let (bins, ch) = (h.bins_per_batch as usize, h.channels as usize);
+        // The length was checked against the header in `parse`.
+        let rec = h.record_bytes().unwrap_or(0) as usize;
+        let n = (h.end_batch - h.first_batch) as usize;
+        (0..n).map(move |r| {
+            let at = self.records_at + r * rec;
+            let f = |i: usize| {
+                f64::from_le_bytes(
+                    self.bytes[at + 8 * i..at + 8 * i + 8]
+                        .try_into()
+                        .unwrap_or([0; 8]),
+                )
+            };
+            let u = |i: usize| u64_at(&self.bytes, at + 8 * i);
+            let stats = RunStats {
+                photons: u(1),
+                collisions: u(2),
+                surface_reflections: u(3),
+                local_estimates: u(4),
+                roulette_kills: u(5),
+                cut: u(6),
+                escaped: u(7),
+                zero_weight: u(8),
+                splits: u(9),
+            };
+            let v0 = 1 + N_COUNTERS;
+            let part = |p: usize| {
+                (0..ch)
+                    .map(|k| f(v0 + bins + p * ch + k))
+                    .collect::<Vec<f64>>()
+            };
+            BatchTally {
+                index: u(0) as usize,
+                bins: (0..bins).map(|i| f(v0 + i)).collect(),
+                flux: Flux {
+                    up: part(0),
+                    down: part(1),
+                    absorbed: part(2),
+                    cut: part(3),
+                },
+                stats,
+            }
+        })
+    }
+}
+
+/// The shard files among `inputs`: a directory gives every `*.lshard` file in it, a file is
+/// taken as it is.
+pub fn shard_paths(inputs: &[PathBuf]) -> Result<Vec<PathBuf>, ShardError> {
+    let mut out = Vec::new();
+    for p in inputs {
+        let meta = fs::metadata(p).map_err(|error| ShardError::Io {
+            path: p.clone(),
+            error,
+        })?;
+        if meta.is_dir() {
+            let mut found = Vec::new();
+            for entry in fs::read_dir(p).map_err(|error| ShardError::Io {
+                path: p.clone(),
+                error,
+            })? {
+                let entry = entry.map_err(|error| ShardError::Io {
+                    path: p.clone(),
+                    error,
+                })?;
+                let path = entry.path();
+                if path.extension().is_some_and(|e| e == EXTENSION) && path.is_file() {
+                    found.push(path);
+                }
+            }
+            found.sort();
+            out.extend(found);
+        } else {
+            out.push(p.clone());
+        }
+    }
+    if out.is_empty() {
+        return Err(ShardError::NoShards(inputs.to_vec()));
+    }
+    Ok(out)
+}
+
+/// Every shard of one run, checked against each other: same version, scene, seed, photons,
+/// batches, shard count and options; each shard exactly once.
+#[derive(Debug, Clone)]
+pub struct ShardSet {
+    /// The shard files in shard order, headers only (the fold reads them again).
+    pub shards: Vec<(PathBuf, ShardHeader)>,
+}
+
+impl ShardSet {
+    /// Read and check the shard files `paths` ([`shard_paths`]). Each file is read whole and
+    /// checked here, so that a damaged shard is refused before the optics are built.
+    pub fn open(paths: &[PathBuf]) -> Result<ShardSet, ShardError> {
+        let mut shards: Vec<(PathBuf, ShardHeader)> = Vec::new();
+        for p in paths {
+            let f = ShardFile::read(p)?;
+            if f.header.lidarsim_version != VERSION {
+                return Err(ShardError::Bad {
+                    path: p.clone(),
+                    what: format!(
+                        "written by lidarsim {}; this is lidarsim {VERSION}, whose photons may differ",
+                        f.header.lidarsim_version
+                    ),
+                });
+            }
+            if let Some((first, h)) = shards.first() {
+                check_same(first, h, p, &f.header)?;
+            }
+            shards.push((f.path, f.header));
+        }
+        shards.sort_by_key(|(_, h)| h.shard_index);
+        for w in shards.windows(2) {
+            if w[0].1.shard_index == w[1].1.shard_index {
+                return Err(ShardError::Duplicate {
+                    spec: w[0].1.spec(),
+                    a: w[0].0.clone(),
+                    b: w[1].0.clone(),
+                });
+            }
+        }
+        let Some((_, first)) = shards.first() else {
+            return Err(ShardError::NoShards(paths.to_vec()));
+        };
+        let count = first.shard_count as usize;
+        if shards.len() != count {
+            let have: Vec<usize> = shards.iter().map(|(_, h)| h.shard_index as usize).collect();
+            let missing = (0..count).filter(|i| !have.contains(i)).collect();
+            return Err(ShardError::Missing {
+                count,
+                missing,
+                files: shards.into_iter().map(|(p, _)| p).collect(),
+            });
+        }
+        Ok(ShardSet { shards })
+    }
+
+    fn first(&self) -> &ShardHeader {
+        &self.shards[0].1
+    }
+
+    /// The scene the shards ran, read again from their text at their path, with their photons
+    /// and seed; refused if its digest is no longer theirs.
+    pub fn scene(&self) -> Result<Scene, ShardError> {
+        let h = self.first();
+        let mut scene = Scene::from_toml(Path::new(&h.scene_path), &h.scene_text)?;
+        scene
+            .override_simulation(Some(h.photons), Some(h.seed), None)
+            .map_err(|what| ShardError::Bad {
+                path: self.shards[0].0.clone(),
+                what,
+            })?;
+        let now = scene_digest(&scene);
+        if now != h.scene_digest {
+            return Err(ShardError::SceneChanged {
+                path: h.scene_path.clone(),
+                now,
+                shards: h.scene_digest.clone(),
+            });
+        }
+        Ok(scene)
+    }
+
+    /// The transport options the shards ran with (threads: all cores; they do not matter).
+    pub fn transport_options(&self, scene: &Scene) -> TransportOptions {
+        let h = self.first();
+        let mut o = TransportOptions::from_scene(scene);
+        o.photons = h.photons;
+        o.seed = h.seed;
+        o.max_order = h.max_order;
+        o.ddis_epsilon = f64::from_bits(h.ddis_epsilon_bits);
+        o.range_stratification = f64::from_bits(h.range_stratification_bits);
+        o.flux_tally = h.flux_tally;
+        o
+    }
+
+    /// Fold every shard's batches in batch order into the run's result. Its `wall_s` is the sum
+    /// of the shards' transport times, its `threads` the most any shard used.
+    pub fn fold(&self, plan: &transport::Plan) -> Result<McResult, ShardError> {
+        let h = self.first();
+        let (path0, _) = &self.shards[0];
+        if plan.batches() as u64 != h.batches || plan.photons_per_batch() != h.photons_per_batch {
+            return Err(ShardError::Bad {
+                path: path0.clone(),
+                what: format!(
+                    "{} batches of {} photons, where the scene read now plans {} of {}",
+                    h.batches,
+                    h.photons_per_batch,
+                    plan.batches(),
+                    plan.photons_per_batch()
+                ),
+            });
+        }
+        let mut fold = plan.fold();
+        let (mut wall_s, mut threads) = (0.0, 0usize);
+        for (path, header) in &self.shards {
+            // Read again (one file in memory at a time); it may have changed since it was
+            // checked.
+            let f = ShardFile::read(path)?;
+            if f.header != *header {
+                return Err(ShardError::Bad {
+                    path: path.clone(),
+                    what: "changed while the merge was running".into(),
+                });
+            }
+            for t in f.batches() {
+                fold.add(t).map_err(|e| ShardError::Bad {
+                    path: path.clone(),
+                    what: e.to_string(),
+                })?;
+            }
+            wall_s += f.wall_s;
+            threads = threads.max(f.threads as usize);
+        }
+        fold.finish(wall_s, threads).map_err(|e| ShardError::Bad {
+            path: path0.clone(),
+            what: e.to_string(),
+        })
+    }
+}
+
+/// `b`'s header against `a`'s: the first difference, named.
+fn check_same(a: &Path, ha: &ShardHeader, b: &Path, hb: &ShardHeader) -> Result<(), ShardError> {
+    let fields: [(&'static str, String, String); 10] = [
+        (
+            "the lidarsim version",
+            ha.lidarsim_version.clone(),
+            hb.lidarsim_version.clone(),
+        ),
+        ("the seed", ha.seed.to_string(), hb.seed.to_string()),
+        (
+            "the photon count",
+            ha.photons.to_string(),
+            hb.photons.to_string(),
+        ),
+        (
+            "the batch count",
+            ha.batches.to_string(),
+            hb.batches.to_string(),
+        ),
+        (
+            "the shard count",
+            ha.shard_count.to_string(),
+            hb.shard_count.to_string(),
+        ),
+        (
+            "the highest order",
+            ha.max_order.to_string(),
+            hb.max_order.to_string(),
+        ),
+        (
+            "the DDIS probability",
+            f64::from_bits(ha.ddis_epsilon_bits).to_string(),
+            f64::from_bits(hb.ddis_epsilon_bits).to_string(),
+        ),
+        (
+            "the range stratification",
+            f64::from_bits(ha.range_stratification_bits).to_string(),
+            f64::from_bits(hb.range_stratification_bits).to_string(),
+        ),
+        (
+            "the flux tally",
+            ha.flux_tally.to_string(),
+            hb.flux_tally.to_string(),
+        ),
+        (
+            "the scene (digest)",
+            format!("{} {}", ha.scene_path, ha.scene_digest),
+            format!("{} {}", hb.scene_path, hb.scene_digest),
+        ),
+    ];
+    for (what, first, second) in fields {
+        if first != second {
+            return Err(ShardError::Mismatch {
+                a: a.to_path_buf(),
+                b: b.to_path_buf(),
+                what,
+                first,
+                second,
+            });
+        }
+    }
+    Ok(())
+}
+
+/// A merged run: the scene and everything a single run of it produces.
+#[derive(Debug)]
+pub struct Merged {
+    /// The scene the shards ran.
+    pub scene: Scene,
+    /// The run, its Monte Carlo folded from the shards.
+    pub run: RunOutput,
+    /// Shards folded.
+    pub shards: usize,
+}
+
+/// Merge the shards found in `inputs` (directories or files): check them ([`ShardSet::open`]),
+/// read their scene again ([`ShardSet::scene`]) and run every stage with the Monte Carlo folded
+/// from them, which gives the single run's numbers.
+pub fn merge(inputs: &[PathBuf]) -> Result<Merged, ShardError> {
+    let set = ShardSet::open(&shard_paths(inputs)?)?;
+    let scene = set.scene()?;
+    let opts = set.transport_options(&scene);
+    let mut failure: Option<ShardError> = None;
+    let result = pipeline::run_with(&scene, &opts, &mut |plan| {
+        set.fold(plan).map_err(|e| {
+            failure = Some(e);
+            // The real error is `failure`; this one only stops the pipeline.
+            TransportError::Options("the shards could not be folded".into())
+        })
+    });
+    if let Some(e) = failure {
+        return Err(e);
+    }
+    Ok(Merged {
+        scene,
+        run: result?,
+        shards: set.shards.len(),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shard_specs_parse_and_refuse() {
+        assert_eq!(
+            "3/8".parse::<ShardSpec>(),
+            Ok(ShardSpec { index: 3, count: 8 })
+        );
+        assert_eq!(
+            " 0 / 1 ".parse::<ShardSpec>(),
+            Ok(ShardSpec { index: 0, count: 1 })
+        );
+        for bad in [
+            "8/8", "0/0", "3", "a/4", "-1/4", "1/-4", "1/2/3", "", "0/10001",
+        ] {
+            assert!(bad.parse::<ShardSpec>().is_err(), "{bad}");
+        }
+    }
+
+    /// The shards' batch ranges tile 0..B in order, none empty, sizes within one of each
+    /// other, and agree with `of_batch` for every batch.
+    #[test]
+    fn shards_tile_the_batches_and_agree_with_of_batch() {
+        for batches in 1..=60 {
+            for count in 1..=batches {
+                let mut next = 0;
+                let (mut small, mut large) = (usize::MAX, 0);
+                for index in 0..count {
+                    let r = ShardSpec { index, count }.batches(batches);
+                    assert_eq!(r.start, next, "B {batches} N {count} shard {index}");
+                    assert!(r.end > r.start);
+                    small = small.min(r.len());
+                    large = large.max(r.len());
+                    for b in r.clone() {
+                        assert_eq!(ShardSpec::of_batch(b, count, batches), index);
+                    }
+                    next = r.end;
+                }
+                assert_eq!(next, batches);
+                assert!(large - small <= 1);
+            }
+        }
+        // Large counts do not overflow.
+        let r = ShardSpec {
+            index: 9_999,
+            count: 10_000,
+        }
+        .batches(10_000);
+        assert_eq!(r, 9_999..10_000);
+    }
+
+    #[test]
+    fn file_names_sort_in_shard_order() {
+        assert_eq!(
+            ShardSpec {
+                index: 3,
+                count: 100
+            }
+            .file_name(),
+            "shard-003-of-100.lshard"
+        );
+        assert_eq!(
+            ShardSpec { index: 0, count: 4 }.file_name(),
+            "shard-0-of-4.lshard"
+        );
+    }
+
+    /// FNV-1a 64 test vectors (Fowler, Noll and Vo; draft-eastlake-fnv).
+    #[test]
+    fn fnv_matches_its_published_vectors() {
+        for (text, want) in [
+            ("", 0xcbf2_9ce4_8422_2325u64),
+            ("a", 0xaf63_dc4c_8601_ec8c),
+            ("foobar", 0x8594_4171_f739_67e8),
+        ] {
+            let mut h = Fnv::new();
+            h.update(text.as_bytes());
+            assert_eq!(h.0, want, "{text:?}");
+        }
+    }
+
+    /// The digest is that of the scene as parsed: the same for the same scene read twice or
+    /// run on other threads, different for another seed, photon count or value.
+    #[test]
+    fn the_digest_follows_the_parsed_scene() {
+        let a = Scene::default_scene().unwrap();
+        let mut b = Scene::default_scene().unwrap();
+        assert_eq!(scene_digest(&a), scene_digest(&b));
+        b.override_simulation(None, None, Some(7)).unwrap();
+        assert_eq!(scene_digest(&a), scene_digest(&b), "threads do not count");
+        b.override_simulation(None, Some(2), None).unwrap();
+        assert_ne!(scene_digest(&a), scene_digest(&b), "seed");
+        let mut c = a.clone();
+        c.override_simulation(Some(5000), None, None).unwrap();
+        assert_ne!(scene_digest(&a), scene_digest(&c), "photons");
+        let mut d = a.clone();
+        d.lidar.telescope_diameter_m = f64::from_bits(d.lidar.telescope_diameter_m.to_bits() + 1);
+        assert_ne!(scene_digest(&a), scene_digest(&d), "one ulp");
+    }
+}

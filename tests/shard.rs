@@ -1,0 +1,501 @@
+//! Sharded runs (issue 12, item 1): `run --shard I/N` and `merge` give the single run's files
+//! byte for byte, and a merge refuses every shard set that is not one whole run, naming the
+//! files.
+
+use std::fs;
+use std::path::{Path, PathBuf};
+
+use lidarsim::shard::{self, ShardFile, ShardSpec};
+
+use crate::util::{lidarsim, lidarsim_ok, project_root};
+
+fn c1_scene() -> String {
+    project_root()
+        .join("scenes/bissonnette_c1.toml")
+        .to_string_lossy()
+        .into_owned()
+}
+
+fn s(p: &Path) -> String {
+    p.to_string_lossy().into_owned()
+}
+
+/// `lidarsim run SCENE --shard I/N --out DIR` with extra arguments (`None`: the default scene).
+fn shard(scene: Option<&str>, spec: &str, out: &Path, extra: &[&str]) {
+    let mut args = vec!["run".to_string()];
+    args.extend(scene.map(String::from));
+    args.extend(["--shard", spec, "--out", &s(out), "--no-plots"].map(String::from));
+    args.extend(extra.iter().map(|a| a.to_string()));
+    lidarsim_ok(&args);
+}
+
+/// Every file of `single` equals its namesake in `merged` byte for byte, but summary.json,
+/// which equals it once wall time, thread count and the scene's path (absolute in a merge) are
+/// left out. Returns the names compared.
+fn assert_same_outputs(single: &Path, merged: &Path) -> Vec<String> {
+    let mut names: Vec<String> = fs::read_dir(single)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    let mut merged_names: Vec<String> = fs::read_dir(merged)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    merged_names.sort();
+    assert_eq!(names, merged_names, "the same files");
+    for name in &names {
+        let (a, b) = (
+            fs::read(single.join(name)).unwrap(),
+            fs::read(merged.join(name)).unwrap(),
+        );
+        if name == "summary.json" {
+            let strip = |bytes: &[u8]| {
+                let mut v: serde_json::Value = serde_json::from_slice(bytes).unwrap();
+                let o = v.as_object_mut().unwrap();
+                for k in ["wall_s", "threads", "scene"] {
+                    assert!(o.remove(k).is_some(), "summary.json has {k}");
+                }
+                v
+            };
+            assert_eq!(strip(&a), strip(&b), "summary.json");
+        } else {
+            assert!(a == b, "{name} differs between the run and the merge");
+        }
+    }
+    names
+}
+
+/// The issue's test: one run, and the merge of 4 shards (computed on 1 and 2 threads, in two
+/// directories, one given as a file), give byte-identical returns.csv, signals.csv,
+/// retrieval.csv and figures. The default scene has a laser (line combinations with their
+/// covariances), a receiver and a retrieval; the C.1 scene a cloud and a phase table file.
+#[test]
+fn one_run_and_the_merge_of_four_shards_give_the_same_bytes() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    for (name, scene) in [("default", None), ("c1", Some(c1_scene()))] {
+        let single = d.join(format!("{name}_single"));
+        let mut args = vec!["run".to_string()];
+        args.extend(scene.clone());
+        args.extend(
+            [
+                "--photons",
+                "2000",
+                "--seed",
+                "7",
+                "--threads",
+                "2",
+                "--out",
+                &s(&single),
+            ]
+            .map(String::from),
+        );
+        lidarsim_ok(&args);
+        let (a, b) = (d.join(format!("{name}_a")), d.join(format!("{name}_b")));
+        for (spec, out, threads) in [
+            ("0/4", &a, "1"),
+            ("1/4", &a, "2"),
+            ("2/4", &b, "1"),
+            ("3/4", &b, "2"),
+        ] {
+            shard(
+                scene.as_deref(),
+                spec,
+                out,
+                &["--photons", "2000", "--seed", "7", "--threads", threads],
+            );
+        }
+        let merged = d.join(format!("{name}_merged"));
+        let stdout = lidarsim_ok([
+            "merge".to_string(),
+            s(&a),
+            s(&b.join("shard-2-of-4.lshard")),
+            s(&b.join("shard-3-of-4.lshard")),
+            "--out".into(),
+            s(&merged),
+        ]);
+        assert!(stdout.contains("merged 4 shards"), "{stdout}");
+        let names = assert_same_outputs(&single, &merged);
+        assert!(names.contains(&"returns.csv".to_string()), "{names:?}");
+        if scene.is_none() {
+            for f in ["signals.csv", "retrieval.csv", "returns.png"] {
+                assert!(names.contains(&f.to_string()), "{f} in {names:?}");
+            }
+        }
+    }
+}
+
+/// A shard's batches are the same bytes whatever the thread count; only the trailer (wall
+/// time, threads, checksum) differs.
+#[test]
+fn a_shard_is_the_same_on_any_thread_count() {
+    let dir = tempfile::tempdir().unwrap();
+    let (one, two) = (dir.path().join("one"), dir.path().join("two"));
+    let scene = c1_scene();
+    shard(
+        Some(&scene),
+        "1/3",
+        &one,
+        &["--photons", "3000", "--threads", "1"],
+    );
+    shard(
+        Some(&scene),
+        "1/3",
+        &two,
+        &["--photons", "3000", "--threads", "2"],
+    );
+    let name = "shard-1-of-3.lshard";
+    let (a, b) = (
+        ShardFile::read(&one.join(name)).unwrap(),
+        ShardFile::read(&two.join(name)).unwrap(),
+    );
+    assert_eq!(a.header, b.header);
+    assert_eq!((a.threads, b.threads), (1, 2));
+    let (ta, tb): (Vec<_>, Vec<_>) = (a.batches().collect(), b.batches().collect());
+    assert_eq!(ta.len(), 33, "batches 34..67 of 100");
+    assert_eq!(ta[0].index, 34);
+    assert!(ta == tb);
+    let (ba, bb) = (
+        fs::read(one.join(name)).unwrap(),
+        fs::read(two.join(name)).unwrap(),
+    );
+    assert_eq!(ba.len(), bb.len());
+    assert_eq!(ba[..ba.len() - 24], bb[..bb.len() - 24]);
+}
+
+/// `lidarsim merge ARGS --out DIR`: exit code 2, one line on stderr, nothing written.
+fn merge_refused(args: &[PathBuf]) -> String {
+    let out_dir = tempfile::tempdir().unwrap();
+    let out = out_dir.path().join("merged");
+    let mut a = vec!["merge".to_string()];
+    a.extend(args.iter().map(|p| s(p)));
+    a.extend(["--out".to_string(), s(&out)]);
+    let o = lidarsim(&a);
+    let stderr = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert_eq!(o.status.code(), Some(2), "{stderr}");
+    assert_eq!(stderr.trim_end().lines().count(), 1, "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(!out.exists(), "nothing written");
+    stderr
+}
+
+/// Four shards of C.1 at 400 photons, seed 1, in `dir`.
+fn four_shards(dir: &Path, extra: &[&str]) -> Vec<PathBuf> {
+    let scene = c1_scene();
+    let mut args = vec!["--threads", "1"];
+    if !extra.contains(&"--photons") {
+        args.extend(["--photons", "400"]);
+    }
+    args.extend_from_slice(extra);
+    (0..4)
+        .map(|i| {
+            shard(Some(&scene), &format!("{i}/4"), dir, &args);
+            dir.join(format!("shard-{i}-of-4.lshard"))
+        })
+        .collect()
+}
+
+#[test]
+fn merge_refuses_a_missing_or_duplicated_shard_naming_the_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let files = four_shards(&dir.path().join("a"), &[]);
+    let e = merge_refused(&[files[0].clone(), files[1].clone(), files[3].clone()]);
+    assert!(e.contains("1 of 4 shards missing (2)"), "{e}");
+    assert!(e.contains("shard-3-of-4.lshard"), "{e}");
+    // The same shard in a second directory.
+    let other = dir.path().join("b");
+    fs::create_dir(&other).unwrap();
+    fs::copy(&files[2], other.join("copy.lshard")).unwrap();
+    let e = merge_refused(&[dir.path().join("a"), other.clone()]);
+    assert!(
+        e.contains("shard 2/4 is given twice")
+            && e.contains("copy.lshard")
+            && e.contains("shard-2-of-4.lshard"),
+        "{e}"
+    );
+    let empty = dir.path().join("empty");
+    fs::create_dir(&empty).unwrap();
+    let e = merge_refused(std::slice::from_ref(&empty));
+    assert!(e.contains("no shard files") && e.contains("empty"), "{e}");
+    let e = merge_refused(&[dir.path().join("nowhere")]);
+    assert!(e.contains("nowhere"), "{e}");
+}
+
+#[test]
+fn merge_refuses_shards_of_different_seeds_photons_scenes_or_options() {
+    let dir = tempfile::tempdir().unwrap();
+    let base = four_shards(&dir.path().join("base"), &[]);
+    let seed = four_shards(&dir.path().join("seed"), &["--seed", "2"]);
+    let photons = four_shards(&dir.path().join("photons"), &["--photons", "800"]);
+    let ddis = four_shards(&dir.path().join("ddis"), &["--ddis-epsilon", "0.2"]);
+    let cases = [
+        (&seed, "the seed differs (1 against 2)"),
+        (&photons, "the photon count differs (400 against 800)"),
+        (&ddis, "the DDIS probability differs (0.3 against 0.2)"),
+    ];
+    for (other, why) in cases {
+        let e = merge_refused(&[
+            base[0].clone(),
+            base[1].clone(),
+            base[2].clone(),
+            other[3].clone(),
+        ]);
+        assert!(e.contains(why), "{why}: {e}");
+        assert!(e.contains(&s(&base[0])) && e.contains(&s(&other[3])), "{e}");
+    }
+    // The same scene with another extinction: same seed and photons, another digest.
+    let text = fs::read_to_string(c1_scene())
+        .unwrap()
+        .replace("extinction_per_km = 17.23", "extinction_per_km = 17.24")
+        .replace(
+            "../phase_functions/",
+            &format!("{}/", s(&project_root().join("phase_functions"))),
+        );
+    let other_scene = dir.path().join("other.toml");
+    fs::write(&other_scene, text).unwrap();
+    let out = dir.path().join("other");
+    shard(
+        Some(&s(&other_scene)),
+        "3/4",
+        &out,
+        &["--photons", "400", "--threads", "1"],
+    );
+    let e = merge_refused(&[
+        base[0].clone(),
+        base[1].clone(),
+        base[2].clone(),
+        out.join("shard-3-of-4.lshard"),
+    ]);
+    assert!(
+        e.contains("the scene (digest) differs") && e.contains("other.toml"),
+        "{e}"
+    );
+    // Shard counts.
+    let three = dir.path().join("three");
+    shard(Some(&c1_scene()), "2/3", &three, &["--photons", "400"]);
+    let e = merge_refused(&[base[0].clone(), three.join("shard-2-of-3.lshard")]);
+    assert!(e.contains("the shard count differs (4 against 3)"), "{e}");
+}
+
+/// The scene a merge reads again must be the one the shards ran, down to the files it reads:
+/// a phase table changed between the shards and the merge is refused.
+#[test]
+fn merge_refuses_a_scene_whose_files_changed_since_the_shards() {
+    let dir = tempfile::tempdir().unwrap();
+    let table = dir.path().join("c1.txt");
+    fs::copy(
+        project_root().join("phase_functions/bissonnette_c1_1064nm.txt"),
+        &table,
+    )
+    .unwrap();
+    let text = fs::read_to_string(c1_scene())
+        .unwrap()
+        .replace("../phase_functions/bissonnette_c1_1064nm.txt", "c1.txt");
+    let scene = dir.path().join("c1.toml");
+    fs::write(&scene, text).unwrap();
+    let out = dir.path().join("shards");
+    for i in 0..2 {
+        shard(
+            Some(&s(&scene)),
+            &format!("{i}/2"),
+            &out,
+            &["--photons", "400"],
+        );
+    }
+    let merged = dir.path().join("merged");
+    lidarsim_ok(["merge".to_string(), s(&out), "--out".into(), s(&merged)]);
+    let t = fs::read_to_string(&table).unwrap();
+    assert!(t.contains("0.0100,7.59310094e+02"));
+    fs::write(
+        &table,
+        t.replace("0.0100,7.59310094e+02", "0.0100,7.59310095e+02"),
+    )
+    .unwrap();
+    let e = merge_refused(&[out]);
+    assert!(
+        e.contains("is not the one the shards ran") && e.contains("c1.toml"),
+        "{e}"
+    );
+}
+
+/// FNV-1a 64 as the file format says (tests rebuild shard files with it).
+fn fnv(bytes: &[u8]) -> u64 {
+    bytes.iter().fold(0xcbf2_9ce4_8422_2325, |h, b| {
+        (h ^ u64::from(*b)).wrapping_mul(0x0000_0100_0000_01b3)
+    })
+}
+
+/// `bytes` with its header replaced by `edit(header)` and a correct checksum.
+fn with_header(bytes: &[u8], edit: impl Fn(&mut serde_json::Value)) -> Vec<u8> {
+    let len = u64::from_le_bytes(bytes[20..28].try_into().unwrap()) as usize;
+    let mut h: serde_json::Value = serde_json::from_slice(&bytes[28..28 + len]).unwrap();
+    edit(&mut h);
+    let json = serde_json::to_vec(&h).unwrap();
+    let mut out = bytes[..20].to_vec();
+    out.extend((json.len() as u64).to_le_bytes());
+    out.extend(&json);
+    out.extend(&bytes[28 + len..bytes.len() - 8]);
+    let sum = fnv(&out);
+    out.extend(sum.to_le_bytes());
+    out
+}
+
+/// A corrupt, truncated, foreign, future-format or other-version shard: one line naming the
+/// file and what is wrong.
+#[test]
+fn merge_refuses_damaged_and_foreign_shard_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let files = four_shards(&dir.path().join("a"), &[]);
+    let good = fs::read(&files[1]).unwrap();
+    let bad = dir.path().join("bad");
+    fs::create_dir(&bad).unwrap();
+    let mut flipped = good.clone();
+    flipped[good.len() / 2] ^= 0x10;
+    let mut future = good.clone();
+    future[16] = 2;
+    let cases: Vec<(&str, Vec<u8>, &str)> = vec![
+        ("truncated", good[..good.len() - 100].to_vec(), "truncated"),
+        ("flipped", flipped, "corrupt: checksum"),
+        (
+            "text",
+            b"returns,csv\n1,2\n".to_vec(),
+            "not a lidarsim shard file",
+        ),
+        ("empty", Vec::new(), "not a lidarsim shard file"),
+        ("future", future, "shard file format 2"),
+        (
+            "version",
+            with_header(&good, |h| h["lidarsim_version"] = "0.0.1".into()),
+            "written by lidarsim 0.0.1",
+        ),
+        (
+            "range",
+            with_header(&good, |h| {
+                h["first_batch"] = 0.into();
+                h["end_batch"] = 25.into();
+            }),
+            "inconsistent header",
+        ),
+        (
+            "sizes",
+            with_header(&good, |h| h["bins_per_batch"] = 7.into()),
+            "where its header announces",
+        ),
+        (
+            "tail",
+            [good.as_slice(), &[0u8; 8]].concat(),
+            "bytes beyond the end",
+        ),
+    ];
+    for (name, bytes, why) in cases {
+        let p = bad.join(format!("{name}.lshard"));
+        fs::write(&p, bytes).unwrap();
+        let e = merge_refused(&[
+            files[0].clone(),
+            p.clone(),
+            files[2].clone(),
+            files[3].clone(),
+        ]);
+        assert!(e.contains(why) && e.contains(&s(&p)), "{name}: {e}");
+        fs::remove_file(&p).unwrap();
+    }
+}
+
+/// No truncation or byte flip of a shard file makes the reader panic; each is refused (a flip
+/// in the trailer's wall time or thread count aside: the checksum covers them too).
+#[test]
+fn every_truncation_and_flip_of_a_shard_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = c1_scene();
+    shard(Some(&scene), "0/50", dir.path(), &["--photons", "200"]);
+    let path = dir.path().join("shard-00-of-50.lshard");
+    let good = fs::read(&path).unwrap();
+    assert!(ShardFile::parse(&path, good.clone()).is_ok());
+    for len in (0..good.len())
+        .step_by(97)
+        .chain(good.len() - 30..good.len())
+    {
+        assert!(
+            ShardFile::parse(&path, good[..len].to_vec()).is_err(),
+            "length {len}"
+        );
+    }
+    for at in (0..good.len())
+        .step_by(89)
+        .chain(good.len() - 30..good.len())
+    {
+        let mut b = good.clone();
+        b[at] ^= 0x04;
+        let e = ShardFile::parse(&path, b).expect_err("flipped byte");
+        assert!(e.to_string().contains(&s(&path)), "{e}");
+    }
+}
+
+#[test]
+fn shard_options_are_checked_before_any_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = s(&dir.path().join("out"));
+    let scene = c1_scene();
+    for (spec, why) in [
+        ("4/4", "shard 4 of 4 does not exist"),
+        ("0/0", "number of shards must lie in"),
+        ("x", "is not I/N"),
+        ("1/2/3", "is not I/N"),
+        ("0/101", "101 shards of a run of 100 batches"),
+    ] {
+        let o = lidarsim([
+            "run",
+            &scene,
+            "--photons",
+            "400",
+            "--shard",
+            spec,
+            "--out",
+            &out,
+        ]);
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{spec}: {e}");
+        assert!(e.contains(why), "{spec}: {e}");
+    }
+    let o = lidarsim([
+        "run",
+        &scene,
+        "--photons",
+        "0",
+        "--shard",
+        "0/2",
+        "--out",
+        &out,
+    ]);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        o.status.code() == Some(2) && e.contains("a shard needs photons"),
+        "{e}"
+    );
+    assert!(!dir.path().join("out").exists());
+}
+
+/// The library's own path: shards written by [`shard::run`] merge by [`shard::merge`] into the
+/// Monte Carlo of [`lidarsim::pipeline::run`], equal as numbers.
+#[test]
+fn library_shards_fold_into_the_pipelines_result() {
+    let scene = shard::read_scene(Some(Path::new(&c1_scene()))).unwrap();
+    let mut opts = lidarsim::transport::TransportOptions::from_scene(&scene);
+    opts.photons = 1000;
+    opts.threads = 1;
+    let mut scene = scene;
+    scene.override_simulation(Some(1000), None, None).unwrap();
+    let whole = lidarsim::pipeline::run(&scene, &opts).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    for i in 0..3 {
+        let r = shard::run(&scene, &opts, ShardSpec { index: i, count: 3 }, dir.path()).unwrap();
+        assert_eq!(r.total_batches, 100);
+    }
+    let merged = shard::merge(&[dir.path().to_path_buf()]).unwrap();
+    let (a, b) = (whole.mc.unwrap(), merged.run.mc.unwrap());
+    assert_eq!(a.returns, b.returns);
+    assert_eq!(a.stats, b.stats);
+    assert_eq!(a.photons, b.photons);
+    assert_eq!(merged.shards, 3);
+}
