@@ -114,9 +114,7 @@ pub fn run_with(
         &mut products,
     )?;
     let (mc, mc_lines) = if transport.photons > 0 {
-        let mut opts = transport.clone();
-        opts.combinations = scene.sampling.combinations();
-        opts.combination_pairs = scene.sampling.covariance_pairs();
+        let opts = plan_options(scene, transport);
         let mc = monte_carlo(&transport::Plan::new(scene, &atmosphere, &opts)?)?;
         let lines = mc.combined.as_ref().map(|c| scene.sampling.split(c));
         (Some(mc), lines)
@@ -145,6 +143,16 @@ pub fn run_with(
         retrieval,
         products,
     })
+}
+
+/// The transport options a run's plan is built with: `transport` with the scene's laser-line
+/// combinations and the pairs whose covariance is folded. One function, so that every process
+/// that builds the plan of a run (MPI ranks, shards) builds the same one.
+pub fn plan_options(scene: &Scene, transport: &TransportOptions) -> TransportOptions {
+    let mut opts = transport.clone();
+    opts.combinations = scene.sampling.combinations();
+    opts.combination_pairs = scene.sampling.covariance_pairs();
+    opts
 }
 
 /// Signals of one set of line returns, and the retrievals from them.

@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use lidarsim::input::Bounds;
 use lidarsim::instrument::signals;
 use lidarsim::output::{self, OutputSet};
-use lidarsim::pipeline::{self, RunOutput};
+use lidarsim::pipeline::RunOutput;
 use lidarsim::retrieval::{self, Method, Product, Quantity};
 use lidarsim::returns::{self, Order, Returns, Source};
 use lidarsim::scene::Scene;
@@ -64,7 +64,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut opts = TransportOptions::from_scene(&scene);
     opts.progress = true;
     opts.ddis_epsilon = args.ddis_epsilon;
-    let run = pipeline::run(&scene, &opts)?;
+    #[cfg(not(feature = "mpi"))]
+    let run = lidarsim::pipeline::run(&scene, &opts)?;
+    // Under `mpirun` the ranks share the batches; rank 0 alone writes (`lidarsim::distributed`).
+    #[cfg(feature = "mpi")]
+    let run = match lidarsim::distributed::run(&scene, &opts)? {
+        lidarsim::distributed::Outcome::Root(run) => run,
+        lidarsim::distributed::Outcome::Worker => return Ok(()),
+        // Rank 0 reports why the run stopped; this rank only ends with the error status.
+        lidarsim::distributed::Outcome::Stopped => std::process::exit(2),
+    };
 
     // Everything is computed; now write all files together or none (`lidarsim::output`).
     let mut files = OutputSet::new();
