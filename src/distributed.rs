@@ -52,7 +52,9 @@ pub enum Outcome {
     /// Another rank: its batches are folded into rank 0's output; nothing to write.
     Worker,
     /// Another rank of a run that failed before the exchange; rank 0 reports why. The process
-    /// should end with the error status without a message of its own.
+    /// should end quietly with status 0: rank 0 ends with the error status, which `mpirun`
+    /// returns, and a rank ending with an error first makes `mpirun` kill rank 0, perhaps before
+    /// its message is out.
     Stopped,
 }
 
@@ -425,9 +427,9 @@ fn agree(
                 failures.push((
                     r,
                     format!(
-                        "rank {r} planned (batches, photons per batch, tally values, channels, \
+                        "it planned (batches, photons per batch, tally values, channels, \
                          seed) = {:?} where rank 0 planned {:?}: every rank must run the same \
-                         scene with the same lidarsim",
+                         scene and options with the same lidarsim",
                         Digest::plan_part(rec),
                         Digest::plan_part(root)
                     ),

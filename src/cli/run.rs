@@ -70,9 +70,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     #[cfg(feature = "mpi")]
     let run = match lidarsim::distributed::run(&scene, &opts)? {
         lidarsim::distributed::Outcome::Root(run) => run,
-        lidarsim::distributed::Outcome::Worker => return Ok(()),
-        // Rank 0 reports why the run stopped; this rank only ends with the error status.
-        lidarsim::distributed::Outcome::Stopped => std::process::exit(2),
+        // Other ranks: rank 0 writes the files, or reports why the run stopped and ends with
+        // status 2 (mpirun's status); a rank that ended with 2 first could cut its message off.
+        lidarsim::distributed::Outcome::Worker | lidarsim::distributed::Outcome::Stopped => {
+            return Ok(());
+        }
     };
 
     // Everything is computed; now write all files together or none (`lidarsim::output`).
