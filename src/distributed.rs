@@ -403,10 +403,8 @@ fn agree(
     let records: Vec<&[u64]> = all.chunks(7).collect();
     let failed: Vec<usize> = (0..size).filter(|&r| records[r][0] != 0).collect();
     // Failed ranks send their messages to rank 0, which alone reports them.
-    if rank != 0 {
-        if let Err(message) = mine {
-            world.process_at_rank(0).send(message.as_bytes());
-        }
+    if let (1.., Err(message)) = (rank, mine) {
+        world.process_at_rank(0).send(message.as_bytes());
     }
     let mut failures: Vec<(usize, String)> = Vec::new();
     for &r in &failed {

@@ -1,0 +1,39 @@
+#!/usr/bin/env bash
+# Strong scaling of one Bissonnette C.1 run over MPI ranks (README.md beside this file).
+#
+#   validation/mpi/scaling.sh SINGLE_BINARY MPI_BINARY [PHOTONS] [REPEATS]
+#
+# Prints one line per run: configuration, repeat, wall time of the whole command [s] and the
+# transport's own wall time from summary.json [s], then the load average, since on a shared
+# machine other work changes the figures.
+set -euo pipefail
+single=$(realpath "$1")
+mpi=$(realpath "$2")
+photons=${3:-2000000}
+repeats=${4:-5}
+cd "$(dirname "$0")/../.."
+scene=scenes/bissonnette_c1.toml
+work=$(mktemp -d)
+trap 'rm -rf "$work"' EXIT
+
+measure() {
+    local label=$1
+    shift
+    for i in $(seq 1 "$repeats"); do
+        local t0 t1
+        t0=$(date +%s.%N)
+        "$@" --out "$work/out" >/dev/null
+        t1=$(date +%s.%N)
+        local transport
+        transport=$(grep '"wall_s"' "$work/out/summary.json" | tr -dc '0-9.e-')
+        printf '%-28s %d  total %6.3f s  transport %6.3f s  load %s\n' "$label" "$i" \
+            "$(awk -v a="$t0" -v b="$t1" 'BEGIN { print b - a }')" "$transport" "$(cut -d' ' -f1 /proc/loadavg)"
+    done
+}
+
+args=(run "$scene" --photons "$photons" --seed 1 --no-plots)
+mpirun_=(mpirun --oversubscribe --allow-run-as-root)
+measure "1 process, 1 thread" "$single" "${args[@]}" --threads 1
+measure "mpirun -np 1, 1 thread" "${mpirun_[@]}" -np 1 "$mpi" "${args[@]}" --threads 1
+measure "mpirun -np 2, 1 thread each" "${mpirun_[@]}" -np 2 "$mpi" "${args[@]}" --threads 1
+measure "1 process, 2 threads" "$single" "${args[@]}" --threads 2
