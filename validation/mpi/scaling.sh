@@ -3,9 +3,9 @@
 #
 #   validation/mpi/scaling.sh SINGLE_BINARY MPI_BINARY [PHOTONS] [REPEATS]
 #
-# Prints one line per run: configuration, repeat, wall time of the whole command [s] and the
-# transport's own wall time from summary.json [s], then the load average, since on a shared
-# machine other work changes the figures.
+# Prints one line per run: configuration, repeat, wall time of the whole command [s], the CPU
+# time of all its processes (user + system) [s], the transport's own wall time from
+# summary.json [s], and the load average, since on a shared machine other work changes them.
 set -euo pipefail
 single=$(realpath "$1")
 mpi=$(realpath "$2")
@@ -20,14 +20,13 @@ measure() {
     local label=$1
     shift
     for i in $(seq 1 "$repeats"); do
-        local t0 t1
-        t0=$(date +%s.%N)
-        "$@" --out "$work/out" >/dev/null
-        t1=$(date +%s.%N)
-        local transport
+        local TIMEFORMAT='%R %U %S' wall user sys transport
+        { time "$@" --out "$work/out" >/dev/null 2>"$work/stderr"; } 2>"$work/time"
+        read -r wall user sys <"$work/time"
         transport=$(grep '"wall_s"' "$work/out/summary.json" | tr -dc '0-9.e-')
-        printf '%-28s %d  total %6.3f s  transport %6.3f s  load %s\n' "$label" "$i" \
-            "$(awk -v a="$t0" -v b="$t1" 'BEGIN { print b - a }')" "$transport" "$(cut -d' ' -f1 /proc/loadavg)"
+        printf '%-28s %d  wall %6.2f s  cpu %6.2f s  transport %6.2f s  load %s\n' "$label" "$i" \
+            "$wall" "$(awk -v u="$user" -v s="$sys" 'BEGIN { print u + s }')" "$transport" \
+            "$(cut -d' ' -f1 /proc/loadavg)"
     done
 }
 
