@@ -24,7 +24,7 @@ measure() {
         { time "$@" --out "$work/out" >/dev/null 2>"$work/stderr"; } 2>"$work/time"
         read -r wall user sys <"$work/time"
         transport=$(grep '"wall_s"' "$work/out/summary.json" | tr -dc '0-9.e-')
-        printf '%-28s %d  wall %6.2f s  cpu %6.2f s  transport %6.2f s  load %s\n' "$label" "$i" \
+        printf '%-30s %d  wall %6.2f s  cpu %6.2f s  transport %6.2f s  load %s\n' "$label" "$i" \
             "$wall" "$(awk -v u="$user" -v s="$sys" 'BEGIN { print u + s }')" "$transport" \
             "$(cut -d' ' -f1 /proc/loadavg)"
     done
@@ -35,4 +35,8 @@ mpirun_=(mpirun --oversubscribe --allow-run-as-root)
 measure "1 process, 1 thread" "$single" "${args[@]}" --threads 1
 measure "mpirun -np 1, 1 thread" "${mpirun_[@]}" -np 1 "$mpi" "${args[@]}" --threads 1
 measure "mpirun -np 2, 1 thread each" "${mpirun_[@]}" -np 2 "$mpi" "${args[@]}" --threads 1
+# OpenMPI polls while a rank waits for its partner; on cores shared with other work, yielding
+# instead gives the partner its time.
+measure "mpirun -np 2, yield when idle" "${mpirun_[@]}" --mca mpi_yield_when_idle 1 -np 2 "$mpi" \
+    "${args[@]}" --threads 1
 measure "1 process, 2 threads" "$single" "${args[@]}" --threads 2
