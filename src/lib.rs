@@ -22,6 +22,8 @@
 
 pub mod atmosphere;
 pub mod constants;
+#[cfg(feature = "mpi")]
+pub mod distributed;
 pub mod input;
 pub mod instrument;
 pub mod lidar_eq;

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use lidarsim::input::Bounds;
 use lidarsim::instrument::signals;
 use lidarsim::output::{self, OutputSet};
-use lidarsim::pipeline::{self, RunOutput};
+use lidarsim::pipeline::RunOutput;
 use lidarsim::retrieval::{self, Method, Product, Quantity};
 use lidarsim::returns::{self, Order, Returns, Source};
 use lidarsim::scene::Scene;
@@ -71,7 +71,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut opts = TransportOptions::from_scene(&scene);
     opts.progress = true;
     opts.ddis_epsilon = args.ddis_epsilon;
-    let run = pipeline::run(&scene, &opts)?;
+    #[cfg(not(feature = "mpi"))]
+    let run = lidarsim::pipeline::run(&scene, &opts)?;
+    // Under `mpirun` the ranks share the batches; rank 0 alone writes (`lidarsim::distributed`).
+    #[cfg(feature = "mpi")]
+    let run = match lidarsim::distributed::run(&scene, &opts)? {
+        lidarsim::distributed::Outcome::Root(run) => run,
+        // Other ranks: rank 0 writes the files, or reports why the run stopped and ends with
+        // status 2 (mpirun's status); a rank that ended with 2 first could cut its message off.
+        lidarsim::distributed::Outcome::Worker | lidarsim::distributed::Outcome::Stopped => {
+            return Ok(());
+        }
+    };
     write_outputs(&args.out, args.no_plots, &scene, &run)
 }
 

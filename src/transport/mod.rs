@@ -646,6 +646,17 @@ impl<'a> Plan<'a> {
         self.per_batch
     }
 
+    /// Values in one batch's tally buffer ([`BatchTally::bins`]): what a batch costs in memory
+    /// and on the wire.
+    pub fn tally_len(&self) -> usize {
+        self.setup.shape.len()
+    }
+
+    /// Monochromatic channels of the run (the length of each part of [`BatchTally::flux`]).
+    pub fn channels(&self) -> usize {
+        self.setup.shape.n_channels
+    }
+
     /// Trace batch `index` from its own random stream: the same tallies on any thread, process
     /// or machine.
     pub fn trace_batch(&self, index: usize) -> BatchTally {
