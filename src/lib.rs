@@ -25,6 +25,7 @@ pub mod input;
 pub mod instrument;
 pub mod lidar_eq;
 pub mod limits;
+pub mod netcdf;
 pub mod optics;
 pub mod output;
 pub mod particles;

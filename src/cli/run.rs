@@ -38,11 +38,15 @@ pub struct Args {
     /// Do not draw the figures (returns.png, dial.png).
     #[arg(long)]
     pub no_plots: bool,
+    /// Do not write run.nc (the CF NetCDF file of returns, signals and retrievals).
+    #[arg(long)]
+    pub no_netcdf: bool,
 }
 
 /// Every file `run` may write into its directory.
-const FILES: [&str; 6] = [
+const FILES: [&str; 7] = [
     "returns.csv",
+    lidarsim::netcdf::RUN_FILE,
     "signals.csv",
     "retrieval.csv",
     "returns.png",
@@ -91,6 +95,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             s.push('\n');
         }
         files.write(args.out.join("retrieval.csv"), s)?;
+    }
+    if !args.no_netcdf {
+        let nc = netcdf_file(&args, &scene, &run, &sets)?;
+        files.write(args.out.join(lidarsim::netcdf::RUN_FILE), nc)?;
     }
     if !args.no_plots && scene.retrieval.is_some() {
         super::figures::draw(&mut files, &args.out, &scene, &run)?;
@@ -263,6 +271,49 @@ fn print_retrieval(
         }
     }
     Ok(())
+}
+
+/// The bytes of `run.nc` (`lidarsim::netcdf`): the numbers of the CSV files, the scene's text
+/// and this command line.
+fn netcdf_file(
+    args: &Args,
+    scene: &Scene,
+    run: &RunOutput,
+    returns: &[&Returns],
+) -> anyhow::Result<Vec<u8>> {
+    use lidarsim::netcdf;
+    let scene_text = match &args.scene {
+        Some(p) => std::fs::read_to_string(p)?,
+        None => lidarsim::scene::DEFAULT_SCENE_TOML.to_string(),
+    };
+    let command: Vec<String> = std::env::args().collect();
+    let title = if scene.description.is_empty() {
+        scene.path.display().to_string()
+    } else {
+        scene.description.clone()
+    };
+    let attributes = netcdf::RunAttributes {
+        title: format!("lidarsim run: {title}"),
+        history: format!(
+            "{}: {}",
+            netcdf::utc_timestamp(std::time::SystemTime::now()),
+            command.join(" ")
+        ),
+        scene_file: scene.path.display().to_string(),
+        scene_text,
+        seed: scene.simulation.seed,
+        photons: run.mc.as_ref().map_or(0, |m| m.photons),
+        batches: scene.simulation.batches as u64,
+    };
+    Ok(netcdf::run_file(&netcdf::RunFile {
+        returns,
+        gates: &scene.gates,
+        lines: &scene.sampling.lines,
+        signals: &run.signals,
+        products: &run.products,
+        gas: run.retrieval.as_ref().map(|r| r.config.gas.as_str()),
+        attributes: &attributes,
+    })?)
 }
 
 fn summary_json(scene: &Scene, run: &RunOutput) -> String {
