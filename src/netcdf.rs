@@ -424,13 +424,16 @@ fn signal_variables(nc: &mut Builder, grid: &Grid, signals: &[Signals]) -> Resul
     Ok(())
 }
 
+/// A column of `retrieval.csv`: its value in a product.
+type Column<T> = fn(&Product) -> T;
+
 /// One table of `retrieval.csv`'s rows of one quantity.
 fn product_variables(nc: &mut Builder, q: Quantity, rows: &[&Product], gas: Option<&str>) {
     let p = q.label();
     let dim = format!("{p}_product");
     nc.dim(&dim, rows.len());
     let name = |column: &str| format!("{p}_{column}");
-    let texts: [(&str, &str, fn(&Product) -> String); 4] = [
+    let texts: [(&str, &str, Column<String>); 4] = [
         (
             "method",
             "retrieval method: ipda (weighting function), ipda_virtual_sigma (virtual cross-sections), dial (range cell)",
@@ -455,7 +458,7 @@ fn product_variables(nc: &mut Builder, q: Quantity, rows: &[&Product], gas: Opti
             .attrs([("long_name", long_name)]);
         coordinates.push(name(column));
     }
-    let geometry: [(&str, &str, &str, fn(&Product) -> f64); 5] = [
+    let geometry: [(&str, &str, &str, Column<f64>); 5] = [
         (
             "fov_full_angle_mrad",
             "receiver field of view, full angle",
@@ -512,7 +515,7 @@ fn product_variables(nc: &mut Builder, q: Quantity, rows: &[&Product], gas: Opti
     };
     let gas = gas.unwrap_or("gas");
     let coordinates = coordinates.join(" ");
-    let values: [(&str, String, fn(&Product) -> f64); 9] = [
+    let values: [(&str, String, Column<f64>); 9] = [
         (
             "truth",
             format!("{gas} of the scene's own profile over the column or cell"),
@@ -625,7 +628,7 @@ struct Var {
 }
 
 impl Var {
-    fn attrs<'s, const N: usize>(&mut self, attrs: [(&str, &'s str); N]) -> &mut Var {
+    fn attrs<const N: usize>(&mut self, attrs: [(&str, &str); N]) -> &mut Var {
         for (k, v) in attrs {
             self.attrs.push((k.into(), Attr::text(v)));
         }
