@@ -14,9 +14,9 @@
 //!
 //! **Conventions.** CF-1.8 (Eaton et al., *NetCDF Climate and Forecast (CF) Metadata
 //! Conventions*, version 1.8, 2020): every variable has `units` and `long_name`, and a
-//! `standard_name` where the CF standard-name table has one that fits (`radiation_wavenumber`,
-//! `dry_atmosphere_mole_fraction_of_carbon_dioxide` / `_of_methane`); range, field of view,
-//! received energy and photo-electrons have none. Range gates have `bounds` (§7.1); an
+//! `standard_name` where the CF standard-name table (version 93) has one that fits
+//! (`dry_atmosphere_mole_fraction_of_carbon_dioxide` / `_of_methane`); range, field of view,
+//! wavenumber, received energy and photo-electrons have none. Range gates have `bounds` (§7.1); an
 //! estimate names its standard error in `ancillary_variables` (§3.4); a bin with no value
 //! holds `_FillValue` (§2.5.1; the CSV writes those as empty fields or `NaN`).
 //!
@@ -276,8 +276,10 @@ fn coordinates(nc: &mut Builder, grid: &Grid, run: &RunFile) -> Result<(), Netcd
         .collect();
     nc.f64("channel_wavenumber_cm1", &["channel"], wavenumber)
         .attrs([
+            // No standard name: the CF table (version 93) has `radiation_wavelength` but no
+            // wavenumber of radiation; `sensor_band_central_radiation_wavenumber` is the first
+            // moment of a band's response, which a laser's frequency offset moves away from.
             ("long_name", "nominal vacuum wavenumber of the laser line"),
-            ("standard_name", "radiation_wavenumber"),
             ("units", "cm-1"),
         ])
         .fill();

@@ -199,9 +199,9 @@ fn returns_land_in_their_bins_and_missing_bins_are_fill() {
         Some("range_m_bounds")
     );
     assert_eq!(
-        ds.get_var_attr_as_string("channel_wavenumber_cm1", "standard_name")
+        ds.get_var_attr_as_string("channel_wavenumber_cm1", "units")
             .as_deref(),
-        Some("radiation_wavenumber")
+        Some("cm-1")
     );
 }
 
