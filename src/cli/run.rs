@@ -283,10 +283,16 @@ fn netcdf_file(
 ) -> anyhow::Result<Vec<u8>> {
     use lidarsim::netcdf;
     let scene_text = match &args.scene {
-        Some(p) => std::fs::read_to_string(p)?,
+        Some(p) => match std::fs::read(p) {
+            Ok(bytes) => String::from_utf8_lossy(&bytes).into_owned(),
+            Err(e) => anyhow::bail!("cannot read {} again for run.nc: {e}", p.display()),
+        },
         None => lidarsim::scene::DEFAULT_SCENE_TOML.to_string(),
     };
-    let command: Vec<String> = std::env::args().collect();
+    // `args_os`: a path that is not UTF-8 must not panic here.
+    let command: Vec<String> = std::env::args_os()
+        .map(|a| a.to_string_lossy().into_owned())
+        .collect();
     let title = if scene.description.is_empty() {
         scene.path.display().to_string()
     } else {
