@@ -12,6 +12,9 @@
 //! | optical atmosphere | [`optics`] | [`optics::OpticalAtmosphere`], the one input of transport |
 //! | Monte Carlo | [`transport`] | [`returns::Returns`] by channel, FOV, gate and order |
 //! | analytic single scatter | [`lidar_eq`] | [`returns::Returns`], order 1 |
+//!
+//! Beside the stages: [`output`] writes a command's files whole or not at all, and [`netcdf`]
+//! makes `run.nc`, the CF NetCDF file of a run's returns, signals and retrievals.
 
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
