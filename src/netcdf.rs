@@ -122,6 +122,92 @@ pub fn run_file(run: &RunFile) -> Result<Vec<u8>, NetcdfError> {
     nc.finish()
 }
 
+/// One column of a table ([`table_file`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Column {
+    /// Variable name: the CSV column's.
+    pub name: &'static str,
+    /// `long_name`.
+    pub long_name: &'static str,
+    /// `units` (UDUNITS); `None` for text.
+    pub units: Option<&'static str>,
+    /// One value per row.
+    pub values: ColumnValues,
+}
+
+/// The values of a [`Column`].
+#[derive(Debug, Clone, PartialEq)]
+pub enum ColumnValues {
+    /// Text (a char array).
+    Text(Vec<String>),
+    /// Numbers; a non-finite one is `_FillValue`.
+    Number(Vec<f64>),
+}
+
+/// A table (the rows of one CSV file) as a CF NetCDF file: one dimension `row_dim`, one
+/// variable per column, named as the column; text columns are the numbers' auxiliary
+/// coordinates (CF-1.8 §5). Global attributes `Conventions`, `title`, `source`, `history`.
+pub fn table_file(
+    row_dim: &str,
+    columns: &[Column],
+    title: &str,
+    history: &str,
+) -> Result<Vec<u8>, NetcdfError> {
+    let rows = columns.first().map_or(0, |c| match &c.values {
+        ColumnValues::Text(v) => v.len(),
+        ColumnValues::Number(v) => v.len(),
+    });
+    if rows == 0 {
+        return Err(NetcdfError::Layout("a table without rows".into()));
+    }
+    let mut nc = Builder::default();
+    nc.global("Conventions", Attr::text(CONVENTIONS));
+    nc.global("title", Attr::text(title));
+    nc.global(
+        "source",
+        Attr::text(format!("lidarsim {}", env!("CARGO_PKG_VERSION"))),
+    );
+    nc.global("history", Attr::text(history));
+    nc.dim(row_dim, rows);
+    let texts: Vec<&str> = columns
+        .iter()
+        .filter(|c| matches!(c.values, ColumnValues::Text(_)))
+        .map(|c| c.name)
+        .collect();
+    let coordinates = texts.join(" ");
+    for c in columns {
+        let len = match &c.values {
+            ColumnValues::Text(v) => v.len(),
+            ColumnValues::Number(v) => v.len(),
+        };
+        if len != rows {
+            return Err(NetcdfError::Layout(format!(
+                "column {} has {len} rows, not {rows}",
+                c.name
+            )));
+        }
+        match &c.values {
+            ColumnValues::Text(v) => {
+                nc.text(c.name, row_dim, v)
+                    .attrs([("long_name", c.long_name)]);
+            }
+            ColumnValues::Number(v) => {
+                let var = nc
+                    .f64(c.name, &[row_dim], v.clone())
+                    .attrs([("long_name", c.long_name)])
+                    .fill();
+                if let Some(u) = c.units {
+                    var.attrs([("units", u)]);
+                }
+                if !coordinates.is_empty() {
+                    var.attrs([("coordinates", coordinates.as_str())]);
+                }
+            }
+        }
+    }
+    nc.finish()
+}
+
 /// `t` as an ISO 8601 UTC time to the second (`2026-11-23T20:30:03Z`), for `history`.
 pub fn utc_timestamp(t: SystemTime) -> String {
     let s = t.duration_since(UNIX_EPOCH).map_or(0, |d| d.as_secs());
@@ -427,7 +513,7 @@ fn signal_variables(nc: &mut Builder, grid: &Grid, signals: &[Signals]) -> Resul
 }
 
 /// A column of `retrieval.csv`: its value in a product.
-type Column<T> = fn(&Product) -> T;
+type Getter<T> = fn(&Product) -> T;
 
 /// One table of `retrieval.csv`'s rows of one quantity.
 fn product_variables(nc: &mut Builder, q: Quantity, rows: &[&Product], gas: Option<&str>) {
@@ -435,7 +521,7 @@ fn product_variables(nc: &mut Builder, q: Quantity, rows: &[&Product], gas: Opti
     let dim = format!("{p}_product");
     nc.dim(&dim, rows.len());
     let name = |column: &str| format!("{p}_{column}");
-    let texts: [(&str, &str, Column<String>); 4] = [
+    let texts: [(&str, &str, Getter<String>); 4] = [
         (
             "method",
             "retrieval method: ipda (weighting function), ipda_virtual_sigma (virtual cross-sections), dial (range cell)",
@@ -460,7 +546,7 @@ fn product_variables(nc: &mut Builder, q: Quantity, rows: &[&Product], gas: Opti
             .attrs([("long_name", long_name)]);
         coordinates.push(name(column));
     }
-    let geometry: [(&str, &str, &str, Column<f64>); 5] = [
+    let geometry: [(&str, &str, &str, Getter<f64>); 5] = [
         (
             "fov_full_angle_mrad",
             "receiver field of view, full angle",
@@ -517,7 +603,7 @@ fn product_variables(nc: &mut Builder, q: Quantity, rows: &[&Product], gas: Opti
     };
     let gas = gas.unwrap_or("gas");
     let coordinates = coordinates.join(" ");
-    let values: [(&str, String, Column<f64>); 9] = [
+    let values: [(&str, String, Getter<f64>); 9] = [
         (
             "truth",
             format!("{gas} of the scene's own profile over the column or cell"),

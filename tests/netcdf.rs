@@ -94,3 +94,46 @@ fn run_nc_holds_the_numbers_of_the_csv_files() {
     );
     assert_eq!(stdout.matches(" equal in run.nc").count(), 4, "{stdout}");
 }
+
+#[test]
+fn sensitivities_nc_holds_the_numbers_of_sensitivities_csv() {
+    let Some(python) = python() else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("select");
+    // Two atmospheres, every line with J'' <= 4 at every offset: line labels and rankings.
+    let o = out.to_string_lossy().into_owned();
+    lidarsim_ok([
+        "select-lines",
+        "--atmosphere",
+        "us_standard,tropical",
+        "--off-cm1",
+        "6360.61",
+        "--co2-ppm",
+        "420",
+        "--layer-m",
+        "2000",
+        "--top-km",
+        "30",
+        "--max-j",
+        "4",
+        "--no-plots",
+        "--out",
+        &o,
+    ]);
+    let check = Command::new(&python)
+        .arg(project_root().join("tests/netcdf_check.py"))
+        .arg("--sensitivities")
+        .arg(&out)
+        .output()
+        .expect("python runs");
+    let stdout = String::from_utf8_lossy(&check.stdout);
+    print!("{stdout}");
+    assert!(
+        check.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&check.stderr)
+    );
+    assert!(stdout.contains("sensitivity rows equal"), "{stdout}");
+}

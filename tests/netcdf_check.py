@@ -1,8 +1,9 @@
 #!/usr/bin/env python3
 """Check `run.nc` of `lidarsim run` against the CSV files beside it, with real NetCDF clients.
 
-Usage: netcdf_check.py OUT_DIR [SCENE_FILE] [OUT_DIR [SCENE_FILE] ...] (pairs; SCENE_FILE "-"
-for the embedded default scene, whose text is then not compared).
+Usage: netcdf_check.py OUT_DIR SCENE_FILE [OUT_DIR SCENE_FILE ...] (`lidarsim run` outputs;
+SCENE_FILE "-" for the embedded default scene, whose text is then not compared), or
+netcdf_check.py --sensitivities OUT_DIR ... (`lidarsim select-lines`).
 
 The file is opened twice: with xarray (as users read it: CF decoding, `_FillValue` masked to
 NaN, char arrays as strings) and with netCDF4-python (the netCDF-C library's own reader, for the
@@ -171,7 +172,48 @@ def check_attributes(path, out, scene):
             fail("range_m_bounds are not the edges of the gates")
 
 
+# sensitivities.csv: the Rust format of each numeric column, as Python's % operator writes it
+# (exponents differ in form, `e-1` against `e-01`, not in value: compared as parsed doubles).
+SENSITIVITY_FORMATS = {
+    "nu_on_cm1": "%.6f", "nu_off_cm1": "%.6f", "daod_one_way": "%.6e", "wf_peak_hpa": "%.2f",
+    "dxco2_per_k_ppm": "%.6e", "dxco2_per_mhz_ppm": "%.6e", "dxco2_per_hpa_ppm": "%.6e",
+    "dxco2_per_10pct_h2o_ppm": "%.6e", "offset_ghz": "%.4f", "t2_on_mean": "%.6e",
+    "t2_on_std": "%.6e", "random_error_ppm": "%.6e", "total_error_ppm": "%.6e",
+    "rank": "%d", "profiles": "%d",
+}
+
+
+def check_sensitivities(out):
+    """`lidarsim select-lines`: sensitivities.nc against sensitivities.csv, row by row."""
+    header, rows = read_csv(f"{out}/sensitivities.csv")
+    with netCDF4.Dataset(f"{out}/sensitivities.nc") as nc:
+        if nc.Conventions != "CF-1.8" or not nc.source.startswith("lidarsim ") or not nc.history:
+            fail("sensitivities.nc: global attributes")
+    with xr.open_dataset(f"{out}/sensitivities.nc") as ds:
+        if ds.sizes["row"] != len(rows):
+            fail(f"sensitivities.nc has {ds.sizes['row']} rows, the CSV {len(rows)}")
+        for j, c in enumerate(header):
+            var = ds[c]
+            if "long_name" not in var.attrs or (c in SENSITIVITY_FORMATS and "units" not in var.attrs):
+                fail(f"sensitivities.nc: {c} lacks long_name or units")
+            for i, row in enumerate(rows):
+                v = var.values[i]
+                if c not in SENSITIVITY_FORMATS:
+                    ok = v == row[j]
+                elif row[j] == "":
+                    ok = math.isnan(float(v))
+                else:
+                    ok = float(row[j]) == float(SENSITIVITY_FORMATS[c] % v)
+                if not ok:
+                    fail(f"sensitivities.csv line {i + 2}, {c}: CSV {row[j]!r}, sensitivities.nc {v!r}")
+    print(f"netcdf check: {out}: {len(rows)} sensitivity rows equal in sensitivities.nc")
+
+
 def main(args):
+    if args and args[0] == "--sensitivities":
+        for out in args[1:]:
+            check_sensitivities(out)
+        return
     if len(args) % 2:
         fail("arguments: OUT_DIR SCENE pairs")
     for out, scene in zip(args[::2], args[1::2]):

@@ -316,3 +316,43 @@ fn timestamps_are_iso_8601_utc() {
     assert_eq!(t(4_107_542_400 - 1), "2100-02-28T23:59:59Z");
     assert_eq!(t(4_107_542_400), "2100-03-01T00:00:00Z");
 }
+
+#[test]
+fn a_table_with_columns_of_different_lengths_is_refused() {
+    let column = |name, values| Column {
+        name,
+        long_name: "x",
+        units: Some("1"),
+        values,
+    };
+    let e = table_file(
+        "row",
+        &[
+            column("a", ColumnValues::Number(vec![1.0, 2.0])),
+            column("b", ColumnValues::Text(vec!["x".into()])),
+        ],
+        "t",
+        "h",
+    )
+    .unwrap_err();
+    assert!(e.to_string().contains("column b has 1 rows, not 2"), "{e}");
+    let bytes = table_file(
+        "row",
+        &[
+            column("a", ColumnValues::Number(vec![1.5, f64::NAN])),
+            column("b", ColumnValues::Text(vec!["x".into(), "yz".into()])),
+        ],
+        "t",
+        "h",
+    )
+    .unwrap();
+    let mut r = read(bytes);
+    assert_eq!(r.read_var_f64("a").unwrap(), [1.5, NC_FILL_F64]);
+    assert_eq!(texts(&mut r, "b"), ["x", "yz"]);
+    assert_eq!(
+        r.data_set()
+            .get_var_attr_as_string("a", "coordinates")
+            .as_deref(),
+        Some("b")
+    );
+}
