@@ -13,6 +13,9 @@
 //! | Monte Carlo | [`transport`] | [`returns::Returns`] by channel, FOV, gate and order |
 //! | analytic single scatter | [`lidar_eq`] | [`returns::Returns`], order 1 |
 //! | what a scene does not need | [`skip`] | whether the Monte Carlo runs, and why |
+//!
+//! Beside the stages: [`output`] writes a command's files whole or not at all, and [`netcdf`]
+//! makes `run.nc`, the CF NetCDF file of a run's returns, signals and retrievals.
 
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
@@ -28,6 +31,7 @@ pub mod input;
 pub mod instrument;
 pub mod lidar_eq;
 pub mod limits;
+pub mod netcdf;
 pub mod optics;
 pub mod output;
 pub mod particles;

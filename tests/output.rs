@@ -112,6 +112,7 @@ fn a_run_replaces_every_file_of_an_earlier_run() {
             "notes.txt",
             "retrieval.csv",
             "returns.csv",
+            "run.nc",
             "signals.csv",
             "summary.json"
         ]

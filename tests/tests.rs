@@ -15,6 +15,8 @@ mod clouds;
 /// Fuzzing: property tests over the readers, a mutation fuzz of the shipped scenes through the
 /// binary (issue 11, item 4).
 mod fuzz;
+/// `run.nc` read by xarray and netCDF4-python against the CSV files (issue 12, item 4).
+mod netcdf;
 /// Output written whole or not at all; CSV quoting.
 mod output;
 /// Particles: Mie, size distributions, phase-function tables and sampling.

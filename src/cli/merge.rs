@@ -32,7 +32,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         merged.shards,
         merged.scene.path.display()
     );
-    super::run::write_outputs(&args.out, args.no_plots, &merged.scene, &merged.run)
+    super::run::write_outputs(&args.out, args.no_plots, true, &merged.scene, &merged.run)
 }
 
 /// `lidarsim run … --shard I/N`: trace the shard's batches and write its file.

@@ -42,11 +42,15 @@ pub struct Args {
     /// DIR/shard-I-of-N.lshard; `lidarsim merge` folds the N files into this run's outputs.
     #[arg(long, value_name = "I/N", value_parser = clap::value_parser!(lidarsim::shard::ShardSpec))]
     pub shard: Option<lidarsim::shard::ShardSpec>,
+    /// Do not write run.nc (the CF NetCDF file of returns, signals and retrievals).
+    #[arg(long)]
+    pub no_netcdf: bool,
 }
 
 /// Every file `run` may write into its directory.
-pub(super) const FILES: [&str; 6] = [
+pub(super) const FILES: [&str; 7] = [
     "returns.csv",
+    lidarsim::netcdf::RUN_FILE,
     "signals.csv",
     "retrieval.csv",
     "returns.png",
@@ -83,7 +87,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             return Ok(());
         }
     };
-    write_outputs(&args.out, args.no_plots, &scene, &run)
+    write_outputs(&args.out, args.no_plots, !args.no_netcdf, &scene, &run)
 }
 
 /// Write the files of a run into `out` (all together or none) and print its summary: for
@@ -91,6 +95,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 pub(super) fn write_outputs(
     out_dir: &Path,
     no_plots: bool,
+    netcdf: bool,
     scene: &Scene,
     run: &RunOutput,
 ) -> anyhow::Result<()> {
@@ -119,6 +124,10 @@ pub(super) fn write_outputs(
             s.push('\n');
         }
         files.write(out_dir.join("retrieval.csv"), s)?;
+    }
+    if netcdf {
+        let nc = netcdf_file(scene, run, &sets)?;
+        files.write(out_dir.join(lidarsim::netcdf::RUN_FILE), nc)?;
     }
     if !no_plots && scene.retrieval.is_some() {
         super::figures::draw(&mut files, out_dir, scene, run)?;
@@ -291,6 +300,44 @@ fn print_retrieval(
         }
     }
     Ok(())
+}
+
+/// The bytes of `run.nc` (`lidarsim::netcdf`): the numbers of the CSV files, the scene's text
+/// and this command line.
+fn netcdf_file(scene: &Scene, run: &RunOutput, returns: &[&Returns]) -> anyhow::Result<Vec<u8>> {
+    use lidarsim::netcdf;
+    let scene_text = scene.text().to_string();
+    // `args_os`: a path that is not UTF-8 must not panic here.
+    let command: Vec<String> = std::env::args_os()
+        .map(|a| a.to_string_lossy().into_owned())
+        .collect();
+    let title = if scene.description.is_empty() {
+        scene.path.display().to_string()
+    } else {
+        scene.description.clone()
+    };
+    let attributes = netcdf::RunAttributes {
+        title: format!("lidarsim run: {title}"),
+        history: format!(
+            "{}: {}",
+            netcdf::utc_timestamp(std::time::SystemTime::now()),
+            command.join(" ")
+        ),
+        scene_file: scene.path.display().to_string(),
+        scene_text,
+        seed: scene.simulation.seed,
+        photons: run.mc.as_ref().map_or(0, |m| m.photons),
+        batches: scene.simulation.batches as u64,
+    };
+    Ok(netcdf::run_file(&netcdf::RunFile {
+        returns,
+        gates: &scene.gates,
+        lines: &scene.sampling.lines,
+        signals: &run.signals,
+        products: &run.products,
+        gas: run.retrieval.as_ref().map(|r| r.config.gas.as_str()),
+        attributes: &attributes,
+    })?)
 }
 
 fn summary_json(scene: &Scene, run: &RunOutput) -> String {

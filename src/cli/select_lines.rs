@@ -331,7 +331,10 @@ pub fn run(a: Args) -> anyhow::Result<()> {
 
     let groups = groups(&a)?;
     // Before the work; the figures' names depend on the groups and are checked when written.
-    output::check_paths(&[a.out.join("sensitivities.csv")])?;
+    output::check_paths(&[
+        a.out.join("sensitivities.csv"),
+        a.out.join("sensitivities.nc"),
+    ])?;
     outln!(
         "select-lines: {} on-line positions, off-line {} cm-1, lines {} ({} lines), grid {} m to {} km",
         cfg.positions.len(),
@@ -428,6 +431,22 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     rows.extend(per_profile);
     let mut files = OutputSet::new();
     files.write(a.out.join("sensitivities.csv"), select::to_csv(&rows))?;
+    if !rows.is_empty() {
+        let command: Vec<String> = std::env::args_os()
+            .map(|a| a.to_string_lossy().into_owned())
+            .collect();
+        let history = format!(
+            "{}: {}",
+            lidarsim::netcdf::utc_timestamp(std::time::SystemTime::now()),
+            command.join(" ")
+        );
+        let nc = select::to_netcdf(
+            &rows,
+            "lidarsim select-lines: CO2 IPDA line selection",
+            &history,
+        )?;
+        files.write(a.out.join("sensitivities.nc"), nc)?;
+    }
     if !a.no_plots {
         init_font();
         for g in &figures {

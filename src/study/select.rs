@@ -948,6 +948,121 @@ pub fn to_csv(rows: &[Row]) -> String {
     s
 }
 
+/// The rows as a CF NetCDF file (`sensitivities.nc`), the columns of `sensitivities.csv` at
+/// full precision over the dimension `row` ([`crate::netcdf::table_file`]).
+pub fn to_netcdf(
+    rows: &[Row],
+    title: &str,
+    history: &str,
+) -> Result<Vec<u8>, crate::netcdf::NetcdfError> {
+    use crate::netcdf::{Column, ColumnValues::Number, ColumnValues::Text, table_file};
+    let num = |name, long_name, units, f: fn(&Row) -> f64| Column {
+        name,
+        long_name,
+        units: Some(units),
+        values: Number(rows.iter().map(f).collect()),
+    };
+    // UDUNITS: ppm as "1e-6" (CF-1.8 §3.1).
+    let columns = [
+        Column {
+            name: "atmosphere",
+            long_name: "atmosphere, latitude class or profile id",
+            units: None,
+            values: Text(rows.iter().map(|r| r.atmosphere.clone()).collect()),
+        },
+        num("nu_on_cm1", "on-line vacuum wavenumber", "cm-1", |r| {
+            r.position.nu_cm1
+        }),
+        num("nu_off_cm1", "off-line vacuum wavenumber", "cm-1", |r| {
+            r.off_cm1
+        }),
+        num(
+            "daod_one_way",
+            "one-way differential absorption optical depth, on - off",
+            "1",
+            |r| r.daod_one_way,
+        ),
+        num(
+            "wf_peak_hpa",
+            "pressure of the peak of the weighting function per unit pressure",
+            "hPa",
+            |r| r.wf_peak_hpa,
+        ),
+        num(
+            "dxco2_per_k_ppm",
+            "XCO2 error for a true temperature 1 K above the assumed",
+            "1e-6",
+            |r| r.dxco2_per_k_ppm,
+        ),
+        num(
+            "dxco2_per_mhz_ppm",
+            "XCO2 error for a true on-line frequency 1 MHz above the assumed",
+            "1e-6",
+            |r| r.dxco2_per_mhz_ppm,
+        ),
+        num(
+            "dxco2_per_hpa_ppm",
+            "XCO2 error for an assumed surface pressure 1 hPa above the truth",
+            "1e-6",
+            |r| r.dxco2_per_hpa_ppm,
+        ),
+        num(
+            "dxco2_per_10pct_h2o_ppm",
+            "XCO2 error for a true humidity 10 % above the assumed",
+            "1e-6",
+            |r| r.dxco2_per_10pct_h2o_ppm,
+        ),
+        Column {
+            name: "line",
+            long_name: "CO2 30012<-00001 line the on-line sits on",
+            units: None,
+            values: Text(
+                rows.iter()
+                    .map(|r| r.position.line.clone().unwrap_or_default())
+                    .collect(),
+            ),
+        },
+        num(
+            "offset_ghz",
+            "on-line offset from the line centre",
+            "GHz",
+            |r| r.position.offset_ghz,
+        ),
+        num(
+            "t2_on_mean",
+            "two-way gas transmission of the on-line, mean over the profiles",
+            "1",
+            |r| r.t2_on_mean,
+        ),
+        num(
+            "t2_on_std",
+            "two-way gas transmission of the on-line, standard deviation over the profiles",
+            "1",
+            |r| r.t2_on_std,
+        ),
+        num(
+            "random_error_ppm",
+            "random error of one averaged measurement",
+            "1e-6",
+            |r| r.random_error_ppm,
+        ),
+        num(
+            "total_error_ppm",
+            "root-sum-square of the random error and each sensitivity times its uncertainty",
+            "1e-6",
+            |r| r.total_error_ppm,
+        ),
+        num(
+            "rank",
+            "rank within the atmosphere by total error (1 = smallest)",
+            "1",
+            |r| r.rank as f64,
+        ),
+        num("profiles", "profiles averaged", "1", |r| r.profiles as f64),
+    ];
+    table_file("row", &columns, title, history)
+}
+
 /// Mean and standard deviation over members of each fine spectrum ([`StudyConfig::spectra`]):
 /// per window, (mean, std) per offset.
 pub fn spectrum_statistics(results: &[&MemberResult], windows: usize) -> Vec<(Vec<f64>, Vec<f64>)> {

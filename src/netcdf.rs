@@ -1,0 +1,854 @@
+//! The results of a run as one CF-conventions NetCDF file, `run.nc`: the numbers of
+//! `returns.csv`, `signals.csv` and `retrieval.csv` on named dimensions, for xarray and every
+//! other NetCDF client.
+//!
+//! **Format.** NetCDF-3 "64-bit offset" (CDF-2), as the NetCDF User Guide's *File Format
+//! Specification* defines it (Unidata, NUG §"Classic Format Specification": big-endian
+//! values, a header of dimensions, attributes and variables, each variable's values padded to
+//! four bytes), written by the pure-Rust `netcdf3` crate. Every NetCDF library reads it (the
+//! netCDF-C library, netCDF4-python, xarray, scipy.io); it needs no C library to write. The
+//! 64-bit offsets lift the classic format's 2 GiB bound on where a variable may start;
+//! [`crate::limits`] keeps a run far below either bound. NetCDF-3 has no string type and no
+//! 64-bit integers: text is a char array whose last dimension is its length (CF-1.8 §2.2), and
+//! counts that may pass 2³¹ (photons, shots) are doubles, exact to 2⁵³.
+//!
+//! **Conventions.** CF-1.8 (Eaton et al., *NetCDF Climate and Forecast (CF) Metadata
+//! Conventions*, version 1.8, 2020): every variable has `units` and `long_name`, and a
+//! `standard_name` where the CF standard-name table (version 93) has one that fits
+//! (`dry_atmosphere_mole_fraction_of_carbon_dioxide` / `_of_methane`); range, field of view,
+//! wavenumber, received energy and photo-electrons have none. Range gates have `bounds` (§7.1); an
+//! estimate names its standard error in `ancillary_variables` (§3.4); a bin with no value
+//! holds `_FillValue` (§2.5.1; the CSV writes those as empty fields or `NaN`).
+//!
+//! **Layout** (README, "Output: `run.nc`"). The dimensions and coordinates carry the CSV
+//! columns' names: `source` (`mc`, `analytic`), `channel`, `fov_full_angle_mrad`, `range_m`
+//! (gate centres, with `range_m_bounds`), `order` (`total`, `1`, …, `N+`). Returns and
+//! signals are variables over all five; a (source, order) pair a run does not compute (the
+//! analytic returns above order 1, say) is `_FillValue`. Retrievals are tables, one per
+//! quantity (its unit differs: ppm, m⁻², m⁻³), with a dimension `<quantity>_product` and the
+//! columns of `retrieval.csv` as `<quantity>_<column>` variables, rows in the CSV's order.
+
+use std::cell::RefCell;
+use std::io::{Cursor, Seek, SeekFrom, Write};
+use std::rc::Rc;
+use std::time::{SystemTime, UNIX_EPOCH};
+
+use netcdf3::{DataSet, FileWriter, NC_FILL_F64, Version};
+use thiserror::Error;
+
+use crate::instrument::laser::Line;
+use crate::instrument::signals::Signals;
+use crate::retrieval::{Product, Quantity};
+use crate::returns::Returns;
+use crate::scene::Gates;
+
+/// The CF version the file declares in its `Conventions` attribute.
+pub const CONVENTIONS: &str = "CF-1.8";
+
+/// Name of the file `lidarsim run` writes beside its CSV files.
+pub const RUN_FILE: &str = "run.nc";
+
+/// Why the file could not be made.
+#[derive(Debug, Error)]
+#[non_exhaustive]
+pub enum NetcdfError {
+    /// The sets of returns or signals are not on one grid (a bug upstream, not bad input).
+    #[error("NetCDF output: {0}")]
+    Layout(String),
+    /// The NetCDF writer refused the data set.
+    #[error("NetCDF output: {0}")]
+    Format(String),
+}
+
+/// What the global attributes record about the run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RunAttributes {
+    /// `title`: what was run.
+    pub title: String,
+    /// `history`: when and by which command line (CF §2.6.2); the caller's, so that the
+    /// rest of the file depends on nothing but the run.
+    pub history: String,
+    /// The scene file's path (or the embedded default scene's name).
+    pub scene_file: String,
+    /// The scene file's whole text (TOML).
+    pub scene_text: String,
+    /// Random seed.
+    pub seed: u64,
+    /// Photon packets traced (0: analytic only).
+    pub photons: u64,
+    /// Independent batches of the Monte Carlo.
+    pub batches: u64,
+}
+
+/// Everything `run.nc` holds.
+#[derive(Debug, Clone, Copy)]
+pub struct RunFile<'a> {
+    /// The sets of line returns of `returns.csv`, in its order (Monte Carlo, then analytic).
+    pub returns: &'a [&'a Returns],
+    /// The range gates of the returns (for the gate edges).
+    pub gates: &'a Gates,
+    /// The laser lines (each channel's wavenumber, where a channel is one of them).
+    pub lines: &'a [Line],
+    /// The sets of signals of `signals.csv` (may be empty).
+    pub signals: &'a [Signals],
+    /// The rows of `retrieval.csv` (may be empty).
+    pub products: &'a [Product],
+    /// The retrieved gas (`CO2`, …), for the mixing ratio's standard name.
+    pub gas: Option<&'a str>,
+    /// Global attributes.
+    pub attributes: &'a RunAttributes,
+}
+
+/// The bytes of `run.nc` (module documentation).
+pub fn run_file(run: &RunFile) -> Result<Vec<u8>, NetcdfError> {
+    let mut nc = Builder::default();
+    let grid = Grid::of(run.returns)?;
+    globals(&mut nc, run.attributes);
+    coordinates(&mut nc, &grid, run)?;
+    returns_variables(&mut nc, &grid, run.returns);
+    if !run.signals.is_empty() {
+        signal_variables(&mut nc, &grid, run.signals)?;
+    }
+    for q in [
+        Quantity::MixingRatio,
+        Quantity::SlantColumn,
+        Quantity::NumberDensity,
+    ] {
+        let rows: Vec<&Product> = run.products.iter().filter(|p| p.quantity == q).collect();
+        if !rows.is_empty() {
+            product_variables(&mut nc, q, &rows, run.gas);
+        }
+    }
+    nc.finish()
+}
+
+/// One column of a table ([`table_file`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Column {
+    /// Variable name: the CSV column's.
+    pub name: &'static str,
+    /// `long_name`.
+    pub long_name: &'static str,
+    /// `units` (UDUNITS); `None` for text.
+    pub units: Option<&'static str>,
+    /// One value per row.
+    pub values: ColumnValues,
+}
+
+/// The values of a [`Column`].
+#[derive(Debug, Clone, PartialEq)]
+pub enum ColumnValues {
+    /// Text (a char array).
+    Text(Vec<String>),
+    /// Numbers; a non-finite one is `_FillValue`.
+    Number(Vec<f64>),
+}
+
+/// A table (the rows of one CSV file) as a CF NetCDF file: one dimension `row_dim`, one
+/// variable per column, named as the column; text columns are the numbers' auxiliary
+/// coordinates (CF-1.8 §5). Global attributes `Conventions`, `title`, `source`, `history`.
+pub fn table_file(
+    row_dim: &str,
+    columns: &[Column],
+    title: &str,
+    history: &str,
+) -> Result<Vec<u8>, NetcdfError> {
+    let rows = columns.first().map_or(0, |c| match &c.values {
+        ColumnValues::Text(v) => v.len(),
+        ColumnValues::Number(v) => v.len(),
+    });
+    if rows == 0 {
+        return Err(NetcdfError::Layout("a table without rows".into()));
+    }
+    let mut nc = Builder::default();
+    nc.global("Conventions", Attr::text(CONVENTIONS));
+    nc.global("title", Attr::text(title));
+    nc.global(
+        "source",
+        Attr::text(format!("lidarsim {}", env!("CARGO_PKG_VERSION"))),
+    );
+    nc.global("history", Attr::text(history));
+    nc.dim(row_dim, rows);
+    let texts: Vec<&str> = columns
+        .iter()
+        .filter(|c| matches!(c.values, ColumnValues::Text(_)))
+        .map(|c| c.name)
+        .collect();
+    let coordinates = texts.join(" ");
+    for c in columns {
+        let len = match &c.values {
+            ColumnValues::Text(v) => v.len(),
+            ColumnValues::Number(v) => v.len(),
+        };
+        if len != rows {
+            return Err(NetcdfError::Layout(format!(
+                "column {} has {len} rows, not {rows}",
+                c.name
+            )));
+        }
+        match &c.values {
+            ColumnValues::Text(v) => {
+                nc.text(c.name, row_dim, v)
+                    .attrs([("long_name", c.long_name)]);
+            }
+            ColumnValues::Number(v) => {
+                let var = nc
+                    .f64(c.name, &[row_dim], v.clone())
+                    .attrs([("long_name", c.long_name)])
+                    .fill();
+                if let Some(u) = c.units {
+                    var.attrs([("units", u)]);
+                }
+                if !coordinates.is_empty() {
+                    var.attrs([("coordinates", coordinates.as_str())]);
+                }
+            }
+        }
+    }
+    nc.finish()
+}
+
+/// `t` as an ISO 8601 UTC time to the second (`2026-11-23T20:30:03Z`), for `history`.
+pub fn utc_timestamp(t: SystemTime) -> String {
+    let s = t.duration_since(UNIX_EPOCH).map_or(0, |d| d.as_secs());
+    let (days, sec) = ((s / 86_400) as i64, s % 86_400);
+    // Civil date from days since 1970-01-01 (H. Hinnant, "chrono-Compatible Low-Level Date
+    // Algorithms", days_from_civil's inverse), proleptic Gregorian calendar.
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let day = doy - (153 * mp + 2) / 5 + 1;
+    let month = if mp < 10 { mp + 3 } else { mp - 9 };
+    let year = yoe + era * 400 + i64::from(month <= 2);
+    format!(
+        "{year:04}-{month:02}-{day:02}T{:02}:{:02}:{:02}Z",
+        sec / 3600,
+        sec / 60 % 60,
+        sec % 60
+    )
+}
+
+// ---------------------------------------------------------------------------------------------
+// The content
+
+/// The common grid of all sets of returns: their sources, channels, fields of view and gates,
+/// and the union of their order bins (in the order the sets list them).
+struct Grid {
+    sources: Vec<String>,
+    channels: Vec<String>,
+    fov_full_angle_mrad: Vec<f64>,
+    range_m: Vec<f64>,
+    orders: Vec<String>,
+}
+
+impl Grid {
+    fn of(sets: &[&Returns]) -> Result<Grid, NetcdfError> {
+        let Some(first) = sets.first() else {
+            return Err(NetcdfError::Layout("no returns to write".into()));
+        };
+        let mut grid = Grid {
+            sources: Vec::new(),
+            channels: first.channels.clone(),
+            fov_full_angle_mrad: first.fov_full_angle_mrad.clone(),
+            range_m: first.range_m.clone(),
+            orders: Vec::new(),
+        };
+        for r in sets {
+            if r.channels != grid.channels
+                || r.fov_full_angle_mrad != grid.fov_full_angle_mrad
+                || r.range_m != grid.range_m
+            {
+                return Err(NetcdfError::Layout(format!(
+                    "the {} returns are not on the grid of the {} returns",
+                    r.source.label(),
+                    first.source.label()
+                )));
+            }
+            let s = r.source.label().to_string();
+            if grid.sources.contains(&s) {
+                return Err(NetcdfError::Layout(format!("two sets of {s} returns")));
+            }
+            grid.sources.push(s);
+            for o in &r.orders {
+                let label = o.label();
+                if !grid.orders.contains(&label) {
+                    grid.orders.push(label);
+                }
+            }
+        }
+        Ok(grid)
+    }
+
+    fn len(&self) -> usize {
+        self.sources.len()
+            * self.channels.len()
+            * self.fov_full_angle_mrad.len()
+            * self.range_m.len()
+            * self.orders.len()
+    }
+
+    /// Flat index of (source, channel, fov, gate, order) in a variable over [`GRID_DIMS`].
+    fn index(&self, s: usize, c: usize, f: usize, g: usize, o: usize) -> usize {
+        (((s * self.channels.len() + c) * self.fov_full_angle_mrad.len() + f) * self.range_m.len()
+            + g)
+            * self.orders.len()
+            + o
+    }
+
+    fn position(list: &[String], what: &str, label: &str) -> Result<usize, NetcdfError> {
+        list.iter()
+            .position(|x| x == label)
+            .ok_or_else(|| NetcdfError::Layout(format!("{what} `{label}` is not in the returns")))
+    }
+}
+
+/// The dimensions of returns and signals, slowest first (the order of `returns.csv`'s rows).
+const GRID_DIMS: [&str; 5] = [
+    "source",
+    "channel",
+    "fov_full_angle_mrad",
+    "range_m",
+    "order",
+];
+
+fn globals(nc: &mut Builder, a: &RunAttributes) {
+    let version = env!("CARGO_PKG_VERSION");
+    nc.global("Conventions", Attr::text(CONVENTIONS));
+    nc.global("title", Attr::text(&a.title));
+    nc.global("source", Attr::text(format!("lidarsim {version}")));
+    nc.global("history", Attr::text(&a.history));
+    nc.global(
+        "comment",
+        Attr::text(
+            "The numbers of returns.csv, signals.csv and retrieval.csv written beside this file \
+             (at full double precision); the lidarsim README, section \"Output: run.nc\", \
+             describes every variable.",
+        ),
+    );
+    nc.global("lidarsim_version", Attr::text(version));
+    nc.global("scene_file", Attr::text(&a.scene_file));
+    nc.global("scene", Attr::text(&a.scene_text));
+    // Text, because NetCDF-3 has no 64-bit integer and a double is exact only to 2^53.
+    nc.global("seed", Attr::text(a.seed.to_string()));
+    nc.global("photons", Attr::F64(vec![a.photons as f64]));
+    nc.global("batches", Attr::F64(vec![a.batches as f64]));
+}
+
+fn coordinates(nc: &mut Builder, grid: &Grid, run: &RunFile) -> Result<(), NetcdfError> {
+    nc.dim("source", grid.sources.len());
+    nc.dim("channel", grid.channels.len());
+    nc.dim("fov_full_angle_mrad", grid.fov_full_angle_mrad.len());
+    nc.dim("range_m", grid.range_m.len());
+    nc.dim("order", grid.orders.len());
+    nc.dim("nv", 2);
+
+    nc.text("source", "source", &grid.sources).attrs([
+        ("long_name", "source of the returns: mc = Monte Carlo transport, analytic = single-scatter lidar equation"),
+    ]);
+    nc.text("channel", "channel", &grid.channels)
+        .attrs([("long_name", "laser line (channel) name")]);
+    let wavenumber: Vec<f64> = grid
+        .channels
+        .iter()
+        .map(|c| {
+            run.lines
+                .iter()
+                .find(|l| l.name == *c)
+                .map_or(f64::NAN, |l| l.wavenumber_cm1)
+        })
+        .collect();
+    nc.f64("channel_wavenumber_cm1", &["channel"], wavenumber)
+        .attrs([
+            // No standard name: the CF table (version 93) has `radiation_wavelength` but no
+            // wavenumber of radiation; `sensor_band_central_radiation_wavenumber` is the first
+            // moment of a band's response, which a laser's frequency offset moves away from.
+            ("long_name", "nominal vacuum wavenumber of the laser line"),
+            ("units", "cm-1"),
+        ])
+        .fill();
+    nc.f64(
+        "fov_full_angle_mrad",
+        &["fov_full_angle_mrad"],
+        grid.fov_full_angle_mrad.clone(),
+    )
+    .attrs([
+        ("long_name", "receiver field of view, full angle"),
+        ("units", "mrad"),
+    ]);
+    nc.f64("range_m", &["range_m"], grid.range_m.clone())
+        .attrs([
+            (
+                "long_name",
+                "range along the beam, centre of the range gate (r = c t / 2)",
+            ),
+            ("units", "m"),
+            ("bounds", "range_m_bounds"),
+        ]);
+    let g = run.gates;
+    if g.count != grid.range_m.len() {
+        return Err(NetcdfError::Layout(format!(
+            "{} gates in the scene, {} in the returns",
+            g.count,
+            grid.range_m.len()
+        )));
+    }
+    let edges = (0..g.count)
+        .flat_map(|i| {
+            [
+                g.start_m + i as f64 * g.width_m,
+                g.start_m + (i + 1) as f64 * g.width_m,
+            ]
+        })
+        .collect();
+    // CF §7.1: a boundary variable takes its units from its coordinate; it needs none of its own.
+    nc.f64("range_m_bounds", &["range_m", "nv"], edges);
+    nc.text("order", "order", &grid.orders).attrs([(
+        "long_name",
+        "scattering-order bin: total = all orders, n = exactly n scattering events (surface \
+         reflections count), n+ = n or more",
+    )]);
+    Ok(())
+}
+
+fn returns_variables(nc: &mut Builder, grid: &Grid, sets: &[&Returns]) {
+    let mut energy = vec![f64::NAN; grid.len()];
+    let mut stderr = vec![f64::NAN; grid.len()];
+    for (s, r) in sets.iter().enumerate() {
+        for (o, order) in r.orders.iter().enumerate() {
+            // The grid's orders are the union of every set's: always found.
+            let Some(go) = grid.orders.iter().position(|l| *l == order.label()) else {
+                continue;
+            };
+            for c in 0..grid.channels.len() {
+                for f in 0..grid.fov_full_angle_mrad.len() {
+                    for g in 0..grid.range_m.len() {
+                        let i = r.index(c, f, g, o);
+                        let j = grid.index(s, c, f, g, go);
+                        energy[j] = r.energy_j[i];
+                        stderr[j] = r.stderr_j[i];
+                    }
+                }
+            }
+        }
+    }
+    nc.f64("energy_j", &GRID_DIMS, energy)
+        .attrs([
+            (
+                "long_name",
+                "expected energy received in the range gate per pulse",
+            ),
+            ("units", "J"),
+            ("ancillary_variables", "stderr_j"),
+        ])
+        .fill();
+    nc.f64("stderr_j", &GRID_DIMS, stderr)
+        .attrs([
+            (
+                "long_name",
+                "standard error of energy_j (from independent batches; 0 for analytic returns)",
+            ),
+            ("units", "J"),
+        ])
+        .fill();
+}
+
+fn signal_variables(nc: &mut Builder, grid: &Grid, signals: &[Signals]) -> Result<(), NetcdfError> {
+    const NAMES: [(&str, &str); 5] = [
+        (
+            "signal_photoelectrons",
+            "mean signal photo-electrons per pulse in the range gate (primary, before avalanche gain)",
+        ),
+        (
+            "background_photoelectrons",
+            "mean background photo-electrons per pulse in the range gate",
+        ),
+        (
+            "dark_electrons",
+            "mean dark-current electrons per pulse in the range gate",
+        ),
+        (
+            "noise_std_photoelectrons",
+            "standard deviation of the noise per pulse in the range gate (shot, excess, background, dark, NEP, amplifier, readout)",
+        ),
+        ("snr", "signal-to-noise ratio per pulse in the range gate"),
+    ];
+    let mut values: Vec<Vec<f64>> = vec![vec![f64::NAN; grid.len()]; NAMES.len()];
+    for sig in signals {
+        if sig.fov_full_angle_mrad != grid.fov_full_angle_mrad || sig.range_m != grid.range_m {
+            return Err(NetcdfError::Layout(
+                "signals are not on the grid of the returns".into(),
+            ));
+        }
+        let s = Grid::position(&grid.sources, "source", sig.source.label())?;
+        let o = Grid::position(&grid.orders, "order", &sig.order.label())?;
+        for (l, line) in sig.lines.iter().enumerate() {
+            let c = Grid::position(&grid.channels, "channel", &line.name)?;
+            for f in 0..grid.fov_full_angle_mrad.len() {
+                for g in 0..grid.range_m.len() {
+                    let n = sig.gate(l, f, g);
+                    let j = grid.index(s, c, f, g, o);
+                    for (v, x) in values.iter_mut().zip([
+                        n.signal_pe,
+                        n.background_pe,
+                        n.dark_pe,
+                        n.std_pe(),
+                        n.snr(),
+                    ]) {
+                        v[j] = x;
+                    }
+                }
+            }
+        }
+    }
+    for ((name, long_name), v) in NAMES.into_iter().zip(values) {
+        // Counts of electrons are numbers: CF's unit "1".
+        nc.f64(name, &GRID_DIMS, v)
+            .attrs([("long_name", long_name), ("units", "1")])
+            .fill();
+    }
+    Ok(())
+}
+
+/// A column of `retrieval.csv`: its value in a product.
+type Getter<T> = fn(&Product) -> T;
+
+/// One table of `retrieval.csv`'s rows of one quantity.
+fn product_variables(nc: &mut Builder, q: Quantity, rows: &[&Product], gas: Option<&str>) {
+    let p = q.label();
+    let dim = format!("{p}_product");
+    nc.dim(&dim, rows.len());
+    let name = |column: &str| format!("{p}_{column}");
+    let texts: [(&str, &str, Getter<String>); 4] = [
+        (
+            "method",
+            "retrieval method: ipda (weighting function), ipda_virtual_sigma (virtual cross-sections), dial (range cell)",
+            |r| r.method.label().into(),
+        ),
+        ("source", "returns retrieved from: mc or analytic", |r| {
+            r.source.label().into()
+        }),
+        (
+            "order",
+            "scattering orders of those returns: 1 or total",
+            |r| r.order.label(),
+        ),
+        ("channel_pair", "on/off laser lines", |r| {
+            r.channel_pair.clone()
+        }),
+    ];
+    let mut coordinates = Vec::new();
+    for (column, long_name, get) in texts {
+        let values: Vec<String> = rows.iter().map(|r| get(r)).collect();
+        nc.text(&name(column), &dim, &values)
+            .attrs([("long_name", long_name)]);
+        coordinates.push(name(column));
+    }
+    let geometry: [(&str, &str, &str, Getter<f64>); 5] = [
+        (
+            "fov_full_angle_mrad",
+            "receiver field of view, full angle",
+            "mrad",
+            |r| r.fov_full_angle_mrad,
+        ),
+        (
+            "range_start_m",
+            "range at the start of the path (IPDA: 0; DIAL: centre of the cell's near gate)",
+            "m",
+            |r| r.range_m.0,
+        ),
+        (
+            "range_end_m",
+            "range at the end of the path (IPDA: the target; DIAL: centre of the cell's far gate)",
+            "m",
+            |r| r.range_m.1,
+        ),
+        (
+            "altitude_bottom_m",
+            "altitude of the bottom of the column or cell",
+            "m",
+            |r| r.altitude_m.0,
+        ),
+        (
+            "altitude_top_m",
+            "altitude of the top of the column or cell",
+            "m",
+            |r| r.altitude_m.1,
+        ),
+    ];
+    for (column, long_name, units, get) in geometry {
+        nc.f64(
+            &name(column),
+            &[&dim],
+            rows.iter().map(|r| get(r)).collect(),
+        )
+        .attrs([("long_name", long_name), ("units", units)])
+        .fill();
+        coordinates.push(name(column));
+    }
+    let (units, unit_text) = match q {
+        // UDUNITS reads "1e-6" as parts per million; "ppm" is not in every UDUNITS database.
+        Quantity::MixingRatio => ("1e-6", "dry-air mole fraction in ppm"),
+        Quantity::SlantColumn => ("m-2", "molecules per square metre along the beam"),
+        Quantity::NumberDensity => ("m-3", "molecules per cubic metre"),
+    };
+    let standard_name = match (q, gas) {
+        (Quantity::MixingRatio, Some("CO2")) => {
+            Some("dry_atmosphere_mole_fraction_of_carbon_dioxide")
+        }
+        (Quantity::MixingRatio, Some("CH4")) => Some("dry_atmosphere_mole_fraction_of_methane"),
+        _ => None,
+    };
+    let gas = gas.unwrap_or("gas");
+    let coordinates = coordinates.join(" ");
+    let values: [(&str, String, Getter<f64>); 9] = [
+        (
+            "truth",
+            format!("{gas} of the scene's own profile over the column or cell"),
+            |r| r.truth,
+        ),
+        (
+            "retrieved",
+            format!("{gas} retrieved from the expected (noise-free) signals"),
+            |r| r.retrieved,
+        ),
+        ("bias", "retrieved minus truth".into(), |r| r.bias()),
+        (
+            "mc_stderr",
+            "standard error of retrieved from the Monte Carlo noise of the returns (0 analytic)"
+                .into(),
+            |r| r.mc_stderr,
+        ),
+        (
+            "random_error_per_shot_pair",
+            "analytic random error of one shot pair".into(),
+            |r| r.random_error_per_shot_pair,
+        ),
+        (
+            "random_error_averaged",
+            "analytic random error after averaging shots_averaged shot pairs".into(),
+            |r| r.random_error_averaged,
+        ),
+        (
+            "simulated_error_per_shot_pair",
+            "standard deviation of simulated noisy retrievals of one shot pair".into(),
+            |r| r.simulated_error_per_shot_pair,
+        ),
+        (
+            "simulated_error_averaged",
+            "standard deviation of simulated noisy retrievals of shots_averaged shot pairs".into(),
+            |r| r.simulated_error_averaged,
+        ),
+        (
+            "simulated_bias_averaged",
+            "mean of the simulated averaged retrievals minus truth".into(),
+            |r| r.simulated_mean_averaged - r.truth,
+        ),
+    ];
+    let ancillary = format!(
+        "{} {} {}",
+        name("mc_stderr"),
+        name("random_error_per_shot_pair"),
+        name("random_error_averaged")
+    );
+    for (column, long_name, get) in values {
+        let v = nc
+            .f64(
+                &name(column),
+                &[&dim],
+                rows.iter().map(|r| get(r)).collect(),
+            )
+            .attrs([
+                ("long_name", format!("{long_name} ({unit_text})").as_str()),
+                ("units", units),
+                ("coordinates", &coordinates),
+            ])
+            .fill();
+        if let (Some(sn), "truth" | "retrieved") = (standard_name, column) {
+            v.attrs([("standard_name", sn)]);
+        }
+        if column == "retrieved" {
+            v.attrs([("ancillary_variables", ancillary.as_str())]);
+        }
+    }
+    nc.f64(
+        &name("shots_averaged"),
+        &[&dim],
+        rows.iter().map(|r| r.shots_averaged as f64).collect(),
+    )
+    .attrs([
+        ("long_name", "shot pairs averaged in one measurement"),
+        ("units", "1"),
+    ]);
+}
+
+// ---------------------------------------------------------------------------------------------
+// A small builder over the `netcdf3` crate: collect everything, then define and write at once
+
+/// An attribute value.
+#[derive(Debug, Clone)]
+enum Attr {
+    Text(String),
+    F64(Vec<f64>),
+}
+
+impl Attr {
+    fn text(s: impl Into<String>) -> Attr {
+        Attr::Text(s.into())
+    }
+}
+
+#[derive(Debug)]
+enum Values {
+    F64(Vec<f64>),
+    /// Char array, row-major, each row NUL-padded to the last dimension's length.
+    Char(Vec<u8>),
+}
+
+#[derive(Debug)]
+struct Var {
+    name: String,
+    dims: Vec<String>,
+    values: Values,
+    attrs: Vec<(String, Attr)>,
+}
+
+impl Var {
+    fn attrs<const N: usize>(&mut self, attrs: [(&str, &str); N]) -> &mut Var {
+        for (k, v) in attrs {
+            self.attrs.push((k.into(), Attr::text(v)));
+        }
+        self
+    }
+
+    /// Mark non-finite values as missing: they become `_FillValue` (NetCDF's default fill
+    /// for doubles, so that a reader that ignores the attribute still sees the same number).
+    fn fill(&mut self) -> &mut Var {
+        if let Values::F64(v) = &mut self.values {
+            for x in v.iter_mut().filter(|x| !x.is_finite()) {
+                *x = NC_FILL_F64;
+            }
+        }
+        self.attrs
+            .push(("_FillValue".into(), Attr::F64(vec![NC_FILL_F64])));
+        self
+    }
+}
+
+#[derive(Debug, Default)]
+struct Builder {
+    dims: Vec<(String, usize)>,
+    vars: Vec<Var>,
+    globals: Vec<(String, Attr)>,
+}
+
+impl Builder {
+    fn dim(&mut self, name: &str, len: usize) {
+        self.dims.push((name.into(), len));
+    }
+
+    fn global(&mut self, name: &str, value: Attr) {
+        self.globals.push((name.into(), value));
+    }
+
+    fn f64(&mut self, name: &str, dims: &[&str], values: Vec<f64>) -> &mut Var {
+        self.vars.push(Var {
+            name: name.into(),
+            dims: dims.iter().map(|d| d.to_string()).collect(),
+            values: Values::F64(values),
+            attrs: Vec::new(),
+        });
+        let n = self.vars.len() - 1;
+        &mut self.vars[n]
+    }
+
+    /// A text variable over `dim`: a char array (`dim`, `<name>_strlen`) as CF-1.8 §2.2 has
+    /// it, with `_Encoding = "utf-8"` so that netCDF4-python and xarray read strings.
+    fn text(&mut self, name: &str, dim: &str, values: &[String]) -> &mut Var {
+        let strlen = values.iter().map(String::len).max().unwrap_or(0).max(1);
+        let strlen_dim = format!("{name}_strlen");
+        self.dim(&strlen_dim, strlen);
+        let mut chars = vec![0u8; values.len() * strlen];
+        for (row, v) in chars.chunks_mut(strlen).zip(values) {
+            row[..v.len()].copy_from_slice(v.as_bytes());
+        }
+        self.vars.push(Var {
+            name: name.into(),
+            dims: vec![dim.into(), strlen_dim],
+            values: Values::Char(chars),
+            attrs: vec![("_Encoding".into(), Attr::text("utf-8"))],
+        });
+        let n = self.vars.len() - 1;
+        &mut self.vars[n]
+    }
+
+    /// Define the data set, write header and values into memory, and return the bytes.
+    fn finish(self) -> Result<Vec<u8>, NetcdfError> {
+        let err = |e: &dyn std::fmt::Debug| NetcdfError::Format(format!("{e:?}"));
+        let mut ds = DataSet::new();
+        for (name, len) in &self.dims {
+            ds.add_fixed_dim(name, *len).map_err(|e| err(&e))?;
+        }
+        for (name, a) in &self.globals {
+            match a {
+                Attr::Text(s) => ds.add_global_attr_string(name, s),
+                Attr::F64(v) => ds.add_global_attr_f64(name, v.clone()),
+            }
+            .map_err(|e| err(&e))?;
+        }
+        for v in &self.vars {
+            let dims: Vec<&str> = v.dims.iter().map(String::as_str).collect();
+            match v.values {
+                Values::F64(_) => ds.add_var_f64(&v.name, &dims),
+                Values::Char(_) => ds.add_var_u8(&v.name, &dims),
+            }
+            .map_err(|e| err(&e))?;
+            for (name, a) in &v.attrs {
+                match a {
+                    Attr::Text(s) => ds.add_var_attr_string(&v.name, name, s),
+                    Attr::F64(x) => ds.add_var_attr_f64(&v.name, name, x.clone()),
+                }
+                .map_err(|e| err(&e))?;
+            }
+        }
+        let buffer = SharedBuffer::default();
+        let mut w =
+            FileWriter::open_seek_write(RUN_FILE, Box::new(buffer.clone())).map_err(|e| err(&e))?;
+        w.set_def(&ds, Version::Offset64Bit, 0)
+            .map_err(|e| err(&e))?;
+        for v in &self.vars {
+            match &v.values {
+                Values::F64(x) => w.write_var_f64(&v.name, x),
+                Values::Char(x) => w.write_var_u8(&v.name, x),
+            }
+            .map_err(|e| err(&e))?;
+        }
+        w.close().map_err(|e| err(&e))?;
+        Ok(buffer.0.take().into_inner())
+    }
+}
+
+/// An in-memory file the writer (which wants to own a `'static` seekable writer) and this
+/// module share, so that the bytes go to the caller's atomic output set.
+#[derive(Debug, Clone, Default)]
+struct SharedBuffer(Rc<RefCell<Cursor<Vec<u8>>>>);
+
+impl Write for SharedBuffer {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        self.0.borrow_mut().write(buf)
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
+    }
+}
+
+impl Seek for SharedBuffer {
+    fn seek(&mut self, pos: SeekFrom) -> std::io::Result<u64> {
+        self.0.borrow_mut().seek(pos)
+    }
+}
+
+#[cfg(test)]
+mod tests;

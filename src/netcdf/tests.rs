@@ -1,0 +1,358 @@
+//! The file read back by the `netcdf3` crate's reader (its own parser of the format, apart
+//! from the writer this module drives), against the values put in. The test that a real
+//! client (netCDF4-python, xarray) reads the same numbers as the CSV files is
+//! `tests/netcdf.rs`.
+
+use std::io::Cursor;
+use std::time::{Duration, UNIX_EPOCH};
+
+use netcdf3::{FileReader, NC_FILL_F64, Version};
+
+use super::*;
+use crate::retrieval::Method;
+use crate::returns::{Order, Source};
+
+fn attributes() -> RunAttributes {
+    RunAttributes {
+        title: "test".into(),
+        history: "2026-01-01T00:00:00Z: lidarsim run".into(),
+        scene_file: "scene.toml".into(),
+        scene_text: "[lidar]\naltitude_m = 1 # µ\n".into(),
+        seed: u64::MAX,
+        photons: 1_000_000_000_000,
+        batches: 100,
+    }
+}
+
+fn gates() -> Gates {
+    Gates {
+        start_m: 100.0,
+        width_m: 30.0,
+        count: 3,
+    }
+}
+
+/// Monte Carlo returns (orders total, 1, 2+) and analytic ones (order 1) on one grid, each
+/// bin's energy a distinct number that names it.
+fn returns() -> (Returns, Returns) {
+    let channels = vec!["on".to_string(), "off, \"ref\"".to_string()];
+    let fov = vec![0.1, 2.0];
+    let range: Vec<f64> = (0..3).map(|g| gates().centre_m(g)).collect();
+    let mut mc = Returns::zeros(
+        Source::MonteCarlo,
+        channels.clone(),
+        fov.clone(),
+        range.clone(),
+        vec![Order::Total, Order::Exactly(1), Order::AtLeast(2)],
+    );
+    for (i, (e, s)) in mc.energy_j.iter_mut().zip(&mut mc.stderr_j).enumerate() {
+        *e = 1e-12 * (i as f64 + 1.0) / 3.0;
+        *s = 1e-15 * (i as f64 + 1.0);
+    }
+    mc.stderr_j[5] = f64::NAN;
+    let mut analytic = Returns::zeros(
+        Source::Analytic,
+        channels,
+        fov,
+        range,
+        vec![Order::Exactly(1)],
+    );
+    for (i, e) in analytic.energy_j.iter_mut().enumerate() {
+        *e = -(i as f64) - 0.5;
+    }
+    (mc, analytic)
+}
+
+fn product(quantity: Quantity, retrieved: f64) -> Product {
+    Product {
+        method: Method::Dial,
+        quantity,
+        source: Source::MonteCarlo,
+        order: Order::Total,
+        channel_pair: "on/off".into(),
+        fov_full_angle_mrad: 2.0,
+        range_m: (115.0, 145.0),
+        altitude_m: (0.0, 30.0),
+        truth: 420.0,
+        retrieved,
+        mc_stderr: 0.1,
+        mc_stderr_independent: 1.0,
+        random_error_per_shot_pair: 5.0,
+        random_error_averaged: 0.5,
+        simulated_error_per_shot_pair: f64::NAN,
+        simulated_error_averaged: 0.4,
+        simulated_mean_averaged: 420.25,
+        simulated_first_averaged: 419.0,
+        shots_averaged: 1 << 40,
+    }
+}
+
+fn write(products: &[Product]) -> Vec<u8> {
+    let (mc, analytic) = returns();
+    let lines = [Line {
+        name: "on".into(),
+        wavenumber_cm1: 6360.04,
+    }];
+    run_file(&RunFile {
+        returns: &[&mc, &analytic],
+        gates: &gates(),
+        lines: &lines,
+        signals: &[],
+        products,
+        gas: Some("CO2"),
+        attributes: &attributes(),
+    })
+    .unwrap()
+}
+
+fn read(bytes: Vec<u8>) -> FileReader {
+    FileReader::open_seek_read("run.nc", Box::new(Cursor::new(bytes))).unwrap()
+}
+
+/// Text rows of a char variable, NULs stripped.
+fn texts(r: &mut FileReader, name: &str) -> Vec<String> {
+    let n = r.data_set().get_var(name).unwrap().get_dims()[1].size();
+    r.read_var_u8(name)
+        .unwrap()
+        .chunks(n)
+        .map(|c| String::from_utf8(c.iter().copied().take_while(|b| *b != 0).collect()).unwrap())
+        .collect()
+}
+
+#[test]
+fn returns_land_in_their_bins_and_missing_bins_are_fill() {
+    let bytes = write(&[]);
+    // NUG "File Format Specification": magic 'C' 'D' 'F' then version 2 (64-bit offset).
+    assert_eq!(&bytes[..4], b"CDF\x02");
+    let mut r = read(bytes);
+    assert_eq!(r.version(), Version::Offset64Bit);
+    let ds = r.data_set();
+    for (dim, len) in [
+        ("source", 2),
+        ("channel", 2),
+        ("fov_full_angle_mrad", 2),
+        ("range_m", 3),
+        ("order", 3),
+        ("nv", 2),
+    ] {
+        assert_eq!(ds.dim_size(dim), Some(len), "{dim}");
+    }
+    assert_eq!(texts(&mut r, "source"), ["mc", "analytic"]);
+    assert_eq!(texts(&mut r, "channel"), ["on", "off, \"ref\""]);
+    assert_eq!(texts(&mut r, "order"), ["total", "1", "2+"]);
+    assert_eq!(r.read_var_f64("range_m").unwrap(), [115.0, 145.0, 175.0]);
+    assert_eq!(
+        r.read_var_f64("range_m_bounds").unwrap(),
+        [100.0, 130.0, 130.0, 160.0, 160.0, 190.0]
+    );
+    assert_eq!(r.read_var_f64("fov_full_angle_mrad").unwrap(), [0.1, 2.0]);
+    assert_eq!(
+        r.read_var_f64("channel_wavenumber_cm1").unwrap(),
+        [6360.04, NC_FILL_F64]
+    );
+
+    let (mc, analytic) = returns();
+    let energy = r.read_var_f64("energy_j").unwrap();
+    let stderr = r.read_var_f64("stderr_j").unwrap();
+    assert_eq!(energy.len(), 2 * 2 * 2 * 3 * 3);
+    // Dimensions (source, channel, fov, range, order), the last fastest.
+    let at =
+        |s: usize, c: usize, f: usize, g: usize, o: usize| (((s * 2 + c) * 2 + f) * 3 + g) * 3 + o;
+    for c in 0..2 {
+        for f in 0..2 {
+            for g in 0..3 {
+                for o in 0..3 {
+                    let i = mc.index(c, f, g, o);
+                    assert_eq!(energy[at(0, c, f, g, o)], mc.energy_j[i]);
+                    let want = if mc.stderr_j[i].is_nan() {
+                        NC_FILL_F64
+                    } else {
+                        mc.stderr_j[i]
+                    };
+                    assert_eq!(stderr[at(0, c, f, g, o)], want);
+                }
+                // Analytic: order 1 only (index 1 of the union), the rest fill.
+                assert_eq!(
+                    energy[at(1, c, f, g, 1)],
+                    analytic.energy_j[analytic.index(c, f, g, 0)]
+                );
+                assert_eq!(stderr[at(1, c, f, g, 1)], 0.0);
+                for o in [0, 2] {
+                    assert_eq!(energy[at(1, c, f, g, o)], NC_FILL_F64);
+                    assert_eq!(stderr[at(1, c, f, g, o)], NC_FILL_F64);
+                }
+            }
+        }
+    }
+    let ds = r.data_set();
+    assert_eq!(
+        ds.get_var_attr_f64("energy_j", "_FillValue"),
+        Some(&[NC_FILL_F64][..])
+    );
+    assert_eq!(
+        ds.get_var_attr_as_string("energy_j", "ancillary_variables")
+            .as_deref(),
+        Some("stderr_j")
+    );
+    assert_eq!(
+        ds.get_var_attr_as_string("range_m", "bounds").as_deref(),
+        Some("range_m_bounds")
+    );
+    assert_eq!(
+        ds.get_var_attr_as_string("channel_wavenumber_cm1", "units")
+            .as_deref(),
+        Some("cm-1")
+    );
+}
+
+#[test]
+fn global_attributes_record_the_run() {
+    let r = read(write(&[]));
+    let ds = r.data_set();
+    let text = |k: &str| ds.get_global_attr_as_string(k).unwrap();
+    assert_eq!(text("Conventions"), "CF-1.8");
+    assert_eq!(
+        text("source"),
+        format!("lidarsim {}", env!("CARGO_PKG_VERSION"))
+    );
+    assert_eq!(text("scene"), attributes().scene_text);
+    assert_eq!(text("scene_file"), "scene.toml");
+    assert_eq!(text("history"), attributes().history);
+    assert_eq!(text("seed"), "18446744073709551615");
+    assert_eq!(ds.get_global_attr_f64("photons"), Some(&[1e12][..]));
+    assert_eq!(ds.get_global_attr_f64("batches"), Some(&[100.0][..]));
+}
+
+#[test]
+fn products_are_one_table_per_quantity_with_fill_for_what_was_not_computed() {
+    let mut ipda = product(Quantity::MixingRatio, 421.5);
+    ipda.method = Method::Ipda;
+    let rows = [
+        ipda,
+        product(Quantity::NumberDensity, 1e22),
+        product(Quantity::MixingRatio, f64::NAN),
+    ];
+    let mut r = read(write(&rows));
+    let ds = r.data_set();
+    assert_eq!(ds.dim_size("mixing_ratio_product"), Some(2));
+    assert_eq!(ds.dim_size("number_density_product"), Some(1));
+    assert!(!ds.has_dim("slant_column_product"));
+    assert_eq!(
+        ds.get_var_attr_as_string("mixing_ratio_truth", "units")
+            .as_deref(),
+        Some("1e-6")
+    );
+    assert_eq!(
+        ds.get_var_attr_as_string("mixing_ratio_retrieved", "standard_name")
+            .as_deref(),
+        Some("dry_atmosphere_mole_fraction_of_carbon_dioxide")
+    );
+    assert_eq!(
+        ds.get_var_attr_as_string("number_density_truth", "units")
+            .as_deref(),
+        Some("m-3")
+    );
+    assert!(
+        ds.get_var_attr("number_density_truth", "standard_name")
+            .is_none()
+    );
+    assert_eq!(texts(&mut r, "mixing_ratio_method"), ["ipda", "dial"]);
+    assert_eq!(
+        texts(&mut r, "mixing_ratio_channel_pair"),
+        ["on/off", "on/off"]
+    );
+    assert_eq!(
+        r.read_var_f64("mixing_ratio_retrieved").unwrap(),
+        [421.5, NC_FILL_F64]
+    );
+    assert_eq!(
+        r.read_var_f64("mixing_ratio_bias").unwrap(),
+        [421.5 - 420.0, NC_FILL_F64]
+    );
+    assert_eq!(
+        r.read_var_f64("mixing_ratio_simulated_bias_averaged")
+            .unwrap(),
+        [0.25, 0.25]
+    );
+    assert_eq!(
+        r.read_var_f64("mixing_ratio_simulated_error_per_shot_pair")
+            .unwrap(),
+        [NC_FILL_F64; 2]
+    );
+    assert_eq!(
+        r.read_var_f64("mixing_ratio_shots_averaged").unwrap(),
+        [(1u64 << 40) as f64; 2]
+    );
+    assert_eq!(r.read_var_f64("number_density_retrieved").unwrap(), [1e22]);
+    assert_eq!(
+        r.read_var_f64("number_density_range_end_m").unwrap(),
+        [145.0]
+    );
+}
+
+#[test]
+fn returns_on_different_grids_are_refused() {
+    let (mc, mut analytic) = returns();
+    analytic.range_m[1] += 1.0;
+    let e = run_file(&RunFile {
+        returns: &[&mc, &analytic],
+        gates: &gates(),
+        lines: &[],
+        signals: &[],
+        products: &[],
+        gas: None,
+        attributes: &attributes(),
+    })
+    .unwrap_err();
+    assert!(e.to_string().contains("not on the grid"), "{e}");
+}
+
+#[test]
+fn timestamps_are_iso_8601_utc() {
+    let t = |s: u64| utc_timestamp(UNIX_EPOCH + Duration::from_secs(s));
+    assert_eq!(t(0), "1970-01-01T00:00:00Z");
+    // 2000-02-29 (a leap day of a century leap year) and 2100-03-01 (after a non-leap 28 Feb).
+    assert_eq!(t(951_782_400 + 3661), "2000-02-29T01:01:01Z");
+    assert_eq!(t(4_107_542_400 - 1), "2100-02-28T23:59:59Z");
+    assert_eq!(t(4_107_542_400), "2100-03-01T00:00:00Z");
+}
+
+#[test]
+fn a_table_with_columns_of_different_lengths_is_refused() {
+    let column = |name, values| Column {
+        name,
+        long_name: "x",
+        units: Some("1"),
+        values,
+    };
+    let e = table_file(
+        "row",
+        &[
+            column("a", ColumnValues::Number(vec![1.0, 2.0])),
+            column("b", ColumnValues::Text(vec!["x".into()])),
+        ],
+        "t",
+        "h",
+    )
+    .unwrap_err();
+    assert!(e.to_string().contains("column b has 1 rows, not 2"), "{e}");
+    let bytes = table_file(
+        "row",
+        &[
+            column("a", ColumnValues::Number(vec![1.5, f64::NAN])),
+            column("b", ColumnValues::Text(vec!["x".into(), "yz".into()])),
+        ],
+        "t",
+        "h",
+    )
+    .unwrap();
+    let mut r = read(bytes);
+    assert_eq!(r.read_var_f64("a").unwrap(), [1.5, NC_FILL_F64]);
+    assert_eq!(texts(&mut r, "b"), ["x", "yz"]);
+    assert_eq!(
+        r.data_set()
+            .get_var_attr_as_string("a", "coordinates")
+            .as_deref(),
+        Some("b")
+    );
+}

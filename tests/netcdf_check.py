@@ -1,0 +1,253 @@
+#!/usr/bin/env python3
+"""Check `run.nc` of `lidarsim run` against the CSV files beside it, with real NetCDF clients.
+
+Usage: netcdf_check.py OUT_DIR SCENE_FILE [OUT_DIR SCENE_FILE ...] (`lidarsim run` outputs;
+SCENE_FILE "-" for the embedded default scene, whose text is then not compared), or
+netcdf_check.py --sensitivities OUT_DIR ... (`lidarsim select-lines`).
+
+The file is opened twice: with xarray (as users read it: CF decoding, `_FillValue` masked to
+NaN, char arrays as strings) and with netCDF4-python (the netCDF-C library's own reader, for the
+attributes and the raw fill values). The CSV files are read with Python's csv module. Checked:
+
+* every row of returns.csv, signals.csv and retrieval.csv has its value in the file, and every
+  bin of the file that holds a value has its row (no extra numbers). returns.csv and
+  signals.csv print 10 significant digits (`{:.9e}`), so a value of the file is compared as
+  Python's `'%.9e'` prints it (both round correctly, half to even): exact equality of the text.
+  retrieval.csv prints the shortest text that reads back as the same double: exact equality.
+  Empty fields (and `NaN`) are missing values in the file;
+* the CF attributes: Conventions, title, source, history, scene, seed, photons; units and
+  long_name on every variable, bounds of range_m, ancillary_variables, _FillValue.
+
+Prints one line per directory and exits 1 on the first difference.
+"""
+
+import csv
+import json
+import math
+import sys
+import time
+
+import netCDF4
+import numpy as np
+import xarray as xr
+
+
+def fail(msg):
+    print(f"netcdf check: FAILED: {msg}")
+    sys.exit(1)
+
+
+def same_e9(text, value):
+    """The CSV's `{:.9e}` text against the file's double."""
+    if text == "NaN":
+        return math.isnan(value)
+    return not math.isnan(value) and float(text) == float("%.9e" % value)
+
+
+def same_exact(text, value):
+    """retrieval.csv's shortest round-trip text (empty: not computed) against the double."""
+    if text == "":
+        return math.isnan(value)
+    return not math.isnan(value) and float(text) == value
+
+
+def read_csv(path):
+    with open(path, newline="", encoding="utf-8") as f:
+        rows = list(csv.reader(f))
+    return rows[0], rows[1:]
+
+
+def positions(ds, coord):
+    """label (or exact float) -> index along a coordinate."""
+    values = ds[coord].values
+    return {(v if isinstance(v, str) else float(v)): i for i, v in enumerate(values)}
+
+
+def check_grid_file(ds, csv_path, columns, what):
+    """returns.csv or signals.csv: each row against the 5-D variables; no extra values."""
+    header, rows = read_csv(csv_path)
+    col = {name: header.index(name) for name in header}
+    pos = {c: positions(ds, c) for c in ["source", "channel", "fov_full_angle_mrad", "range_m", "order"]}
+    arrays = {c: ds[c].values for c in columns}
+    for c in columns:
+        if ds[c].dims != ("source", "channel", "fov_full_angle_mrad", "range_m", "order"):
+            fail(f"{c} has dimensions {ds[c].dims}")
+    seen = np.zeros(arrays[columns[0]].shape, dtype=bool)
+    for n, row in enumerate(rows, start=2):
+        try:
+            idx = (
+                pos["source"][row[col["source"]]],
+                pos["channel"][row[col["channel"]]],
+                pos["fov_full_angle_mrad"][float(row[col["fov_full_angle_mrad"]])],
+                pos["range_m"][float(row[col["range_m"]])],
+                pos["order"][row[col["order"]]],
+            )
+        except KeyError as e:
+            fail(f"{csv_path} line {n}: coordinate {e} is not in run.nc")
+        if seen[idx]:
+            fail(f"{csv_path} line {n}: a second row for one bin")
+        seen[idx] = True
+        for c in columns:
+            v = float(arrays[c][idx])
+            if not same_e9(row[col[c]], v):
+                fail(f"{csv_path} line {n}, {c}: CSV {row[col[c]]}, run.nc {v!r}")
+    for c in columns:
+        extra = ~seen & ~np.isnan(arrays[c])
+        if extra.any():
+            fail(f"{c}: {int(extra.sum())} values in run.nc that {what} does not have")
+    return len(rows)
+
+
+UNITS = {"ppm": "1e-6", "molecules/m2": "m-2", "molecules/m3": "m-3"}
+TEXT_COLUMNS = ["method", "source", "order", "channel_pair"]
+
+
+def check_retrievals(ds, csv_path):
+    header, rows = read_csv(csv_path)
+    col = {name: header.index(name) for name in header}
+    by_quantity = {}
+    for n, row in enumerate(rows, start=2):
+        by_quantity.setdefault(row[col["quantity"]], []).append((n, row))
+    for q, qrows in by_quantity.items():
+        dim = f"{q}_product"
+        if ds.sizes.get(dim) != len(qrows):
+            fail(f"{dim}: {ds.sizes.get(dim)} in run.nc, {len(qrows)} {q} rows in retrieval.csv")
+        for c in header:
+            if c in ("quantity", "unit"):
+                continue
+            var = ds[f"{q}_{c}"]
+            if c in TEXT_COLUMNS or c == "shots_averaged" or c.endswith("_m") or c.endswith("_mrad"):
+                pass
+            elif var.attrs.get("units") != UNITS[qrows[0][1][col["unit"]]]:
+                fail(f"{q}_{c}: units {var.attrs.get('units')!r} for {qrows[0][1][col['unit']]}")
+            for i, (n, row) in enumerate(qrows):
+                v = var.values[i]
+                if c in TEXT_COLUMNS:
+                    if v != row[col[c]]:
+                        fail(f"{csv_path} line {n}, {c}: CSV {row[col[c]]!r}, run.nc {v!r}")
+                elif not same_exact(row[col[c]], float(v)):
+                    fail(f"{csv_path} line {n}, {c}: CSV {row[col[c]]!r}, run.nc {float(v)!r}")
+    extra = [d for d in ds.sizes if d.endswith("_product") and d[: -len("_product")] not in by_quantity]
+    if extra:
+        fail(f"run.nc has products {extra} that retrieval.csv does not")
+    return len(rows)
+
+
+def check_attributes(path, out, scene):
+    summary = json.load(open(f"{out}/summary.json", encoding="utf-8"))
+    with netCDF4.Dataset(path) as nc:
+        if nc.data_model != "NETCDF3_64BIT_OFFSET":
+            fail(f"data model {nc.data_model}")
+        g = {k: nc.getncattr(k) for k in nc.ncattrs()}
+        for k in ["Conventions", "title", "source", "history", "scene", "scene_file", "seed", "photons"]:
+            if k not in g:
+                fail(f"global attribute {k} is missing")
+        if g["Conventions"] != "CF-1.8":
+            fail(f"Conventions {g['Conventions']!r}")
+        if not g["source"].startswith("lidarsim "):
+            fail(f"source {g['source']!r}")
+        if "lidarsim" not in g["history"] or not g["history"][:4].isdigit():
+            fail(f"history {g['history']!r}")
+        if scene is not None and g["scene"] != open(scene, encoding="utf-8").read():
+            fail("the scene attribute is not the scene file's text")
+        if float(g["photons"]) != summary["photons"]:
+            fail(f"photons {g['photons']} vs summary.json {summary['photons']}")
+        if "seed" in summary and g["seed"] != str(summary["seed"]):
+            fail(f"seed {g['seed']!r} vs summary.json {summary['seed']}")
+        for name, v in nc.variables.items():
+            attrs = v.ncattrs()
+            if name.endswith("_bounds"):
+                continue
+            if "long_name" not in attrs:
+                fail(f"{name} has no long_name")
+            if v.dtype != "S1" and "units" not in attrs:
+                fail(f"{name} has no units")
+        e = nc.variables["energy_j"]
+        if e.ancillary_variables != "stderr_j" or "_FillValue" not in e.ncattrs():
+            fail("energy_j: ancillary_variables or _FillValue missing")
+        r = nc.variables["range_m"]
+        b = nc.variables[r.bounds][:]
+        centre = r[:]
+        if b.shape != (len(centre), 2) or not np.allclose((b[:, 0] + b[:, 1]) / 2, centre, rtol=1e-15, atol=0):
+            fail("range_m_bounds are not the edges of the gates")
+
+
+# sensitivities.csv: the Rust format of each numeric column, as Python's % operator writes it
+# (exponents differ in form, `e-1` against `e-01`, not in value: compared as parsed doubles).
+SENSITIVITY_FORMATS = {
+    "nu_on_cm1": "%.6f", "nu_off_cm1": "%.6f", "daod_one_way": "%.6e", "wf_peak_hpa": "%.2f",
+    "dxco2_per_k_ppm": "%.6e", "dxco2_per_mhz_ppm": "%.6e", "dxco2_per_hpa_ppm": "%.6e",
+    "dxco2_per_10pct_h2o_ppm": "%.6e", "offset_ghz": "%.4f", "t2_on_mean": "%.6e",
+    "t2_on_std": "%.6e", "random_error_ppm": "%.6e", "total_error_ppm": "%.6e",
+    "rank": "%d", "profiles": "%d",
+}
+
+
+def check_sensitivities(out):
+    """`lidarsim select-lines`: sensitivities.nc against sensitivities.csv, row by row."""
+    header, rows = read_csv(f"{out}/sensitivities.csv")
+    with netCDF4.Dataset(f"{out}/sensitivities.nc") as nc:
+        if nc.Conventions != "CF-1.8" or not nc.source.startswith("lidarsim ") or not nc.history:
+            fail("sensitivities.nc: global attributes")
+    with xr.open_dataset(f"{out}/sensitivities.nc") as ds:
+        if ds.sizes["row"] != len(rows):
+            fail(f"sensitivities.nc has {ds.sizes['row']} rows, the CSV {len(rows)}")
+        for j, c in enumerate(header):
+            var = ds[c]
+            if "long_name" not in var.attrs or (c in SENSITIVITY_FORMATS and "units" not in var.attrs):
+                fail(f"sensitivities.nc: {c} lacks long_name or units")
+            for i, row in enumerate(rows):
+                v = var.values[i]
+                if c not in SENSITIVITY_FORMATS:
+                    ok = v == row[j]
+                elif row[j] == "":
+                    ok = math.isnan(float(v))
+                else:
+                    ok = float(row[j]) == float(SENSITIVITY_FORMATS[c] % v)
+                if not ok:
+                    fail(f"sensitivities.csv line {i + 2}, {c}: CSV {row[j]!r}, sensitivities.nc {v!r}")
+    print(f"netcdf check: {out}: {len(rows)} sensitivity rows equal in sensitivities.nc")
+
+
+def main(args):
+    if args and args[0] == "--sensitivities":
+        for out in args[1:]:
+            check_sensitivities(out)
+        return
+    if len(args) % 2:
+        fail("arguments: OUT_DIR SCENE pairs")
+    for out, scene in zip(args[::2], args[1::2]):
+        t0 = time.time()
+        path = f"{out}/run.nc"
+        check_attributes(path, out, None if scene == "-" else scene)
+        with xr.open_dataset(path) as ds:
+            n_ret = check_grid_file(ds, f"{out}/returns.csv", ["energy_j", "stderr_j"], "returns.csv")
+            n_sig = n_prod = 0
+            try:
+                open(f"{out}/signals.csv").close()
+                has_signals = True
+            except FileNotFoundError:
+                has_signals = False
+            if has_signals:
+                n_sig = check_grid_file(
+                    ds,
+                    f"{out}/signals.csv",
+                    ["signal_photoelectrons", "background_photoelectrons", "dark_electrons", "noise_std_photoelectrons", "snr"],
+                    "signals.csv",
+                )
+            elif "snr" in ds:
+                fail("run.nc has signals but there is no signals.csv")
+            try:
+                n_prod = check_retrievals(ds, f"{out}/retrieval.csv")
+            except FileNotFoundError:
+                if any(d.endswith("_product") for d in ds.sizes):
+                    fail("run.nc has retrievals but there is no retrieval.csv")
+        print(
+            f"netcdf check: {out}: {n_ret} returns, {n_sig} signal and {n_prod} retrieval rows "
+            f"equal in run.nc (xarray {xr.__version__}, netCDF4 {netCDF4.__version__}, "
+            f"{time.time() - t0:.2f} s)"
+        )
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
