@@ -63,6 +63,10 @@ pub struct Args {
     /// (photons and the first thread count of `--threads`).
     #[arg(long, value_name = "DIR")]
     pub depth: Option<PathBuf>,
+    /// With `--depth`: instead of the FOM, K independent runs of `--photons` and the scatter of
+    /// their means against their standard errors (spikes), into DIR/scatter.csv.
+    #[arg(long, value_name = "K", requires = "depth")]
+    pub seeds: Option<u64>,
     /// With `--depth`: the plain estimator's per-photon variance from a long run (a file written
     /// by `--write-plain`).
     #[arg(long, value_name = "FILE", requires = "depth")]
@@ -244,6 +248,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         return study_bench(n, &args);
     }
     let first_threads = args.threads.first().copied().unwrap_or(1);
+    let method = |o: &mut TransportOptions| {
+        o.ddis_epsilon = args.ddis_epsilon;
+        o.range_stratification = args.range_stratification;
+        o.cone_estimate = args.cone_estimate;
+    };
+    if let (Some(dir), Some(k)) = (&args.depth, args.seeds) {
+        return super::bench_depth::scatter(dir, args.photons, first_threads, k, method);
+    }
     if let Some(dir) = &args.depth {
         return super::bench_depth::run(
             dir,
@@ -252,11 +264,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             args.repeat,
             args.seed,
             args.plain.as_ref(),
-            |o| {
-                o.ddis_epsilon = args.ddis_epsilon;
-                o.range_stratification = args.range_stratification;
-                o.cone_estimate = args.cone_estimate;
-            },
+            method,
         );
     }
     if let Some(path) = &args.write_plain {

@@ -321,3 +321,70 @@ fn draw(path: &Path, rows: &[(Cell, Cell, f64)]) -> Result<(), Box<dyn std::erro
     root.present()?;
     Ok(())
 }
+
+/// Spikes: `seeds` independent runs of `photons`; per (FOV, gate) the scatter of the runs'
+/// multiple-scattering means against the standard error each run reports. Without spikes the
+/// ratio sd(means)/rms(stderr) is 1 within about 1/√(2(K − 1)); rare large contributions make
+/// it large (the batches of one run miss them, other runs catch them). Writes
+/// `scatter.csv` into `out`.
+pub fn scatter(
+    out: &Path,
+    photons: u64,
+    threads: usize,
+    seeds: u64,
+    method: impl Fn(&mut TransportOptions),
+) -> anyhow::Result<()> {
+    anyhow::ensure!(seeds >= 3, "--seeds needs at least 3 runs");
+    let mut scene = scene()?;
+    scene.simulation.photons = photons;
+    let atm = OpticalAtmosphere::build(&scene)?;
+    let mut runs = Vec::new();
+    for seed in 1..=seeds {
+        scene.simulation.seed = 1000 + seed;
+        runs.push(cells(&scene, &fastest(&scene, &atm, threads, 1, &method)?));
+    }
+    let k = seeds as f64;
+    let mut csv = format!(
+        "# C.1 orders >= 2: {seeds} runs of {photons} photons; ratio = sd of the run means / rms of their standard errors (1 ± {:.2} expected without spikes)\n\
+         fov_full_angle_mrad,depth_m,mean_j,sd_of_means_j,rms_stderr_j,ratio\n",
+        1.0 / (2.0 * (k - 1.0)).sqrt()
+    );
+    println!("scatter of {seeds} runs' means / their standard errors (orders ≥ 2)");
+    print!("depth_m");
+    for f in FOVS_MRAD {
+        print!("  {f:>6} mrad");
+    }
+    println!();
+    let n_cells = runs[0].len();
+    let mut ratios = vec![0.0; n_cells];
+    for (i, ratio) in ratios.iter_mut().enumerate() {
+        let means: Vec<f64> = runs.iter().map(|r| r[i].mean_j).collect();
+        let mean = means.iter().sum::<f64>() / k;
+        let sd = (means.iter().map(|m| (m - mean).powi(2)).sum::<f64>() / (k - 1.0)).sqrt();
+        let rms_se = (runs
+            .iter()
+            .map(|r| r[i].var_per_photon / photons as f64)
+            .sum::<f64>()
+            / k)
+            .sqrt();
+        *ratio = sd / rms_se;
+        let c = runs[0][i];
+        writeln!(
+            csv,
+            "{},{},{mean:e},{sd:e},{rms_se:e},{ratio:.3}",
+            c.fov_mrad, c.depth_m
+        )?;
+    }
+    let n_depth = n_cells / FOVS_MRAD.len();
+    for d in 0..n_depth {
+        print!("{:>7}", runs[0][d].depth_m);
+        for f in 0..FOVS_MRAD.len() {
+            print!("  {:>11.2}", ratios[f * n_depth + d]);
+        }
+        println!();
+    }
+    let mut files = OutputSet::new();
+    files.write(out.join("scatter.csv"), csv)?;
+    files.commit()?;
+    Ok(())
+}
