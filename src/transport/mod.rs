@@ -115,8 +115,9 @@ pub struct TransportOptions {
     /// Probability β of drawing the first collision uniformly in range over the gated window
     /// instead of from the exponential (0 turns it off).
     pub range_stratification: f64,
-    /// Score orders ≥ 2 by the cone estimate (a virtual last scattering drawn inside each
-    /// field of view; `photon` module docs) instead of waiting for collisions to land there.
+    /// Score orders ≥ 2 in optically narrow fields of view also by the cone estimate (a last
+    /// scattering drawn inside the field of view, `docs/transport.md` step 6a), not only when
+    /// collisions happen to land there.
     pub cone_estimate: bool,
     /// Linear combinations of channels to report as well (laser lines from their quadrature
     /// nodes), folded batch by batch so that their standard errors are right.

@@ -25,6 +25,9 @@
 //!   ΔE_k = w_k · P(Θ_r)/(4π) · cos θ_r/d² · e^{−τ_k(x→receiver)}, and at the surface
 //!   ΔE_k = w_k e^{−τ_k} · ρ_k cos θ_s/π · cos θ_r/d² · e^{−τ_k(S→receiver)}; the telescope area,
 //!   optical efficiency and pulse energy per photon multiply in once, when a batch is folded.
+//! * Cone estimate for the narrow fields of view (`super::cone`, `docs/transport.md` step 6a):
+//!   at every collision one more flight and scattering drawn into a FOV annulus, scored as the
+//!   next order and combined with the walk's own local estimates there by the balance heuristic.
 //! * Russian roulette below a weight of 1e-2 (survivors continue at 5e-2).
 
 use std::f64::consts::PI;
