@@ -67,6 +67,10 @@ pub struct Args {
     /// their means against their standard errors (spikes), into DIR/scatter.csv.
     #[arg(long, value_name = "K", requires = "depth")]
     pub seeds: Option<u64>,
+    /// With `--depth` and `--plain`: instead of the FOM, the relative error against time of
+    /// both estimators at `--photons`/27, /9, /3 and `--photons` (DIR/error_time.{csv,png}).
+    #[arg(long, requires = "plain")]
+    pub ladder: bool,
     /// With `--depth`: the plain estimator's per-photon variance from a long run (a file written
     /// by `--write-plain`).
     #[arg(long, value_name = "FILE", requires = "depth")]
@@ -255,6 +259,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     if let (Some(dir), Some(k)) = (&args.depth, args.seeds) {
         return super::bench_depth::scatter(dir, args.photons, first_threads, k, method);
+    }
+    if let (Some(dir), Some(plain), true) = (&args.depth, &args.plain, args.ladder) {
+        return super::bench_depth::ladder(dir, args.photons, first_threads, plain, method);
     }
     if let Some(dir) = &args.depth {
         return super::bench_depth::run(

@@ -388,3 +388,140 @@ pub fn scatter(
     files.commit()?;
     Ok(())
 }
+
+/// Error against time: both estimators at `photons`/27, /9, /3 and `photons`; the relative
+/// error of orders ≥ 2 at three depths for 1 and 10 mrad against the run's time, with the plain
+/// estimator's expected error from the long reference (its short runs miss the spikes).
+/// Writes `error_time.csv` and `error_time.png` into `out`.
+pub fn ladder(
+    out: &Path,
+    photons: u64,
+    threads: usize,
+    reference: &Path,
+    method: impl Fn(&mut TransportOptions),
+) -> anyhow::Result<()> {
+    let (long, _) = read_reference(reference)?;
+    let mut scene = scene()?;
+    let atm = OpticalAtmosphere::build(&scene)?;
+    let picks = [
+        (1.0, 100.0),
+        (1.0, 200.0),
+        (1.0, 290.0),
+        (10.0, 100.0),
+        (10.0, 200.0),
+        (10.0, 290.0),
+    ];
+    let mut csv = String::from(
+        "method,fov_full_angle_mrad,depth_m,photons,seconds,rel_err,plain_expected_rel_err\n",
+    );
+    // (label, fov, depth) → points (s, rel).
+    let mut series: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
+    for (name, plain_method) in [("lidarsim", false), ("plain", true)] {
+        let mut pts: Vec<Vec<(f64, f64)>> = vec![Vec::new(); picks.len()];
+        for div in [27u64, 9, 3, 1] {
+            scene.simulation.photons = (photons / div).max(200);
+            scene.simulation.seed = 20 + div;
+            let r = fastest(&scene, &atm, threads, 1, |o| {
+                if plain_method { plain(o) } else { method(o) }
+            })?;
+            let cs = cells(&scene, &r);
+            for (j, (fov, depth)) in picks.iter().enumerate() {
+                let Some(c) = cs
+                    .iter()
+                    .find(|c| c.fov_mrad == *fov && c.depth_m == *depth)
+                else {
+                    continue;
+                };
+                let rel = (c.var_per_photon / r.photons as f64).sqrt() / c.mean_j;
+                let expected = long
+                    .iter()
+                    .find(|p| p.fov_mrad == *fov && p.depth_m == *depth)
+                    .map_or(f64::NAN, |p| {
+                        (p.var_per_photon / r.photons as f64).sqrt() / p.mean_j
+                    });
+                writeln!(
+                    csv,
+                    "{name},{fov},{depth},{},{:.4},{rel:e},{expected:e}",
+                    r.photons, r.wall_s
+                )?;
+                // The plain estimator is drawn with its expected error (long reference).
+                pts[j].push((r.wall_s, if plain_method { expected } else { rel }));
+            }
+        }
+        for (j, (fov, depth)) in picks.iter().enumerate() {
+            series.push((format!("{name} {fov} mrad {depth} m"), pts[j].clone()));
+        }
+    }
+    let mut files = OutputSet::new();
+    files.write(out.join("error_time.csv"), csv)?;
+    files.write_via(out.join("error_time.png"), |path| {
+        draw_ladder(path, &series)
+    })?;
+    files.commit()?;
+    println!("wrote {}", out.join("error_time.{csv,png}").display());
+    Ok(())
+}
+
+/// Relative error against seconds, log-log: lidarsim solid, plain (expected) dashed.
+fn draw_ladder(
+    path: &Path,
+    series: &[(String, Vec<(f64, f64)>)],
+) -> Result<(), Box<dyn std::error::Error>> {
+    use plotters::prelude::*;
+    init_font();
+    let root = BitMapBackend::new(path, (1000, 650)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let pts = series
+        .iter()
+        .flat_map(|s| s.1.iter())
+        .filter(|(t, e)| *t > 0.0 && *e > 0.0 && e.is_finite());
+    let (t0, t1, e0, e1) = pts.fold(
+        (f64::INFINITY, 0.0f64, f64::INFINITY, 0.0f64),
+        |a, (t, e)| (a.0.min(*t), a.1.max(*t), a.2.min(*e), a.3.max(*e)),
+    );
+    let mut chart = ChartBuilder::on(&root)
+        .caption(
+            "C.1 orders ≥ 2: relative error against time (solid lidarsim, dashed plain, expected)",
+            (FONT, 20),
+        )
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(70)
+        .build_cartesian_2d(
+            (t0 / 1.5..t1 * 1.5).log_scale(),
+            (e0 / 1.5..e1 * 1.5).log_scale(),
+        )?;
+    chart
+        .configure_mesh()
+        .x_desc("wall-clock seconds, 1 thread")
+        .y_desc("relative standard error")
+        .label_style((FONT, 15))
+        .axis_desc_style((FONT, 17))
+        .draw()?;
+    let half = series.len() / 2;
+    for (i, (label, pts)) in series.iter().enumerate() {
+        let colour = Palette99::pick(i % half).to_rgba();
+        let pts: Vec<(f64, f64)> = pts.iter().copied().filter(|(_, e)| e.is_finite()).collect();
+        if i < half {
+            chart
+                .draw_series(LineSeries::new(
+                    pts,
+                    ShapeStyle::from(&colour).stroke_width(2),
+                ))?
+                .label(label.trim_start_matches("lidarsim ").to_string())
+                .legend(move |(x, y)| {
+                    PathElement::new([(x, y), (x + 20, y)], colour.stroke_width(2))
+                });
+        } else {
+            chart.draw_series(DashedLineSeries::new(
+                pts,
+                6,
+                4,
+                ShapeStyle::from(&colour).stroke_width(1),
+            ))?;
+        }
+    }
+    draw_legend(&mut chart)?;
+    root.present()?;
+    Ok(())
+}
