@@ -725,3 +725,67 @@ fn dial_merge_refuses_foreign_missing_and_damaged_shards() {
     assert!(e.contains("13 shards of a study of 12 profiles"), "{e}");
     assert!(!e.contains("panicked"), "{e}");
 }
+
+/// Dial shards of a profile set file: the merge gives the single study's tables, and refuses a
+/// set file that changed since the shards ran, naming it.
+#[test]
+fn dial_shards_of_a_profile_set_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let scene = study_scene(d);
+    let set = d.join("set.csv");
+    let generate = |seed: &str| {
+        lidarsim_ok([
+            "profiles",
+            "generate",
+            "--n",
+            "5",
+            "--seed",
+            seed,
+            "--class",
+            "mid",
+            "--out",
+            &s(&set),
+        ]);
+    };
+    generate("2");
+    let study = |out: &Path, extra: &[&str]| {
+        let mut a = vec![
+            "dial".to_string(),
+            s(&scene),
+            "--profiles".into(),
+            s(&set),
+            "--no-plots".into(),
+            "--out".into(),
+            s(out),
+        ];
+        a.extend(extra.iter().map(|x| x.to_string()));
+        lidarsim_ok(&a);
+    };
+    let single = d.join("single");
+    study(&single, &[]);
+    let shards = d.join("shards");
+    for spec in ["0/2", "1/2"] {
+        study(&shards, &["--shard", spec]);
+    }
+    let merged = d.join("merged");
+    lidarsim_ok([
+        "merge".to_string(),
+        s(&shards),
+        "--no-plots".into(),
+        "--out".into(),
+        s(&merged),
+    ]);
+    for f in ["profiles.csv", "summary.csv", "budget.csv", "failed.csv"] {
+        assert!(
+            fs::read(single.join(f)).unwrap() == fs::read(merged.join(f)).unwrap(),
+            "{f}"
+        );
+    }
+    generate("3");
+    let e = merge_refused(&[shards]);
+    assert!(
+        e.contains("is not the one the shards ran") && e.contains("set.csv"),
+        "{e}"
+    );
+}

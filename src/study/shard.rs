@@ -651,7 +651,11 @@ pub fn merge(paths: &[PathBuf]) -> Result<DialMerged, ShardError> {
         return Err(ShardError::Bad {
             path: path0,
             what: format!(
-                "the profile set as built now ({} profiles, digest {digest}) is not the one the shards ran ({} profiles, digest {}): its file has changed since",
+                "the profile set {} as built now ({} profiles, digest {digest}) is not the one the shards ran ({} profiles, digest {}): its file has changed since",
+                match &source {
+                    ProfileSource::Set(p) => p.display().to_string(),
+                    ProfileSource::Ensemble(n) => format!("of {n} members per class"),
+                },
                 set.len(),
                 h.profiles,
                 h.set_digest
