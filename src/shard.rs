@@ -23,6 +23,11 @@
 //! | 8 | worker threads it used (u64) |
 //! | 8 | FNV-1a 64 checksum of every byte before it |
 //!
+//! The magic, format, header length, JSON header and trailing checksum are the framing of
+//! every shard file (`FrameWriter`, `Frame`); the header's `kind` ([`KIND_RUN`], or
+//! [`KIND_DIAL`] for the ensemble shards of [`crate::study::shard`]) says what the body holds,
+//! and [`common_kind`] lets `lidarsim merge` tell them apart and refuse a mix.
+//!
 //! The tallies are the raw per-batch sums of [`BatchTally`] (before normalisation), so no
 //! rounding happens between a shard and the fold. The header holds the lidarsim version, the
 //! scene's path, text and digest ([`scene_digest`]), the seed, photons and batches, the shard
