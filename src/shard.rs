@@ -23,6 +23,11 @@
 //! | 8 | worker threads it used (u64) |
 //! | 8 | FNV-1a 64 checksum of every byte before it |
 //!
+//! The magic, format, header length, JSON header and trailing checksum are the framing of
+//! every shard file (`FrameWriter`, `Frame`); the header's `kind` ([`KIND_RUN`], or
+//! [`KIND_DIAL`] for the ensemble shards of [`crate::study::shard`]) says what the body holds,
+//! and [`common_kind`] lets `lidarsim merge` tell them apart and refuse a mix.
+//!
 //! The tallies are the raw per-batch sums of [`BatchTally`] (before normalisation), so no
 //! rounding happens between a shard and the fold. The header holds the lidarsim version, the
 //! scene's path, text and digest ([`scene_digest`]), the seed, photons and batches, the shard
@@ -142,6 +147,10 @@ impl ShardSpec {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ShardHeader {
+    /// What the shard is a slice of: [`KIND_RUN`] (absent in files of lidarsim 0.x before the
+    /// ensemble shards: read as a run shard).
+    #[serde(default = "run_kind")]
+    pub kind: String,
     /// lidarsim version that wrote the shard.
     pub lidarsim_version: String,
     /// The scene file's absolute path ([`crate::scene::DEFAULT_SCENE_NAME`] for the default
@@ -179,6 +188,15 @@ pub struct ShardHeader {
     pub bins_per_batch: u64,
     /// Monochromatic channels (values per flux part).
     pub channels: u64,
+}
+
+/// The `kind` of a run shard (`lidarsim run --shard`).
+pub const KIND_RUN: &str = "run";
+/// The `kind` of an ensemble shard (`lidarsim dial --shard`, [`crate::study::shard`]).
+pub const KIND_DIAL: &str = "dial";
+
+fn run_kind() -> String {
+    KIND_RUN.to_string()
 }
 
 impl ShardHeader {
@@ -308,14 +326,14 @@ fn list_paths(v: &[PathBuf]) -> String {
 /// versions (std's `DefaultHasher` is not), and a change of any single byte changes it (each
 /// step is a bijection of the state).
 #[derive(Debug, Clone, Copy)]
-struct Fnv(u64);
+pub(crate) struct Fnv(pub(crate) u64);
 
 impl Fnv {
-    fn new() -> Self {
+    pub(crate) fn new() -> Self {
         Fnv(0xcbf2_9ce4_8422_2325)
     }
 
-    fn update(&mut self, bytes: &[u8]) {
+    pub(crate) fn update(&mut self, bytes: &[u8]) {
         for b in bytes {
             self.0 = (self.0 ^ u64::from(*b)).wrapping_mul(0x0000_0100_0000_01b3);
         }
@@ -337,9 +355,15 @@ impl fmt::Write for Fnv {
 pub fn scene_digest(scene: &Scene) -> String {
     let mut s = scene.clone();
     s.simulation.threads = 0;
+    debug_digest(&s)
+}
+
+/// FNV-1a 64 of a value's `Debug` text, as 16 hex digits: the digest of a parsed input (a
+/// scene, a profile set), which holds every value (floats in their shortest exact form).
+pub fn debug_digest(value: &impl fmt::Debug) -> String {
     let mut h = Fnv::new();
     // Writing into the hasher cannot fail.
-    let _ = write!(h, "{s:?}");
+    let _ = write!(h, "{value:?}");
     format!("{:016x}", h.0)
 }
 
@@ -375,13 +399,37 @@ pub struct ShardReport {
     pub threads: usize,
 }
 
-/// A writer that hashes what passes through it.
-struct Hashing<W: Write> {
+/// The framing every shard file shares, whatever its kind: a writer that puts the magic, the
+/// format and the JSON header first and hashes every byte that passes through it, so that
+/// [`FrameWriter::finish`] can append the FNV-1a 64 checksum.
+pub(crate) struct FrameWriter<W: Write> {
     inner: W,
     hash: Fnv,
 }
 
-impl<W: Write> Write for Hashing<W> {
+impl<W: Write> FrameWriter<W> {
+    /// Start a shard file on `inner` with the header `json`.
+    pub(crate) fn start(inner: W, json: &[u8]) -> io::Result<Self> {
+        let mut w = FrameWriter {
+            inner,
+            hash: Fnv::new(),
+        };
+        w.write_all(MAGIC)?;
+        w.write_all(&FORMAT.to_le_bytes())?;
+        w.write_all(&(json.len() as u64).to_le_bytes())?;
+        w.write_all(json)?;
+        Ok(w)
+    }
+
+    /// Append the checksum of every byte written and flush.
+    pub(crate) fn finish(mut self) -> io::Result<()> {
+        let sum = self.hash.0;
+        self.inner.write_all(&sum.to_le_bytes())?;
+        self.inner.flush()
+    }
+}
+
+impl<W: Write> Write for FrameWriter<W> {
     fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
         let n = self.inner.write(buf)?;
         self.hash.update(&buf[..n]);
@@ -505,6 +553,7 @@ fn write_shard(
     // The first batch alone: its buffers give the header's sizes and the chunk size.
     let first = plan.trace_batch(range.start);
     let header = ShardHeader {
+        kind: KIND_RUN.to_string(),
         lidarsim_version: VERSION.to_string(),
         scene_path: scene.path.to_string_lossy().into_owned(),
         scene_text: scene.text().to_string(),
@@ -536,14 +585,7 @@ fn write_shard(
     let mut wall_s = 0.0;
     let mut set = OutputSet::new();
     set.write_with(path, |file| {
-        let mut w = Hashing {
-            inner: BufWriter::new(file),
-            hash: Fnv::new(),
-        };
-        w.write_all(MAGIC)?;
-        w.write_all(&FORMAT.to_le_bytes())?;
-        w.write_all(&(json.len() as u64).to_le_bytes())?;
-        w.write_all(&json)?;
+        let mut w = FrameWriter::start(BufWriter::new(file), &json)?;
         write_record(&mut w, &first)?;
         let mut start = range.start + 1;
         while start < range.end {
@@ -562,9 +604,7 @@ fn write_shard(
         wall_s = started.elapsed().as_secs_f64();
         w.write_all(&wall_s.to_le_bytes())?;
         w.write_all(&(threads as u64).to_le_bytes())?;
-        let sum = w.hash.0;
-        w.inner.write_all(&sum.to_le_bytes())?;
-        w.inner.flush()
+        w.finish()
     })?;
     set.commit()?;
     Ok(ShardReport {
@@ -600,6 +640,169 @@ fn u64_at(b: &[u8], at: usize) -> u64 {
     u64::from_le_bytes(a)
 }
 
+/// The framing of a shard file read back, whatever its kind: where its header and body lie,
+/// its `kind`, and whether its checksum matches (checked last by the caller, so that a
+/// truncation reads as one).
+#[derive(Debug, Clone)]
+pub(crate) struct Frame {
+    /// The header's `kind` ([`KIND_RUN`] when it has none or cannot be read).
+    pub(crate) kind: String,
+    /// Offset of the header.
+    header_at: usize,
+    /// Offset of the body (one past the header).
+    pub(crate) body_at: usize,
+    /// Offset of the checksum (one past the body and any trailer).
+    pub(crate) sum_at: usize,
+    /// Whether the checksum matches.
+    pub(crate) checksum_ok: bool,
+    computed: u64,
+    stored: u64,
+}
+
+impl Frame {
+    /// Check the magic, format and header length of `bytes` (read from `path`), with
+    /// `trailer` bytes before the checksum at the end, and compute the checksum.
+    pub(crate) fn parse(path: &Path, bytes: &[u8], trailer: usize) -> Result<Frame, ShardError> {
+        let bad = |what: String| ShardError::Bad {
+            path: path.to_path_buf(),
+            what,
+        };
+        if bytes.len() < MAGIC.len() || &bytes[..MAGIC.len()] != MAGIC {
+            return Err(bad(
+                "not a lidarsim shard file (no `lidarsim shard` magic at its start)".into(),
+            ));
+        }
+        if bytes.len() < PREAMBLE_BYTES + trailer + 8 {
+            return Err(bad(format!(
+                "truncated: {} bytes, too short for a shard file",
+                bytes.len()
+            )));
+        }
+        let format = u32::from_le_bytes([bytes[16], bytes[17], bytes[18], bytes[19]]);
+        if format != FORMAT {
+            return Err(bad(format!(
+                "shard file format {format}; this lidarsim ({VERSION}) reads format {FORMAT}"
+            )));
+        }
+        let header_len = u64_at(bytes, 20);
+        let available = (bytes.len() - PREAMBLE_BYTES - trailer - 8) as u64;
+        if header_len > MAX_HEADER_BYTES || header_len > available {
+            return Err(bad(format!(
+                "truncated or corrupt: a header of {header_len} bytes in a file of {} bytes",
+                bytes.len()
+            )));
+        }
+        let body_at = PREAMBLE_BYTES + header_len as usize;
+        let sum_at = bytes.len() - 8;
+        let mut h = Fnv::new();
+        h.update(&bytes[..sum_at]);
+        let stored = u64_at(bytes, sum_at);
+        Ok(Frame {
+            kind: header_kind(&bytes[PREAMBLE_BYTES..body_at]),
+            header_at: PREAMBLE_BYTES,
+            body_at,
+            sum_at,
+            checksum_ok: h.0 == stored,
+            computed: h.0,
+            stored,
+        })
+    }
+
+    /// The header's bytes (JSON).
+    pub(crate) fn header<'b>(&self, bytes: &'b [u8]) -> &'b [u8] {
+        &bytes[self.header_at..self.body_at]
+    }
+
+    /// Refuse the file if its checksum does not match.
+    pub(crate) fn check_sum(&self, path: &Path) -> Result<(), ShardError> {
+        if self.checksum_ok {
+            return Ok(());
+        }
+        Err(ShardError::Bad {
+            path: path.to_path_buf(),
+            what: format!(
+                "corrupt: checksum {:016x} where the file records {:016x}",
+                self.computed, self.stored
+            ),
+        })
+    }
+}
+
+/// The `kind` of a shard header (JSON): [`KIND_RUN`] when it names none or cannot be read.
+fn header_kind(json: &[u8]) -> String {
+    serde_json::from_slice::<serde_json::Value>(json)
+        .ok()
+        .and_then(|v| v.get("kind").and_then(|k| k.as_str()).map(String::from))
+        .unwrap_or_else(run_kind)
+}
+
+/// The kind of the shard file `path` ([`KIND_RUN`] or [`KIND_DIAL`]), from its header only.
+pub fn shard_kind(path: &Path) -> Result<String, ShardError> {
+    use std::io::Read;
+    let io_err = |error| ShardError::Io {
+        path: path.to_path_buf(),
+        error,
+    };
+    let bad = |what: String| ShardError::Bad {
+        path: path.to_path_buf(),
+        what,
+    };
+    let mut f = fs::File::open(path).map_err(io_err)?;
+    let mut pre = [0u8; PREAMBLE_BYTES];
+    let mut got = 0;
+    while got < PREAMBLE_BYTES {
+        match f.read(&mut pre[got..]).map_err(io_err)? {
+            0 => break,
+            n => got += n,
+        }
+    }
+    if got < MAGIC.len() || &pre[..MAGIC.len()] != MAGIC {
+        return Err(bad(
+            "not a lidarsim shard file (no `lidarsim shard` magic at its start)".into(),
+        ));
+    }
+    if got < PREAMBLE_BYTES {
+        return Err(bad(format!(
+            "truncated: {got} bytes, too short for a shard file"
+        )));
+    }
+    let len = u64_at(&pre, 20);
+    let size = f.metadata().map_err(io_err)?.len();
+    if len > MAX_HEADER_BYTES || len > size.saturating_sub(PREAMBLE_BYTES as u64) {
+        return Err(bad(format!(
+            "truncated or corrupt: a header of {len} bytes in a file of {size} bytes"
+        )));
+    }
+    let mut json = vec![0u8; len as usize];
+    f.read_exact(&mut json).map_err(io_err)?;
+    Ok(header_kind(&json))
+}
+
+/// The one kind of every shard file in `paths`; shards of different kinds are refused, naming
+/// a file of each.
+pub fn common_kind(paths: &[PathBuf]) -> Result<String, ShardError> {
+    let mut first: Option<(&PathBuf, String)> = None;
+    for p in paths {
+        let k = shard_kind(p)?;
+        match &first {
+            None => first = Some((p, k)),
+            Some((a, ka)) if *ka != k => {
+                return Err(ShardError::Mismatch {
+                    a: (*a).clone(),
+                    b: p.clone(),
+                    what: "the kind of shard (`run --shard` or `dial --shard`)",
+                    first: ka.clone(),
+                    second: k,
+                });
+            }
+            Some(_) => {}
+        }
+    }
+    first
+        .map(|(_, k)| k)
+        .ok_or_else(|| ShardError::NoShards(paths.to_vec()))
+}
+
 impl ShardFile {
     /// Read `path` and check that it is a whole shard file of this format, consistent in
     /// itself.
@@ -617,42 +820,19 @@ impl ShardFile {
             path: path.to_path_buf(),
             what,
         };
-        if bytes.len() < MAGIC.len() || &bytes[..MAGIC.len()] != MAGIC {
-            return Err(bad(
-                "not a lidarsim shard file (no `lidarsim shard` magic at its start)".into(),
-            ));
-        }
-        if bytes.len() < PREAMBLE_BYTES + TRAILER_BYTES {
-            return Err(bad(format!(
-                "truncated: {} bytes, too short for a shard file",
-                bytes.len()
-            )));
-        }
-        let format = u32::from_le_bytes([bytes[16], bytes[17], bytes[18], bytes[19]]);
-        if format != FORMAT {
-            return Err(bad(format!(
-                "shard file format {format}; this lidarsim ({VERSION}) reads format {FORMAT}"
-            )));
-        }
-        let header_len = u64_at(&bytes, 20);
-        let available = (bytes.len() - PREAMBLE_BYTES - TRAILER_BYTES) as u64;
-        if header_len > MAX_HEADER_BYTES || header_len > available {
-            return Err(bad(format!(
-                "truncated or corrupt: a header of {header_len} bytes in a file of {} bytes",
-                bytes.len()
-            )));
-        }
-        let records_at = PREAMBLE_BYTES + header_len as usize;
-        // The checksum first: a damaged header should read as damage, not as a mismatch.
+        let frame = Frame::parse(path, &bytes, TRAILER_BYTES)?;
+        let records_at = frame.body_at;
         let body = bytes.len() - 8;
-        let mut h = Fnv::new();
-        h.update(&bytes[..body]);
-        let stored = u64_at(&bytes, body);
-        let header: Result<ShardHeader, _> =
-            serde_json::from_slice(&bytes[PREAMBLE_BYTES..records_at]);
+        if frame.kind != KIND_RUN {
+            return Err(bad(format!(
+                "a `{}` shard (from `lidarsim {} --shard`), not a run shard",
+                frame.kind, frame.kind
+            )));
+        }
+        let header: Result<ShardHeader, _> = serde_json::from_slice(frame.header(&bytes));
         let header = match header {
             Ok(hd) => hd,
-            Err(e) if h.0 == stored => {
+            Err(e) if frame.checksum_ok => {
                 return Err(bad(format!("its header cannot be read: {e}")));
             }
             Err(_) => {
@@ -686,12 +866,7 @@ impl ShardFile {
                 ));
             }
         }
-        if h.0 != stored {
-            return Err(bad(format!(
-                "corrupt: checksum {:016x} where the file records {stored:016x}",
-                h.0
-            )));
-        }
+        frame.check_sum(path)?;
         if header.shard_count == 0
             || header.shard_index >= header.shard_count
             || header.shard_count > header.batches

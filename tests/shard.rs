@@ -503,3 +503,289 @@ fn library_shards_fold_into_the_pipelines_result() {
     assert_eq!(a.photons, b.photons);
     assert_eq!(merged.shards, 3);
 }
+
+/// `lidarsim dial SCENE --ensemble 4 --on on,side` (12 profiles, analytic) with extra
+/// arguments, into `out`.
+fn dial(scene: &Path, out: &Path, extra: &[&str]) -> String {
+    let mut args = vec![
+        "dial".to_string(),
+        s(scene),
+        "--out".into(),
+        s(out),
+        "--ensemble".into(),
+        "4".into(),
+        "--on".into(),
+        "on,side".into(),
+    ];
+    args.extend(extra.iter().map(|a| a.to_string()));
+    lidarsim_ok(&args)
+}
+
+/// The study scene of tests/study.rs in `dir`.
+fn study_scene(dir: &Path) -> PathBuf {
+    let p = dir.join("study.toml");
+    fs::write(&p, crate::study::SCENE).unwrap();
+    p
+}
+
+/// Three dial shards of the study in `dir/name` (shard 1 on two threads, the others on one).
+fn three_dial_shards(scene: &Path, dir: &Path, name: &str, extra: &[&str]) -> Vec<PathBuf> {
+    let out = dir.join(name);
+    (0..3)
+        .map(|i| {
+            let spec = format!("{i}/3");
+            let threads = if i == 1 { "2" } else { "1" };
+            let mut a = vec!["--shard", &spec, "--threads", threads];
+            a.extend_from_slice(extra);
+            let stdout = dial(scene, &out, &a);
+            assert!(
+                stdout.contains(&format!("shard {i}/3: profiles")),
+                "{stdout}"
+            );
+            out.join(format!("shard-{i}-of-3.lshard"))
+        })
+        .collect()
+}
+
+/// Issue 12, item 1 for ensembles: one `lidarsim dial` and the merge of 3 dial shards give
+/// byte-identical profiles.csv, summary.csv, budget.csv, failed.csv and figures, and the same
+/// summary.json but for its timing and the scene's path (absolute in shards).
+#[test]
+fn dial_shards_merge_into_the_single_studys_bytes() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let scene = study_scene(d);
+    let single = d.join("single");
+    dial(&scene, &single, &[]);
+    let shards = three_dial_shards(&scene, d, "shards", &[]);
+    let merged = d.join("merged");
+    // A directory and a file of another directory.
+    fs::create_dir(d.join("other")).unwrap();
+    let moved = d.join("other").join("shard-2-of-3.lshard");
+    fs::rename(&shards[2], &moved).unwrap();
+    let stdout = lidarsim_ok([
+        "merge".to_string(),
+        s(&d.join("shards")),
+        s(&moved),
+        "--out".into(),
+        s(&merged),
+    ]);
+    assert!(
+        stdout.contains("merged 3 dial shards of 12 profiles"),
+        "{stdout}"
+    );
+    let mut names: Vec<String> = fs::read_dir(&single)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    for f in [
+        "profiles.csv",
+        "summary.csv",
+        "budget.csv",
+        "failed.csv",
+        "summary.json",
+        "ensemble.png",
+    ] {
+        assert!(names.contains(&f.to_string()), "{f} in {names:?}");
+    }
+    for name in &names {
+        let (a, b) = (
+            fs::read(single.join(name)).unwrap(),
+            fs::read(merged.join(name)).unwrap(),
+        );
+        if name == "summary.json" {
+            let strip = |bytes: &[u8]| {
+                let mut v: serde_json::Value = serde_json::from_slice(bytes).unwrap();
+                let o = v.as_object_mut().unwrap();
+                for k in ["timing_s", "scene"] {
+                    assert!(o.remove(k).is_some(), "summary.json has {k}");
+                }
+                v
+            };
+            assert_eq!(strip(&a), strip(&b), "summary.json");
+        } else {
+            assert!(a == b, "{name} differs between the study and the merge");
+        }
+    }
+    // A shard's records are the same on any thread count (its header records its timing):
+    // shard 1, on two threads above, again on one.
+    let one = d.join("one");
+    dial(&scene, &one, &["--shard", "1/3", "--threads", "1"]);
+    let again = [one.join("shard-1-of-3.lshard")];
+    let body = |p: &Path| {
+        let f = lidarsim::study::shard::DialShardFile::read(p).unwrap();
+        f.outcomes
+    };
+    assert_eq!(body(&again[0]), body(&shards[1]));
+}
+
+/// A dial merge refuses a missing or duplicated shard, shards of another seed, scene or
+/// options, a run shard among dial shards and a damaged file: exit code 2, one line naming the
+/// files, nothing written.
+#[test]
+fn dial_merge_refuses_foreign_missing_and_damaged_shards() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let scene = study_scene(d);
+    let base = three_dial_shards(&scene, d, "base", &[]);
+
+    let e = merge_refused(&base[..2]);
+    assert!(e.contains("1 of 3 shards missing (2)"), "{e}");
+    let copy = d.join("copy.lshard");
+    fs::copy(&base[1], &copy).unwrap();
+    let e = merge_refused(&[
+        base[0].clone(),
+        base[1].clone(),
+        copy.clone(),
+        base[2].clone(),
+    ]);
+    assert!(
+        e.contains("shard 1/3 is given twice") && e.contains("copy.lshard"),
+        "{e}"
+    );
+
+    for (name, extra, why) in [
+        (
+            "seed",
+            &["--seed", "5"][..],
+            "the seed differs (3 against 5)",
+        ),
+        (
+            "steps",
+            &["--budget-temperature-k", "2"][..],
+            "the set of budget steps differs",
+        ),
+        (
+            "pairs",
+            &["--on", "on"][..],
+            "the choice of line pairs differs",
+        ),
+    ] {
+        let other = three_dial_shards(&scene, d, name, extra);
+        let e = merge_refused(&[base[0].clone(), base[1].clone(), other[2].clone()]);
+        assert!(e.contains(why), "{name}: {e}");
+        assert!(e.contains(&s(&base[0])) && e.contains(&s(&other[2])), "{e}");
+    }
+    let other_scene = d.join("other.toml");
+    fs::write(
+        &other_scene,
+        crate::study::SCENE.replace("co2_ppm = 420.0", "co2_ppm = 410.0"),
+    )
+    .unwrap();
+    let other = three_dial_shards(&other_scene, d, "scene", &[]);
+    let e = merge_refused(&[base[0].clone(), base[1].clone(), other[2].clone()]);
+    assert!(
+        e.contains("the scene (digest) differs") && e.contains("other.toml"),
+        "{e}"
+    );
+
+    // A run shard among dial shards.
+    let run_dir = d.join("run");
+    shard(
+        Some(&c1_scene()),
+        "0/4",
+        &run_dir,
+        &["--photons", "400", "--threads", "1"],
+    );
+    let run_shard = run_dir.join("shard-0-of-4.lshard");
+    let e = merge_refused(&[base[0].clone(), run_shard.clone()]);
+    assert!(
+        e.contains("kind of shard") && e.contains("dial against run"),
+        "{e}"
+    );
+    assert!(e.contains(&s(&run_shard)), "{e}");
+
+    // Damage: one flipped byte in the records, a truncation.
+    let mut bytes = fs::read(&base[1]).unwrap();
+    let n = bytes.len();
+    bytes[n - 20] ^= 1;
+    let flipped = d.join("flipped.lshard");
+    fs::write(&flipped, &bytes).unwrap();
+    let e = merge_refused(&[base[0].clone(), flipped.clone(), base[2].clone()]);
+    assert!(e.contains("corrupt") && e.contains(&s(&flipped)), "{e}");
+    let cut = d.join("cut.lshard");
+    fs::write(&cut, &bytes[..n / 2]).unwrap();
+    let e = merge_refused(&[base[0].clone(), cut.clone(), base[2].clone()]);
+    assert!(e.contains(&s(&cut)), "{e}");
+
+    // No more shards than profiles, refused before any work.
+    let o = lidarsim([
+        "dial".to_string(),
+        s(&scene),
+        "--ensemble".into(),
+        "4".into(),
+        "--shard".into(),
+        "12/13".into(),
+        "--out".into(),
+        s(&d.join("too_many")),
+    ]);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{e}");
+    assert!(e.contains("13 shards of a study of 12 profiles"), "{e}");
+    assert!(!e.contains("panicked"), "{e}");
+}
+
+/// Dial shards of a profile set file: the merge gives the single study's tables, and refuses a
+/// set file that changed since the shards ran, naming it.
+#[test]
+fn dial_shards_of_a_profile_set_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let scene = study_scene(d);
+    let set = d.join("set.csv");
+    let generate = |seed: &str| {
+        lidarsim_ok([
+            "profiles",
+            "generate",
+            "--n",
+            "5",
+            "--seed",
+            seed,
+            "--class",
+            "mid",
+            "--out",
+            &s(&set),
+        ]);
+    };
+    generate("2");
+    let study = |out: &Path, extra: &[&str]| {
+        let mut a = vec![
+            "dial".to_string(),
+            s(&scene),
+            "--profiles".into(),
+            s(&set),
+            "--no-plots".into(),
+            "--out".into(),
+            s(out),
+        ];
+        a.extend(extra.iter().map(|x| x.to_string()));
+        lidarsim_ok(&a);
+    };
+    let single = d.join("single");
+    study(&single, &[]);
+    let shards = d.join("shards");
+    for spec in ["0/2", "1/2"] {
+        study(&shards, &["--shard", spec]);
+    }
+    let merged = d.join("merged");
+    lidarsim_ok([
+        "merge".to_string(),
+        s(&shards),
+        "--no-plots".into(),
+        "--out".into(),
+        s(&merged),
+    ]);
+    for f in ["profiles.csv", "summary.csv", "budget.csv", "failed.csv"] {
+        assert!(
+            fs::read(single.join(f)).unwrap() == fs::read(merged.join(f)).unwrap(),
+            "{f}"
+        );
+    }
+    generate("3");
+    let e = merge_refused(&[shards]);
+    assert!(
+        e.contains("is not the one the shards ran") && e.contains("set.csv"),
+        "{e}"
+    );
+}

@@ -20,7 +20,7 @@ use crate::util::{lidarsim, lidarsim_ok};
 /// A space-borne CO2 IPDA, nadir from 450 km, monochromatic on-line 2.2 GHz up R16e and
 /// off-line in the trough, built-in band model, no Rayleigh scattering (so the measured
 /// differential optical depth is the gas's alone), 1 km layers to 50 km.
-const SCENE: &str = r#"description = "study test"
+pub(crate) const SCENE: &str = r#"description = "study test"
 [lidar]
 altitude_km = 450.0
 zenith_angle_deg = 180.0

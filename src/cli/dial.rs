@@ -3,17 +3,20 @@
 
 use std::fmt::Write as _;
 use std::io::Write;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 
-use lidarsim::atmosphere::{LatitudeClass, ProfileSet, class_ensemble, read_profile_set};
+use lidarsim::atmosphere::ProfileSet;
 use lidarsim::input::Bounds;
 use lidarsim::output::{self, OutputSet, csv_field};
 use lidarsim::scene::Scene;
+use lidarsim::shard::{self, ShardSpec};
 use lidarsim::study::dial::{
-    self, BudgetSteps, N_SOURCES, ProfileOutcome, Source, StudyOptions, StudyResult, Summary,
+    self, BudgetSteps, N_SOURCES, ProfileOutcome, ProfileSource, Source, StudyOptions, StudyResult,
+    Summary,
 };
+use lidarsim::study::shard::{self as study_shard, StudyInputs};
 
 /// Arguments of `lidarsim dial`.
 #[derive(clap::Args, Debug)]
@@ -71,10 +74,15 @@ pub struct Args {
     /// Do not draw the figures.
     #[arg(long)]
     pub no_plots: bool,
+    /// Run only shard I of N (0 ≤ I < N) of the profiles and write their records raw to
+    /// DIR/shard-I-of-N.lshard; `lidarsim merge` puts the N files together into this study's
+    /// outputs.
+    #[arg(long, value_name = "I/N", value_parser = clap::value_parser!(ShardSpec))]
+    pub shard: Option<ShardSpec>,
 }
 
 /// Every file `dial` may write into its directory.
-const FILES: [&str; 8] = [
+pub const FILES: [&str; 8] = [
     "profiles.csv",
     "summary.csv",
     "budget.csv",
@@ -87,22 +95,63 @@ const FILES: [&str; 8] = [
 
 /// Run the subcommand.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    let out_files = match args.shard {
+        Some(spec) => vec![args.out.join(spec.file_name())],
+        None => FILES.map(|f| args.out.join(f)).to_vec(),
+    };
     // Before the work: a study must not fail at its end on a name it could have refused now.
-    output::check_paths(&FILES.map(|f| args.out.join(f)))?;
-    let scene = match &args.scene {
-        Some(p) => Scene::read(p)?,
-        None => Scene::default_scene()?,
+    output::check_paths(&out_files)?;
+    let inputs = study_inputs(&args)?;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(args.threads)
+        .build()
+        .with_context(|| format!("cannot start {} threads", args.threads))?;
+    if let Some(spec) = args.shard {
+        let n = spec.batches(inputs.set.len()).len();
+        let bar = super::progress::Progress::new(n, "dial shard", "profiles");
+        let r = pool.install(|| study_shard::run(&inputs, spec, &args.out, &|| bar.tick()))?;
+        bar.finish();
+        outln!(
+            "shard {spec}: profiles {}..{} of {} ({} failed) in {:.2} s on {} threads; wrote {}",
+            r.profiles.start,
+            r.profiles.end,
+            r.total_profiles,
+            r.failed,
+            r.wall_s,
+            r.threads,
+            r.path.display()
+        );
+        return Ok(());
+    }
+    let bar = super::progress::Progress::new(inputs.set.len(), "dial", "profiles");
+    let result =
+        pool.install(|| dial::run(&inputs.scene, &inputs.set, &inputs.options, &|| bar.tick()))?;
+    bar.finish();
+    write_outputs(&args.out, args.no_plots, &inputs, &result)
+}
+
+/// The scene, profiles and options of a study from the command line (a shard reads the scene
+/// and the profile set by their absolute paths, so that shards started anywhere agree).
+fn study_inputs(args: &Args) -> anyhow::Result<StudyInputs> {
+    let scene = match (&args.scene, args.shard) {
+        (Some(p), Some(_)) => shard::read_scene(Some(p))?,
+        (Some(p), None) => Scene::read(p)?,
+        (None, _) => Scene::default_scene()?,
     };
     let retrieval = scene
         .retrieval
         .as_ref()
         .context("the scene has no [retrieval]: nothing to study")?;
-    let classes: Vec<LatitudeClass> = match args.class.as_str() {
-        "all" => LatitudeClass::ALL.to_vec(),
-        c => vec![c.parse::<LatitudeClass>().map_err(anyhow::Error::msg)?],
-    };
     let seed = args.seed.unwrap_or(scene.simulation.seed);
-    let set = profile_set(&args, &classes, seed)?;
+    let source = match (&args.profiles, args.ensemble) {
+        (Some(p), _) if args.shard.is_some() => ProfileSource::Set(
+            std::fs::canonicalize(p).with_context(|| format!("cannot read {}", p.display()))?,
+        ),
+        (Some(p), _) => ProfileSource::Set(p.clone()),
+        (None, Some(n)) => ProfileSource::Ensemble(n),
+        (None, None) => bail!("give --profiles SET or --ensemble N"),
+    };
+    let set = dial::profile_set(&source, &args.class, seed)?;
     // Each step was checked by the argument parser (finite, signed where a sign means a
     // direction of the error).
     let steps = BudgetSteps {
@@ -150,77 +199,47 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         steps,
         fov: 0,
     };
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(args.threads)
-        .build()
-        .with_context(|| format!("cannot start {} threads", args.threads))?;
-    let bar = super::progress::Progress::new(set.len(), "dial", "profiles");
-    let result = pool.install(|| dial::run(&scene, &set, &options, &|| bar.tick()))?;
-    bar.finish();
-    let summaries = dial::summarise(&result.outcomes);
+    Ok(StudyInputs {
+        scene,
+        source,
+        class: args.class.clone(),
+        set,
+        options,
+    })
+}
 
+/// Write a study's files into `dir` (all or none) and print its report: `lidarsim dial`, and
+/// `lidarsim merge` of dial shards.
+pub fn write_outputs(
+    dir: &Path,
+    no_plots: bool,
+    inputs: &StudyInputs,
+    result: &StudyResult,
+) -> anyhow::Result<()> {
+    let (scene, set, options) = (&inputs.scene, &inputs.set, &inputs.options);
+    let summaries = dial::summarise(&result.outcomes);
     let mut files = OutputSet::new();
-    let dir = &args.out;
-    files.write(dir.join("profiles.csv"), profiles_csv(&result))?;
+    files.write(dir.join("profiles.csv"), profiles_csv(result))?;
     files.write(dir.join("summary.csv"), summary_csv(&summaries))?;
     files.write(
         dir.join("budget.csv"),
-        budget_csv(&summaries, &steps, &scene),
+        budget_csv(&summaries, &options.steps, scene),
     )?;
     files.write(dir.join("failed.csv"), failed_csv(&result.outcomes))?;
-    if !args.no_plots {
-        super::study_figures::draw(&mut files, dir, &set, &result, &summaries)?;
+    if !no_plots {
+        super::study_figures::draw(&mut files, dir, set, result, &summaries)?;
     }
     files.write(
         dir.join("summary.json"),
-        summary_json(&scene, &set, &options, &result),
+        summary_json(scene, set, options, result),
     )?;
     let written = files.commit()?;
 
     let mut out = std::io::stdout().lock();
-    print_report(&mut out, &set, &result, &summaries, photons)?;
+    print_report(&mut out, set, result, &summaries, options.photons)?;
     let names: Vec<String> = written.iter().map(|p| p.display().to_string()).collect();
     writeln!(out, "wrote {}", names.join(", "))?;
     Ok(())
-}
-
-/// The profiles to run: a set's members of the chosen classes, or generated ensembles.
-fn profile_set(args: &Args, classes: &[LatitudeClass], seed: u64) -> anyhow::Result<ProfileSet> {
-    if let Some(path) = &args.profiles {
-        let set = read_profile_set(path)?;
-        let mut out = ProfileSet {
-            name: set.name.clone(),
-            members: Vec::new(),
-            notes: set.notes.clone(),
-        };
-        for c in classes {
-            out.members.extend(set.class(*c).members);
-        }
-        if out.is_empty() {
-            bail!("{}: no profile of class {}", path.display(), args.class);
-        }
-        return Ok(out);
-    }
-    let n = args
-        .ensemble
-        .context("give --profiles SET or --ensemble N")?;
-    let mut set = ProfileSet {
-        name: format!("{n} members per class, seed {seed}"),
-        members: Vec::new(),
-        notes: Vec::new(),
-    };
-    for c in classes {
-        let i = LatitudeClass::ALL.iter().position(|x| x == c).unwrap_or(0) as u64;
-        let (s, report) = class_ensemble(*c, n, seed.wrapping_add(i))?;
-        if report.capped_values > 0 {
-            set.notes.push(format!(
-                "class {c}: water vapour capped at 100 % relative humidity in {} of {} values",
-                report.capped_values, report.total_values
-            ));
-        }
-        set.members.extend(s.members);
-    }
-    Ok(set)
 }
 
 /// Header of `profiles.csv`, one row per profile, line pair and retrieved quantity.

@@ -10,11 +10,12 @@ use lidarsim::transport::TransportOptions;
 /// Arguments of `lidarsim merge`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// Directories holding shard files (`*.lshard`, from `lidarsim run --shard I/N`), or the
-    /// files themselves: every shard of one run, each once.
+    /// Directories holding shard files (`*.lshard`, from `lidarsim run --shard I/N` or
+    /// `lidarsim dial --shard I/N`), or the files themselves: every shard of one run or study,
+    /// each once.
     #[arg(required = true, value_name = "DIR")]
     pub inputs: Vec<PathBuf>,
-    /// Output directory: receives the files a single run of the scene writes.
+    /// Output directory: receives the files a single run (or study) writes.
     #[arg(long, default_value = "out")]
     pub out: PathBuf,
     /// Do not draw the figures (returns.png, dial.png).
@@ -24,6 +25,23 @@ pub struct Args {
 
 /// Run the subcommand.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    let paths = shard::shard_paths(&args.inputs)?;
+    if shard::common_kind(&paths)? == shard::KIND_DIAL {
+        output::check_paths(&super::dial::FILES.map(|f| args.out.join(f)))?;
+        let merged = lidarsim::study::shard::merge(&paths)?;
+        outln!(
+            "merged {} dial shards of {} profiles of {}",
+            merged.shards,
+            merged.inputs.set.len(),
+            merged.inputs.scene.path.display()
+        );
+        return super::dial::write_outputs(
+            &args.out,
+            args.no_plots,
+            &merged.inputs,
+            &merged.result,
+        );
+    }
     // Before the work: a merge must not fail at its end on a name it could have refused now.
     output::check_paths(&super::run::FILES.map(|f| args.out.join(f)))?;
     let merged = shard::merge(&args.inputs)?;

@@ -288,6 +288,9 @@ pub enum StudyError {
     /// The scene cannot be studied (no retrieval, no receiver, no gas).
     #[error("{0}")]
     Scene(String),
+    /// The profile set could not be read or generated.
+    #[error("{0}")]
+    Profiles(String),
     /// The ensemble-mean profile of a class failed.
     #[error("the mean profile of class {class}: {message}")]
     MeanProfile {
@@ -335,6 +338,28 @@ pub fn run(
     options: &StudyOptions,
     progress: &(dyn Fn() + Sync),
 ) -> Result<StudyResult, StudyError> {
+    run_slice(scene, set, options, 0..set.len(), progress)
+}
+
+/// [`run`] for the profiles `slice` of `set` only (a shard of the study,
+/// [`crate::study::shard`]): the class means are still those of the whole set and each
+/// profile keeps its noise seed, so the outcomes are those of the same profiles in [`run`],
+/// bit for bit. `outcomes` holds the slice's profiles only.
+pub fn run_slice(
+    scene: &Scene,
+    set: &ProfileSet,
+    options: &StudyOptions,
+    slice: std::ops::Range<usize>,
+    progress: &(dyn Fn() + Sync),
+) -> Result<StudyResult, StudyError> {
+    if slice.start > slice.end || slice.end > set.len() {
+        return Err(StudyError::Scene(format!(
+            "profiles {}..{} of a set of {}",
+            slice.start,
+            slice.end,
+            set.len()
+        )));
+    }
     let started = Instant::now();
     let config = scene
         .retrieval
@@ -438,18 +463,18 @@ pub fn run(
         }
     };
     // With photons the transport parallelises each profile itself.
+    let (members, seeds, checked) = (
+        &set.members[slice.clone()],
+        &seeds[slice.clone()],
+        &checked[slice],
+    );
     let outcomes: Vec<ProfileOutcome> = if options.photons > 0 {
-        set.members
-            .iter()
-            .zip(&seeds)
-            .zip(&checked)
-            .map(one)
-            .collect()
+        members.iter().zip(seeds).zip(checked).map(one).collect()
     } else {
-        set.members
+        members
             .par_iter()
-            .zip(&seeds)
-            .zip(&checked)
+            .zip(seeds)
+            .zip(checked)
             .map(one)
             .collect()
     };
@@ -467,6 +492,76 @@ pub fn run(
         mean_profiles,
         timing,
     })
+}
+
+/// Where a study's profiles come from.
+#[derive(Debug, Clone, PartialEq)]
+pub enum ProfileSource {
+    /// A profile set file (lidarsim format), its members of the classes asked for.
+    Set(std::path::PathBuf),
+    /// `n` members per class generated around the class's AFGL mean with the representative
+    /// NWP forecast-error covariance; class i of tropical, mid, high takes seed `seed + i`.
+    Ensemble(usize),
+}
+
+/// The latitude classes `class` names: `tropical`, `mid`, `high` or `all`.
+pub fn classes(class: &str) -> Result<Vec<LatitudeClass>, StudyError> {
+    match class {
+        "all" => Ok(LatitudeClass::ALL.to_vec()),
+        c => Ok(vec![
+            c.parse::<LatitudeClass>().map_err(StudyError::Profiles)?,
+        ]),
+    }
+}
+
+/// The profiles of a study: `source`'s members of the classes `class` names ([`classes`]),
+/// generated ensembles from `seed`.
+pub fn profile_set(
+    source: &ProfileSource,
+    class: &str,
+    seed: u64,
+) -> Result<ProfileSet, StudyError> {
+    let classes = classes(class)?;
+    let n = match source {
+        ProfileSource::Set(path) => {
+            let set = crate::atmosphere::read_profile_set(path)
+                .map_err(|e| StudyError::Profiles(e.to_string()))?;
+            let mut out = ProfileSet {
+                name: set.name.clone(),
+                members: Vec::new(),
+                notes: set.notes.clone(),
+            };
+            for c in &classes {
+                out.members.extend(set.class(*c).members);
+            }
+            if out.is_empty() {
+                return Err(StudyError::Profiles(format!(
+                    "{}: no profile of class {class}",
+                    path.display()
+                )));
+            }
+            return Ok(out);
+        }
+        ProfileSource::Ensemble(n) => *n,
+    };
+    let mut set = ProfileSet {
+        name: format!("{n} members per class, seed {seed}"),
+        members: Vec::new(),
+        notes: Vec::new(),
+    };
+    for c in &classes {
+        let i = LatitudeClass::ALL.iter().position(|x| x == c).unwrap_or(0) as u64;
+        let (s, report) = crate::atmosphere::class_ensemble(*c, n, seed.wrapping_add(i))
+            .map_err(|e| StudyError::Profiles(e.to_string()))?;
+        if report.capped_values > 0 {
+            set.notes.push(format!(
+                "class {c}: water vapour capped at 100 % relative humidity in {} of {} values",
+                report.capped_values, report.total_values
+            ));
+        }
+        set.members.extend(s.members);
+    }
+    Ok(set)
 }
 
 /// Line returns and signals of one truth.

@@ -10,3 +10,4 @@
 
 pub mod dial;
 pub mod select;
+pub mod shard;

@@ -1,0 +1,778 @@
+//! Sharded ensemble studies: `lidarsim dial --shard I/N` runs a slice of the profiles and
+//! stores their records in one shard file; [`merge`] puts the slices back together into the
+//! outcomes of the single study, bit for bit.
+//!
+//! Profile `p` of a set of `P` belongs to shard `⌊p·N/P⌋` (as a run's batches,
+//! [`ShardSpec::batches`]), so shard `i` holds profiles `⌈i·P/N⌉ … ⌈(i+1)·P/N⌉ − 1`. Every shard
+//! builds the whole set and its class means (the retrieval's virtual cross-sections are those
+//! of the class-mean profile) and runs its profiles with the noise seed each has in the single
+//! study ([`dial::run_slice`]), so a shard gives the same bytes on any machine and thread count.
+//!
+//! # The dial shard file (`shard-I-of-N.lshard`, `kind` = `dial`)
+//!
+//! The framing of every shard file ([`crate::shard`]): magic, format, header length, a JSON
+//! header ([`DialShardHeader`]), the body, and an FNV-1a 64 checksum of every byte before it.
+//! The body holds the slice's outcomes in profile order, little-endian:
+//!
+//! | bytes | content |
+//! |---|---|
+//! | string | profile id (u64 length, UTF-8) |
+//! | 1 | latitude class (0 tropical, 1 mid, 2 high) |
+//! | 1 | 0: records follow; 1: the profile failed, the reason (a string) follows |
+//! | 8 | number of records (u64), then per record: pair (string), method (u8: 0 IPDA, 1 IPDA virtual σ, 2 DIAL), altitudes bottom and top, truth, retrieved, noisy, own-reference (f64), the budget rows (f64 each) |
+//!
+//! Floats are stored as their IEEE-754 bits, so the records round-trip exactly (NaN included).
+
+use std::fs;
+use std::io::{self, BufWriter, Write};
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use crate::atmosphere::{LatitudeClass, ProfileSet};
+use crate::output::{self, OutputSet};
+use crate::retrieval::Method;
+use crate::scene::Scene;
+use crate::shard::{
+    self, FORMAT, Frame, FrameWriter, KIND_DIAL, ShardError, ShardSpec, VERSION, debug_digest,
+};
+use crate::study::dial::{
+    self, BudgetSteps, N_SOURCES, ProfileOutcome, ProfileSource, Record, StudyOptions, StudyResult,
+    Timing,
+};
+
+/// Everything a study is made of: the scene, where its profiles come from, and the options
+/// that change its numbers.
+#[derive(Debug, Clone)]
+pub struct StudyInputs {
+    /// The scene (read by its absolute path for a shard, [`shard::read_scene`]).
+    pub scene: Scene,
+    /// Where the profiles come from (a set file by its absolute path for a shard).
+    pub source: ProfileSource,
+    /// The latitude classes run: `tropical`, `mid`, `high` or `all`.
+    pub class: String,
+    /// The profiles ([`dial::profile_set`] of `source`, `class` and `options.seed`).
+    pub set: ProfileSet,
+    /// The study's options.
+    pub options: StudyOptions,
+}
+
+/// The header of a dial shard file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DialShardHeader {
+    /// [`KIND_DIAL`].
+    pub kind: String,
+    /// lidarsim version that wrote the shard.
+    pub lidarsim_version: String,
+    /// The scene file's absolute path (or the default scene's name).
+    pub scene_path: String,
+    /// The scene text.
+    pub scene_text: String,
+    /// [`shard::scene_digest`] of the scene.
+    pub scene_digest: String,
+    /// The profile set file's absolute path, for a set.
+    pub profiles_path: Option<String>,
+    /// Members per class, for generated ensembles.
+    pub ensemble: Option<u64>,
+    /// The classes run.
+    pub class: String,
+    /// [`debug_digest`] of the profile set as built.
+    pub set_digest: String,
+    /// Profiles in the set.
+    pub profiles: u64,
+    /// Photons per profile (0: analytic).
+    pub photons: u64,
+    /// Seed of the ensemble, the noise and the Monte Carlo.
+    pub seed: u64,
+    /// (on, off) line indices.
+    pub pairs: Vec<[u64; 2]>,
+    /// Budget steps (temperature, humidity, surface pressure, frequency offset, line width)
+    /// as IEEE-754 bits.
+    pub budget_steps_bits: [u64; 5],
+    /// Field of view of the retrievals.
+    pub fov: u64,
+    /// This shard, `0..shard_count`.
+    pub shard_index: u64,
+    /// Shards of the study.
+    pub shard_count: u64,
+    /// First profile of the shard.
+    pub first_profile: u64,
+    /// One past its last profile.
+    pub end_profile: u64,
+    /// The shard's [`Timing`] \[s\]: class means, truth optics, returns, references,
+    /// retrievals, wall.
+    pub timing_s: [f64; 6],
+    /// Worker threads it ran on.
+    pub threads: u64,
+}
+
+impl DialShardHeader {
+    fn spec(&self) -> ShardSpec {
+        ShardSpec {
+            index: self.shard_index as usize,
+            count: self.shard_count as usize,
+        }
+    }
+
+    fn steps(&self) -> BudgetSteps {
+        let b = self.budget_steps_bits.map(f64::from_bits);
+        BudgetSteps {
+            temperature_k: b[0],
+            humidity_fraction: b[1],
+            surface_pressure_hpa: b[2],
+            frequency_offset_mhz: b[3],
+            linewidth_fraction: b[4],
+        }
+    }
+
+    fn options(&self) -> StudyOptions {
+        StudyOptions {
+            photons: self.photons,
+            seed: self.seed,
+            pairs: self
+                .pairs
+                .iter()
+                .map(|p| (p[0] as usize, p[1] as usize))
+                .collect(),
+            steps: self.steps(),
+            fov: self.fov as usize,
+        }
+    }
+}
+
+/// What a dial shard did.
+#[derive(Debug, Clone)]
+pub struct DialShardReport {
+    /// The file written.
+    pub path: PathBuf,
+    /// Its profiles.
+    pub profiles: Range<usize>,
+    /// Profiles of the whole set.
+    pub total_profiles: usize,
+    /// Profiles of the slice that failed.
+    pub failed: usize,
+    /// Wall time \[s\].
+    pub wall_s: f64,
+    /// Worker threads.
+    pub threads: usize,
+}
+
+/// Run shard `spec` of the study `inputs` on the current rayon pool and write it as
+/// `out_dir/`[`ShardSpec::file_name`] (whole or not at all). `progress` is called once per
+/// finished profile of the slice.
+pub fn run(
+    inputs: &StudyInputs,
+    spec: ShardSpec,
+    out_dir: &Path,
+    progress: &(dyn Fn() + Sync),
+) -> Result<DialShardReport, ShardError> {
+    let total = inputs.set.len();
+    if spec.count > total {
+        return Err(ShardError::Spec {
+            spec,
+            what: format!(
+                "{} shards of a study of {total} profiles leave some without a profile (at most one shard per profile)",
+                spec.count
+            ),
+        });
+    }
+    let range = spec.batches(total);
+    let path = out_dir.join(spec.file_name());
+    output::check_paths(&[&path])?;
+    let result = dial::run_slice(
+        &inputs.scene,
+        &inputs.set,
+        &inputs.options,
+        range.clone(),
+        progress,
+    )
+    .map_err(|e| ShardError::Spec {
+        spec,
+        what: e.to_string(),
+    })?;
+    let threads = rayon::current_num_threads();
+    let header = header_of(inputs, spec, range.clone(), &result.timing, threads)?;
+    let json = serde_json::to_vec(&header).map_err(|e| ShardError::Bad {
+        path: path.clone(),
+        what: format!("cannot encode the header: {e}"),
+    })?;
+    let mut set = OutputSet::new();
+    set.write_with(&path, |file| {
+        let mut w = FrameWriter::start(BufWriter::new(file), &json)?;
+        for o in &result.outcomes {
+            write_outcome(&mut w, o)?;
+        }
+        w.finish()
+    })?;
+    set.commit()?;
+    Ok(DialShardReport {
+        path,
+        profiles: range,
+        total_profiles: total,
+        failed: result
+            .outcomes
+            .iter()
+            .filter(|o| o.records.is_err())
+            .count(),
+        wall_s: result.timing.wall_s,
+        threads,
+    })
+}
+
+fn header_of(
+    inputs: &StudyInputs,
+    spec: ShardSpec,
+    range: Range<usize>,
+    t: &Timing,
+    threads: usize,
+) -> Result<DialShardHeader, ShardError> {
+    let (profiles_path, ensemble) = match &inputs.source {
+        ProfileSource::Set(p) => (Some(p.to_string_lossy().into_owned()), None),
+        ProfileSource::Ensemble(n) => (None, Some(*n as u64)),
+    };
+    let o = &inputs.options;
+    let st = &o.steps;
+    Ok(DialShardHeader {
+        kind: KIND_DIAL.to_string(),
+        lidarsim_version: VERSION.to_string(),
+        scene_path: inputs.scene.path.to_string_lossy().into_owned(),
+        scene_text: inputs.scene.text().to_string(),
+        scene_digest: shard::scene_digest(&inputs.scene),
+        profiles_path,
+        ensemble,
+        class: inputs.class.clone(),
+        set_digest: debug_digest(&inputs.set),
+        profiles: inputs.set.len() as u64,
+        photons: o.photons,
+        seed: o.seed,
+        pairs: o.pairs.iter().map(|&(a, b)| [a as u64, b as u64]).collect(),
+        budget_steps_bits: [
+            st.temperature_k,
+            st.humidity_fraction,
+            st.surface_pressure_hpa,
+            st.frequency_offset_mhz,
+            st.linewidth_fraction,
+        ]
+        .map(f64::to_bits),
+        fov: o.fov as u64,
+        shard_index: spec.index as u64,
+        shard_count: spec.count as u64,
+        first_profile: range.start as u64,
+        end_profile: range.end as u64,
+        timing_s: [
+            t.mean_references_s,
+            t.truth_optics_s,
+            t.returns_s,
+            t.references_s,
+            t.retrievals_s,
+            t.wall_s,
+        ],
+        threads: threads as u64,
+    })
+}
+
+const METHODS: [Method; 3] = [Method::Ipda, Method::IpdaVirtual, Method::Dial];
+
+fn write_str(w: &mut impl Write, s: &str) -> io::Result<()> {
+    w.write_all(&(s.len() as u64).to_le_bytes())?;
+    w.write_all(s.as_bytes())
+}
+
+fn write_outcome(w: &mut impl Write, o: &ProfileOutcome) -> io::Result<()> {
+    write_str(w, &o.id)?;
+    let class = LatitudeClass::ALL
+        .iter()
+        .position(|c| *c == o.class)
+        .unwrap_or(0) as u8;
+    w.write_all(&[class])?;
+    match &o.records {
+        Err(reason) => {
+            w.write_all(&[1])?;
+            write_str(w, reason)
+        }
+        Ok(records) => {
+            w.write_all(&[0])?;
+            w.write_all(&(records.len() as u64).to_le_bytes())?;
+            for r in records {
+                write_str(w, &r.pair)?;
+                let m = METHODS.iter().position(|m| *m == r.method).unwrap_or(0) as u8;
+                w.write_all(&[m])?;
+                let values = [
+                    r.altitude_m.0,
+                    r.altitude_m.1,
+                    r.truth_ppm,
+                    r.retrieved_ppm,
+                    r.retrieved_noisy_ppm,
+                    r.retrieved_own_ppm,
+                ];
+                for v in values.iter().chain(&r.budget_ppm) {
+                    w.write_all(&v.to_le_bytes())?;
+                }
+            }
+            Ok(())
+        }
+    }
+}
+
+/// A reader of the body that refuses to read past its end.
+struct Body<'b> {
+    bytes: &'b [u8],
+    at: usize,
+}
+
+impl Body<'_> {
+    fn take(&mut self, n: usize) -> Result<&[u8], String> {
+        if n > self.bytes.len() - self.at {
+            return Err(format!(
+                "truncated or corrupt: its records end {} bytes early",
+                n - (self.bytes.len() - self.at)
+            ));
+        }
+        let s = &self.bytes[self.at..self.at + n];
+        self.at += n;
+        Ok(s)
+    }
+
+    fn u8(&mut self) -> Result<u8, String> {
+        Ok(self.take(1)?[0])
+    }
+
+    fn u64(&mut self) -> Result<u64, String> {
+        let mut a = [0u8; 8];
+        a.copy_from_slice(self.take(8)?);
+        Ok(u64::from_le_bytes(a))
+    }
+
+    fn f64(&mut self) -> Result<f64, String> {
+        Ok(f64::from_bits(self.u64()?))
+    }
+
+    fn string(&mut self) -> Result<String, String> {
+        let n = self.u64()?;
+        let n = usize::try_from(n).map_err(|_| format!("corrupt: a string of {n} bytes"))?;
+        String::from_utf8(self.take(n)?.to_vec())
+            .map_err(|_| "corrupt: a string that is not UTF-8".to_string())
+    }
+
+    fn outcome(&mut self) -> Result<ProfileOutcome, String> {
+        let id = self.string()?;
+        let c = self.u8()?;
+        let class = *LatitudeClass::ALL
+            .get(c as usize)
+            .ok_or_else(|| format!("corrupt: latitude class {c} of profile {id}"))?;
+        let records = match self.u8()? {
+            1 => Err(self.string()?),
+            0 => {
+                let n = self.u64()?;
+                // Each record takes at least this many bytes: a bound before allocating.
+                let min = 8 + 1 + 8 * (6 + N_SOURCES) as u64;
+                if n > (self.bytes.len() - self.at) as u64 / min {
+                    return Err(format!(
+                        "truncated or corrupt: {n} records of profile {id} in {} bytes",
+                        self.bytes.len() - self.at
+                    ));
+                }
+                let mut records = Vec::with_capacity(n as usize);
+                for _ in 0..n {
+                    let pair = self.string()?;
+                    let m = self.u8()?;
+                    let method = *METHODS
+                        .get(m as usize)
+                        .ok_or_else(|| format!("corrupt: method {m} in profile {id}"))?;
+                    let mut v = [0.0; 6];
+                    for x in &mut v {
+                        *x = self.f64()?;
+                    }
+                    let mut budget_ppm = [0.0; N_SOURCES];
+                    for x in &mut budget_ppm {
+                        *x = self.f64()?;
+                    }
+                    records.push(Record {
+                        pair,
+                        method,
+                        altitude_m: (v[0], v[1]),
+                        truth_ppm: v[2],
+                        retrieved_ppm: v[3],
+                        retrieved_noisy_ppm: v[4],
+                        retrieved_own_ppm: v[5],
+                        budget_ppm,
+                    });
+                }
+                Ok(records)
+            }
+            s => return Err(format!("corrupt: status {s} of profile {id}")),
+        };
+        Ok(ProfileOutcome { id, class, records })
+    }
+}
+
+/// A dial shard file read and checked.
+#[derive(Debug, Clone)]
+pub struct DialShardFile {
+    /// Where it was read from.
+    pub path: PathBuf,
+    /// Its header.
+    pub header: DialShardHeader,
+    /// Its profiles' outcomes, in profile order.
+    pub outcomes: Vec<ProfileOutcome>,
+}
+
+impl DialShardFile {
+    /// Read `path` and check that it is a whole dial shard file, consistent in itself.
+    pub fn read(path: &Path) -> Result<DialShardFile, ShardError> {
+        let bytes = fs::read(path).map_err(|error| ShardError::Io {
+            path: path.to_path_buf(),
+            error,
+        })?;
+        Self::parse(path, &bytes)
+    }
+
+    /// [`DialShardFile::read`] on bytes already read.
+    pub fn parse(path: &Path, bytes: &[u8]) -> Result<DialShardFile, ShardError> {
+        let bad = |what: String| ShardError::Bad {
+            path: path.to_path_buf(),
+            what,
+        };
+        let frame = Frame::parse(path, bytes, 0)?;
+        if frame.kind != KIND_DIAL {
+            return Err(bad(format!(
+                "a `{}` shard, not a dial shard (from `lidarsim dial --shard`)",
+                frame.kind
+            )));
+        }
+        let header: DialShardHeader = match serde_json::from_slice(frame.header(bytes)) {
+            Ok(h) => h,
+            Err(e) if frame.checksum_ok => {
+                return Err(bad(format!("its header cannot be read: {e}")));
+            }
+            Err(_) => {
+                return Err(bad("corrupt or truncated: its header cannot be read and its checksum does not match".into()));
+            }
+        };
+        frame.check_sum(path)?;
+        let spec = header.spec();
+        let valid = header.shard_count > 0
+            && header.shard_index < header.shard_count
+            && header.shard_count <= header.profiles;
+        let range = if valid {
+            spec.batches(header.profiles as usize)
+        } else {
+            0..0
+        };
+        if !valid
+            || (header.first_profile, header.end_profile) != (range.start as u64, range.end as u64)
+        {
+            return Err(bad(format!(
+                "inconsistent header: profiles {}..{} as shard {}/{} of {} profiles",
+                header.first_profile,
+                header.end_profile,
+                header.shard_index,
+                header.shard_count,
+                header.profiles
+            )));
+        }
+        let mut body = Body {
+            bytes: &bytes[frame.body_at..frame.sum_at],
+            at: 0,
+        };
+        let mut outcomes = Vec::with_capacity(range.len().min(1 << 20));
+        for _ in range {
+            outcomes.push(body.outcome().map_err(&bad)?);
+        }
+        if body.at != body.bytes.len() {
+            return Err(bad(format!(
+                "{} bytes beyond its last profile",
+                body.bytes.len() - body.at
+            )));
+        }
+        Ok(DialShardFile {
+            path: path.to_path_buf(),
+            header,
+            outcomes,
+        })
+    }
+}
+
+/// `b`'s header against `a`'s: the first difference, named.
+fn check_same(
+    a: &Path,
+    ha: &DialShardHeader,
+    b: &Path,
+    hb: &DialShardHeader,
+) -> Result<(), ShardError> {
+    let fields: [(&'static str, String, String); 11] = [
+        (
+            "the lidarsim version",
+            ha.lidarsim_version.clone(),
+            hb.lidarsim_version.clone(),
+        ),
+        ("the seed", ha.seed.to_string(), hb.seed.to_string()),
+        (
+            "the scene (digest)",
+            format!("{} {}", ha.scene_path, ha.scene_digest),
+            format!("{} {}", hb.scene_path, hb.scene_digest),
+        ),
+        (
+            "the profile set",
+            format!("{:?} {:?}", ha.profiles_path, ha.ensemble),
+            format!("{:?} {:?}", hb.profiles_path, hb.ensemble),
+        ),
+        ("the class", ha.class.clone(), hb.class.clone()),
+        (
+            "the profile set (digest)",
+            format!("{} profiles {}", ha.profiles, ha.set_digest),
+            format!("{} profiles {}", hb.profiles, hb.set_digest),
+        ),
+        (
+            "the shard count",
+            ha.shard_count.to_string(),
+            hb.shard_count.to_string(),
+        ),
+        (
+            "the photon count",
+            ha.photons.to_string(),
+            hb.photons.to_string(),
+        ),
+        (
+            "the choice of line pairs",
+            format!("{:?}", ha.pairs),
+            format!("{:?}", hb.pairs),
+        ),
+        (
+            "the set of budget steps",
+            format!("{:?}", ha.steps()),
+            format!("{:?}", hb.steps()),
+        ),
+        ("the field of view", ha.fov.to_string(), hb.fov.to_string()),
+    ];
+    for (what, first, second) in fields {
+        if first != second {
+            return Err(ShardError::Mismatch {
+                a: a.to_path_buf(),
+                b: b.to_path_buf(),
+                what,
+                first,
+                second,
+            });
+        }
+    }
+    Ok(())
+}
+
+/// A merged study: its inputs and the single study's result. The result's `mean_profiles` is
+/// empty (the shards do not store them), its timing the shards' summed (wall time included).
+#[derive(Debug)]
+pub struct DialMerged {
+    /// The study's inputs, rebuilt from the shards and checked against their digests.
+    pub inputs: StudyInputs,
+    /// The outcomes of every profile in set order.
+    pub result: StudyResult,
+    /// Shards merged.
+    pub shards: usize,
+}
+
+/// Merge the dial shard files `paths` ([`shard::shard_paths`]): every shard of one study, each
+/// once, of the same version, scene, profile set, seed and options; the scene and the set are
+/// built again and must have the shards' digests.
+pub fn merge(paths: &[PathBuf]) -> Result<DialMerged, ShardError> {
+    let mut files: Vec<DialShardFile> = Vec::new();
+    for p in paths {
+        let f = DialShardFile::read(p)?;
+        if f.header.lidarsim_version != VERSION {
+            return Err(ShardError::Bad {
+                path: p.clone(),
+                what: format!(
+                    "written by lidarsim {}; this is lidarsim {VERSION} (shard format {FORMAT}), whose numbers may differ",
+                    f.header.lidarsim_version
+                ),
+            });
+        }
+        if let Some(first) = files.first() {
+            check_same(&first.path, &first.header, p, &f.header)?;
+        }
+        files.push(f);
+    }
+    files.sort_by_key(|f| f.header.shard_index);
+    for w in files.windows(2) {
+        if w[0].header.shard_index == w[1].header.shard_index {
+            return Err(ShardError::Duplicate {
+                spec: w[0].header.spec(),
+                a: w[0].path.clone(),
+                b: w[1].path.clone(),
+            });
+        }
+    }
+    let Some(first) = files.first() else {
+        return Err(ShardError::NoShards(paths.to_vec()));
+    };
+    let count = first.header.shard_count as usize;
+    if files.len() != count {
+        let have: Vec<usize> = files
+            .iter()
+            .map(|f| f.header.shard_index as usize)
+            .collect();
+        return Err(ShardError::Missing {
+            count,
+            missing: (0..count).filter(|i| !have.contains(i)).collect(),
+            files: files.into_iter().map(|f| f.path).collect(),
+        });
+    }
+    let h = first.header.clone();
+    let path0 = first.path.clone();
+    let scene = Scene::from_toml(Path::new(&h.scene_path), &h.scene_text)?;
+    let now = shard::scene_digest(&scene);
+    if now != h.scene_digest {
+        return Err(ShardError::SceneChanged {
+            path: h.scene_path.clone(),
+            now,
+            shards: h.scene_digest.clone(),
+        });
+    }
+    let source = match (&h.profiles_path, h.ensemble) {
+        (Some(p), None) => ProfileSource::Set(PathBuf::from(p)),
+        (None, Some(n)) => ProfileSource::Ensemble(n as usize),
+        _ => {
+            return Err(ShardError::Bad {
+                path: path0,
+                what:
+                    "inconsistent header: it names both or neither of a profile set and an ensemble"
+                        .into(),
+            });
+        }
+    };
+    let set = dial::profile_set(&source, &h.class, h.seed).map_err(|e| ShardError::Bad {
+        path: path0.clone(),
+        what: format!("its profile set cannot be built again: {e}"),
+    })?;
+    let digest = debug_digest(&set);
+    if digest != h.set_digest || set.len() as u64 != h.profiles {
+        return Err(ShardError::Bad {
+            path: path0,
+            what: format!(
+                "the profile set {} as built now ({} profiles, digest {digest}) is not the one the shards ran ({} profiles, digest {}): its file has changed since",
+                match &source {
+                    ProfileSource::Set(p) => p.display().to_string(),
+                    ProfileSource::Ensemble(n) => format!("of {n} members per class"),
+                },
+                set.len(),
+                h.profiles,
+                h.set_digest
+            ),
+        });
+    }
+    let mut outcomes = Vec::with_capacity(set.len());
+    let mut timing = Timing::default();
+    for f in files {
+        let t = f.header.timing_s;
+        timing.mean_references_s += t[0];
+        timing.truth_optics_s += t[1];
+        timing.returns_s += t[2];
+        timing.references_s += t[3];
+        timing.retrievals_s += t[4];
+        timing.wall_s += t[5];
+        let start = f.header.first_profile as usize;
+        for (k, o) in f.outcomes.into_iter().enumerate() {
+            let m = &set.members[start + k].meta;
+            if o.id != m.id || o.class != m.class() {
+                return Err(ShardError::Bad {
+                    path: f.path,
+                    what: format!(
+                        "profile {} is `{}` ({}) where the set has `{}` ({})",
+                        start + k,
+                        o.id,
+                        o.class,
+                        m.id,
+                        m.class()
+                    ),
+                });
+            }
+            outcomes.push(o);
+        }
+    }
+    let options = h.options();
+    Ok(DialMerged {
+        inputs: StudyInputs {
+            scene,
+            source,
+            class: h.class,
+            set,
+            options,
+        },
+        result: StudyResult {
+            outcomes,
+            mean_profiles: Vec::new(),
+            timing,
+        },
+        shards: count,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Outcomes round-trip exactly: every f64 by its bits (NaN, −0, infinities, subnormals),
+    /// failed profiles with their reason, text with commas and non-ASCII; and a truncated body
+    /// is refused, never read past.
+    #[test]
+    fn outcomes_round_trip_bit_for_bit() {
+        let record = |x: f64| Record {
+            pair: "on,1/off é".into(),
+            method: Method::Dial,
+            altitude_m: (-0.0, f64::INFINITY),
+            truth_ppm: x,
+            retrieved_ppm: f64::from_bits(0x7ff8_0000_0000_1234),
+            retrieved_noisy_ppm: f64::MIN_POSITIVE / 3.0,
+            retrieved_own_ppm: 1.0 / 3.0,
+            budget_ppm: [x; N_SOURCES],
+        };
+        let outcomes = vec![
+            ProfileOutcome {
+                id: "a".into(),
+                class: LatitudeClass::High,
+                records: Ok(vec![record(420.123), record(f64::NEG_INFINITY)]),
+            },
+            ProfileOutcome {
+                id: "b\n\"x\"".into(),
+                class: LatitudeClass::Tropical,
+                records: Err("supersaturated, 101 %".into()),
+            },
+            ProfileOutcome {
+                id: String::new(),
+                class: LatitudeClass::Mid,
+                records: Ok(Vec::new()),
+            },
+        ];
+        let mut bytes = Vec::new();
+        for o in &outcomes {
+            write_outcome(&mut bytes, o).unwrap();
+        }
+        let mut body = Body {
+            bytes: &bytes,
+            at: 0,
+        };
+        let back: Vec<ProfileOutcome> = (0..3).map(|_| body.outcome().unwrap()).collect();
+        assert_eq!(body.at, bytes.len());
+        let bits = |o: &[ProfileOutcome]| format!("{o:?}");
+        assert_eq!(bits(&back), bits(&outcomes));
+        for (a, b) in back.iter().zip(&outcomes) {
+            if let (Ok(ra), Ok(rb)) = (&a.records, &b.records) {
+                for (x, y) in ra.iter().zip(rb) {
+                    assert_eq!(x.retrieved_ppm.to_bits(), y.retrieved_ppm.to_bits());
+                    assert_eq!(x.altitude_m.0.to_bits(), y.altitude_m.0.to_bits());
+                    assert_eq!(x.retrieved_noisy_ppm, y.retrieved_noisy_ppm);
+                }
+            }
+        }
+        for n in 0..bytes.len() {
+            let mut body = Body {
+                bytes: &bytes[..n],
+                at: 0,
+            };
+            let r: Result<Vec<ProfileOutcome>, String> = (0..3).map(|_| body.outcome()).collect();
+            assert!(r.is_err(), "{n} bytes");
+        }
+    }
+}
