@@ -39,18 +39,6 @@ pub fn streams(seed: u64, stream: Stream, count: usize) -> Vec<Rng> {
     out
 }
 
-/// Generator for work unit `index` alone: the same as `streams(seed, stream, index + 1)[index]`.
-pub fn stream(seed: u64, stream: Stream, index: usize) -> Rng {
-    let mut base = Rng::seed_from_u64(seed);
-    for _ in 0..=(stream as u32) {
-        base.long_jump();
-    }
-    for _ in 0..index {
-        base.jump();
-    }
-    base
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -65,6 +53,5 @@ mod tests {
         assert_eq!(first(&a[2]), first(&b[2]));
         assert_ne!(first(&a[0]), first(&a[1]));
         assert_ne!(first(&a[0]), first(&c[0]));
-        assert_eq!(first(&a[2]), first(&stream(7, Stream::Transport, 2)));
     }
 }

@@ -1174,18 +1174,29 @@ fn check_same(a: &Path, ha: &ShardHeader, b: &Path, hb: &ShardHeader) -> Result<
             format!("{} {}", hb.scene_path, hb.scene_digest),
         ),
     ];
-    for (what, first, second) in fields {
-        if first != second {
-            return Err(ShardError::Mismatch {
-                a: a.to_path_buf(),
-                b: b.to_path_buf(),
-                what,
-                first,
-                second,
-            });
-        }
+    first_mismatch(a, b, fields)
+}
+
+/// The first of the (what, value in `a`, value in `b`) pairs that differ, as the error naming
+/// both files; shard headers of every kind are compared this way.
+pub(crate) fn first_mismatch(
+    a: &Path,
+    b: &Path,
+    fields: impl IntoIterator<Item = (&'static str, String, String)>,
+) -> Result<(), ShardError> {
+    match fields
+        .into_iter()
+        .find(|(_, first, second)| first != second)
+    {
+        Some((what, first, second)) => Err(ShardError::Mismatch {
+            a: a.to_path_buf(),
+            b: b.to_path_buf(),
+            what,
+            first,
+            second,
+        }),
+        None => Ok(()),
     }
-    Ok(())
 }
 
 /// A merged run: the scene and everything a single run of it produces.

@@ -547,18 +547,7 @@ fn check_same(
         ),
         ("the field of view", ha.fov.to_string(), hb.fov.to_string()),
     ];
-    for (what, first, second) in fields {
-        if first != second {
-            return Err(ShardError::Mismatch {
-                a: a.to_path_buf(),
-                b: b.to_path_buf(),
-                what,
-                first,
-                second,
-            });
-        }
-    }
-    Ok(())
+    crate::shard::first_mismatch(a, b, fields)
 }
 
 /// A merged study: its inputs and the single study's result. The result's `mean_profiles` is

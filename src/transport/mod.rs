@@ -426,7 +426,8 @@ pub struct Plan<'a> {
     fov_order: Vec<usize>,
     batches: usize,
     per_batch: u64,
-    seed: u64,
+    /// The random stream each batch starts from (computed once: batch b's is b jumps on).
+    streams: Vec<rng::Rng>,
     threads: usize,
     progress: bool,
     /// Energy per photon reaching the detector, per unit weight × geometric factor.
@@ -621,7 +622,7 @@ impl<'a> Plan<'a> {
             fov_order,
             batches,
             per_batch,
-            seed: opts.seed,
+            streams: rng::streams(opts.seed, Stream::Transport, batches),
             threads: opts.threads,
             progress: opts.progress,
             scale: lidar.pulse_energy_j * lidar.optical_efficiency * lidar.telescope_area_m2()
@@ -659,10 +660,9 @@ impl<'a> Plan<'a> {
     }
 
     /// Trace batch `index` from its own random stream: the same tallies on any thread, process
-    /// or machine.
+    /// or machine. `index` < [`Plan::batches`].
     pub fn trace_batch(&self, index: usize) -> BatchTally {
-        let mut rng = rng::stream(self.seed, Stream::Transport, index);
-        self.trace_batch_with(index, &mut rng)
+        self.trace_batch_with(index, &mut self.streams[index].clone())
     }
 
     fn trace_batch_with(&self, index: usize, rng: &mut rng::Rng) -> BatchTally {
@@ -773,7 +773,6 @@ pub fn run(
 /// Trace every batch of a plan on its thread pool and fold them in order.
 pub fn run_plan(plan: &Plan) -> Result<McResult, TransportError> {
     let batches = plan.batches;
-    let streams = rng::streams(plan.seed, Stream::Transport, batches);
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(plan.threads)
         .build()
@@ -804,7 +803,7 @@ pub fn run_plan(plan: &Plan) -> Result<McResult, TransportError> {
             (start..end)
                 .into_par_iter()
                 .map(|b| {
-                    let t = plan.trace_batch_with(b, &mut streams[b].clone());
+                    let t = plan.trace_batch(b);
                     bar.inc(1);
                     t
                 })
