@@ -276,9 +276,15 @@ impl OpticalAtmosphere {
             return (0.0, 0.0);
         }
         let z = z.clamp(self.bottom_m(), self.top_m());
-        let l = self.layer_of(z);
+        self.cumulative_tau_in(self.layer_of(z), z, k)
+    }
+
+    /// [`Self::cumulative_tau`] at an altitude z already known to lie in layer l (clamped to
+    /// it): no search.
+    #[inline]
+    pub fn cumulative_tau_in(&self, l: usize, z: f64, k: usize) -> (f64, f64) {
         let nch = self.n_channels;
-        let dz = z - self.edges_m[l];
+        let dz = z.clamp(self.edges_m[l], self.edges_m[l + 1]) - self.edges_m[l];
         (
             self.cum_tau_s[l * nch + k] + dz * self.sigma_s_per_m[l * nch + k],
             self.cum_tau_a[l * nch + k] + dz * self.sigma_a_per_m[l * nch + k],

@@ -106,6 +106,19 @@ impl PhaseFunction {
         }
     }
 
+    /// Sample μ as [`Self::sample`] does, with P(μ) (for a table, a by-product of the
+    /// inversion: no second search of its nodes).
+    #[inline]
+    pub fn sample_with_value(&self, u: f64) -> (f64, f64) {
+        match self {
+            PhaseFunction::Tabulated(t) => t.sample_with_value(u),
+            _ => {
+                let mu = self.sample(u);
+                (mu, self.eval(mu))
+            }
+        }
+    }
+
     /// Asymmetry parameter g = ⟨μ⟩ = ½ ∫ P μ dμ.
     pub fn asymmetry(&self) -> f64 {
         match self {
@@ -423,6 +436,12 @@ impl TabulatedPhase {
     /// Sample μ by inverting the CDF.
     #[inline]
     pub fn sample(&self, u: f64) -> f64 {
+        self.sample_with_value(u).0
+    }
+
+    /// Sample μ by inverting the CDF, with P(μ) from the segment the inversion found.
+    #[inline]
+    pub fn sample_with_value(&self, u: f64) -> (f64, f64) {
         let cell = ((u * SAMPLE_GUIDE_CELLS as f64) as usize).min(SAMPLE_GUIDE_CELLS);
         let mut i = self.sample_guide[cell] as usize;
         let last = self.mu.len() - 2;
@@ -445,7 +464,7 @@ impl TabulatedPhase {
         } else {
             0.0
         };
-        (self.mu[i] + t).clamp(-1.0, 1.0)
+        ((self.mu[i] + t).clamp(-1.0, 1.0), a + b * t)
     }
 }
 

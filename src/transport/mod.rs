@@ -194,8 +194,8 @@ pub(crate) struct Setup<'a> {
     beam_profile: BeamProfile,
     /// cos of FOV half-angles, narrowest first.
     fov_cos: Vec<f64>,
-    /// Square of the cosine of the widest half-angle.
-    fov_cos_widest_sq: f64,
+    /// Cosine of the widest half-angle.
+    fov_cos_widest: f64,
     has_layers: bool,
     bottom_m: f64,
     top_m: f64,
@@ -234,19 +234,26 @@ pub(crate) struct ScatterClass {
     channel: usize,
     cum: Vec<f64>,
     sigma: Vec<f64>,
+    /// 1/σ per layer (0 where σ = 0): the inverse optical depth without a division.
+    inv_sigma: Vec<f64>,
 }
 
 impl ScatterClass {
     fn of_channel(atm: &OpticalAtmosphere, k: usize) -> Self {
         let nch = atm.n_channels;
+        let sigma: Vec<f64> = (0..atm.n_layers())
+            .map(|l| atm.sigma_s_per_m[l * nch + k])
+            .collect();
         ScatterClass {
             channel: k,
             cum: (0..atm.edges_m.len())
                 .map(|e| atm.cum_tau_s[e * nch + k])
                 .collect(),
-            sigma: (0..atm.n_layers())
-                .map(|l| atm.sigma_s_per_m[l * nch + k])
+            inv_sigma: sigma
+                .iter()
+                .map(|s| if *s > 0.0 { 1.0 / s } else { 0.0 })
                 .collect(),
+            sigma,
         }
     }
 }
@@ -378,6 +385,19 @@ impl Setup<'_> {
         cls.cum[l] + (z - e[l]) * cls.sigma[l]
     }
 
+    /// [`Self::class_tau_at`] at the end `z_end` of a flight that ends `end`: at the top or
+    /// bottom without a search.
+    #[inline]
+    fn class_tau_at_end(&self, c: usize, end: photon::End, z_end: f64) -> f64 {
+        let cum = &self.classes[c].cum;
+        match end {
+            _ if !self.has_layers => 0.0,
+            photon::End::Top => cum[cum.len() - 1],
+            photon::End::Bottom | photon::End::Surface => cum[0],
+            photon::End::Cut => self.class_tau_at(c, z_end),
+        }
+    }
+
     /// Altitude (and its layer) at which a photon leaving a point of cumulative class-`c`
     /// scattering optical depth `t0` with direction cosine μ ≠ 0 has accumulated τ*.
     #[inline]
@@ -393,9 +413,8 @@ impl Setup<'_> {
         .saturating_sub(1)
         .min(n - 1);
         let e = &self.atm.edges_m;
-        let sigma = cls.sigma[l];
-        let z = if sigma > 0.0 {
-            e[l] + (target - cls.cum[l]) / sigma
+        let z = if cls.sigma[l] > 0.0 {
+            e[l] + (target - cls.cum[l]) * cls.inv_sigma[l]
         } else {
             e[l]
         };
@@ -529,7 +548,7 @@ impl<'a> Plan<'a> {
             .fold(0.0f64, |m, f| m.max(*f));
         let setup = Setup {
             atm,
-            fov_cos_widest_sq: widest * widest,
+            fov_cos_widest: widest,
             has_layers: atm.n_layers() > 0,
             bottom_m: atm.bottom_m(),
             top_m: atm.top_m(),

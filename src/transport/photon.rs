@@ -89,7 +89,7 @@ pub(crate) struct Tracer<'a> {
 
 /// Where a flight ends if nothing happens on the way.
 #[derive(Clone, Copy, PartialEq, Eq)]
-enum End {
+pub(crate) enum End {
     Top,
     Bottom,
     Surface,
@@ -162,11 +162,19 @@ impl<'a> Tracer<'a> {
         let atm = s.atm;
         let nch = self.w.len();
         self.set_altitude(pos.z);
+        let mut carried: Option<(DVec3, f64)> = None;
 
         loop {
             // Range check: even a straight return from here arrives after the last gate.
-            let to_rx = s.receiver - pos;
-            let d0 = to_rx.length();
+            // The geometry to the receiver, carried over from the collision that ends the last
+            // flight (where the local estimate needed it) or computed here.
+            let (to_rx, d0) = match carried.take() {
+                Some(g) => g,
+                None => {
+                    let v = s.receiver - pos;
+                    (v, v.length())
+                }
+            };
             let budget = 2.0 * s.r_end_m - path;
             if d0 >= budget {
                 self.stats.cut += 1;
@@ -181,6 +189,8 @@ impl<'a> Tracer<'a> {
             // Flight: the useful part of the path and where it ends.
             let mu = dir.z;
             let horizontal = mu.abs() <= HORIZONTAL;
+            // Slant factor 1/|μ| (unused, infinite, when horizontal): one division per flight.
+            let inv_mu = 1.0 / mu.abs();
             let (s_bound, boundary) = if mu > HORIZONTAL {
                 ((s.top_m - pos.z).max(0.0) / mu, End::Top)
             } else if mu < -HORIZONTAL {
@@ -194,9 +204,12 @@ impl<'a> Tracer<'a> {
                 (f64::INFINITY, End::Top)
             };
             // Ellipsoid with foci at the photon and the receiver: path + s + |rx − x(s)| = 2 r_end.
-            let s_range = (budget * budget - d0 * d0) / (2.0 * (budget - dir.dot(to_rx)));
-            let (s_end, end) = if s_range < s_bound {
-                (s_range, End::Cut)
+            // s = (b² − d0²)/(2(b − ω·(rx − x))), the denominator > 0 as b > d0: compared with
+            // the boundary's distance before dividing, so that only flights the cut ends divide.
+            let range_num = budget * budget - d0 * d0;
+            let range_den = 2.0 * (budget - dir.dot(to_rx));
+            let (s_end, end) = if range_num < s_bound * range_den {
+                (range_num / range_den, End::Cut)
             } else {
                 (s_bound, boundary)
             };
@@ -218,14 +231,9 @@ impl<'a> Tracer<'a> {
                     }
                 } else {
                     let t0 = self.ts[s.classes[c].channel];
-                    (s.class_tau_at(c, pos.z + mu * s_end) - t0).abs() / mu.abs()
+                    (s.class_tau_at_end(c, end, pos.z + mu * s_end) - t0).abs() * inv_mu
                 };
-                // 1 − e^{−τ}, accurate for small τ; exactly 1 in double precision beyond τ ≈ 37.
-                self.cls_p[c] = if self.cls_tau[c] > 40.0 {
-                    1.0
-                } else {
-                    -(-self.cls_tau[c]).exp_m1()
-                };
+                self.cls_p[c] = one_minus_exp_neg(self.cls_tau[c]);
             }
             let p_collide = self.cls_p[0];
             // ΣP_c over the classes (one class: its own P); its mean decides the surface branch.
@@ -245,7 +253,7 @@ impl<'a> Tracer<'a> {
                         }
                     } else {
                         let (ts1, ta1) = atm.cumulative_tau(z_end, k);
-                        ((ts1 - self.ts[k]) + (ta1 - self.ta[k])).abs() / mu.abs()
+                        ((ts1 - self.ts[k]) + (ta1 - self.ta[k])).abs() * inv_mu
                     };
                 }
             }
@@ -328,7 +336,7 @@ impl<'a> Tracer<'a> {
                 let tau = if horizontal {
                     s.classes[0].sigma[layer0] * s_u
                 } else {
-                    (s.class_tau_at(0, z) - self.ts[0]).abs() / mu.abs()
+                    (s.class_tau_at(0, z) - self.ts[0]).abs() * inv_mu
                 };
                 (s_u, if horizontal { layer0 } else { atm.layer_of(z) }, tau)
             } else {
@@ -345,13 +353,15 @@ impl<'a> Tracer<'a> {
                             (0..ncls).rev().find(|&c| self.cls_p[c] > 0.0).unwrap_or(0)
                         })
                 };
-                let tau_star = -(-rng.random::<f64>() * self.cls_p[c]).ln_1p();
+                // −ln(1 − uP): u·P < 1, and the absolute error of τ* (what places the
+                // collision) is a few ulps of 1 however small uP is; ln_1p would cost 2× more.
+                let tau_star = -(1.0 - rng.random::<f64>() * self.cls_p[c]).ln();
                 if horizontal {
                     (tau_star / s.classes[c].sigma[layer0], layer0, tau_star)
                 } else {
                     let t0 = self.ts[s.classes[c].channel];
                     let (z, l) = s.altitude_at_tau(c, t0, mu, tau_star);
-                    (((z - pos.z) / mu).clamp(0.0, s_end), l, tau_star)
+                    (((z - pos.z).abs() * inv_mu).min(s_end), l, tau_star)
                 }
             };
             let p_unif = |s_c: f64| match window {
@@ -391,17 +401,22 @@ impl<'a> Tracer<'a> {
                     collide_factor *= p_phys / g;
                 }
                 let i = layer * nch;
-                let dts_ref = if horizontal {
+                // Channel 0's scattering optical depth of the flight, which the others' is
+                // compared with (grey scattering: all equal, not needed).
+                let dts_ref = if atm.grey_scattering {
+                    0.0
+                } else if horizontal {
                     s.classes[0].sigma[layer] * s_coll
                 } else {
-                    (s.class_tau_at(0, pos.z) - self.ts[0]).abs() / mu.abs()
+                    (s.class_tau_at(0, pos.z) - self.ts[0]).abs() * inv_mu
                 };
+                let known = in_layers.then_some(layer);
                 for k in 0..nch {
                     let (ts_new, ta_new, dts, dta) =
-                        self.channel_step(k, pos.z, mu, horizontal, s_coll, i + k);
+                        self.channel_step(k, pos.z, known, inv_mu, horizontal, s_coll, i + k);
                     let mut f = collide_factor;
                     if dta > 0.0 {
-                        f *= (-dta).exp();
+                        f *= exp_neg(dta);
                     }
                     if !atm.grey_scattering {
                         f *= atm.sigma_s_per_m[i + k] / atm.sigma_s_per_m[i]
@@ -413,7 +428,7 @@ impl<'a> Tracer<'a> {
                 }
             } else if !self.mixture_weights(
                 pos,
-                mu,
+                inv_mu,
                 horizontal,
                 s_coll,
                 layer,
@@ -433,15 +448,16 @@ impl<'a> Tracer<'a> {
             // unattenuated size, and DDIS factors multiplied over the hundreds of scatterings
             // deep in a thick cloud would only widen the weights' spread.
             let ddis_layer = s.ddis_epsilon > 0.0 && s.forward_peaked[layer];
-            let (omega_rx, d_rx) = if ddis_layer {
-                let to_rx = s.receiver - pos;
-                let d = to_rx.length();
-                (to_rx / d, d)
+            let to_rx = s.receiver - pos;
+            let d_here = to_rx.length();
+            carried = Some((to_rx, d_here));
+            // Seen from the receiver within the DDIS cone: −(rx − x)·axis ≥ cos α · d.
+            let (omega_rx, d_rx) = if ddis_layer && -to_rx.dot(s.axis) >= s.ddis_cos * d_here {
+                (to_rx * (1.0 / d_here), d_here)
             } else {
                 (DVec3::ZERO, 0.0)
             };
-            let ddis = ddis_layer
-                && -omega_rx.dot(s.axis) >= s.ddis_cos
+            let ddis = d_rx > 0.0
                 && s.classes.iter().any(|c| {
                     let k = c.channel;
                     s.tau_to_receiver(pos.z, omega_rx.z, d_rx, layer, k, self.ts[k] + self.ta[k])
@@ -460,6 +476,7 @@ impl<'a> Tracer<'a> {
             // here for the next order.
             self.score_collision(
                 pos,
+                (to_rx, d_here),
                 dir,
                 path,
                 order,
@@ -523,15 +540,21 @@ impl<'a> Tracer<'a> {
                 s.classes[cls].sigma[layer],
                 rng,
             );
-            let mu_sampled =
-                atm.phases[atm.components[layer][c].phase[rep] as usize].sample(rng.random());
+            let (mu_sampled, p_sampled) = atm.phases[atm.components[layer][c].phase[rep] as usize]
+                .sample_with_value(rng.random());
             let centre = if towards_rx { omega_rx } else { dir };
             let new_dir = rotate(centre, mu_sampled, unit_azimuth(rng));
             if ddis {
                 let mu_s = dir.dot(new_dir);
-                let p0 = mean_phase(mu_s);
-                let q = (1.0 - s.ddis_epsilon) * p0
-                    + s.ddis_epsilon * mean_phase(omega_rx.dot(new_dir));
+                // One scatterer in one class: the density sampled is the mean phase function,
+                // and its value at the sampled angle came with the sample.
+                let sampled_is_mean = ncls == 1 && atm.components[layer].len() == 1;
+                let (p0, p_rx) = match (sampled_is_mean, towards_rx) {
+                    (true, false) => (p_sampled, mean_phase(omega_rx.dot(new_dir))),
+                    (true, true) => (mean_phase(mu_s), p_sampled),
+                    _ => (mean_phase(mu_s), mean_phase(omega_rx.dot(new_dir))),
+                };
+                let q = (1.0 - s.ddis_epsilon) * p0 + s.ddis_epsilon * p_rx;
                 for k in 0..nch {
                     let pk = if atm.grey_scattering {
                         p0
@@ -582,7 +605,7 @@ impl<'a> Tracer<'a> {
     }
 
     /// Several scattering classes: the weights of a collision at `pos` (in `layer`, reached
-    /// after `s_coll` along a flight with direction cosine μ), w_k ← w_k f_k/g, where
+    /// after `s_coll` along a flight with slant factor `inv_mu` = 1/|μ|), w_k ← w_k f_k/g, where
     /// f_k = σ_s,k e^{−τ_s,k − τ_a,k} is channel k's own collision density and g the density
     /// the collision was drawn from: `a_phys` Σ_c σ_c e^{−τ_c}/ΣP_c + `a_unif` (the branch and
     /// range-stratification shares; `p_any` = ΣP_c). Both are scaled by e^{τ_min}, τ_min the
@@ -592,7 +615,7 @@ impl<'a> Tracer<'a> {
     fn mixture_weights(
         &mut self,
         pos: DVec3,
-        mu: f64,
+        inv_mu: f64,
         horizontal: bool,
         s_coll: f64,
         layer: usize,
@@ -609,7 +632,7 @@ impl<'a> Tracer<'a> {
             let tau = if horizontal {
                 cls.sigma[layer] * s_coll
             } else {
-                (s.class_tau_at(c, pos.z) - self.ts[cls.channel]).abs() / mu.abs()
+                (s.class_tau_at(c, pos.z) - self.ts[cls.channel]).abs() * inv_mu
             };
             self.cls_tau[c] = tau;
             if in_layers && cls.sigma[layer] > 0.0 {
@@ -636,7 +659,9 @@ impl<'a> Tracer<'a> {
         }
         for k in 0..nch {
             let i = layer * nch + k;
-            let (ts_new, ta_new, dts, dta) = self.channel_step(k, pos.z, mu, horizontal, s_coll, i);
+            let known = in_layers.then_some(layer);
+            let (ts_new, ta_new, dts, dta) =
+                self.channel_step(k, pos.z, known, inv_mu, horizontal, s_coll, i);
             let sigma_k = atm.sigma_s_per_m[i];
             // σ_k = 0: this channel cannot scatter here (and e^{τ_min − τ_k} may be huge).
             self.w[k] *= if sigma_k > 0.0 && in_layers {
@@ -650,27 +675,33 @@ impl<'a> Tracer<'a> {
         true
     }
 
-    /// Channel k over a flight of length `s_coll` ending at altitude z (index `i` of its layer
-    /// and channel): the cumulative scattering and absorption optical depths there, and the
-    /// flight's scattering and absorption optical depths.
+    /// Channel k over a flight of length `s_coll` (slant factor `inv_mu` = 1/|μ|) ending at
+    /// altitude z, in layer `layer` if known (index `i` of its layer and channel): the
+    /// cumulative scattering and absorption optical depths there, and the flight's scattering
+    /// and absorption optical depths.
+    #[allow(clippy::too_many_arguments)]
     #[inline]
     fn channel_step(
         &self,
         k: usize,
         z: f64,
-        mu: f64,
+        layer: Option<usize>,
+        inv_mu: f64,
         horizontal: bool,
         s_coll: f64,
         i: usize,
     ) -> (f64, f64, f64, f64) {
         let atm = self.s.atm;
-        let (ts_new, ta_new) = atm.cumulative_tau(z, k);
+        let (ts_new, ta_new) = match layer {
+            Some(l) => atm.cumulative_tau_in(l, z, k),
+            None => atm.cumulative_tau(z, k),
+        };
         let (dts, dta) = if horizontal {
             (atm.sigma_s_per_m[i] * s_coll, atm.sigma_a_per_m[i] * s_coll)
         } else {
             (
-                (ts_new - self.ts[k]).abs() / mu.abs(),
-                (ta_new - self.ta[k]).abs() / mu.abs(),
+                (ts_new - self.ts[k]).abs() * inv_mu,
+                (ta_new - self.ta[k]).abs() * inv_mu,
             )
         };
         (ts_new, ta_new, dts, dta)
@@ -711,10 +742,13 @@ impl<'a> Tracer<'a> {
         self.s.fov_cos.iter().position(|c| cos_axis >= *c)
     }
 
-    /// Local estimate from a collision at `x` in `layer` of a photon travelling along `dir`.
+    /// Local estimate from a collision at `x` in `layer` of a photon travelling along `dir`;
+    /// `(v, d)`: rx − x and its length.
+    #[allow(clippy::too_many_arguments)]
     fn score_collision(
         &mut self,
         x: DVec3,
+        (v, d): (DVec3, f64),
         dir: DVec3,
         path: f64,
         order: u32,
@@ -722,15 +756,13 @@ impl<'a> Tracer<'a> {
         mis: Option<&Prev>,
     ) {
         let s = self.s;
-        let v = s.receiver - x;
-        let d2 = v.length_squared();
-        // Outside the widest field of view? (x − rx)·axis ≥ cos α_max · d, squared: no root.
+        // Outside the widest field of view: (x − rx)·axis < cos α_max · d.
         let along = -v.dot(s.axis);
-        if along <= 0.0 || along * along < s.fov_cos_widest_sq * d2 {
+        if along <= 0.0 || along < s.fov_cos_widest * d {
             return;
         }
-        let d = d2.sqrt();
-        let omega = v / d;
+        let d2 = v.length_squared();
+        let omega = v * (1.0 / d);
         let cos_axis = along / d;
         let Some(annulus) = self.annulus(cos_axis) else {
             return;
@@ -883,7 +915,7 @@ impl<'a> Tracer<'a> {
         let v = s.receiver - hit;
         let d2 = v.length_squared();
         let d = d2.sqrt();
-        let omega = v / d;
+        let omega = v * (1.0 / d);
         if omega.z <= 0.0 {
             return;
         }
@@ -914,6 +946,31 @@ impl<'a> Tracer<'a> {
         for k in 0..nch {
             self.flux.absorbed[k] += self.w[k] * atm.absorbed_fraction(z0, mu, s_end, k);
         }
+    }
+}
+
+/// e^{−x} for x ≥ 0. Below 1e-3 (the absorption of a flight through a nearly conservative
+/// cloud, once per flight) by its Taylor series to x⁴, whose remainder x⁵/120 < 1e-17 is below
+/// the last bit: the same number at a fraction of a library call's cost.
+#[inline]
+fn exp_neg(x: f64) -> f64 {
+    if x < 1e-3 {
+        1.0 - x * (1.0 - x * (0.5 - x * (1.0 / 6.0 - x * (1.0 / 24.0))))
+    } else {
+        (-x).exp()
+    }
+}
+
+/// 1 − e^{−τ} for τ ≥ 0, to a few ulps relative: expm1 only where the difference would cancel
+/// (it costs about 3× exp in glibc, and this runs once per flight); exactly 1 beyond τ ≈ 37.
+#[inline]
+fn one_minus_exp_neg(tau: f64) -> f64 {
+    if tau > 40.0 {
+        1.0
+    } else if tau > 0.5 {
+        1.0 - (-tau).exp()
+    } else {
+        -(-tau).exp_m1()
     }
 }
 
@@ -952,17 +1009,22 @@ fn unit_azimuth(rng: &mut Rng) -> (f64, f64) {
         let y = 2.0 * rng.random::<f64>() - 1.0;
         let r2 = x * x + y * y;
         if r2 <= 1.0 && r2 > 1e-12 {
-            return ((x * x - y * y) / r2, 2.0 * x * y / r2);
+            let inv = 1.0 / r2;
+            return ((x * x - y * y) * inv, 2.0 * x * y * inv);
         }
     }
 }
 
-/// Rotate `dir` by a scattering angle with cosine `mu` and azimuth (cos φ, sin φ).
+/// Rotate the unit vector `dir` by a scattering angle with cosine `mu` and azimuth (cos φ, sin φ).
 #[inline]
 pub(crate) fn rotate(dir: DVec3, mu: f64, (cp, sp): (f64, f64)) -> DVec3 {
     let (e1, e2) = dir.any_orthonormal_pair();
     let sin_t = (1.0 - mu * mu).max(0.0).sqrt();
-    (dir * mu + (e1 * cp + e2 * sp) * sin_t).normalize()
+    let v = dir * mu + (e1 * cp + e2 * sp) * sin_t;
+    // |v| = 1 to a few ulps: one Newton step for 1/|v| (1/√a ≈ (3 − a)/2 near a = 1) keeps
+    // the length from drifting over thousands of scatterings, without a square root and a
+    // division per scattering.
+    v * (1.5 - 0.5 * v.length_squared())
 }
 
 /// Cosine-weighted (Lambertian) direction into the upper hemisphere.
