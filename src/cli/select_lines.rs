@@ -3,7 +3,8 @@
 //! (method: `lidarsim::study::select`, docs/retrieval.md; the study's set-up:
 //! `lidarsim::study::select_study`). Writes `DIR/sensitivities.csv`, `DIR/sensitivities.nc` and,
 //! unless `--no-plots`, per atmosphere `transmission_<atm>.png` (Figure 4 of the seed paper) and
-//! `errors_<atm>.png` (Figure 5).
+//! `errors_<atm>.png` (Figure 5); with `--shard I/N` only the shard file of a slice of the
+//! profiles (`lidarsim::study::select_shard`), which `lidarsim merge` puts together.
 
 use std::path::{Path, PathBuf};
 
@@ -14,7 +15,9 @@ use lidarsim::atmosphere::StandardAtmosphere;
 use lidarsim::input::Bounds;
 use lidarsim::output::{self, OutputError, OutputSet};
 use lidarsim::scene::Scene;
+use lidarsim::shard::{self, ShardSpec};
 use lidarsim::study::select::{self, Row, StudyConfig, Uncertainties};
+use lidarsim::study::select_shard;
 use lidarsim::study::select_study::{
     GroupSummary, MemberOutcome, SPECTRUM_HALF_GHZ, SelectOptions, SelectSource, SelectStudy,
 };
@@ -113,6 +116,11 @@ pub struct Args {
     /// Worker threads, 0 for all cores.
     #[arg(long, default_value_t = 0, allow_negative_numbers = true, value_parser = super::threads())]
     threads: usize,
+    /// Study only shard I of N (0 ≤ I < N) of the profiles and write their results raw to
+    /// DIR/shard-I-of-N.lshard; `lidarsim merge` puts the N files together into this study's
+    /// outputs.
+    #[arg(long, value_name = "I/N", value_parser = clap::value_parser!(ShardSpec))]
+    shard: Option<ShardSpec>,
 }
 
 /// Half width of the laser's spectral window marked in Figure 4 \[GHz\].
@@ -120,30 +128,60 @@ const WINDOW_HALF_GHZ: f64 = 0.5;
 
 /// `lidarsim select-lines`.
 pub fn run(a: Args) -> anyhow::Result<()> {
-    let scene = match &a.scene {
-        Some(p) => Scene::read(p)?,
-        None => Scene::default_scene()?,
+    let scene = match (&a.scene, a.shard) {
+        (Some(p), Some(_)) => shard::read_scene(Some(p))?,
+        (Some(p), None) => Scene::read(p)?,
+        (None, _) => Scene::default_scene()?,
     };
     let study = SelectStudy::build(options(&a)?, scene)?;
     // Before the work; the figures' names depend on the groups and are checked when written.
-    output::check_paths(&[
-        a.out.join("sensitivities.csv"),
-        a.out.join("sensitivities.nc"),
-    ])?;
+    let out_files = match a.shard {
+        Some(spec) => vec![a.out.join(spec.file_name())],
+        None => vec![
+            a.out.join("sensitivities.csv"),
+            a.out.join("sensitivities.nc"),
+        ],
+    };
+    output::check_paths(&out_files)?;
     print_setup(&study)?;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(a.threads)
         .build()
         .with_context(|| format!("cannot start {} threads", a.threads))?;
+    if let Some(spec) = a.shard {
+        let n = spec.batches(study.len()).len();
+        let bar = super::progress::Progress::new(n, "select-lines shard", "profiles");
+        let r = pool.install(|| select_shard::run(&study, spec, &a.out, &|| bar.tick()))?;
+        bar.finish();
+        outln!(
+            "shard {spec}: profiles {}..{} of {} ({} failed) in {:.2} s on {} threads; wrote {}",
+            r.profiles.start,
+            r.profiles.end,
+            r.total_profiles,
+            r.failed,
+            r.wall_s,
+            r.threads,
+            r.path.display()
+        );
+        return Ok(());
+    }
     let bar = super::progress::Progress::new(study.len(), "select-lines", "profiles");
     let outcomes = pool.install(|| study.study(0..study.len(), &|| bar.tick()));
     bar.finish();
     write_outputs(&a.out, a.no_plots, &study, &outcomes)
 }
 
-/// The study's options from the command line.
+/// The study's options from the command line. A shard names its files by their absolute
+/// paths, so that shards started from different directories agree.
 fn options(a: &Args) -> anyhow::Result<SelectOptions> {
-    let path = |p: &PathBuf| -> anyhow::Result<PathBuf> { Ok(p.clone()) };
+    let path = |p: &PathBuf| -> anyhow::Result<PathBuf> {
+        match a.shard {
+            Some(_) => {
+                std::fs::canonicalize(p).with_context(|| format!("cannot read {}", p.display()))
+            }
+            None => Ok(p.clone()),
+        }
+    };
     let source = match (&a.profiles, a.ensemble) {
         (Some(p), _) => SelectSource::Set(path(p)?),
         (None, Some(n)) => SelectSource::Ensemble(n),
