@@ -789,3 +789,472 @@ fn dial_shards_of_a_profile_set_file() {
         "{e}"
     );
 }
+
+/// `lidarsim select-lines` on generated ensembles of 2 members per class (6 members), with
+/// per-profile rows, a 21-position scan on a 2 km grid to 30 km and the figures of R4e
+/// (0.1 s), with extra arguments, into `out`.
+fn select_lines(out: &Path, extra: &[&str]) -> String {
+    let mut args: Vec<String> = [
+        "select-lines",
+        "--ensemble",
+        "2",
+        "--per-profile",
+        "--max-j",
+        "6",
+        "--offsets-ghz=-1,1,2",
+        "--off-cm1",
+        "6360.61",
+        "--co2-ppm",
+        "420",
+        "--layer-m",
+        "2000",
+        "--top-km",
+        "30",
+        "--figure-lines",
+        "R4e",
+        "--out",
+    ]
+    .map(String::from)
+    .to_vec();
+    args.push(s(out));
+    args.extend(extra.iter().map(|a| a.to_string()));
+    lidarsim_ok(&args)
+}
+
+/// Three select-lines shards in `dir/name` (shard 1 on two threads, the others on one).
+fn three_select_shards(dir: &Path, name: &str, extra: &[&str]) -> Vec<PathBuf> {
+    let out = dir.join(name);
+    (0..3)
+        .map(|i| {
+            let spec = format!("{i}/3");
+            let threads = if i == 1 { "2" } else { "1" };
+            let mut a = vec!["--shard", &spec, "--threads", threads];
+            a.extend_from_slice(extra);
+            let stdout = select_lines(&out, &a);
+            assert!(
+                stdout.contains(&format!(
+                    "shard {i}/3: profiles {}..{} of 6",
+                    2 * i,
+                    2 * i + 2
+                )),
+                "{stdout}"
+            );
+            out.join(format!("shard-{i}-of-3.lshard"))
+        })
+        .collect()
+}
+
+/// The files in `dir`, sorted.
+fn file_names(dir: &Path) -> Vec<String> {
+    let mut names: Vec<String> = fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    names
+}
+
+/// Two NetCDF files with the same dimensions, variables, attributes and values (each f64 by
+/// its shortest exact decimal), read by the `netcdf3` crate's reader, but for the global
+/// attribute `history` (the time and the command line). Returns the two histories.
+fn assert_same_netcdf(a: &Path, b: &Path) -> (String, String) {
+    let read = |p: &Path| {
+        let mut r = netcdf3::FileReader::open(p).unwrap();
+        let mut vars: Vec<_> = r.read_all_vars().unwrap().into_iter().collect();
+        vars.sort_by(|x, y| x.0.cmp(&y.0));
+        let (mut ds, version) = r.close();
+        let history = ds.get_global_attr_as_string("history").unwrap();
+        ds.remove_global_attr("history").unwrap();
+        (format!("{version:?} {ds:?}"), format!("{vars:?}"), history)
+    };
+    let (ha, va, hist_a) = read(a);
+    let (hb, vb, hist_b) = read(b);
+    assert_eq!(ha, hb, "{} and {}: header", a.display(), b.display());
+    assert!(va == vb, "{} and {}: values", a.display(), b.display());
+    assert!(va.contains("dxco2_per_k_ppm"), "{va}");
+    (hist_a, hist_b)
+}
+
+/// The report of a select-lines run without the lines that name the run (`merged …`, the
+/// setup line, `wrote …`).
+fn group_report(stdout: &str) -> Vec<&str> {
+    stdout
+        .lines()
+        .filter(|l| !l.starts_with("merged ") && !l.starts_with("wrote "))
+        .collect()
+}
+
+/// Issue 12, item 1 for line selection: one `lidarsim select-lines` and the merge of 3 shards
+/// (one given as a file of another directory, one run on two threads) give byte-identical
+/// sensitivities.csv and figures, a sensitivities.nc equal in every dimension, variable,
+/// attribute and value but `history`, and the same report. A shard's results are the same on
+/// any thread count.
+#[test]
+fn select_lines_shards_merge_into_the_single_studys_bytes() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let single = d.join("single");
+    let single_stdout = select_lines(&single, &["--threads", "2"]);
+    let shards = three_select_shards(d, "shards", &[]);
+    fs::create_dir(d.join("other")).unwrap();
+    let moved = d.join("other").join("shard-2-of-3.lshard");
+    fs::rename(&shards[2], &moved).unwrap();
+    let merged = d.join("merged");
+    let stdout = lidarsim_ok([
+        "merge".to_string(),
+        s(&d.join("shards")),
+        s(&moved),
+        "--out".into(),
+        s(&merged),
+    ]);
+    assert!(
+        stdout.contains("merged 3 select-lines shards of 6 profiles"),
+        "{stdout}"
+    );
+    assert_eq!(group_report(&stdout), group_report(&single_stdout));
+    let names = file_names(&single);
+    assert_eq!(names, file_names(&merged));
+    for c in ["tropical", "mid", "high"] {
+        for f in [format!("transmission_{c}.png"), format!("errors_{c}.png")] {
+            assert!(names.contains(&f), "{f} in {names:?}");
+        }
+    }
+    for name in &names {
+        let (a, b) = (single.join(name), merged.join(name));
+        if name == "sensitivities.nc" {
+            let (_, history) = assert_same_netcdf(&a, &b);
+            assert!(history.contains("lidarsim merge"), "{history}");
+        } else {
+            assert!(
+                fs::read(&a).unwrap() == fs::read(&b).unwrap(),
+                "{name} differs between the study and the merge"
+            );
+        }
+    }
+    // 3 classes × 21 positions and 6 profiles × 21 positions.
+    let csv = fs::read_to_string(single.join("sensitivities.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 1 + 9 * 21);
+
+    // Shard 1, on two threads above, again on one: the same results.
+    let one = d.join("one");
+    select_lines(&one, &["--shard", "1/3", "--threads", "1"]);
+    let body = |p: &Path| {
+        let f = lidarsim::study::select_shard::SelectShardFile::read(p).unwrap();
+        assert_eq!(f.outcomes.len(), 2);
+        format!("{:?}", f.outcomes)
+    };
+    assert_eq!(body(&one.join("shard-1-of-3.lshard")), body(&shards[1]));
+}
+
+/// A select-lines merge refuses a missing or duplicated shard, shards of another seed or
+/// options, shards of other kinds among them and a damaged file: exit code 2, one line
+/// naming the files, nothing written. More shards than profiles are refused before any work.
+#[test]
+fn select_lines_merge_refuses_foreign_missing_and_damaged_shards() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let base = three_select_shards(d, "base", &[]);
+
+    let e = merge_refused(&base[..2]);
+    assert!(e.contains("1 of 3 shards missing (2)"), "{e}");
+    let copy = d.join("copy.lshard");
+    fs::copy(&base[1], &copy).unwrap();
+    let e = merge_refused(&[
+        base[0].clone(),
+        base[1].clone(),
+        copy.clone(),
+        base[2].clone(),
+    ]);
+    assert!(
+        e.contains("shard 1/3 is given twice") && e.contains("copy.lshard"),
+        "{e}"
+    );
+
+    for (name, extra, why) in [
+        (
+            "seed",
+            &["--seed", "5"][..],
+            "the seed differs (1 against 5)",
+        ),
+        (
+            "wing",
+            &["--wing-cm1", "20"][..],
+            "the wing cutoff (--wing-cm1) differs (25 against 20)",
+        ),
+        (
+            "plots",
+            &["--no-plots"][..],
+            "the choice of figures (--no-plots, --figure-lines) differs",
+        ),
+        (
+            "uncertainty",
+            &["--temperature-uncertainty-k", "0.5"][..],
+            "the set of uncertainties (K, MHz, hPa, %) differs (1,1,1,10 against 0.5,1,1,10)",
+        ),
+    ] {
+        let other = three_select_shards(d, name, extra);
+        let e = merge_refused(&[base[0].clone(), base[1].clone(), other[2].clone()]);
+        assert!(e.contains(why), "{name}: {e}");
+        assert!(e.contains(&s(&base[0])) && e.contains(&s(&other[2])), "{e}");
+    }
+
+    // A dial shard and a run shard among select shards.
+    let scene = study_scene(d);
+    let dial_shard = three_dial_shards(&scene, d, "dial", &[]).remove(0);
+    let e = merge_refused(&[base[0].clone(), base[1].clone(), dial_shard.clone()]);
+    assert!(
+        e.contains("kind of shard") && e.contains("select against dial"),
+        "{e}"
+    );
+    assert!(e.contains(&s(&dial_shard)), "{e}");
+    let run_dir = d.join("run");
+    shard(
+        Some(&c1_scene()),
+        "0/4",
+        &run_dir,
+        &["--photons", "400", "--threads", "1"],
+    );
+    let run_shard = run_dir.join("shard-0-of-4.lshard");
+    let e = merge_refused(&[run_shard.clone(), base[0].clone()]);
+    assert!(
+        e.contains("run against select") && e.contains(&s(&run_shard)),
+        "{e}"
+    );
+    // The library refuses a select shard where it reads a dial shard.
+    let e = lidarsim::study::shard::DialShardFile::read(&base[0]).unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("a `select` shard (from `lidarsim select-lines --shard`), not a dial shard"),
+        "{e}"
+    );
+
+    // Damage: a flipped byte in the results, a truncation, a header whose range is not its
+    // shard's (with a correct checksum), bytes beyond the end.
+    let good = fs::read(&base[1]).unwrap();
+    let n = good.len();
+    let mut flipped = good.clone();
+    flipped[n - 20] ^= 1;
+    for (name, bytes, why) in [
+        ("flipped", flipped, "corrupt: checksum"),
+        ("cut", good[..n / 2].to_vec(), "corrupt"),
+        (
+            "range",
+            with_header(&good, |h| h["end_profile"] = 5.into()),
+            "inconsistent header: profiles 2..5 as shard 1/3 of 6 profiles",
+        ),
+        (
+            "tail",
+            with_header(&[&good, &[0u8; 8][..]].concat(), |_| {}),
+            "8 bytes beyond its last profile",
+        ),
+    ] {
+        let p = d.join(format!("{name}.lshard"));
+        fs::write(&p, bytes).unwrap();
+        let e = merge_refused(&[base[0].clone(), p.clone(), base[2].clone()]);
+        assert!(e.contains(why) && e.contains(&s(&p)), "{name}: {e}");
+    }
+
+    // No more shards than profiles, refused before any work.
+    let out = d.join("too_many");
+    let o = lidarsim([
+        "select-lines",
+        "--ensemble",
+        "2",
+        "--off-cm1",
+        "6360.61",
+        "--co2-ppm",
+        "420",
+        "--shard",
+        "6/7",
+        "--out",
+        &s(&out),
+    ]);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{e}");
+    assert!(e.contains("7 shards of a study of 6 profiles"), "{e}");
+    assert!(!e.contains("panicked") && !out.exists(), "{e}");
+}
+
+/// Select-lines shards of a profile set file (one profile that cannot be studied) and of a
+/// HITRAN line file: the merge gives the single study's files and report, and refuses the set
+/// file or the line file changed since the shards ran, naming it.
+#[test]
+fn select_lines_shards_of_a_profile_set_and_a_line_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // Two tropical profiles and `short`, which ends at 700 hPa, below one 4 km layer
+    // (tests/select_lines.rs).
+    let set = d.join("set.csv");
+    let mut text =
+        String::from("profile,latitude_deg,longitude_deg,pressure_hPa,temperature_K,H2O_ppmv\n");
+    let levels = [
+        (1013.0, 299.0, 20000.0),
+        (850.0, 290.0, 12000.0),
+        (700.0, 282.0, 6000.0),
+        (500.0, 267.0, 2000.0),
+        (300.0, 242.0, 300.0),
+        (200.0, 220.0, 30.0),
+        (100.0, 195.0, 5.0),
+        (50.0, 205.0, 4.0),
+        (10.0, 225.0, 4.0),
+        (1.0, 260.0, 4.0),
+    ];
+    for (id, lat, t_off, n) in [
+        ("a", 10.0, 0.0, 10),
+        ("short", 5.0, 0.0, 3),
+        ("b", -12.0, 2.0, 10),
+    ] {
+        for (p, t, q) in &levels[..n] {
+            text.push_str(&format!("{id},{lat},0,{p},{},{q}\n", t + t_off));
+        }
+    }
+    fs::write(&set, &text).unwrap();
+    let study = |out: &Path, extra: &[&str]| {
+        let mut a: Vec<String> = [
+            "select-lines",
+            "--profiles",
+            &s(&set),
+            "--per-profile",
+            "--max-j",
+            "18",
+            "--offsets-ghz=1.5,2",
+            "--off-cm1",
+            "6360.61",
+            "--co2-ppm",
+            "410",
+            "--layer-m",
+            "4000",
+            "--top-km",
+            "40",
+            "--figure-lines",
+            "R16e",
+            "--out",
+            &s(out),
+        ]
+        .map(String::from)
+        .to_vec();
+        a.extend(extra.iter().map(|x| x.to_string()));
+        lidarsim_ok(&a)
+    };
+    let single = d.join("single");
+    let single_stdout = study(&single, &[]);
+    assert!(
+        single_stdout.contains("tropical: profile short excluded: "),
+        "{single_stdout}"
+    );
+    let shards = d.join("shards");
+    for spec in ["0/2", "1/2"] {
+        study(&shards, &["--shard", spec]);
+    }
+    let merged = d.join("merged");
+    let stdout = lidarsim_ok(["merge".to_string(), s(&shards), "--out".into(), s(&merged)]);
+    assert_eq!(group_report(&stdout), group_report(&single_stdout));
+    let names = file_names(&single);
+    assert_eq!(names, file_names(&merged));
+    for name in names.iter().filter(|n| *n != "sensitivities.nc") {
+        assert!(
+            fs::read(single.join(name)).unwrap() == fs::read(merged.join(name)).unwrap(),
+            "{name}"
+        );
+    }
+    assert_same_netcdf(
+        &single.join("sensitivities.nc"),
+        &merged.join("sensitivities.nc"),
+    );
+    // `--no-plots` at the merge leaves out the figures only.
+    let plain = d.join("plain");
+    lidarsim_ok([
+        "merge".to_string(),
+        s(&shards),
+        "--no-plots".into(),
+        "--out".into(),
+        s(&plain),
+    ]);
+    assert_eq!(
+        file_names(&plain),
+        ["sensitivities.csv", "sensitivities.nc"]
+    );
+    assert!(
+        fs::read(single.join("sensitivities.csv")).unwrap()
+            == fs::read(plain.join("sensitivities.csv")).unwrap()
+    );
+
+    fs::write(&set, text.replace("b,-12,0,850,292,", "b,-12,0,850,292.5,")).unwrap();
+    assert_ne!(fs::read_to_string(&set).unwrap(), text);
+    let e = merge_refused(std::slice::from_ref(&shards));
+    assert!(
+        e.contains("are not the ones the shards ran") && e.contains("set.csv"),
+        "{e}"
+    );
+
+    // A line file: the CO2 lines of HITRAN 2016 from 6330 to 6390 cm-1.
+    let Some(hitran) = crate::util::shared_file("data/hitran/CO2_626_6000-6400_HITRAN2016.par")
+    else {
+        return;
+    };
+    let lines_file = d.join("co2.par");
+    let window: String = fs::read_to_string(hitran)
+        .unwrap()
+        .lines()
+        .filter(|l| {
+            l.get(3..15)
+                .and_then(|nu| nu.trim().parse::<f64>().ok())
+                .is_some_and(|nu| (6330.0..6390.0).contains(&nu))
+        })
+        .map(|l| format!("{l}\n"))
+        .collect();
+    fs::write(&lines_file, &window).unwrap();
+    let study = |out: &Path, extra: &[&str]| {
+        let mut a: Vec<String> = [
+            "select-lines",
+            "--atmosphere",
+            "us_standard,tropical,subarctic_winter",
+            "--lines",
+            &s(&lines_file),
+            "--on-cm1",
+            "6360.0337,6362.4704",
+            "--off-cm1",
+            "6360.61",
+            "--co2-ppm",
+            "420",
+            "--layer-m",
+            "2000",
+            "--top-km",
+            "30",
+            "--no-plots",
+            "--out",
+            &s(out),
+        ]
+        .map(String::from)
+        .to_vec();
+        a.extend(extra.iter().map(|x| x.to_string()));
+        lidarsim_ok(&a)
+    };
+    let single = d.join("lines_single");
+    study(&single, &[]);
+    let shards = d.join("lines_shards");
+    for spec in ["0/3", "1/3", "2/3"] {
+        study(&shards, &["--shard", spec]);
+    }
+    let merged = d.join("lines_merged");
+    lidarsim_ok(["merge".to_string(), s(&shards), "--out".into(), s(&merged)]);
+    assert!(
+        fs::read(single.join("sensitivities.csv")).unwrap()
+            == fs::read(merged.join("sensitivities.csv")).unwrap()
+    );
+    // The intensity of R16e of the 30012 band (columns 16-25, ` 1.779E-23`) changed in its
+    // last digit.
+    let r16 = window
+        .lines()
+        .find(|l| l.contains("R 16e") && l.get(21..25) == Some("E-23"))
+        .unwrap();
+    let mut changed = r16.as_bytes().to_vec();
+    changed[20] = b'0' + (changed[20] - b'0' + 1) % 10;
+    let changed = String::from_utf8(changed).unwrap();
+    fs::write(&lines_file, window.replacen(r16, &changed, 1)).unwrap();
+    let e = merge_refused(&[shards]);
+    assert!(
+        e.contains("the line list as read now") && e.contains("co2.par"),
+        "{e}"
+    );
+}

@@ -478,6 +478,8 @@ fn decimal(bits: &[u64]) -> String {
 /// `b`'s header against `a`'s: the first difference, named.
 fn check_same(a: &SelectShardFile, b: &SelectShardFile) -> Result<(), ShardError> {
     type Field = (&'static str, fn(&SelectShardHeader) -> String);
+    // The options first, so that the message names the one that differs rather than the
+    // digests it changes.
     let fields: [Field; 20] = [
         ("the lidarsim version", |h| h.lidarsim_version.clone()),
         ("the seed", |h| h.seed.to_string()),
@@ -485,23 +487,21 @@ fn check_same(a: &SelectShardFile, b: &SelectShardFile) -> Result<(), ShardError
             format!("{} {}", h.scene_path, h.scene_digest)
         }),
         (
-            "the profiles (--atmosphere, --profiles or --ensemble)",
+            "the source of profiles (--atmosphere, --profiles or --ensemble)",
             |h| format!("{:?} {:?} {:?}", h.atmospheres, h.profiles_path, h.ensemble),
         ),
         ("the class", |h| h.class.clone()),
-        ("the profiles (digest)", |h| {
-            format!("{} profiles {}", h.profiles, h.groups_digest)
-        }),
         ("the shard count", |h| h.shard_count.to_string()),
-        ("the line files", |h| format!("{:?}", h.lines)),
-        ("the line list (digest)", |h| h.lines_digest.clone()),
-        ("the on-line positions (--on-cm1)", |h| {
+        ("the choice of line files (--lines)", |h| {
+            format!("{:?}", h.lines)
+        }),
+        ("the choice of on-line positions (--on-cm1)", |h| {
             decimal(&h.on_cm1_bits)
         }),
         ("the off-line (--off-cm1)", |h| decimal(&[h.off_cm1_bits])),
         ("the CO2 column (--co2-ppm)", |h| decimal(&[h.co2_ppm_bits])),
         ("the largest J'' (--max-j)", |h| h.max_j.to_string()),
-        ("the offsets (--offsets-ghz)", |h| {
+        ("the choice of scan offsets (--offsets-ghz)", |h| {
             decimal(&h.offsets_ghz_bits)
         }),
         ("the layer thickness (--layer-m)", |h| {
@@ -513,15 +513,19 @@ fn check_same(a: &SelectShardFile, b: &SelectShardFile) -> Result<(), ShardError
         ("the wing cutoff (--wing-cm1)", |h| {
             decimal(&[h.wing_cm1_bits])
         }),
-        ("the uncertainties (K, MHz, hPa, %)", |h| {
+        ("the set of uncertainties (K, MHz, hPa, %)", |h| {
             decimal(&h.uncertainties_bits)
         }),
-        ("the per-profile rows (--per-profile)", |h| {
+        ("the per-profile option (--per-profile)", |h| {
             h.per_profile.to_string()
         }),
-        ("the figures (--no-plots, --figure-lines)", |h| {
+        ("the choice of figures (--no-plots, --figure-lines)", |h| {
             format!("{} {:?}", h.plots, h.figure_lines)
         }),
+        ("the profile set (digest)", |h| {
+            format!("{} profiles {}", h.profiles, h.groups_digest)
+        }),
+        ("the line list (digest)", |h| h.lines_digest.clone()),
     ];
     shard::first_mismatch(
         &a.path,
