@@ -796,27 +796,28 @@ pub(crate) fn read_header<H: DeserializeOwned>(
     }
 }
 
-/// Write a string as its length (u64) and its UTF-8 bytes.
+/// Write a string as its length (u64) and its UTF-8 bytes ([`Body::string`] reads it).
 pub(crate) fn write_str(w: &mut impl Write, s: &str) -> io::Result<()> {
     w.write_all(&(s.len() as u64).to_le_bytes())?;
     w.write_all(s.as_bytes())
 }
 
-/// A reader of a shard's body (little-endian) that refuses to read past its end; its errors
-/// say what is wrong, the caller names the file.
-pub(crate) struct Body<'b> {
+/// A reader of a study shard's body (little-endian) that refuses to read past its end; its
+/// errors say what is wrong, the caller names the file.
+#[derive(Debug)]
+pub struct Body<'b> {
     bytes: &'b [u8],
     at: usize,
 }
 
 impl<'b> Body<'b> {
     /// A reader at the start of `bytes`.
-    pub(crate) fn new(bytes: &'b [u8]) -> Self {
+    pub fn new(bytes: &'b [u8]) -> Self {
         Body { bytes, at: 0 }
     }
 
     /// Bytes not read yet.
-    pub(crate) fn left(&self) -> usize {
+    pub fn left(&self) -> usize {
         self.bytes.len() - self.at
     }
 
@@ -832,22 +833,25 @@ impl<'b> Body<'b> {
         Ok(s)
     }
 
-    pub(crate) fn u8(&mut self) -> Result<u8, String> {
+    /// One byte.
+    pub fn u8(&mut self) -> Result<u8, String> {
         Ok(self.take(1)?[0])
     }
 
-    pub(crate) fn u64(&mut self) -> Result<u64, String> {
+    /// A u64.
+    pub fn u64(&mut self) -> Result<u64, String> {
         let mut a = [0u8; 8];
         a.copy_from_slice(self.take(8)?);
         Ok(u64::from_le_bytes(a))
     }
 
-    pub(crate) fn f64(&mut self) -> Result<f64, String> {
+    /// An f64 from its bits.
+    pub fn f64(&mut self) -> Result<f64, String> {
         Ok(f64::from_bits(self.u64()?))
     }
 
-    /// A string written by [`write_str`].
-    pub(crate) fn string(&mut self) -> Result<String, String> {
+    /// A string: its length (u64), then its UTF-8 bytes.
+    pub fn string(&mut self) -> Result<String, String> {
         let n = self.u64()?;
         let n = usize::try_from(n).map_err(|_| format!("corrupt: a string of {n} bytes"))?;
         String::from_utf8(self.take(n)?.to_vec())
@@ -856,7 +860,7 @@ impl<'b> Body<'b> {
 
     /// A count (u64) of `what`, each at least `min_bytes` long: refused if the rest of the
     /// body cannot hold them, so that nothing is allocated on a corrupt count.
-    pub(crate) fn count(&mut self, min_bytes: usize, what: &str) -> Result<usize, String> {
+    pub fn count(&mut self, min_bytes: usize, what: &str) -> Result<usize, String> {
         let n = self.u64()?;
         let left = self.left();
         if n > (left / min_bytes.max(1)) as u64 {
@@ -866,7 +870,7 @@ impl<'b> Body<'b> {
     }
 
     /// A count (u64) of f64 and the values.
-    pub(crate) fn f64s(&mut self, what: &str) -> Result<Vec<f64>, String> {
+    pub fn f64s(&mut self, what: &str) -> Result<Vec<f64>, String> {
         let n = self.count(8, what)?;
         (0..n).map(|_| self.f64()).collect()
     }

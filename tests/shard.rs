@@ -33,17 +33,8 @@ fn shard(scene: Option<&str>, spec: &str, out: &Path, extra: &[&str]) {
 /// which equals it once wall time, thread count and the scene's path (absolute in a merge) are
 /// left out. Returns the names compared.
 fn assert_same_outputs(single: &Path, merged: &Path) -> Vec<String> {
-    let mut names: Vec<String> = fs::read_dir(single)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect();
-    names.sort();
-    let mut merged_names: Vec<String> = fs::read_dir(merged)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect();
-    merged_names.sort();
-    assert_eq!(names, merged_names, "the same files");
+    let names = file_names(single);
+    assert_eq!(names, file_names(merged), "the same files");
     for name in &names {
         let (a, b) = (
             fs::read(single.join(name)).unwrap(),
@@ -528,8 +519,14 @@ fn study_scene(dir: &Path) -> PathBuf {
     p
 }
 
-/// Three dial shards of the study in `dir/name` (shard 1 on two threads, the others on one).
-fn three_dial_shards(scene: &Path, dir: &Path, name: &str, extra: &[&str]) -> Vec<PathBuf> {
+/// Three study shards in `dir/name`, each written by `study(out, extra)` (shard 1 on two
+/// threads, the others on one) and reporting its slice of the profiles.
+fn three_study_shards(
+    dir: &Path,
+    name: &str,
+    extra: &[&str],
+    study: impl Fn(&Path, &[&str]) -> String,
+) -> Vec<PathBuf> {
     let out = dir.join(name);
     (0..3)
         .map(|i| {
@@ -537,7 +534,7 @@ fn three_dial_shards(scene: &Path, dir: &Path, name: &str, extra: &[&str]) -> Ve
             let threads = if i == 1 { "2" } else { "1" };
             let mut a = vec!["--shard", &spec, "--threads", threads];
             a.extend_from_slice(extra);
-            let stdout = dial(scene, &out, &a);
+            let stdout = study(&out, &a);
             assert!(
                 stdout.contains(&format!("shard {i}/3: profiles")),
                 "{stdout}"
@@ -545,6 +542,59 @@ fn three_dial_shards(scene: &Path, dir: &Path, name: &str, extra: &[&str]) -> Ve
             out.join(format!("shard-{i}-of-3.lshard"))
         })
         .collect()
+}
+
+/// `lidarsim merge` of the three shards in `dir/shards` into `dir/merged`, the last moved to
+/// another directory and given as a file; the merged directory and the merge's report.
+fn merge_three(dir: &Path, shards: &[PathBuf]) -> (PathBuf, String) {
+    fs::create_dir(dir.join("other")).unwrap();
+    let moved = dir.join("other").join("shard-2-of-3.lshard");
+    fs::rename(&shards[2], &moved).unwrap();
+    let merged = dir.join("merged");
+    let stdout = lidarsim_ok([
+        "merge".to_string(),
+        s(&dir.join("shards")),
+        s(&moved),
+        "--out".into(),
+        s(&merged),
+    ]);
+    (merged, stdout)
+}
+
+/// Three dial shards of the study in `dir/name`.
+fn three_dial_shards(scene: &Path, dir: &Path, name: &str, extra: &[&str]) -> Vec<PathBuf> {
+    three_study_shards(dir, name, extra, |out, a| dial(scene, out, a))
+}
+
+/// A study merge refuses the three shards `base` with the last missing or with shard 1 given
+/// twice (a copy in `dir`), and each `(name, extra, why)` of `cases`: the last shard made by
+/// `shards(name, extra)` among the first two of `base`, refused with `why`, naming both files.
+fn merge_refuses_missing_duplicated_and_other_options(
+    dir: &Path,
+    base: &[PathBuf],
+    shards: impl Fn(&str, &[&str]) -> Vec<PathBuf>,
+    cases: &[(&str, &[&str], &str)],
+) {
+    let e = merge_refused(&base[..2]);
+    assert!(e.contains("1 of 3 shards missing (2)"), "{e}");
+    let copy = dir.join("copy.lshard");
+    fs::copy(&base[1], &copy).unwrap();
+    let e = merge_refused(&[
+        base[0].clone(),
+        base[1].clone(),
+        copy.clone(),
+        base[2].clone(),
+    ]);
+    assert!(
+        e.contains("shard 1/3 is given twice") && e.contains("copy.lshard"),
+        "{e}"
+    );
+    for (name, extra, why) in cases {
+        let other = shards(name, extra);
+        let e = merge_refused(&[base[0].clone(), base[1].clone(), other[2].clone()]);
+        assert!(e.contains(why), "{name}: {e}");
+        assert!(e.contains(&s(&base[0])) && e.contains(&s(&other[2])), "{e}");
+    }
 }
 
 /// Issue 12, item 1 for ensembles: one `lidarsim dial` and the merge of 3 dial shards give
@@ -558,27 +608,12 @@ fn dial_shards_merge_into_the_single_studys_bytes() {
     let single = d.join("single");
     dial(&scene, &single, &[]);
     let shards = three_dial_shards(&scene, d, "shards", &[]);
-    let merged = d.join("merged");
-    // A directory and a file of another directory.
-    fs::create_dir(d.join("other")).unwrap();
-    let moved = d.join("other").join("shard-2-of-3.lshard");
-    fs::rename(&shards[2], &moved).unwrap();
-    let stdout = lidarsim_ok([
-        "merge".to_string(),
-        s(&d.join("shards")),
-        s(&moved),
-        "--out".into(),
-        s(&merged),
-    ]);
+    let (merged, stdout) = merge_three(d, &shards);
     assert!(
         stdout.contains("merged 3 dial shards of 12 profiles"),
         "{stdout}"
     );
-    let mut names: Vec<String> = fs::read_dir(&single)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect();
-    names.sort();
+    let names = file_names(&single);
     for f in [
         "profiles.csv",
         "summary.csv",
@@ -629,44 +664,20 @@ fn dial_merge_refuses_foreign_missing_and_damaged_shards() {
     let d = dir.path();
     let scene = study_scene(d);
     let base = three_dial_shards(&scene, d, "base", &[]);
-
-    let e = merge_refused(&base[..2]);
-    assert!(e.contains("1 of 3 shards missing (2)"), "{e}");
-    let copy = d.join("copy.lshard");
-    fs::copy(&base[1], &copy).unwrap();
-    let e = merge_refused(&[
-        base[0].clone(),
-        base[1].clone(),
-        copy.clone(),
-        base[2].clone(),
-    ]);
-    assert!(
-        e.contains("shard 1/3 is given twice") && e.contains("copy.lshard"),
-        "{e}"
+    merge_refuses_missing_duplicated_and_other_options(
+        d,
+        &base,
+        |name, extra| three_dial_shards(&scene, d, name, extra),
+        &[
+            ("seed", &["--seed", "5"], "the seed differs (3 against 5)"),
+            (
+                "steps",
+                &["--budget-temperature-k", "2"],
+                "the set of budget steps differs",
+            ),
+            ("pairs", &["--on", "on"], "the choice of line pairs differs"),
+        ],
     );
-
-    for (name, extra, why) in [
-        (
-            "seed",
-            &["--seed", "5"][..],
-            "the seed differs (3 against 5)",
-        ),
-        (
-            "steps",
-            &["--budget-temperature-k", "2"][..],
-            "the set of budget steps differs",
-        ),
-        (
-            "pairs",
-            &["--on", "on"][..],
-            "the choice of line pairs differs",
-        ),
-    ] {
-        let other = three_dial_shards(&scene, d, name, extra);
-        let e = merge_refused(&[base[0].clone(), base[1].clone(), other[2].clone()]);
-        assert!(e.contains(why), "{name}: {e}");
-        assert!(e.contains(&s(&base[0])) && e.contains(&s(&other[2])), "{e}");
-    }
     let other_scene = d.join("other.toml");
     fs::write(
         &other_scene,
@@ -790,12 +801,20 @@ fn dial_shards_of_a_profile_set_file() {
     );
 }
 
+/// `lidarsim select-lines ARGS --out OUT EXTRA…`.
+fn select_lines_with(args: &[&str], out: &Path, extra: &[&str]) -> String {
+    let mut a = vec!["select-lines".to_string()];
+    a.extend(args.iter().map(|x| x.to_string()));
+    a.extend(["--out".to_string(), s(out)]);
+    a.extend(extra.iter().map(|x| x.to_string()));
+    lidarsim_ok(&a)
+}
+
 /// `lidarsim select-lines` on generated ensembles of 2 members per class (6 members), with
 /// per-profile rows, a 21-position scan on a 2 km grid to 30 km and the figures of R4e
 /// (0.1 s), with extra arguments, into `out`.
 fn select_lines(out: &Path, extra: &[&str]) -> String {
-    let mut args: Vec<String> = [
-        "select-lines",
+    let args = [
         "--ensemble",
         "2",
         "--per-profile",
@@ -812,36 +831,13 @@ fn select_lines(out: &Path, extra: &[&str]) -> String {
         "30",
         "--figure-lines",
         "R4e",
-        "--out",
-    ]
-    .map(String::from)
-    .to_vec();
-    args.push(s(out));
-    args.extend(extra.iter().map(|a| a.to_string()));
-    lidarsim_ok(&args)
+    ];
+    select_lines_with(&args, out, extra)
 }
 
-/// Three select-lines shards in `dir/name` (shard 1 on two threads, the others on one).
+/// Three select-lines shards in `dir/name`.
 fn three_select_shards(dir: &Path, name: &str, extra: &[&str]) -> Vec<PathBuf> {
-    let out = dir.join(name);
-    (0..3)
-        .map(|i| {
-            let spec = format!("{i}/3");
-            let threads = if i == 1 { "2" } else { "1" };
-            let mut a = vec!["--shard", &spec, "--threads", threads];
-            a.extend_from_slice(extra);
-            let stdout = select_lines(&out, &a);
-            assert!(
-                stdout.contains(&format!(
-                    "shard {i}/3: profiles {}..{} of 6",
-                    2 * i,
-                    2 * i + 2
-                )),
-                "{stdout}"
-            );
-            out.join(format!("shard-{i}-of-3.lshard"))
-        })
-        .collect()
+    three_study_shards(dir, name, extra, select_lines)
 }
 
 /// The files in `dir`, sorted.
@@ -896,17 +892,7 @@ fn select_lines_shards_merge_into_the_single_studys_bytes() {
     let single = d.join("single");
     let single_stdout = select_lines(&single, &["--threads", "2"]);
     let shards = three_select_shards(d, "shards", &[]);
-    fs::create_dir(d.join("other")).unwrap();
-    let moved = d.join("other").join("shard-2-of-3.lshard");
-    fs::rename(&shards[2], &moved).unwrap();
-    let merged = d.join("merged");
-    let stdout = lidarsim_ok([
-        "merge".to_string(),
-        s(&d.join("shards")),
-        s(&moved),
-        "--out".into(),
-        s(&merged),
-    ]);
+    let (merged, stdout) = merge_three(d, &shards);
     assert!(
         stdout.contains("merged 3 select-lines shards of 6 profiles"),
         "{stdout}"
@@ -954,49 +940,29 @@ fn select_lines_merge_refuses_foreign_missing_and_damaged_shards() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let base = three_select_shards(d, "base", &[]);
-
-    let e = merge_refused(&base[..2]);
-    assert!(e.contains("1 of 3 shards missing (2)"), "{e}");
-    let copy = d.join("copy.lshard");
-    fs::copy(&base[1], &copy).unwrap();
-    let e = merge_refused(&[
-        base[0].clone(),
-        base[1].clone(),
-        copy.clone(),
-        base[2].clone(),
-    ]);
-    assert!(
-        e.contains("shard 1/3 is given twice") && e.contains("copy.lshard"),
-        "{e}"
+    merge_refuses_missing_duplicated_and_other_options(
+        d,
+        &base,
+        |name, extra| three_select_shards(d, name, extra),
+        &[
+            ("seed", &["--seed", "5"], "the seed differs (1 against 5)"),
+            (
+                "wing",
+                &["--wing-cm1", "20"],
+                "the wing cutoff (--wing-cm1) differs (25 against 20)",
+            ),
+            (
+                "plots",
+                &["--no-plots"],
+                "the choice of figures (--no-plots, --figure-lines) differs",
+            ),
+            (
+                "uncertainty",
+                &["--temperature-uncertainty-k", "0.5"],
+                "the set of uncertainties (K, MHz, hPa, %) differs (1,1,1,10 against 0.5,1,1,10)",
+            ),
+        ],
     );
-
-    for (name, extra, why) in [
-        (
-            "seed",
-            &["--seed", "5"][..],
-            "the seed differs (1 against 5)",
-        ),
-        (
-            "wing",
-            &["--wing-cm1", "20"][..],
-            "the wing cutoff (--wing-cm1) differs (25 against 20)",
-        ),
-        (
-            "plots",
-            &["--no-plots"][..],
-            "the choice of figures (--no-plots, --figure-lines) differs",
-        ),
-        (
-            "uncertainty",
-            &["--temperature-uncertainty-k", "0.5"][..],
-            "the set of uncertainties (K, MHz, hPa, %) differs (1,1,1,10 against 0.5,1,1,10)",
-        ),
-    ] {
-        let other = three_select_shards(d, name, extra);
-        let e = merge_refused(&[base[0].clone(), base[1].clone(), other[2].clone()]);
-        assert!(e.contains(why), "{name}: {e}");
-        assert!(e.contains(&s(&base[0])) && e.contains(&s(&other[2])), "{e}");
-    }
 
     // A dial shard and a run shard among select shards.
     let scene = study_scene(d);
@@ -1085,57 +1051,32 @@ fn select_lines_shards_of_a_profile_set_and_a_line_file() {
     // Two tropical profiles and `short`, which ends at 700 hPa, below one 4 km layer
     // (tests/select_lines.rs).
     let set = d.join("set.csv");
-    let mut text =
-        String::from("profile,latitude_deg,longitude_deg,pressure_hPa,temperature_K,H2O_ppmv\n");
-    let levels = [
-        (1013.0, 299.0, 20000.0),
-        (850.0, 290.0, 12000.0),
-        (700.0, 282.0, 6000.0),
-        (500.0, 267.0, 2000.0),
-        (300.0, 242.0, 300.0),
-        (200.0, 220.0, 30.0),
-        (100.0, 195.0, 5.0),
-        (50.0, 205.0, 4.0),
-        (10.0, 225.0, 4.0),
-        (1.0, 260.0, 4.0),
-    ];
-    for (id, lat, t_off, n) in [
+    let text = crate::select_lines::tropical_set(&[
         ("a", 10.0, 0.0, 10),
         ("short", 5.0, 0.0, 3),
         ("b", -12.0, 2.0, 10),
-    ] {
-        for (p, t, q) in &levels[..n] {
-            text.push_str(&format!("{id},{lat},0,{p},{},{q}\n", t + t_off));
-        }
-    }
+    ]);
     fs::write(&set, &text).unwrap();
-    let study = |out: &Path, extra: &[&str]| {
-        let mut a: Vec<String> = [
-            "select-lines",
-            "--profiles",
-            &s(&set),
-            "--per-profile",
-            "--max-j",
-            "18",
-            "--offsets-ghz=1.5,2",
-            "--off-cm1",
-            "6360.61",
-            "--co2-ppm",
-            "410",
-            "--layer-m",
-            "4000",
-            "--top-km",
-            "40",
-            "--figure-lines",
-            "R16e",
-            "--out",
-            &s(out),
-        ]
-        .map(String::from)
-        .to_vec();
-        a.extend(extra.iter().map(|x| x.to_string()));
-        lidarsim_ok(&a)
-    };
+    let set_arg = s(&set);
+    let args = [
+        "--profiles",
+        &set_arg,
+        "--per-profile",
+        "--max-j",
+        "18",
+        "--offsets-ghz=1.5,2",
+        "--off-cm1",
+        "6360.61",
+        "--co2-ppm",
+        "410",
+        "--layer-m",
+        "4000",
+        "--top-km",
+        "40",
+        "--figure-lines",
+        "R16e",
+    ];
+    let study = |out: &Path, extra: &[&str]| select_lines_with(&args, out, extra);
     let single = d.join("single");
     let single_stdout = study(&single, &[]);
     assert!(
@@ -1204,32 +1145,25 @@ fn select_lines_shards_of_a_profile_set_and_a_line_file() {
         .map(|l| format!("{l}\n"))
         .collect();
     fs::write(&lines_file, &window).unwrap();
-    let study = |out: &Path, extra: &[&str]| {
-        let mut a: Vec<String> = [
-            "select-lines",
-            "--atmosphere",
-            "us_standard,tropical,subarctic_winter",
-            "--lines",
-            &s(&lines_file),
-            "--on-cm1",
-            "6360.0337,6362.4704",
-            "--off-cm1",
-            "6360.61",
-            "--co2-ppm",
-            "420",
-            "--layer-m",
-            "2000",
-            "--top-km",
-            "30",
-            "--no-plots",
-            "--out",
-            &s(out),
-        ]
-        .map(String::from)
-        .to_vec();
-        a.extend(extra.iter().map(|x| x.to_string()));
-        lidarsim_ok(&a)
-    };
+    let lines_arg = s(&lines_file);
+    let args = [
+        "--atmosphere",
+        "us_standard,tropical,subarctic_winter",
+        "--lines",
+        &lines_arg,
+        "--on-cm1",
+        "6360.0337,6362.4704",
+        "--off-cm1",
+        "6360.61",
+        "--co2-ppm",
+        "420",
+        "--layer-m",
+        "2000",
+        "--top-km",
+        "30",
+        "--no-plots",
+    ];
+    let study = |out: &Path, extra: &[&str]| select_lines_with(&args, out, extra);
     let single = d.join("lines_single");
     study(&single, &[]);
     let shards = d.join("lines_shards");

@@ -7,6 +7,7 @@ use std::path::PathBuf;
 
 use lidarsim::output;
 use lidarsim::shard::{self, ShardSpec};
+use lidarsim::study::shard::StudyShardReport;
 use lidarsim::transport::TransportOptions;
 
 /// Arguments of `lidarsim merge`.
@@ -95,6 +96,32 @@ pub fn run_shard(args: &super::run::Args, spec: ShardSpec) -> anyhow::Result<()>
         r.batches.end,
         r.total_batches,
         r.photons_per_batch,
+        r.wall_s,
+        r.threads,
+        r.path.display()
+    );
+    Ok(())
+}
+
+/// `lidarsim dial … --shard I/N` and `lidarsim select-lines … --shard I/N`: run `shard` (which
+/// studies the `n` profiles of shard `spec` and writes its file) on `pool` with a progress bar
+/// labelled `what`, and print what it did.
+pub fn study_shard(
+    spec: ShardSpec,
+    n: usize,
+    what: &str,
+    pool: &rayon::ThreadPool,
+    shard: impl FnOnce(&(dyn Fn() + Sync)) -> Result<StudyShardReport, shard::ShardError> + Send,
+) -> anyhow::Result<()> {
+    let bar = super::progress::Progress::new(n, what, "profiles");
+    let r = pool.install(|| shard(&|| bar.tick()))?;
+    bar.finish();
+    outln!(
+        "shard {spec}: profiles {}..{} of {} ({} failed) in {:.2} s on {} threads; wrote {}",
+        r.profiles.start,
+        r.profiles.end,
+        r.total_profiles,
+        r.failed,
         r.wall_s,
         r.threads,
         r.path.display()

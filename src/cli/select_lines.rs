@@ -150,20 +150,9 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         .with_context(|| format!("cannot start {} threads", a.threads))?;
     if let Some(spec) = a.shard {
         let n = spec.batches(study.len()).len();
-        let bar = super::progress::Progress::new(n, "select-lines shard", "profiles");
-        let r = pool.install(|| select_shard::run(&study, spec, &a.out, &|| bar.tick()))?;
-        bar.finish();
-        outln!(
-            "shard {spec}: profiles {}..{} of {} ({} failed) in {:.2} s on {} threads; wrote {}",
-            r.profiles.start,
-            r.profiles.end,
-            r.total_profiles,
-            r.failed,
-            r.wall_s,
-            r.threads,
-            r.path.display()
-        );
-        return Ok(());
+        return super::merge::study_shard(spec, n, "select-lines shard", &pool, |tick| {
+            select_shard::run(&study, spec, &a.out, tick)
+        });
     }
     let bar = super::progress::Progress::new(study.len(), "select-lines", "profiles");
     let outcomes = pool.install(|| study.study(0..study.len(), &|| bar.tick()));

@@ -29,7 +29,6 @@
 //!
 //! Floats are stored as their IEEE-754 bits, so the results round-trip exactly (NaN included).
 
-use std::fs;
 use std::io::{self, Write};
 use std::ops::Range;
 use std::path::{Path, PathBuf};
@@ -41,13 +40,16 @@ use crate::atmosphere::{SetMember, StandardAtmosphere};
 use crate::output;
 use crate::scene::Scene;
 use crate::shard::{
-    self, Body, KIND_SELECT, ShardError, ShardSpec, Sharded, VERSION, debug_digest, write_str,
+    self, Body, KIND_SELECT, ShardError, ShardSpec, VERSION, debug_digest, write_str,
 };
 use crate::study::select::{
     MemberFailure, MemberResult, PositionResult, StudyConfig, Uncertainties,
 };
 use crate::study::select_study::{MemberOutcome, SelectOptions, SelectSource, SelectStudy};
-use crate::study::shard::{class_code, class_of_code, header_slice, profile_slice};
+use crate::study::shard::{
+    ReadOutcome, StudyHeader, StudyShardFile, StudyShardReport, class_code, class_of_code,
+    profile_slice,
+};
 
 /// The header of a select shard file: the lidarsim version, the scene, every option of the
 /// study (floats as IEEE-754 bits), the digests of what it read, and the slice.
@@ -134,14 +136,24 @@ pub fn lines_digest(config: &StudyConfig) -> String {
     debug_digest(&(&config.lines, &config.positions, &config.spectra))
 }
 
-impl SelectShardHeader {
-    fn spec(&self) -> ShardSpec {
-        ShardSpec {
-            index: self.shard_index as usize,
-            count: self.shard_count as usize,
-        }
+impl StudyHeader for SelectShardHeader {
+    type Outcome = MemberOutcome;
+    const KIND: &'static str = KIND_SELECT;
+
+    fn lidarsim_version(&self) -> &str {
+        &self.lidarsim_version
     }
 
+    fn shard_of(&self) -> [u64; 3] {
+        [self.shard_index, self.shard_count, self.profiles]
+    }
+
+    fn held(&self) -> (u64, u64) {
+        (self.first_profile, self.end_profile)
+    }
+}
+
+impl SelectShardHeader {
     /// The study's options.
     fn options(&self) -> Result<SelectOptions, String> {
         let source = match (&self.atmospheres, &self.profiles_path, self.ensemble) {
@@ -244,23 +256,6 @@ fn header_of(
     }
 }
 
-/// What a select shard did.
-#[derive(Debug, Clone)]
-pub struct SelectShardReport {
-    /// The file written.
-    pub path: PathBuf,
-    /// Its members.
-    pub profiles: Range<usize>,
-    /// Members of the whole study.
-    pub total_profiles: usize,
-    /// Members of the slice that failed.
-    pub failed: usize,
-    /// Wall time \[s\].
-    pub wall_s: f64,
-    /// Worker threads.
-    pub threads: usize,
-}
-
 /// Study shard `spec` of `study` on the current rayon pool and write it as
 /// `out_dir/`[`ShardSpec::file_name`] (whole or not at all). `progress` is called once per
 /// finished member of the slice.
@@ -269,7 +264,7 @@ pub fn run(
     spec: ShardSpec,
     out_dir: &Path,
     progress: &(dyn Fn() + Sync),
-) -> Result<SelectShardReport, ShardError> {
+) -> Result<StudyShardReport, ShardError> {
     let total = study.len();
     let range = profile_slice(spec, total)?;
     let path = out_dir.join(spec.file_name());
@@ -285,7 +280,7 @@ pub fn run(
         }
         Ok(())
     })?;
-    Ok(SelectShardReport {
+    Ok(StudyShardReport {
         path,
         profiles: range,
         total_profiles: total,
@@ -403,70 +398,11 @@ fn read_outcome(body: &mut Body) -> Result<MemberOutcome, String> {
 }
 
 /// A select shard file read and checked.
-#[derive(Debug, Clone)]
-pub struct SelectShardFile {
-    /// Where it was read from.
-    pub path: PathBuf,
-    /// Its header.
-    pub header: SelectShardHeader,
-    /// Its members' outcomes, in member order.
-    pub outcomes: Vec<MemberOutcome>,
-}
+pub type SelectShardFile = StudyShardFile<SelectShardHeader>;
 
-impl Sharded for SelectShardFile {
-    fn path(&self) -> &Path {
-        &self.path
-    }
-
-    fn version(&self) -> &str {
-        &self.header.lidarsim_version
-    }
-
-    fn spec(&self) -> ShardSpec {
-        self.header.spec()
-    }
-}
-
-impl SelectShardFile {
-    /// Read `path` and check that it is a whole select shard file, consistent in itself.
-    pub fn read(path: &Path) -> Result<SelectShardFile, ShardError> {
-        let bytes = fs::read(path).map_err(|error| ShardError::Io {
-            path: path.to_path_buf(),
-            error,
-        })?;
-        Self::parse(path, &bytes)
-    }
-
-    /// [`SelectShardFile::read`] on bytes already read.
-    pub fn parse(path: &Path, bytes: &[u8]) -> Result<SelectShardFile, ShardError> {
-        let bad = |what: String| ShardError::Bad {
-            path: path.to_path_buf(),
-            what,
-        };
-        let (frame, header): (_, SelectShardHeader) =
-            shard::read_header(path, bytes, 0, KIND_SELECT)?;
-        frame.check_sum(path)?;
-        let range = header_slice(
-            path,
-            [header.shard_index, header.shard_count, header.profiles],
-            (header.first_profile, header.end_profile),
-        )?;
-        let mut body = Body::new(&bytes[frame.body_at..frame.sum_at]);
-        let mut outcomes = Vec::with_capacity(range.len().min(1 << 20));
-        for _ in range {
-            outcomes.push(read_outcome(&mut body).map_err(&bad)?);
-        }
-        if body.left() != 0 {
-            return Err(bad(format!(
-                "{} bytes beyond its last profile",
-                body.left()
-            )));
-        }
-        Ok(SelectShardFile {
-            path: path.to_path_buf(),
-            header,
-            outcomes,
-        })
+impl ReadOutcome for MemberOutcome {
+    fn read(body: &mut Body) -> Result<Self, String> {
+        read_outcome(body)
     }
 }
 

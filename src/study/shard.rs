@@ -28,6 +28,7 @@ use std::io::{self, Write};
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 
+use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 use crate::atmosphere::{LatitudeClass, ProfileSet};
@@ -108,14 +109,24 @@ pub struct DialShardHeader {
     pub threads: u64,
 }
 
-impl DialShardHeader {
-    fn spec(&self) -> ShardSpec {
-        ShardSpec {
-            index: self.shard_index as usize,
-            count: self.shard_count as usize,
-        }
+impl StudyHeader for DialShardHeader {
+    type Outcome = ProfileOutcome;
+    const KIND: &'static str = KIND_DIAL;
+
+    fn lidarsim_version(&self) -> &str {
+        &self.lidarsim_version
     }
 
+    fn shard_of(&self) -> [u64; 3] {
+        [self.shard_index, self.shard_count, self.profiles]
+    }
+
+    fn held(&self) -> (u64, u64) {
+        (self.first_profile, self.end_profile)
+    }
+}
+
+impl DialShardHeader {
     fn steps(&self) -> BudgetSteps {
         let b = self.budget_steps_bits.map(f64::from_bits);
         BudgetSteps {
@@ -142,9 +153,9 @@ impl DialShardHeader {
     }
 }
 
-/// What a dial shard did.
+/// What a study shard (dial or select-lines) did.
 #[derive(Debug, Clone)]
-pub struct DialShardReport {
+pub struct StudyShardReport {
     /// The file written.
     pub path: PathBuf,
     /// Its profiles.
@@ -167,7 +178,7 @@ pub fn run(
     spec: ShardSpec,
     out_dir: &Path,
     progress: &(dyn Fn() + Sync),
-) -> Result<DialShardReport, ShardError> {
+) -> Result<StudyShardReport, ShardError> {
     let total = inputs.set.len();
     let range = profile_slice(spec, total)?;
     let path = out_dir.join(spec.file_name());
@@ -191,7 +202,7 @@ pub fn run(
         }
         Ok(())
     })?;
-    Ok(DialShardReport {
+    Ok(StudyShardReport {
         path,
         profiles: range,
         total_profiles: total,
@@ -222,7 +233,7 @@ pub(crate) fn profile_slice(spec: ShardSpec, total: usize) -> Result<Range<usize
 
 /// The profiles `first..end` that the header of the study shard `path` says it holds, refused
 /// unless they are those of shard `index` of `count` of a study of `total` profiles.
-pub(crate) fn header_slice(
+fn header_slice(
     path: &Path,
     [index, count, total]: [u64; 3],
     (first, end): (u64, u64),
@@ -395,34 +406,69 @@ fn read_outcome(body: &mut Body) -> Result<ProfileOutcome, String> {
     Ok(ProfileOutcome { id, class, records })
 }
 
-/// A dial shard file read and checked.
+/// The header of a study shard file (dial or select-lines): its kind, the version that wrote
+/// it, its slice of the study's profiles, and what each profile's record in the body holds.
+pub trait StudyHeader: DeserializeOwned {
+    /// One profile's outcome, as the body holds it.
+    type Outcome: ReadOutcome;
+    /// The header's `kind`.
+    const KIND: &'static str;
+    /// The lidarsim version that wrote the shard.
+    fn lidarsim_version(&self) -> &str;
+    /// The shard's index, the shard count and the study's profiles.
+    fn shard_of(&self) -> [u64; 3];
+    /// The shard's profiles: the first, and one past the last.
+    fn held(&self) -> (u64, u64);
+}
+
+/// The outcome of one profile as a study shard's body holds it.
+pub trait ReadOutcome: Sized {
+    /// Read one from `body`; the error says what is wrong, the caller names the file.
+    fn read(body: &mut Body) -> Result<Self, String>;
+}
+
+impl ReadOutcome for ProfileOutcome {
+    fn read(body: &mut Body) -> Result<Self, String> {
+        read_outcome(body)
+    }
+}
+
+/// A study shard file read and checked: its header and its profiles' outcomes.
 #[derive(Debug, Clone)]
-pub struct DialShardFile {
+pub struct StudyShardFile<H: StudyHeader> {
     /// Where it was read from.
     pub path: PathBuf,
     /// Its header.
-    pub header: DialShardHeader,
+    pub header: H,
     /// Its profiles' outcomes, in profile order.
-    pub outcomes: Vec<ProfileOutcome>,
+    pub outcomes: Vec<H::Outcome>,
 }
 
-impl Sharded for DialShardFile {
+/// A dial shard file read and checked.
+pub type DialShardFile = StudyShardFile<DialShardHeader>;
+
+impl<H: StudyHeader> Sharded for StudyShardFile<H> {
     fn path(&self) -> &Path {
         &self.path
     }
 
     fn version(&self) -> &str {
-        &self.header.lidarsim_version
+        self.header.lidarsim_version()
     }
 
     fn spec(&self) -> ShardSpec {
-        self.header.spec()
+        let [index, count, _] = self.header.shard_of();
+        ShardSpec {
+            index: index as usize,
+            count: count as usize,
+        }
     }
 }
 
-impl DialShardFile {
-    /// Read `path` and check that it is a whole dial shard file, consistent in itself.
-    pub fn read(path: &Path) -> Result<DialShardFile, ShardError> {
+impl<H: StudyHeader> StudyShardFile<H> {
+    /// Read `path` and check that it is a whole shard file of the kind `H::KIND`, consistent
+    /// in itself.
+    pub fn read(path: &Path) -> Result<Self, ShardError> {
         let bytes = fs::read(path).map_err(|error| ShardError::Io {
             path: path.to_path_buf(),
             error,
@@ -430,23 +476,19 @@ impl DialShardFile {
         Self::parse(path, &bytes)
     }
 
-    /// [`DialShardFile::read`] on bytes already read.
-    pub fn parse(path: &Path, bytes: &[u8]) -> Result<DialShardFile, ShardError> {
+    /// [`StudyShardFile::read`] on bytes already read.
+    pub fn parse(path: &Path, bytes: &[u8]) -> Result<Self, ShardError> {
         let bad = |what: String| ShardError::Bad {
             path: path.to_path_buf(),
             what,
         };
-        let (frame, header): (_, DialShardHeader) = shard::read_header(path, bytes, 0, KIND_DIAL)?;
+        let (frame, header): (_, H) = shard::read_header(path, bytes, 0, H::KIND)?;
         frame.check_sum(path)?;
-        let range = header_slice(
-            path,
-            [header.shard_index, header.shard_count, header.profiles],
-            (header.first_profile, header.end_profile),
-        )?;
+        let range = header_slice(path, header.shard_of(), header.held())?;
         let mut body = Body::new(&bytes[frame.body_at..frame.sum_at]);
         let mut outcomes = Vec::with_capacity(range.len().min(1 << 20));
         for _ in range {
-            outcomes.push(read_outcome(&mut body).map_err(&bad)?);
+            outcomes.push(H::Outcome::read(&mut body).map_err(&bad)?);
         }
         if body.left() != 0 {
             return Err(bad(format!(
@@ -454,7 +496,7 @@ impl DialShardFile {
                 body.left()
             )));
         }
-        Ok(DialShardFile {
+        Ok(StudyShardFile {
             path: path.to_path_buf(),
             header,
             outcomes,
