@@ -33,7 +33,8 @@ enum Command {
     /// Line selection for CO2 IPDA: XCO2 sensitivities to T, frequency, surface pressure and
     /// humidity, random error and rank of candidate on-lines; write DIR/sensitivities.csv.
     SelectLines(Box<cli::select_lines::Args>),
-    /// Fold the shard files of `run --shard I/N` into the files a single run writes.
+    /// Fold the shard files of `run`, `dial` or `select-lines --shard I/N` into the files a
+    /// single run writes.
     Merge(cli::merge::Args),
 }
 

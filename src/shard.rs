@@ -24,9 +24,12 @@
 //! | 8 | FNV-1a 64 checksum of every byte before it |
 //!
 //! The magic, format, header length, JSON header and trailing checksum are the framing of
-//! every shard file (`FrameWriter`, `Frame`); the header's `kind` ([`KIND_RUN`], or
-//! [`KIND_DIAL`] for the ensemble shards of [`crate::study::shard`]) says what the body holds,
-//! and [`common_kind`] lets `lidarsim merge` tell them apart and refuse a mix.
+//! every shard file (`FrameWriter`, `Frame`); the header's `kind` ([`KIND_RUN`];
+//! [`KIND_DIAL`] for the ensemble shards of [`crate::study::shard`], [`KIND_SELECT`] for the
+//! line-selection shards of [`crate::study::select_shard`]) says what the body holds, and
+//! [`common_kind`] lets `lidarsim merge` tell them apart and refuse a mix. The checks of a
+//! whole set of shards (one version, each shard once, none missing: `whole_set`) and the body
+//! reader of the study shards (`Body`) are shared by every kind too.
 //!
 //! The tallies are the raw per-batch sums of [`BatchTally`] (before normalisation), so no
 //! rounding happens between a shard and the fold. The header holds the lidarsim version, the
@@ -47,6 +50,7 @@ use std::str::FromStr;
 use std::time::Instant;
 
 use rayon::prelude::*;
+use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
@@ -194,6 +198,17 @@ pub struct ShardHeader {
 pub const KIND_RUN: &str = "run";
 /// The `kind` of an ensemble shard (`lidarsim dial --shard`, [`crate::study::shard`]).
 pub const KIND_DIAL: &str = "dial";
+/// The `kind` of a line-selection shard (`lidarsim select-lines --shard`,
+/// [`crate::study::select_shard`]).
+pub const KIND_SELECT: &str = "select";
+
+/// The subcommand that writes shards of `kind`.
+fn command_of(kind: &str) -> &str {
+    match kind {
+        KIND_SELECT => "select-lines",
+        k => k,
+    }
+}
 
 fn run_kind() -> String {
     KIND_RUN.to_string()
@@ -439,6 +454,27 @@ impl<W: Write> Write for FrameWriter<W> {
     fn flush(&mut self) -> io::Result<()> {
         self.inner.flush()
     }
+}
+
+/// Write the study shard file `path` whole or not at all: the framing with `header` (JSON),
+/// the body that `body` writes, the checksum.
+pub(crate) fn write_frame(
+    path: &Path,
+    header: &impl Serialize,
+    body: impl FnOnce(&mut FrameWriter<BufWriter<&mut fs::File>>) -> io::Result<()>,
+) -> Result<(), ShardError> {
+    let json = serde_json::to_vec(header).map_err(|e| ShardError::Bad {
+        path: path.to_path_buf(),
+        what: format!("cannot encode the header: {e}"),
+    })?;
+    let mut set = OutputSet::new();
+    set.write_with(path, |file| {
+        let mut w = FrameWriter::start(BufWriter::new(file), &json)?;
+        body(&mut w)?;
+        w.finish()
+    })?;
+    set.commit()?;
+    Ok(())
 }
 
 /// Write batch `t` as one record.
@@ -728,6 +764,210 @@ impl Frame {
     }
 }
 
+/// Check the framing of `bytes` (read from `path`, with `trailer` bytes before the checksum)
+/// and read its JSON header as a shard of `kind`. The checksum is the caller's to check
+/// ([`Frame::check_sum`]), after any check of the body's length, so that a truncation reads
+/// as one.
+pub(crate) fn read_header<H: DeserializeOwned>(
+    path: &Path,
+    bytes: &[u8],
+    trailer: usize,
+    kind: &str,
+) -> Result<(Frame, H), ShardError> {
+    let bad = |what: String| ShardError::Bad {
+        path: path.to_path_buf(),
+        what,
+    };
+    let frame = Frame::parse(path, bytes, trailer)?;
+    if frame.kind != kind {
+        return Err(bad(format!(
+            "a `{}` shard (from `lidarsim {} --shard`), not a {kind} shard",
+            frame.kind,
+            command_of(&frame.kind)
+        )));
+    }
+    match serde_json::from_slice(frame.header(bytes)) {
+        Ok(h) => Ok((frame, h)),
+        Err(e) if frame.checksum_ok => Err(bad(format!("its header cannot be read: {e}"))),
+        Err(_) => Err(bad(
+            "corrupt or truncated: its header cannot be read and its checksum does not match"
+                .into(),
+        )),
+    }
+}
+
+/// Write a string as its length (u64) and its UTF-8 bytes ([`Body::string`] reads it).
+pub(crate) fn write_str(w: &mut impl Write, s: &str) -> io::Result<()> {
+    w.write_all(&(s.len() as u64).to_le_bytes())?;
+    w.write_all(s.as_bytes())
+}
+
+/// A reader of a study shard's body (little-endian) that refuses to read past its end; its
+/// errors say what is wrong, the caller names the file.
+#[derive(Debug)]
+pub struct Body<'b> {
+    bytes: &'b [u8],
+    at: usize,
+}
+
+impl<'b> Body<'b> {
+    /// A reader at the start of `bytes`.
+    pub fn new(bytes: &'b [u8]) -> Self {
+        Body { bytes, at: 0 }
+    }
+
+    /// Bytes not read yet.
+    pub fn left(&self) -> usize {
+        self.bytes.len() - self.at
+    }
+
+    fn take(&mut self, n: usize) -> Result<&'b [u8], String> {
+        if n > self.left() {
+            return Err(format!(
+                "truncated or corrupt: its records end {} bytes early",
+                n - self.left()
+            ));
+        }
+        let s = &self.bytes[self.at..self.at + n];
+        self.at += n;
+        Ok(s)
+    }
+
+    /// One byte.
+    pub fn u8(&mut self) -> Result<u8, String> {
+        Ok(self.take(1)?[0])
+    }
+
+    /// A u64.
+    pub fn u64(&mut self) -> Result<u64, String> {
+        let mut a = [0u8; 8];
+        a.copy_from_slice(self.take(8)?);
+        Ok(u64::from_le_bytes(a))
+    }
+
+    /// An f64 from its bits.
+    pub fn f64(&mut self) -> Result<f64, String> {
+        Ok(f64::from_bits(self.u64()?))
+    }
+
+    /// A string: its length (u64), then its UTF-8 bytes.
+    pub fn string(&mut self) -> Result<String, String> {
+        let n = self.u64()?;
+        let n = usize::try_from(n).map_err(|_| format!("corrupt: a string of {n} bytes"))?;
+        String::from_utf8(self.take(n)?.to_vec())
+            .map_err(|_| "corrupt: a string that is not UTF-8".to_string())
+    }
+
+    /// A count (u64) of `what`, each at least `min_bytes` long: refused if the rest of the
+    /// body cannot hold them, so that nothing is allocated on a corrupt count.
+    pub fn count(&mut self, min_bytes: usize, what: &str) -> Result<usize, String> {
+        let n = self.u64()?;
+        let left = self.left();
+        if n > (left / min_bytes.max(1)) as u64 {
+            return Err(format!("truncated or corrupt: {n} {what} in {left} bytes"));
+        }
+        Ok(n as usize)
+    }
+
+    /// A count (u64) of f64 and the values.
+    pub fn f64s(&mut self, what: &str) -> Result<Vec<f64>, String> {
+        let n = self.count(8, what)?;
+        (0..n).map(|_| self.f64()).collect()
+    }
+}
+
+/// A shard file as the checks of a set see it: where it was read from, the lidarsim version
+/// that wrote it, and which shard it is.
+pub(crate) trait Sharded {
+    /// The file.
+    fn path(&self) -> &Path;
+    /// The lidarsim version that wrote it.
+    fn version(&self) -> &str;
+    /// Which shard of how many.
+    fn spec(&self) -> ShardSpec;
+}
+
+impl Sharded for (PathBuf, ShardHeader) {
+    fn path(&self) -> &Path {
+        &self.0
+    }
+
+    fn version(&self) -> &str {
+        &self.1.lidarsim_version
+    }
+
+    fn spec(&self) -> ShardSpec {
+        self.1.spec()
+    }
+}
+
+/// Every shard of one run or study, in shard order: each of `paths` read by `read` and
+/// refused if another lidarsim version wrote it or if `same` finds that it differs from the
+/// first (naming both files); then the set refused if a shard is given twice or is missing.
+pub(crate) fn whole_set<F: Sharded>(
+    paths: &[PathBuf],
+    read: impl Fn(&Path) -> Result<F, ShardError>,
+    same: impl Fn(&F, &F) -> Result<(), ShardError>,
+) -> Result<Vec<F>, ShardError> {
+    let mut files: Vec<F> = Vec::with_capacity(paths.len());
+    for p in paths {
+        let f = read(p)?;
+        if f.version() != VERSION {
+            return Err(ShardError::Bad {
+                path: p.clone(),
+                what: format!(
+                    "written by lidarsim {}; this is lidarsim {VERSION} (shard format {FORMAT}), whose numbers may differ",
+                    f.version()
+                ),
+            });
+        }
+        if let Some(first) = files.first() {
+            same(first, &f)?;
+        }
+        files.push(f);
+    }
+    files.sort_by_key(|f| f.spec().index);
+    for w in files.windows(2) {
+        if w[0].spec().index == w[1].spec().index {
+            return Err(ShardError::Duplicate {
+                spec: w[0].spec(),
+                a: w[0].path().to_path_buf(),
+                b: w[1].path().to_path_buf(),
+            });
+        }
+    }
+    let Some(first) = files.first() else {
+        return Err(ShardError::NoShards(paths.to_vec()));
+    };
+    let count = first.spec().count;
+    if files.len() != count {
+        // In shard order, each once.
+        let have: Vec<usize> = files.iter().map(|f| f.spec().index).collect();
+        return Err(ShardError::Missing {
+            count,
+            missing: (0..count)
+                .filter(|i| have.binary_search(i).is_err())
+                .collect(),
+            files: files.iter().map(|f| f.path().to_path_buf()).collect(),
+        });
+    }
+    Ok(files)
+}
+
+/// Refuse `scene`, read again from the text stored in shards at `path`, if its digest is no
+/// longer the shards' `digest`: a file it reads has changed since they ran.
+pub(crate) fn check_scene(scene: &Scene, path: &str, digest: &str) -> Result<(), ShardError> {
+    let now = scene_digest(scene);
+    if now != digest {
+        return Err(ShardError::SceneChanged {
+            path: path.to_string(),
+            now,
+            shards: digest.to_string(),
+        });
+    }
+    Ok(())
+}
+
 /// The `kind` of a shard header (JSON): [`KIND_RUN`] when it names none or cannot be read.
 fn header_kind(json: &[u8]) -> String {
     serde_json::from_slice::<serde_json::Value>(json)
@@ -736,7 +976,8 @@ fn header_kind(json: &[u8]) -> String {
         .unwrap_or_else(run_kind)
 }
 
-/// The kind of the shard file `path` ([`KIND_RUN`] or [`KIND_DIAL`]), from its header only.
+/// The kind of the shard file `path` ([`KIND_RUN`], [`KIND_DIAL`] or [`KIND_SELECT`]), from its
+/// header only.
 pub fn shard_kind(path: &Path) -> Result<String, ShardError> {
     use std::io::Read;
     let io_err = |error| ShardError::Io {
@@ -790,7 +1031,7 @@ pub fn common_kind(paths: &[PathBuf]) -> Result<String, ShardError> {
                 return Err(ShardError::Mismatch {
                     a: (*a).clone(),
                     b: p.clone(),
-                    what: "the kind of shard (`run --shard` or `dial --shard`)",
+                    what: "the kind of shard (`run --shard`, `dial --shard` or `select-lines --shard`)",
                     first: ka.clone(),
                     second: k,
                 });
@@ -820,25 +1061,10 @@ impl ShardFile {
             path: path.to_path_buf(),
             what,
         };
-        let frame = Frame::parse(path, &bytes, TRAILER_BYTES)?;
+        let (frame, header): (Frame, ShardHeader) =
+            read_header(path, &bytes, TRAILER_BYTES, KIND_RUN)?;
         let records_at = frame.body_at;
         let body = bytes.len() - 8;
-        if frame.kind != KIND_RUN {
-            return Err(bad(format!(
-                "a `{}` shard (from `lidarsim {} --shard`), not a run shard",
-                frame.kind, frame.kind
-            )));
-        }
-        let header: Result<ShardHeader, _> = serde_json::from_slice(frame.header(&bytes));
-        let header = match header {
-            Ok(hd) => hd,
-            Err(e) if frame.checksum_ok => {
-                return Err(bad(format!("its header cannot be read: {e}")));
-            }
-            Err(_) => {
-                return Err(bad("corrupt or truncated: its header cannot be read and its checksum does not match".into()));
-            }
-        };
         let spec = header.spec();
         let n_records = header.end_batch.saturating_sub(header.first_batch);
         let expected = header
@@ -997,46 +1223,14 @@ impl ShardSet {
     /// Read and check the shard files `paths` ([`shard_paths`]). Each file is read whole and
     /// checked here, so that a damaged shard is refused before the optics are built.
     pub fn open(paths: &[PathBuf]) -> Result<ShardSet, ShardError> {
-        let mut shards: Vec<(PathBuf, ShardHeader)> = Vec::new();
-        for p in paths {
-            let f = ShardFile::read(p)?;
-            if f.header.lidarsim_version != VERSION {
-                return Err(ShardError::Bad {
-                    path: p.clone(),
-                    what: format!(
-                        "written by lidarsim {}; this is lidarsim {VERSION}, whose photons may differ",
-                        f.header.lidarsim_version
-                    ),
-                });
-            }
-            if let Some((first, h)) = shards.first() {
-                check_same(first, h, p, &f.header)?;
-            }
-            shards.push((f.path, f.header));
-        }
-        shards.sort_by_key(|(_, h)| h.shard_index);
-        for w in shards.windows(2) {
-            if w[0].1.shard_index == w[1].1.shard_index {
-                return Err(ShardError::Duplicate {
-                    spec: w[0].1.spec(),
-                    a: w[0].0.clone(),
-                    b: w[1].0.clone(),
-                });
-            }
-        }
-        let Some((_, first)) = shards.first() else {
-            return Err(ShardError::NoShards(paths.to_vec()));
-        };
-        let count = first.shard_count as usize;
-        if shards.len() != count {
-            let have: Vec<usize> = shards.iter().map(|(_, h)| h.shard_index as usize).collect();
-            let missing = (0..count).filter(|i| !have.contains(i)).collect();
-            return Err(ShardError::Missing {
-                count,
-                missing,
-                files: shards.into_iter().map(|(p, _)| p).collect(),
-            });
-        }
+        let shards = whole_set(
+            paths,
+            |p| {
+                let f = ShardFile::read(p)?;
+                Ok((f.path, f.header))
+            },
+            |(a, ha), (b, hb)| check_same(a, ha, b, hb),
+        )?;
         Ok(ShardSet { shards })
     }
 
@@ -1055,14 +1249,7 @@ impl ShardSet {
                 path: self.shards[0].0.clone(),
                 what,
             })?;
-        let now = scene_digest(&scene);
-        if now != h.scene_digest {
-            return Err(ShardError::SceneChanged {
-                path: h.scene_path.clone(),
-                now,
-                shards: h.scene_digest.clone(),
-            });
-        }
+        check_scene(&scene, &h.scene_path, &h.scene_digest)?;
         Ok(scene)
     }
 

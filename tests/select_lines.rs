@@ -385,14 +385,9 @@ fn cli_rejects_a_bad_off_line() {
     }
 }
 
-/// A profile set: class statistics, per-profile rows, a profile that cannot be studied named and
-/// excluded, and the figures.
-#[test]
-fn cli_profile_set_classes_failures_and_figures() {
-    let dir = tempfile::tempdir().unwrap();
-    let set = dir.path().join("set.csv");
-    // Two tropical profiles (hydrostatic altitudes from 0 m); `short` ends at 700 hPa, about
-    // 3 km, below one 4 km layer: it cannot cover the grid.
+/// A profile set of tropical profiles (hydrostatic altitudes from 0 m), each (id, latitude,
+/// temperature offset \[K\], its first n of ten levels from 1013 to 1 hPa).
+pub fn tropical_set(profiles: &[(&str, f64, f64, usize)]) -> String {
     let mut text =
         String::from("profile,latitude_deg,longitude_deg,pressure_hPa,temperature_K,H2O_ppmv\n");
     let levels = [
@@ -407,15 +402,27 @@ fn cli_profile_set_classes_failures_and_figures() {
         (10.0, 225.0, 4.0),
         (1.0, 260.0, 4.0),
     ];
-    for (id, lat, t_off, n) in [
-        ("a", 10.0, 0.0, 10),
-        ("b", -12.0, 2.0, 10),
-        ("short", 5.0, 0.0, 3),
-    ] {
+    for &(id, lat, t_off, n) in profiles {
         for (p, t, q) in &levels[..n] {
             text.push_str(&format!("{id},{lat},0,{p},{},{q}\n", t + t_off));
         }
     }
+    text
+}
+
+/// A profile set: class statistics, per-profile rows, a profile that cannot be studied named and
+/// excluded, and the figures.
+#[test]
+fn cli_profile_set_classes_failures_and_figures() {
+    let dir = tempfile::tempdir().unwrap();
+    let set = dir.path().join("set.csv");
+    // Two tropical profiles (hydrostatic altitudes from 0 m); `short` ends at 700 hPa, about
+    // 3 km, below one 4 km layer: it cannot cover the grid.
+    let text = tropical_set(&[
+        ("a", 10.0, 0.0, 10),
+        ("b", -12.0, 2.0, 10),
+        ("short", 5.0, 0.0, 3),
+    ]);
     std::fs::write(&set, text).unwrap();
     let out = dir.path().join("out");
     let stdout = lidarsim_ok([

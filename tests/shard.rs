@@ -33,17 +33,8 @@ fn shard(scene: Option<&str>, spec: &str, out: &Path, extra: &[&str]) {
 /// which equals it once wall time, thread count and the scene's path (absolute in a merge) are
 /// left out. Returns the names compared.
 fn assert_same_outputs(single: &Path, merged: &Path) -> Vec<String> {
-    let mut names: Vec<String> = fs::read_dir(single)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect();
-    names.sort();
-    let mut merged_names: Vec<String> = fs::read_dir(merged)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect();
-    merged_names.sort();
-    assert_eq!(names, merged_names, "the same files");
+    let names = file_names(single);
+    assert_eq!(names, file_names(merged), "the same files");
     for name in &names {
         let (a, b) = (
             fs::read(single.join(name)).unwrap(),
@@ -528,8 +519,14 @@ fn study_scene(dir: &Path) -> PathBuf {
     p
 }
 
-/// Three dial shards of the study in `dir/name` (shard 1 on two threads, the others on one).
-fn three_dial_shards(scene: &Path, dir: &Path, name: &str, extra: &[&str]) -> Vec<PathBuf> {
+/// Three study shards in `dir/name`, each written by `study(out, extra)` (shard 1 on two
+/// threads, the others on one) and reporting its slice of the profiles.
+fn three_study_shards(
+    dir: &Path,
+    name: &str,
+    extra: &[&str],
+    study: impl Fn(&Path, &[&str]) -> String,
+) -> Vec<PathBuf> {
     let out = dir.join(name);
     (0..3)
         .map(|i| {
@@ -537,7 +534,7 @@ fn three_dial_shards(scene: &Path, dir: &Path, name: &str, extra: &[&str]) -> Ve
             let threads = if i == 1 { "2" } else { "1" };
             let mut a = vec!["--shard", &spec, "--threads", threads];
             a.extend_from_slice(extra);
-            let stdout = dial(scene, &out, &a);
+            let stdout = study(&out, &a);
             assert!(
                 stdout.contains(&format!("shard {i}/3: profiles")),
                 "{stdout}"
@@ -545,6 +542,59 @@ fn three_dial_shards(scene: &Path, dir: &Path, name: &str, extra: &[&str]) -> Ve
             out.join(format!("shard-{i}-of-3.lshard"))
         })
         .collect()
+}
+
+/// `lidarsim merge` of the three shards in `dir/shards` into `dir/merged`, the last moved to
+/// another directory and given as a file; the merged directory and the merge's report.
+fn merge_three(dir: &Path, shards: &[PathBuf]) -> (PathBuf, String) {
+    fs::create_dir(dir.join("other")).unwrap();
+    let moved = dir.join("other").join("shard-2-of-3.lshard");
+    fs::rename(&shards[2], &moved).unwrap();
+    let merged = dir.join("merged");
+    let stdout = lidarsim_ok([
+        "merge".to_string(),
+        s(&dir.join("shards")),
+        s(&moved),
+        "--out".into(),
+        s(&merged),
+    ]);
+    (merged, stdout)
+}
+
+/// Three dial shards of the study in `dir/name`.
+fn three_dial_shards(scene: &Path, dir: &Path, name: &str, extra: &[&str]) -> Vec<PathBuf> {
+    three_study_shards(dir, name, extra, |out, a| dial(scene, out, a))
+}
+
+/// A study merge refuses the three shards `base` with the last missing or with shard 1 given
+/// twice (a copy in `dir`), and each `(name, extra, why)` of `cases`: the last shard made by
+/// `shards(name, extra)` among the first two of `base`, refused with `why`, naming both files.
+fn merge_refuses_missing_duplicated_and_other_options(
+    dir: &Path,
+    base: &[PathBuf],
+    shards: impl Fn(&str, &[&str]) -> Vec<PathBuf>,
+    cases: &[(&str, &[&str], &str)],
+) {
+    let e = merge_refused(&base[..2]);
+    assert!(e.contains("1 of 3 shards missing (2)"), "{e}");
+    let copy = dir.join("copy.lshard");
+    fs::copy(&base[1], &copy).unwrap();
+    let e = merge_refused(&[
+        base[0].clone(),
+        base[1].clone(),
+        copy.clone(),
+        base[2].clone(),
+    ]);
+    assert!(
+        e.contains("shard 1/3 is given twice") && e.contains("copy.lshard"),
+        "{e}"
+    );
+    for (name, extra, why) in cases {
+        let other = shards(name, extra);
+        let e = merge_refused(&[base[0].clone(), base[1].clone(), other[2].clone()]);
+        assert!(e.contains(why), "{name}: {e}");
+        assert!(e.contains(&s(&base[0])) && e.contains(&s(&other[2])), "{e}");
+    }
 }
 
 /// Issue 12, item 1 for ensembles: one `lidarsim dial` and the merge of 3 dial shards give
@@ -558,27 +608,12 @@ fn dial_shards_merge_into_the_single_studys_bytes() {
     let single = d.join("single");
     dial(&scene, &single, &[]);
     let shards = three_dial_shards(&scene, d, "shards", &[]);
-    let merged = d.join("merged");
-    // A directory and a file of another directory.
-    fs::create_dir(d.join("other")).unwrap();
-    let moved = d.join("other").join("shard-2-of-3.lshard");
-    fs::rename(&shards[2], &moved).unwrap();
-    let stdout = lidarsim_ok([
-        "merge".to_string(),
-        s(&d.join("shards")),
-        s(&moved),
-        "--out".into(),
-        s(&merged),
-    ]);
+    let (merged, stdout) = merge_three(d, &shards);
     assert!(
         stdout.contains("merged 3 dial shards of 12 profiles"),
         "{stdout}"
     );
-    let mut names: Vec<String> = fs::read_dir(&single)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect();
-    names.sort();
+    let names = file_names(&single);
     for f in [
         "profiles.csv",
         "summary.csv",
@@ -629,44 +664,20 @@ fn dial_merge_refuses_foreign_missing_and_damaged_shards() {
     let d = dir.path();
     let scene = study_scene(d);
     let base = three_dial_shards(&scene, d, "base", &[]);
-
-    let e = merge_refused(&base[..2]);
-    assert!(e.contains("1 of 3 shards missing (2)"), "{e}");
-    let copy = d.join("copy.lshard");
-    fs::copy(&base[1], &copy).unwrap();
-    let e = merge_refused(&[
-        base[0].clone(),
-        base[1].clone(),
-        copy.clone(),
-        base[2].clone(),
-    ]);
-    assert!(
-        e.contains("shard 1/3 is given twice") && e.contains("copy.lshard"),
-        "{e}"
+    merge_refuses_missing_duplicated_and_other_options(
+        d,
+        &base,
+        |name, extra| three_dial_shards(&scene, d, name, extra),
+        &[
+            ("seed", &["--seed", "5"], "the seed differs (3 against 5)"),
+            (
+                "steps",
+                &["--budget-temperature-k", "2"],
+                "the set of budget steps differs",
+            ),
+            ("pairs", &["--on", "on"], "the choice of line pairs differs"),
+        ],
     );
-
-    for (name, extra, why) in [
-        (
-            "seed",
-            &["--seed", "5"][..],
-            "the seed differs (3 against 5)",
-        ),
-        (
-            "steps",
-            &["--budget-temperature-k", "2"][..],
-            "the set of budget steps differs",
-        ),
-        (
-            "pairs",
-            &["--on", "on"][..],
-            "the choice of line pairs differs",
-        ),
-    ] {
-        let other = three_dial_shards(&scene, d, name, extra);
-        let e = merge_refused(&[base[0].clone(), base[1].clone(), other[2].clone()]);
-        assert!(e.contains(why), "{name}: {e}");
-        assert!(e.contains(&s(&base[0])) && e.contains(&s(&other[2])), "{e}");
-    }
     let other_scene = d.join("other.toml");
     fs::write(
         &other_scene,
@@ -786,6 +797,398 @@ fn dial_shards_of_a_profile_set_file() {
     let e = merge_refused(&[shards]);
     assert!(
         e.contains("is not the one the shards ran") && e.contains("set.csv"),
+        "{e}"
+    );
+}
+
+/// `lidarsim select-lines ARGS --out OUT EXTRA…`.
+fn select_lines_with(args: &[&str], out: &Path, extra: &[&str]) -> String {
+    let mut a = vec!["select-lines".to_string()];
+    a.extend(args.iter().map(|x| x.to_string()));
+    a.extend(["--out".to_string(), s(out)]);
+    a.extend(extra.iter().map(|x| x.to_string()));
+    lidarsim_ok(&a)
+}
+
+/// `lidarsim select-lines` on generated ensembles of 2 members per class (6 members), with
+/// per-profile rows, a 21-position scan on a 2 km grid to 30 km and the figures of R4e
+/// (0.1 s), with extra arguments, into `out`.
+fn select_lines(out: &Path, extra: &[&str]) -> String {
+    let args = [
+        "--ensemble",
+        "2",
+        "--per-profile",
+        "--max-j",
+        "6",
+        "--offsets-ghz=-1,1,2",
+        "--off-cm1",
+        "6360.61",
+        "--co2-ppm",
+        "420",
+        "--layer-m",
+        "2000",
+        "--top-km",
+        "30",
+        "--figure-lines",
+        "R4e",
+    ];
+    select_lines_with(&args, out, extra)
+}
+
+/// Three select-lines shards in `dir/name`.
+fn three_select_shards(dir: &Path, name: &str, extra: &[&str]) -> Vec<PathBuf> {
+    three_study_shards(dir, name, extra, select_lines)
+}
+
+/// The files in `dir`, sorted.
+fn file_names(dir: &Path) -> Vec<String> {
+    let mut names: Vec<String> = fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    names
+}
+
+/// Two NetCDF files with the same dimensions, variables, attributes and values (each f64 by
+/// its shortest exact decimal), read by the `netcdf3` crate's reader, but for the global
+/// attribute `history` (the time and the command line). Returns the two histories.
+fn assert_same_netcdf(a: &Path, b: &Path) -> (String, String) {
+    let read = |p: &Path| {
+        let mut r = netcdf3::FileReader::open(p).unwrap();
+        let mut vars: Vec<_> = r.read_all_vars().unwrap().into_iter().collect();
+        vars.sort_by(|x, y| x.0.cmp(&y.0));
+        let (mut ds, version) = r.close();
+        let history = ds.get_global_attr_as_string("history").unwrap();
+        ds.remove_global_attr("history").unwrap();
+        (format!("{version:?} {ds:?}"), format!("{vars:?}"), history)
+    };
+    let (ha, va, hist_a) = read(a);
+    let (hb, vb, hist_b) = read(b);
+    assert_eq!(ha, hb, "{} and {}: header", a.display(), b.display());
+    assert!(va == vb, "{} and {}: values", a.display(), b.display());
+    assert!(va.contains("dxco2_per_k_ppm"), "{va}");
+    (hist_a, hist_b)
+}
+
+/// The report of a select-lines run without the lines that name the run (`merged …`, the
+/// setup line, `wrote …`).
+fn group_report(stdout: &str) -> Vec<&str> {
+    stdout
+        .lines()
+        .filter(|l| !l.starts_with("merged ") && !l.starts_with("wrote "))
+        .collect()
+}
+
+/// Issue 12, item 1 for line selection: one `lidarsim select-lines` and the merge of 3 shards
+/// (one given as a file of another directory, one run on two threads) give byte-identical
+/// sensitivities.csv and figures, a sensitivities.nc equal in every dimension, variable,
+/// attribute and value but `history`, and the same report. A shard's results are the same on
+/// any thread count.
+#[test]
+fn select_lines_shards_merge_into_the_single_studys_bytes() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let single = d.join("single");
+    let single_stdout = select_lines(&single, &["--threads", "2"]);
+    let shards = three_select_shards(d, "shards", &[]);
+    let (merged, stdout) = merge_three(d, &shards);
+    assert!(
+        stdout.contains("merged 3 select-lines shards of 6 profiles"),
+        "{stdout}"
+    );
+    assert_eq!(group_report(&stdout), group_report(&single_stdout));
+    let names = file_names(&single);
+    assert_eq!(names, file_names(&merged));
+    for c in ["tropical", "mid", "high"] {
+        for f in [format!("transmission_{c}.png"), format!("errors_{c}.png")] {
+            assert!(names.contains(&f), "{f} in {names:?}");
+        }
+    }
+    for name in &names {
+        let (a, b) = (single.join(name), merged.join(name));
+        if name == "sensitivities.nc" {
+            let (_, history) = assert_same_netcdf(&a, &b);
+            assert!(history.contains("lidarsim merge"), "{history}");
+        } else {
+            assert!(
+                fs::read(&a).unwrap() == fs::read(&b).unwrap(),
+                "{name} differs between the study and the merge"
+            );
+        }
+    }
+    // 3 classes × 21 positions and 6 profiles × 21 positions.
+    let csv = fs::read_to_string(single.join("sensitivities.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 1 + 9 * 21);
+
+    // Shard 1, on two threads above, again on one: the same results.
+    let one = d.join("one");
+    select_lines(&one, &["--shard", "1/3", "--threads", "1"]);
+    let body = |p: &Path| {
+        let f = lidarsim::study::select_shard::SelectShardFile::read(p).unwrap();
+        assert_eq!(f.outcomes.len(), 2);
+        format!("{:?}", f.outcomes)
+    };
+    assert_eq!(body(&one.join("shard-1-of-3.lshard")), body(&shards[1]));
+}
+
+/// A select-lines merge refuses a missing or duplicated shard, shards of another seed or
+/// options, shards of other kinds among them and a damaged file: exit code 2, one line
+/// naming the files, nothing written. More shards than profiles are refused before any work.
+#[test]
+fn select_lines_merge_refuses_foreign_missing_and_damaged_shards() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let base = three_select_shards(d, "base", &[]);
+    merge_refuses_missing_duplicated_and_other_options(
+        d,
+        &base,
+        |name, extra| three_select_shards(d, name, extra),
+        &[
+            ("seed", &["--seed", "5"], "the seed differs (1 against 5)"),
+            (
+                "wing",
+                &["--wing-cm1", "20"],
+                "the wing cutoff (--wing-cm1) differs (25 against 20)",
+            ),
+            (
+                "plots",
+                &["--no-plots"],
+                "the choice of figures (--no-plots, --figure-lines) differs",
+            ),
+            (
+                "uncertainty",
+                &["--temperature-uncertainty-k", "0.5"],
+                "the set of uncertainties (K, MHz, hPa, %) differs (1,1,1,10 against 0.5,1,1,10)",
+            ),
+        ],
+    );
+
+    // A dial shard and a run shard among select shards.
+    let scene = study_scene(d);
+    let dial_shard = three_dial_shards(&scene, d, "dial", &[]).remove(0);
+    let e = merge_refused(&[base[0].clone(), base[1].clone(), dial_shard.clone()]);
+    assert!(
+        e.contains("kind of shard") && e.contains("select against dial"),
+        "{e}"
+    );
+    assert!(e.contains(&s(&dial_shard)), "{e}");
+    let run_dir = d.join("run");
+    shard(
+        Some(&c1_scene()),
+        "0/4",
+        &run_dir,
+        &["--photons", "400", "--threads", "1"],
+    );
+    let run_shard = run_dir.join("shard-0-of-4.lshard");
+    let e = merge_refused(&[run_shard.clone(), base[0].clone()]);
+    assert!(
+        e.contains("run against select") && e.contains(&s(&run_shard)),
+        "{e}"
+    );
+    // The library refuses a select shard where it reads a dial shard.
+    let e = lidarsim::study::shard::DialShardFile::read(&base[0]).unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("a `select` shard (from `lidarsim select-lines --shard`), not a dial shard"),
+        "{e}"
+    );
+
+    // Damage: a flipped byte in the results, a truncation, a header whose range is not its
+    // shard's (with a correct checksum), bytes beyond the end.
+    let good = fs::read(&base[1]).unwrap();
+    let n = good.len();
+    let mut flipped = good.clone();
+    flipped[n - 20] ^= 1;
+    for (name, bytes, why) in [
+        ("flipped", flipped, "corrupt: checksum"),
+        ("cut", good[..n / 2].to_vec(), "corrupt"),
+        (
+            "range",
+            with_header(&good, |h| h["end_profile"] = 5.into()),
+            "inconsistent header: profiles 2..5 as shard 1/3 of 6 profiles",
+        ),
+        (
+            "tail",
+            with_header(&[&good, &[0u8; 8][..]].concat(), |_| {}),
+            "8 bytes beyond its last profile",
+        ),
+    ] {
+        let p = d.join(format!("{name}.lshard"));
+        fs::write(&p, bytes).unwrap();
+        let e = merge_refused(&[base[0].clone(), p.clone(), base[2].clone()]);
+        assert!(e.contains(why) && e.contains(&s(&p)), "{name}: {e}");
+    }
+
+    // No more shards than profiles, refused before any work.
+    let out = d.join("too_many");
+    let o = lidarsim([
+        "select-lines",
+        "--ensemble",
+        "2",
+        "--off-cm1",
+        "6360.61",
+        "--co2-ppm",
+        "420",
+        "--shard",
+        "6/7",
+        "--out",
+        &s(&out),
+    ]);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{e}");
+    assert!(e.contains("7 shards of a study of 6 profiles"), "{e}");
+    assert!(!e.contains("panicked") && !out.exists(), "{e}");
+}
+
+/// Select-lines shards of a profile set file (one profile that cannot be studied) and of a
+/// HITRAN line file: the merge gives the single study's files and report, and refuses the set
+/// file or the line file changed since the shards ran, naming it.
+#[test]
+fn select_lines_shards_of_a_profile_set_and_a_line_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // Two tropical profiles and `short`, which ends at 700 hPa, below one 4 km layer
+    // (tests/select_lines.rs).
+    let set = d.join("set.csv");
+    let text = crate::select_lines::tropical_set(&[
+        ("a", 10.0, 0.0, 10),
+        ("short", 5.0, 0.0, 3),
+        ("b", -12.0, 2.0, 10),
+    ]);
+    fs::write(&set, &text).unwrap();
+    let set_arg = s(&set);
+    let args = [
+        "--profiles",
+        &set_arg,
+        "--per-profile",
+        "--max-j",
+        "18",
+        "--offsets-ghz=1.5,2",
+        "--off-cm1",
+        "6360.61",
+        "--co2-ppm",
+        "410",
+        "--layer-m",
+        "4000",
+        "--top-km",
+        "40",
+        "--figure-lines",
+        "R16e",
+    ];
+    let study = |out: &Path, extra: &[&str]| select_lines_with(&args, out, extra);
+    let single = d.join("single");
+    let single_stdout = study(&single, &[]);
+    assert!(
+        single_stdout.contains("tropical: profile short excluded: "),
+        "{single_stdout}"
+    );
+    let shards = d.join("shards");
+    for spec in ["0/2", "1/2"] {
+        study(&shards, &["--shard", spec]);
+    }
+    let merged = d.join("merged");
+    let stdout = lidarsim_ok(["merge".to_string(), s(&shards), "--out".into(), s(&merged)]);
+    assert_eq!(group_report(&stdout), group_report(&single_stdout));
+    let names = file_names(&single);
+    assert_eq!(names, file_names(&merged));
+    for name in names.iter().filter(|n| *n != "sensitivities.nc") {
+        assert!(
+            fs::read(single.join(name)).unwrap() == fs::read(merged.join(name)).unwrap(),
+            "{name}"
+        );
+    }
+    assert_same_netcdf(
+        &single.join("sensitivities.nc"),
+        &merged.join("sensitivities.nc"),
+    );
+    // `--no-plots` at the merge leaves out the figures only.
+    let plain = d.join("plain");
+    lidarsim_ok([
+        "merge".to_string(),
+        s(&shards),
+        "--no-plots".into(),
+        "--out".into(),
+        s(&plain),
+    ]);
+    assert_eq!(
+        file_names(&plain),
+        ["sensitivities.csv", "sensitivities.nc"]
+    );
+    assert!(
+        fs::read(single.join("sensitivities.csv")).unwrap()
+            == fs::read(plain.join("sensitivities.csv")).unwrap()
+    );
+
+    fs::write(&set, text.replace("b,-12,0,850,292,", "b,-12,0,850,292.5,")).unwrap();
+    assert_ne!(fs::read_to_string(&set).unwrap(), text);
+    let e = merge_refused(std::slice::from_ref(&shards));
+    assert!(
+        e.contains("are not the ones the shards ran") && e.contains("set.csv"),
+        "{e}"
+    );
+
+    // A line file: the CO2 lines of HITRAN 2016 from 6330 to 6390 cm-1.
+    let Some(hitran) = crate::util::shared_file("data/hitran/CO2_626_6000-6400_HITRAN2016.par")
+    else {
+        return;
+    };
+    let lines_file = d.join("co2.par");
+    let window: String = fs::read_to_string(hitran)
+        .unwrap()
+        .lines()
+        .filter(|l| {
+            l.get(3..15)
+                .and_then(|nu| nu.trim().parse::<f64>().ok())
+                .is_some_and(|nu| (6330.0..6390.0).contains(&nu))
+        })
+        .map(|l| format!("{l}\n"))
+        .collect();
+    fs::write(&lines_file, &window).unwrap();
+    let lines_arg = s(&lines_file);
+    let args = [
+        "--atmosphere",
+        "us_standard,tropical,subarctic_winter",
+        "--lines",
+        &lines_arg,
+        "--on-cm1",
+        "6360.0337,6362.4704",
+        "--off-cm1",
+        "6360.61",
+        "--co2-ppm",
+        "420",
+        "--layer-m",
+        "2000",
+        "--top-km",
+        "30",
+        "--no-plots",
+    ];
+    let study = |out: &Path, extra: &[&str]| select_lines_with(&args, out, extra);
+    let single = d.join("lines_single");
+    study(&single, &[]);
+    let shards = d.join("lines_shards");
+    for spec in ["0/3", "1/3", "2/3"] {
+        study(&shards, &["--shard", spec]);
+    }
+    let merged = d.join("lines_merged");
+    lidarsim_ok(["merge".to_string(), s(&shards), "--out".into(), s(&merged)]);
+    assert!(
+        fs::read(single.join("sensitivities.csv")).unwrap()
+            == fs::read(merged.join("sensitivities.csv")).unwrap()
+    );
+    // The intensity of R16e of the 30012 band (columns 16-25, ` 1.779E-23`) changed in its
+    // last digit.
+    let r16 = window
+        .lines()
+        .find(|l| l.contains("R 16e") && l.get(21..25) == Some("E-23"))
+        .unwrap();
+    let mut changed = r16.as_bytes().to_vec();
+    changed[20] = b'0' + (changed[20] - b'0' + 1) % 10;
+    let changed = String::from_utf8(changed).unwrap();
+    fs::write(&lines_file, window.replacen(r16, &changed, 1)).unwrap();
+    let e = merge_refused(&[shards]);
+    assert!(
+        e.contains("the line list as read now") && e.contains("co2.par"),
         "{e}"
     );
 }

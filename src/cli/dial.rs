@@ -108,20 +108,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .with_context(|| format!("cannot start {} threads", args.threads))?;
     if let Some(spec) = args.shard {
         let n = spec.batches(inputs.set.len()).len();
-        let bar = super::progress::Progress::new(n, "dial shard", "profiles");
-        let r = pool.install(|| study_shard::run(&inputs, spec, &args.out, &|| bar.tick()))?;
-        bar.finish();
-        outln!(
-            "shard {spec}: profiles {}..{} of {} ({} failed) in {:.2} s on {} threads; wrote {}",
-            r.profiles.start,
-            r.profiles.end,
-            r.total_profiles,
-            r.failed,
-            r.wall_s,
-            r.threads,
-            r.path.display()
-        );
-        return Ok(());
+        return super::merge::study_shard(spec, n, "dial shard", &pool, |tick| {
+            study_shard::run(&inputs, spec, &args.out, tick)
+        });
     }
     let bar = super::progress::Progress::new(inputs.set.len(), "dial", "profiles");
     let result =

@@ -1,22 +1,25 @@
 //! `lidarsim select-lines`: sensitivities of a CO2 IPDA's XCO2 to temperature, laser frequency,
 //! surface pressure and humidity errors, and its random error, for candidate on-line positions
-//! (method: `lidarsim::study::select`, docs/retrieval.md). Writes `DIR/sensitivities.csv` and,
+//! (method: `lidarsim::study::select`, docs/retrieval.md; the study's set-up:
+//! `lidarsim::study::select_study`). Writes `DIR/sensitivities.csv`, `DIR/sensitivities.nc` and,
 //! unless `--no-plots`, per atmosphere `transmission_<atm>.png` (Figure 4 of the seed paper) and
-//! `errors_<atm>.png` (Figure 5).
+//! `errors_<atm>.png` (Figure 5); with `--shard I/N` only the shard file of a slice of the
+//! profiles (`lidarsim::study::select_shard`), which `lidarsim merge` puts together.
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, bail};
+use anyhow::Context;
 use plotters::prelude::*;
 
-use lidarsim::atmosphere::{LatitudeClass, SetMember, StandardAtmosphere, read_profile_set};
+use lidarsim::atmosphere::StandardAtmosphere;
 use lidarsim::input::Bounds;
 use lidarsim::output::{self, OutputError, OutputSet};
 use lidarsim::scene::Scene;
-use lidarsim::spectroscopy::{LblOptions, LineFilter, LineList};
-use lidarsim::study::select::{
-    self, GridSpec, MemberResult, NoiseModel, OnPosition, Row, SpectrumWindow, Steps, StudyConfig,
-    Uncertainties,
+use lidarsim::shard::{self, ShardSpec};
+use lidarsim::study::select::{self, Row, StudyConfig, Uncertainties};
+use lidarsim::study::select_shard;
+use lidarsim::study::select_study::{
+    GroupSummary, MemberOutcome, SPECTRUM_HALF_GHZ, SelectOptions, SelectSource, SelectStudy,
 };
 
 use super::plot::{FONT, draw_legend, init_font};
@@ -110,291 +113,137 @@ pub struct Args {
     /// Do not draw figures.
     #[arg(long)]
     no_plots: bool,
+    /// Worker threads, 0 for all cores.
+    #[arg(long, default_value_t = 0, allow_negative_numbers = true, value_parser = super::threads())]
+    threads: usize,
+    /// Study only shard I of N (0 ≤ I < N) of the profiles and write their results raw to
+    /// DIR/shard-I-of-N.lshard; `lidarsim merge` puts the N files together into this study's
+    /// outputs.
+    #[arg(long, value_name = "I/N", value_parser = clap::value_parser!(ShardSpec))]
+    shard: Option<ShardSpec>,
 }
 
-/// Half width of the fine spectra of Figure 4 \[GHz\] and their step.
-const SPECTRUM_HALF_GHZ: f64 = 4.0;
-const SPECTRUM_STEP_GHZ: f64 = 0.02;
 /// Half width of the laser's spectral window marked in Figure 4 \[GHz\].
 const WINDOW_HALF_GHZ: f64 = 0.5;
 
-/// Read and merge the line files (all molecules) with `filter`; the band model without files.
-fn read_lines(paths: &[PathBuf], filter: &LineFilter) -> anyhow::Result<LineList> {
-    if paths.is_empty() {
-        return Ok(LineList::co2_30012_band_model().filtered(filter));
-    }
-    let mut out = LineList {
-        source: String::new(),
-        lines: Vec::new(),
-    };
-    let mut sources = Vec::new();
-    for p in paths {
-        let l =
-            LineList::read_par(p, filter).with_context(|| format!("--lines {}", p.display()))?;
-        sources.push(l.source);
-        out.lines.extend(l.lines);
-    }
-    out.lines.sort_by(|a, b| a.nu_cm1.total_cmp(&b.nu_cm1));
-    out.source = sources.join(" + ");
-    Ok(out)
-}
-
-/// The groups of members: (atmosphere name, members).
-fn groups(a: &Args) -> anyhow::Result<Vec<(String, Vec<SetMember>)>> {
-    if a.profiles.is_some() || a.ensemble.is_some() {
-        let set = match (&a.profiles, a.ensemble) {
-            (Some(path), _) => read_profile_set(path)?,
-            (None, Some(n)) => {
-                let mut set = lidarsim::atmosphere::ProfileSet::default();
-                for (i, c) in LatitudeClass::ALL.iter().enumerate() {
-                    if a.class == "all" || a.class.parse::<LatitudeClass>().ok() == Some(*c) {
-                        let (s, _) = lidarsim::atmosphere::class_ensemble(
-                            *c,
-                            n,
-                            a.seed.wrapping_add(i as u64),
-                        )?;
-                        set.members.extend(s.members);
-                    }
-                }
-                set.name = format!("{n} members per class, seed {}", a.seed);
-                set
-            }
-            (None, None) => bail!("give --profiles SET or --ensemble N"),
-        };
-        let path = a
-            .profiles
-            .clone()
-            .unwrap_or_else(|| PathBuf::from(set.name.clone()));
-        if set.is_empty() {
-            bail!("--profiles {}: the set has no profiles", path.display());
-        }
-        let classes: Vec<LatitudeClass> = if a.class == "all" {
-            LatitudeClass::ALL.to_vec()
-        } else {
-            vec![
-                a.class
-                    .parse()
-                    .map_err(|e: String| anyhow::anyhow!("--class: {e}"))?,
-            ]
-        };
-        let mut out = Vec::new();
-        for c in classes {
-            let members = set.class(c).members;
-            if !members.is_empty() {
-                out.push((c.name().to_string(), members));
-            }
-        }
-        if out.is_empty() {
-            bail!(
-                "--profiles {}: no profile in class `{}`",
-                path.display(),
-                a.class
-            );
-        }
-        Ok(out)
-    } else {
-        Ok(a.atmosphere
-            .iter()
-            .map(|s| (s.name().to_string(), vec![s.member()]))
-            .collect())
-    }
-}
-
 /// `lidarsim select-lines`.
 pub fn run(a: Args) -> anyhow::Result<()> {
-    // Each number was checked by the argument parser; here the size of the grid.
-    lidarsim::limits::check_product(
-        "--layer-m",
-        &[("layers", (a.top_km * 1e3 / a.layer_m).ceil() as u64)],
-        lidarsim::limits::MAX_PATH_LAYERS,
-    )
-    .map_err(anyhow::Error::msg)?;
-    let wing = a.wing_cm1;
-
-    // Candidate positions: the band's lines (626 only) first when scanning.
-    let band_all = select::band_lines(&read_lines(
-        &a.lines,
-        &LineFilter {
-            isotopologues: Some(vec![(2, 1)]),
-            ..Default::default()
-        },
-    )?);
-    let positions: Vec<OnPosition> = if a.on_cm1.is_empty() {
-        if a.offsets_ghz.is_empty() {
-            bail!("--offsets-ghz: give at least one offset");
-        }
-        let p = select::scan_positions(&band_all, a.max_j, &a.offsets_ghz);
-        if p.is_empty() {
-            bail!(
-                "no line of the CO2 30012<-00001 band (626) with J'' <= {} in {}",
-                a.max_j,
-                if a.lines.is_empty() {
-                    "the band model".to_string()
-                } else {
-                    format!("--lines {}", a.lines[0].display())
-                }
-            );
-        }
-        p
-    } else {
-        select::label_positions(&band_all, &a.on_cm1)
+    let scene = match (&a.scene, a.shard) {
+        (Some(p), Some(_)) => shard::read_scene(Some(p))?,
+        (Some(p), None) => Scene::read(p)?,
+        (None, _) => Scene::default_scene()?,
     };
-    let spectra: Vec<SpectrumWindow> = if a.no_plots {
-        Vec::new()
-    } else {
-        let n = (2.0 * SPECTRUM_HALF_GHZ / SPECTRUM_STEP_GHZ).round() as usize;
-        let offsets: Vec<f64> = (0..=n)
-            .map(|k| -SPECTRUM_HALF_GHZ + k as f64 * SPECTRUM_STEP_GHZ)
-            .collect();
-        a.figure_lines
-            .iter()
-            .map(|label| match band_all.iter().find(|b| &b.label == label) {
-                Some(b) => Ok(SpectrumWindow {
-                    label: label.clone(),
-                    centre_cm1: b.nu_cm1,
-                    offsets_ghz: offsets.clone(),
-                }),
-                None => {
-                    bail!("--figure-lines: no band line `{label}` (labels look like R16e, P20e)")
-                }
-            })
-            .collect::<anyhow::Result<_>>()?
-    };
-
-    // Every line reaching a position, the off-line or a spectrum with its wing.
-    let mut nus: Vec<f64> = positions.iter().map(|p| p.nu_cm1).collect();
-    nus.push(a.off_cm1);
-    for w in &spectra {
-        nus.push(w.centre_cm1 - SPECTRUM_HALF_GHZ / select::GHZ_PER_CM1);
-        nus.push(w.centre_cm1 + SPECTRUM_HALF_GHZ / select::GHZ_PER_CM1);
-    }
-    let lo = nus.iter().copied().fold(f64::INFINITY, f64::min) - wing - 1.0;
-    let hi = nus.iter().copied().fold(f64::NEG_INFINITY, f64::max) + wing + 1.0;
-    let lines = read_lines(&a.lines, &LineFilter::window(lo, hi))?;
-    let reaches = |nu: f64| {
-        lines
-            .lines
-            .iter()
-            .any(|l| l.molecule_id == 2 && (l.nu_cm1 - nu).abs() <= wing)
-    };
-    if !reaches(a.off_cm1) {
-        bail!(
-            "--off-cm1 {}: no CO2 line within the wing cutoff ({wing} cm-1) in {}; the off-line must lie in the CO2 band the lines cover",
-            a.off_cm1,
-            if a.lines.is_empty() {
-                "the built-in 30012 band model"
-            } else {
-                "the line files"
-            }
-        );
-    }
-    if let Some(p) = positions.iter().find(|p| !reaches(p.nu_cm1)) {
-        bail!(
-            "--on-cm1 {}: no CO2 line within the wing cutoff ({wing} cm-1)",
-            p.nu_cm1
-        );
-    }
-    if !(5000.0..=1e5).contains(&a.off_cm1) {
-        bail!(
-            "--off-cm1 {}: outside 5000–100000 cm-1 (the Rayleigh cross-sections cover 100–2000 nm)",
-            a.off_cm1
-        );
-    }
-
-    let scene = match &a.scene {
-        Some(p) => Scene::read(p)?,
-        None => Scene::default_scene()?,
-    };
-    let noise = NoiseModel::from_scene(&scene)?;
-    let cfg = StudyConfig {
-        lines,
-        options: LblOptions {
-            wing_cm1: wing,
-            ..Default::default()
-        },
-        off_cm1: a.off_cm1,
-        positions,
-        grid: GridSpec {
-            layer_m: a.layer_m,
-            top_m: a.top_km * 1e3,
-        },
-        steps: Steps::CONTRACT,
-        noise: Some(noise),
-        spectra,
-    };
-    let unc = Uncertainties {
-        temperature_k: a.temperature_uncertainty_k,
-        frequency_mhz: a.frequency_uncertainty_mhz,
-        surface_pressure_hpa: a.surface_pressure_uncertainty_hpa,
-        h2o_percent: a.h2o_uncertainty_percent,
-    };
-
-    let groups = groups(&a)?;
+    let study = SelectStudy::build(options(&a)?, scene)?;
     // Before the work; the figures' names depend on the groups and are checked when written.
-    output::check_paths(&[
-        a.out.join("sensitivities.csv"),
-        a.out.join("sensitivities.nc"),
-    ])?;
+    let out_files = match a.shard {
+        Some(spec) => vec![a.out.join(spec.file_name())],
+        None => vec![
+            a.out.join("sensitivities.csv"),
+            a.out.join("sensitivities.nc"),
+        ],
+    };
+    output::check_paths(&out_files)?;
+    print_setup(&study)?;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(a.threads)
+        .build()
+        .with_context(|| format!("cannot start {} threads", a.threads))?;
+    if let Some(spec) = a.shard {
+        let n = spec.batches(study.len()).len();
+        return super::merge::study_shard(spec, n, "select-lines shard", &pool, |tick| {
+            select_shard::run(&study, spec, &a.out, tick)
+        });
+    }
+    let bar = super::progress::Progress::new(study.len(), "select-lines", "profiles");
+    let outcomes = pool.install(|| study.study(0..study.len(), &|| bar.tick()));
+    bar.finish();
+    write_outputs(&a.out, a.no_plots, &study, &outcomes)
+}
+
+/// The study's options from the command line. A shard names its files by their absolute
+/// paths, so that shards started from different directories agree.
+fn options(a: &Args) -> anyhow::Result<SelectOptions> {
+    let path = |p: &PathBuf| -> anyhow::Result<PathBuf> {
+        match a.shard {
+            Some(_) => {
+                std::fs::canonicalize(p).with_context(|| format!("cannot read {}", p.display()))
+            }
+            None => Ok(p.clone()),
+        }
+    };
+    let source = match (&a.profiles, a.ensemble) {
+        (Some(p), _) => SelectSource::Set(path(p)?),
+        (None, Some(n)) => SelectSource::Ensemble(n),
+        (None, None) => SelectSource::Atmospheres(a.atmosphere.clone()),
+    };
+    Ok(SelectOptions {
+        source,
+        seed: a.seed,
+        class: a.class.clone(),
+        per_profile: a.per_profile,
+        lines: a.lines.iter().map(path).collect::<anyhow::Result<_>>()?,
+        on_cm1: a.on_cm1.clone(),
+        off_cm1: a.off_cm1,
+        co2_ppm: a.co2_ppm,
+        max_j: a.max_j,
+        offsets_ghz: a.offsets_ghz.clone(),
+        layer_m: a.layer_m,
+        top_km: a.top_km,
+        wing_cm1: a.wing_cm1,
+        uncertainties: Uncertainties {
+            temperature_k: a.temperature_uncertainty_k,
+            frequency_mhz: a.frequency_uncertainty_mhz,
+            surface_pressure_hpa: a.surface_pressure_uncertainty_hpa,
+            h2o_percent: a.h2o_uncertainty_percent,
+        },
+        figure_lines: a.figure_lines.clone(),
+        plots: !a.no_plots,
+    })
+}
+
+/// The line of the report that says what the study computes.
+pub fn print_setup(study: &SelectStudy) -> anyhow::Result<()> {
+    let cfg = &study.config;
     outln!(
         "select-lines: {} on-line positions, off-line {} cm-1, lines {} ({} lines), grid {} m to {} km",
         cfg.positions.len(),
         cfg.off_cm1,
         cfg.lines.source,
         cfg.lines.len(),
-        a.layer_m,
-        a.top_km
+        study.options.layer_m,
+        study.options.top_km
     );
+    Ok(())
+}
+
+/// Report every group of a study from its members' `outcomes` (all of them, in member order)
+/// and write its files into `dir` (all or none): `lidarsim select-lines`, and `lidarsim merge`
+/// of its shards. The figures are drawn if the study computed their spectra and `no_plots` is
+/// not set.
+pub fn write_outputs(
+    dir: &Path,
+    no_plots: bool,
+    study: &SelectStudy,
+    outcomes: &[MemberOutcome],
+) -> anyhow::Result<()> {
+    let summaries = study.summarise(outcomes);
     let mut rows: Vec<Row> = Vec::new();
     let mut per_profile: Vec<Row> = Vec::new();
-    let mut figures: Vec<GroupFigures> = Vec::new();
-    let total: usize = groups.iter().map(|(_, m)| m.len()).sum();
-    let bar = super::progress::Progress::new(total, "select-lines", "profiles");
-    for (name, mut members) in groups {
-        let mut failed = Vec::new();
-        members.retain_mut(
-            |m| match select::set_co2_column_average(&mut m.profile, a.co2_ppm) {
-                Ok(()) => true,
-                Err(e) => {
-                    failed.push((m.meta.id.clone(), e.to_string()));
-                    false
-                }
-            },
-        );
-        let results = select::study_members(&members, &cfg, &|| bar.tick());
-        let mut ok: Vec<&MemberResult> = Vec::new();
-        for r in &results {
-            match r {
-                Ok(m) => ok.push(m),
-                Err(f) => failed.push((f.id.clone(), f.reason.clone())),
-            }
+    for g in &summaries {
+        let name = &g.name;
+        for f in &g.failed {
+            outln!("{name}: profile {} excluded: {}", f.id, f.reason);
         }
-        for (id, reason) in &failed {
-            outln!("{name}: profile {id} excluded: {reason}");
-        }
-        if ok.is_empty() {
-            bail!("{name}: every profile failed (see above)");
-        }
-        let (group_rows, dropped) = select::summarise(&name, &ok, &cfg, &unc);
-        if !a.on_cm1.is_empty() && !dropped.is_empty() {
-            let v: Vec<String> = dropped
-                .iter()
-                .map(|i| format!("{}", cfg.positions[*i].nu_cm1))
-                .collect();
-            bail!(
-                "--on-cm1 {}: the on-line does not absorb more than the off-line {} cm-1 (DAOD ≤ 0) in `{name}`",
-                v.join(","),
-                cfg.off_cm1
-            );
-        }
+        g.check(study)?;
         outln!(
             "{name}: {} profiles ({} excluded), XCO2 {:.2} ppm, {} positions kept, {} dropped (DAOD ≤ 0)",
-            ok.len(),
-            failed.len(),
-            ok.iter().map(|m| m.xco2_ppm).sum::<f64>() / ok.len() as f64,
-            group_rows.len(),
-            dropped.len()
+            g.profiles,
+            g.failed.len(),
+            g.mean_xco2_ppm,
+            g.rows.len(),
+            g.dropped.len()
         );
-        for r in group_rows.iter().take(5) {
+        for r in g.rows.iter().take(5) {
             outln!(
                 "  #{} {:.4} cm-1 {} {:+.2} GHz: DAOD {:.3}, WF peak {:.0} hPa, per K {:+.3}, per MHz {:+.3}, per hPa {:+.3}, per 10% H2O {:+.3}, random {:.3}, total {:.3} ppm",
                 r.rank,
@@ -411,26 +260,12 @@ pub fn run(a: Args) -> anyhow::Result<()> {
                 r.total_error_ppm
             );
         }
-        if a.per_profile {
-            for m in &ok {
-                per_profile.extend(select::summarise(&m.id, &[*m], &cfg, &unc).0);
-            }
-        }
-        if !a.no_plots {
-            let stats = select::spectrum_statistics(&ok, cfg.spectra.len());
-            figures.push(GroupFigures {
-                name: name.clone(),
-                rows: group_rows.clone(),
-                stats,
-                members: ok.len(),
-            });
-        }
-        rows.extend(group_rows);
+        rows.extend(g.rows.iter().cloned());
+        per_profile.extend(g.per_profile.iter().cloned());
     }
-    bar.finish();
     rows.extend(per_profile);
     let mut files = OutputSet::new();
-    files.write(a.out.join("sensitivities.csv"), select::to_csv(&rows))?;
+    files.write(dir.join("sensitivities.csv"), select::to_csv(&rows))?;
     if !rows.is_empty() {
         let command: Vec<String> = std::env::args_os()
             .map(|a| a.to_string_lossy().into_owned())
@@ -445,12 +280,18 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             "lidarsim select-lines: CO2 IPDA line selection",
             &history,
         )?;
-        files.write(a.out.join("sensitivities.nc"), nc)?;
+        files.write(dir.join("sensitivities.nc"), nc)?;
     }
-    if !a.no_plots {
+    if study.options.plots && !no_plots {
         init_font();
-        for g in &figures {
-            draw_figures(&mut files, &a.out, g, &cfg, &unc)?;
+        for g in &summaries {
+            draw_figures(
+                &mut files,
+                dir,
+                g,
+                &study.config,
+                &study.options.uncertainties,
+            )?;
         }
     }
     for p in files.commit()? {
@@ -461,27 +302,15 @@ pub fn run(a: Args) -> anyhow::Result<()> {
 
 type DrawResult = Result<(), Box<dyn std::error::Error>>;
 
-/// What the figures of one atmosphere (or class) show.
-struct GroupFigures {
-    /// Atmosphere or class name.
-    name: String,
-    /// Its rows, in rank order.
-    rows: Vec<Row>,
-    /// Mean and standard deviation of each fine spectrum.
-    stats: Vec<(Vec<f64>, Vec<f64>)>,
-    /// Profiles averaged.
-    members: usize,
-}
-
 /// Stage the figures of one group in `files`, for the directory `dir`.
 fn draw_figures(
     files: &mut OutputSet,
     dir: &Path,
-    g: &GroupFigures,
+    g: &GroupSummary,
     cfg: &StudyConfig,
     unc: &Uncertainties,
 ) -> Result<(), OutputError> {
-    let (name, rows, stats, members) = (g.name.as_str(), &g.rows, &g.stats, g.members);
+    let (name, rows, stats, members) = (g.name.as_str(), &g.rows, &g.spectra, g.profiles);
     files.write_via(dir.join(format!("transmission_{name}.png")), |p| {
         transmission_figure(p, name, rows, cfg, stats, members)
     })?;

@@ -86,6 +86,23 @@ pub enum SelectError {
         /// What is wrong.
         reason: String,
     },
+    /// A line file that cannot be read.
+    #[error("--lines {}: {error}", path.display())]
+    Lines {
+        /// The file.
+        path: std::path::PathBuf,
+        /// Why.
+        error: SpectroscopyError,
+    },
+    /// A profile set file that cannot be read.
+    #[error(transparent)]
+    Input(#[from] crate::input::InputError),
+    /// A generated ensemble that cannot be drawn.
+    #[error(transparent)]
+    Study(#[from] crate::study::dial::StudyError),
+    /// Options that cannot be studied together; the message names the option.
+    #[error("{0}")]
+    Usage(String),
     /// A scene that lacks what the random error needs.
     #[error("scene {path}: {message}")]
     Scene {
@@ -732,20 +749,27 @@ pub fn study_member(member: &SetMember, cfg: &StudyConfig) -> Result<MemberResul
     })
 }
 
-/// Study every member, in parallel (rayon) and in member order; the numbers do not depend on
-/// the thread count (each member is computed alone). `progress` is called once per member.
+/// Study every member with its CO2 set to a dry-air column average of `co2_ppm` first
+/// ([`set_co2_column_average`]), in parallel (rayon) and in member order; the numbers do not
+/// depend on the thread count (each member is computed alone). `progress` is called once per
+/// member.
 pub fn study_members(
-    members: &[SetMember],
+    members: &[&SetMember],
     cfg: &StudyConfig,
+    co2_ppm: f64,
     progress: &(dyn Fn() + Sync),
 ) -> Vec<Result<MemberResult, MemberFailure>> {
     members
         .par_iter()
         .map(|m| {
-            let r = study_member(m, cfg).map_err(|e| MemberFailure {
-                id: m.meta.id.clone(),
-                reason: e.to_string(),
-            });
+            let mut m = (*m).clone();
+            let r = set_co2_column_average(&mut m.profile, co2_ppm)
+                .map_err(SelectError::from)
+                .and_then(|()| study_member(&m, cfg))
+                .map_err(|e| MemberFailure {
+                    id: m.meta.id.clone(),
+                    reason: e.to_string(),
+                });
             progress();
             r
         })

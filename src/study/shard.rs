@@ -24,18 +24,19 @@
 //! Floats are stored as their IEEE-754 bits, so the records round-trip exactly (NaN included).
 
 use std::fs;
-use std::io::{self, BufWriter, Write};
+use std::io::{self, Write};
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 
+use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 use crate::atmosphere::{LatitudeClass, ProfileSet};
-use crate::output::{self, OutputSet};
+use crate::output;
 use crate::retrieval::Method;
 use crate::scene::Scene;
 use crate::shard::{
-    self, FORMAT, Frame, FrameWriter, KIND_DIAL, ShardError, ShardSpec, VERSION, debug_digest,
+    self, Body, KIND_DIAL, ShardError, ShardSpec, Sharded, VERSION, debug_digest, write_str,
 };
 use crate::study::dial::{
     self, BudgetSteps, N_SOURCES, ProfileOutcome, ProfileSource, Record, StudyOptions, StudyResult,
@@ -108,14 +109,24 @@ pub struct DialShardHeader {
     pub threads: u64,
 }
 
-impl DialShardHeader {
-    fn spec(&self) -> ShardSpec {
-        ShardSpec {
-            index: self.shard_index as usize,
-            count: self.shard_count as usize,
-        }
+impl StudyHeader for DialShardHeader {
+    type Outcome = ProfileOutcome;
+    const KIND: &'static str = KIND_DIAL;
+
+    fn lidarsim_version(&self) -> &str {
+        &self.lidarsim_version
     }
 
+    fn shard_of(&self) -> [u64; 3] {
+        [self.shard_index, self.shard_count, self.profiles]
+    }
+
+    fn held(&self) -> (u64, u64) {
+        (self.first_profile, self.end_profile)
+    }
+}
+
+impl DialShardHeader {
     fn steps(&self) -> BudgetSteps {
         let b = self.budget_steps_bits.map(f64::from_bits);
         BudgetSteps {
@@ -142,9 +153,9 @@ impl DialShardHeader {
     }
 }
 
-/// What a dial shard did.
+/// What a study shard (dial or select-lines) did.
 #[derive(Debug, Clone)]
-pub struct DialShardReport {
+pub struct StudyShardReport {
     /// The file written.
     pub path: PathBuf,
     /// Its profiles.
@@ -167,18 +178,9 @@ pub fn run(
     spec: ShardSpec,
     out_dir: &Path,
     progress: &(dyn Fn() + Sync),
-) -> Result<DialShardReport, ShardError> {
+) -> Result<StudyShardReport, ShardError> {
     let total = inputs.set.len();
-    if spec.count > total {
-        return Err(ShardError::Spec {
-            spec,
-            what: format!(
-                "{} shards of a study of {total} profiles leave some without a profile (at most one shard per profile)",
-                spec.count
-            ),
-        });
-    }
-    let range = spec.batches(total);
+    let range = profile_slice(spec, total)?;
     let path = out_dir.join(spec.file_name());
     output::check_paths(&[&path])?;
     let result = dial::run_slice(
@@ -194,20 +196,13 @@ pub fn run(
     })?;
     let threads = rayon::current_num_threads();
     let header = header_of(inputs, spec, range.clone(), &result.timing, threads)?;
-    let json = serde_json::to_vec(&header).map_err(|e| ShardError::Bad {
-        path: path.clone(),
-        what: format!("cannot encode the header: {e}"),
-    })?;
-    let mut set = OutputSet::new();
-    set.write_with(&path, |file| {
-        let mut w = FrameWriter::start(BufWriter::new(file), &json)?;
+    shard::write_frame(&path, &header, |w| {
         for o in &result.outcomes {
-            write_outcome(&mut w, o)?;
+            write_outcome(w, o)?;
         }
-        w.finish()
+        Ok(())
     })?;
-    set.commit()?;
-    Ok(DialShardReport {
+    Ok(StudyShardReport {
         path,
         profiles: range,
         total_profiles: total,
@@ -219,6 +214,65 @@ pub fn run(
         wall_s: result.timing.wall_s,
         threads,
     })
+}
+
+/// The profiles of shard `spec` of a study of `total` (as a run's batches,
+/// [`ShardSpec::batches`]); refused if some shard would have none.
+pub(crate) fn profile_slice(spec: ShardSpec, total: usize) -> Result<Range<usize>, ShardError> {
+    if spec.count > total {
+        return Err(ShardError::Spec {
+            spec,
+            what: format!(
+                "{} shards of a study of {total} profiles leave some without a profile (at most one shard per profile)",
+                spec.count
+            ),
+        });
+    }
+    Ok(spec.batches(total))
+}
+
+/// The profiles `first..end` that the header of the study shard `path` says it holds, refused
+/// unless they are those of shard `index` of `count` of a study of `total` profiles.
+fn header_slice(
+    path: &Path,
+    [index, count, total]: [u64; 3],
+    (first, end): (u64, u64),
+) -> Result<Range<usize>, ShardError> {
+    let valid = count > 0 && index < count && count <= total;
+    let range = if valid {
+        ShardSpec {
+            index: index as usize,
+            count: count as usize,
+        }
+        .batches(total as usize)
+    } else {
+        0..0
+    };
+    if !valid || (first, end) != (range.start as u64, range.end as u64) {
+        return Err(ShardError::Bad {
+            path: path.to_path_buf(),
+            what: format!(
+                "inconsistent header: profiles {first}..{end} as shard {index}/{count} of {total} profiles"
+            ),
+        });
+    }
+    Ok(range)
+}
+
+/// A latitude class as one byte: its index in [`LatitudeClass::ALL`].
+pub(crate) fn class_code(class: LatitudeClass) -> u8 {
+    LatitudeClass::ALL
+        .iter()
+        .position(|c| *c == class)
+        .unwrap_or(0) as u8
+}
+
+/// The class of [`class_code`] `c` (of profile `id`, named in the error).
+pub(crate) fn class_of_code(c: u8, id: &str) -> Result<LatitudeClass, String> {
+    LatitudeClass::ALL
+        .get(c as usize)
+        .copied()
+        .ok_or_else(|| format!("corrupt: latitude class {c} of profile {id}"))
 }
 
 fn header_of(
@@ -275,18 +329,9 @@ fn header_of(
 
 const METHODS: [Method; 3] = [Method::Ipda, Method::IpdaVirtual, Method::Dial];
 
-fn write_str(w: &mut impl Write, s: &str) -> io::Result<()> {
-    w.write_all(&(s.len() as u64).to_le_bytes())?;
-    w.write_all(s.as_bytes())
-}
-
 fn write_outcome(w: &mut impl Write, o: &ProfileOutcome) -> io::Result<()> {
     write_str(w, &o.id)?;
-    let class = LatitudeClass::ALL
-        .iter()
-        .position(|c| *c == o.class)
-        .unwrap_or(0) as u8;
-    w.write_all(&[class])?;
+    w.write_all(&[class_code(o.class)])?;
     match &o.records {
         Err(reason) => {
             w.write_all(&[1])?;
@@ -316,112 +361,114 @@ fn write_outcome(w: &mut impl Write, o: &ProfileOutcome) -> io::Result<()> {
     }
 }
 
-/// A reader of the body that refuses to read past its end.
-struct Body<'b> {
-    bytes: &'b [u8],
-    at: usize,
-}
-
-impl Body<'_> {
-    fn take(&mut self, n: usize) -> Result<&[u8], String> {
-        if n > self.bytes.len() - self.at {
-            return Err(format!(
-                "truncated or corrupt: its records end {} bytes early",
-                n - (self.bytes.len() - self.at)
-            ));
-        }
-        let s = &self.bytes[self.at..self.at + n];
-        self.at += n;
-        Ok(s)
-    }
-
-    fn u8(&mut self) -> Result<u8, String> {
-        Ok(self.take(1)?[0])
-    }
-
-    fn u64(&mut self) -> Result<u64, String> {
-        let mut a = [0u8; 8];
-        a.copy_from_slice(self.take(8)?);
-        Ok(u64::from_le_bytes(a))
-    }
-
-    fn f64(&mut self) -> Result<f64, String> {
-        Ok(f64::from_bits(self.u64()?))
-    }
-
-    fn string(&mut self) -> Result<String, String> {
-        let n = self.u64()?;
-        let n = usize::try_from(n).map_err(|_| format!("corrupt: a string of {n} bytes"))?;
-        String::from_utf8(self.take(n)?.to_vec())
-            .map_err(|_| "corrupt: a string that is not UTF-8".to_string())
-    }
-
-    fn outcome(&mut self) -> Result<ProfileOutcome, String> {
-        let id = self.string()?;
-        let c = self.u8()?;
-        let class = *LatitudeClass::ALL
-            .get(c as usize)
-            .ok_or_else(|| format!("corrupt: latitude class {c} of profile {id}"))?;
-        let records = match self.u8()? {
-            1 => Err(self.string()?),
-            0 => {
-                let n = self.u64()?;
-                // Each record takes at least this many bytes: a bound before allocating.
-                let min = 8 + 1 + 8 * (6 + N_SOURCES) as u64;
-                if n > (self.bytes.len() - self.at) as u64 / min {
-                    return Err(format!(
-                        "truncated or corrupt: {n} records of profile {id} in {} bytes",
-                        self.bytes.len() - self.at
-                    ));
+/// One profile's outcome, as [`write_outcome`] writes it.
+fn read_outcome(body: &mut Body) -> Result<ProfileOutcome, String> {
+    let id = body.string()?;
+    let class = class_of_code(body.u8()?, &id)?;
+    let records = match body.u8()? {
+        1 => Err(body.string()?),
+        0 => {
+            // Each record takes at least this many bytes: a bound before allocating.
+            let n = body.count(
+                8 + 1 + 8 * (6 + N_SOURCES),
+                &format!("records of profile {id}"),
+            )?;
+            let mut records = Vec::with_capacity(n);
+            for _ in 0..n {
+                let pair = body.string()?;
+                let m = body.u8()?;
+                let method = *METHODS
+                    .get(m as usize)
+                    .ok_or_else(|| format!("corrupt: method {m} in profile {id}"))?;
+                let mut v = [0.0; 6];
+                for x in &mut v {
+                    *x = body.f64()?;
                 }
-                let mut records = Vec::with_capacity(n as usize);
-                for _ in 0..n {
-                    let pair = self.string()?;
-                    let m = self.u8()?;
-                    let method = *METHODS
-                        .get(m as usize)
-                        .ok_or_else(|| format!("corrupt: method {m} in profile {id}"))?;
-                    let mut v = [0.0; 6];
-                    for x in &mut v {
-                        *x = self.f64()?;
-                    }
-                    let mut budget_ppm = [0.0; N_SOURCES];
-                    for x in &mut budget_ppm {
-                        *x = self.f64()?;
-                    }
-                    records.push(Record {
-                        pair,
-                        method,
-                        altitude_m: (v[0], v[1]),
-                        truth_ppm: v[2],
-                        retrieved_ppm: v[3],
-                        retrieved_noisy_ppm: v[4],
-                        retrieved_own_ppm: v[5],
-                        budget_ppm,
-                    });
+                let mut budget_ppm = [0.0; N_SOURCES];
+                for x in &mut budget_ppm {
+                    *x = body.f64()?;
                 }
-                Ok(records)
+                records.push(Record {
+                    pair,
+                    method,
+                    altitude_m: (v[0], v[1]),
+                    truth_ppm: v[2],
+                    retrieved_ppm: v[3],
+                    retrieved_noisy_ppm: v[4],
+                    retrieved_own_ppm: v[5],
+                    budget_ppm,
+                });
             }
-            s => return Err(format!("corrupt: status {s} of profile {id}")),
-        };
-        Ok(ProfileOutcome { id, class, records })
+            Ok(records)
+        }
+        s => return Err(format!("corrupt: status {s} of profile {id}")),
+    };
+    Ok(ProfileOutcome { id, class, records })
+}
+
+/// The header of a study shard file (dial or select-lines): its kind, the version that wrote
+/// it, its slice of the study's profiles, and what each profile's record in the body holds.
+pub trait StudyHeader: DeserializeOwned {
+    /// One profile's outcome, as the body holds it.
+    type Outcome: ReadOutcome;
+    /// The header's `kind`.
+    const KIND: &'static str;
+    /// The lidarsim version that wrote the shard.
+    fn lidarsim_version(&self) -> &str;
+    /// The shard's index, the shard count and the study's profiles.
+    fn shard_of(&self) -> [u64; 3];
+    /// The shard's profiles: the first, and one past the last.
+    fn held(&self) -> (u64, u64);
+}
+
+/// The outcome of one profile as a study shard's body holds it.
+pub trait ReadOutcome: Sized {
+    /// Read one from `body`; the error says what is wrong, the caller names the file.
+    fn read(body: &mut Body) -> Result<Self, String>;
+}
+
+impl ReadOutcome for ProfileOutcome {
+    fn read(body: &mut Body) -> Result<Self, String> {
+        read_outcome(body)
     }
 }
 
-/// A dial shard file read and checked.
+/// A study shard file read and checked: its header and its profiles' outcomes.
 #[derive(Debug, Clone)]
-pub struct DialShardFile {
+pub struct StudyShardFile<H: StudyHeader> {
     /// Where it was read from.
     pub path: PathBuf,
     /// Its header.
-    pub header: DialShardHeader,
+    pub header: H,
     /// Its profiles' outcomes, in profile order.
-    pub outcomes: Vec<ProfileOutcome>,
+    pub outcomes: Vec<H::Outcome>,
 }
 
-impl DialShardFile {
-    /// Read `path` and check that it is a whole dial shard file, consistent in itself.
-    pub fn read(path: &Path) -> Result<DialShardFile, ShardError> {
+/// A dial shard file read and checked.
+pub type DialShardFile = StudyShardFile<DialShardHeader>;
+
+impl<H: StudyHeader> Sharded for StudyShardFile<H> {
+    fn path(&self) -> &Path {
+        &self.path
+    }
+
+    fn version(&self) -> &str {
+        self.header.lidarsim_version()
+    }
+
+    fn spec(&self) -> ShardSpec {
+        let [index, count, _] = self.header.shard_of();
+        ShardSpec {
+            index: index as usize,
+            count: count as usize,
+        }
+    }
+}
+
+impl<H: StudyHeader> StudyShardFile<H> {
+    /// Read `path` and check that it is a whole shard file of the kind `H::KIND`, consistent
+    /// in itself.
+    pub fn read(path: &Path) -> Result<Self, ShardError> {
         let bytes = fs::read(path).map_err(|error| ShardError::Io {
             path: path.to_path_buf(),
             error,
@@ -429,65 +476,27 @@ impl DialShardFile {
         Self::parse(path, &bytes)
     }
 
-    /// [`DialShardFile::read`] on bytes already read.
-    pub fn parse(path: &Path, bytes: &[u8]) -> Result<DialShardFile, ShardError> {
+    /// [`StudyShardFile::read`] on bytes already read.
+    pub fn parse(path: &Path, bytes: &[u8]) -> Result<Self, ShardError> {
         let bad = |what: String| ShardError::Bad {
             path: path.to_path_buf(),
             what,
         };
-        let frame = Frame::parse(path, bytes, 0)?;
-        if frame.kind != KIND_DIAL {
-            return Err(bad(format!(
-                "a `{}` shard, not a dial shard (from `lidarsim dial --shard`)",
-                frame.kind
-            )));
-        }
-        let header: DialShardHeader = match serde_json::from_slice(frame.header(bytes)) {
-            Ok(h) => h,
-            Err(e) if frame.checksum_ok => {
-                return Err(bad(format!("its header cannot be read: {e}")));
-            }
-            Err(_) => {
-                return Err(bad("corrupt or truncated: its header cannot be read and its checksum does not match".into()));
-            }
-        };
+        let (frame, header): (_, H) = shard::read_header(path, bytes, 0, H::KIND)?;
         frame.check_sum(path)?;
-        let spec = header.spec();
-        let valid = header.shard_count > 0
-            && header.shard_index < header.shard_count
-            && header.shard_count <= header.profiles;
-        let range = if valid {
-            spec.batches(header.profiles as usize)
-        } else {
-            0..0
-        };
-        if !valid
-            || (header.first_profile, header.end_profile) != (range.start as u64, range.end as u64)
-        {
-            return Err(bad(format!(
-                "inconsistent header: profiles {}..{} as shard {}/{} of {} profiles",
-                header.first_profile,
-                header.end_profile,
-                header.shard_index,
-                header.shard_count,
-                header.profiles
-            )));
-        }
-        let mut body = Body {
-            bytes: &bytes[frame.body_at..frame.sum_at],
-            at: 0,
-        };
+        let range = header_slice(path, header.shard_of(), header.held())?;
+        let mut body = Body::new(&bytes[frame.body_at..frame.sum_at]);
         let mut outcomes = Vec::with_capacity(range.len().min(1 << 20));
         for _ in range {
-            outcomes.push(body.outcome().map_err(&bad)?);
+            outcomes.push(H::Outcome::read(&mut body).map_err(&bad)?);
         }
-        if body.at != body.bytes.len() {
+        if body.left() != 0 {
             return Err(bad(format!(
                 "{} bytes beyond its last profile",
-                body.bytes.len() - body.at
+                body.left()
             )));
         }
-        Ok(DialShardFile {
+        Ok(StudyShardFile {
             path: path.to_path_buf(),
             header,
             outcomes,
@@ -566,59 +575,16 @@ pub struct DialMerged {
 /// once, of the same version, scene, profile set, seed and options; the scene and the set are
 /// built again and must have the shards' digests.
 pub fn merge(paths: &[PathBuf]) -> Result<DialMerged, ShardError> {
-    let mut files: Vec<DialShardFile> = Vec::new();
-    for p in paths {
-        let f = DialShardFile::read(p)?;
-        if f.header.lidarsim_version != VERSION {
-            return Err(ShardError::Bad {
-                path: p.clone(),
-                what: format!(
-                    "written by lidarsim {}; this is lidarsim {VERSION} (shard format {FORMAT}), whose numbers may differ",
-                    f.header.lidarsim_version
-                ),
-            });
-        }
-        if let Some(first) = files.first() {
-            check_same(&first.path, &first.header, p, &f.header)?;
-        }
-        files.push(f);
-    }
-    files.sort_by_key(|f| f.header.shard_index);
-    for w in files.windows(2) {
-        if w[0].header.shard_index == w[1].header.shard_index {
-            return Err(ShardError::Duplicate {
-                spec: w[0].header.spec(),
-                a: w[0].path.clone(),
-                b: w[1].path.clone(),
-            });
-        }
-    }
-    let Some(first) = files.first() else {
-        return Err(ShardError::NoShards(paths.to_vec()));
-    };
-    let count = first.header.shard_count as usize;
-    if files.len() != count {
-        let have: Vec<usize> = files
-            .iter()
-            .map(|f| f.header.shard_index as usize)
-            .collect();
-        return Err(ShardError::Missing {
-            count,
-            missing: (0..count).filter(|i| !have.contains(i)).collect(),
-            files: files.into_iter().map(|f| f.path).collect(),
-        });
-    }
-    let h = first.header.clone();
-    let path0 = first.path.clone();
+    let files = shard::whole_set(
+        paths,
+        DialShardFile::read,
+        |a: &DialShardFile, b: &DialShardFile| check_same(&a.path, &a.header, &b.path, &b.header),
+    )?;
+    let count = files.len();
+    let h = files[0].header.clone();
+    let path0 = files[0].path.clone();
     let scene = Scene::from_toml(Path::new(&h.scene_path), &h.scene_text)?;
-    let now = shard::scene_digest(&scene);
-    if now != h.scene_digest {
-        return Err(ShardError::SceneChanged {
-            path: h.scene_path.clone(),
-            now,
-            shards: h.scene_digest.clone(),
-        });
-    }
+    shard::check_scene(&scene, &h.scene_path, &h.scene_digest)?;
     let source = match (&h.profiles_path, h.ensemble) {
         (Some(p), None) => ProfileSource::Set(PathBuf::from(p)),
         (None, Some(n)) => ProfileSource::Ensemble(n as usize),
@@ -738,12 +704,9 @@ mod tests {
         for o in &outcomes {
             write_outcome(&mut bytes, o).unwrap();
         }
-        let mut body = Body {
-            bytes: &bytes,
-            at: 0,
-        };
-        let back: Vec<ProfileOutcome> = (0..3).map(|_| body.outcome().unwrap()).collect();
-        assert_eq!(body.at, bytes.len());
+        let mut body = Body::new(&bytes);
+        let back: Vec<ProfileOutcome> = (0..3).map(|_| read_outcome(&mut body).unwrap()).collect();
+        assert_eq!(body.left(), 0);
         let bits = |o: &[ProfileOutcome]| format!("{o:?}");
         assert_eq!(bits(&back), bits(&outcomes));
         for (a, b) in back.iter().zip(&outcomes) {
@@ -756,11 +719,9 @@ mod tests {
             }
         }
         for n in 0..bytes.len() {
-            let mut body = Body {
-                bytes: &bytes[..n],
-                at: 0,
-            };
-            let r: Result<Vec<ProfileOutcome>, String> = (0..3).map(|_| body.outcome()).collect();
+            let mut body = Body::new(&bytes[..n]);
+            let r: Result<Vec<ProfileOutcome>, String> =
+                (0..3).map(|_| read_outcome(&mut body)).collect();
             assert!(r.is_err(), "{n} bytes");
         }
     }
