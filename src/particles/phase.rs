@@ -611,6 +611,14 @@ mod tests {
             let t = mu - tab.mu[i];
             let cdf = tab.cdf[i] + 0.5 * (tab.p[i] * t + 0.5 * tab.slope[i] * t * t);
             assert!((cdf - u).abs() < 1e-12, "u={u}: {cdf}");
+            // The value that comes with the sample is the table's own P(μ) there.
+            let (mu2, p_mu) = tab.sample_with_value(u);
+            assert_eq!(mu2, mu);
+            let p_eval = tab.eval(mu);
+            assert!(
+                (p_mu - p_eval).abs() <= 1e-12 * p_eval,
+                "u={u}: {p_mu} vs {p_eval}"
+            );
         }
     }
 
