@@ -657,9 +657,9 @@ impl<'a> Tracer<'a> {
         if !(g > 0.0 && g.is_finite()) {
             return false;
         }
+        let known = in_layers.then_some(layer);
         for k in 0..nch {
             let i = layer * nch + k;
-            let known = in_layers.then_some(layer);
             let (ts_new, ta_new, dts, dta) =
                 self.channel_step(k, pos.z, known, inv_mu, horizontal, s_coll, i);
             let sigma_k = atm.sigma_s_per_m[i];
@@ -761,7 +761,7 @@ impl<'a> Tracer<'a> {
         if along <= 0.0 || along < s.fov_cos_widest * d {
             return;
         }
-        let d2 = v.length_squared();
+        let d2 = d * d;
         let omega = v * (1.0 / d);
         let cos_axis = along / d;
         let Some(annulus) = self.annulus(cos_axis) else {
