@@ -1,6 +1,7 @@
 //! `run.nc` opened by real NetCDF clients (xarray and netCDF4-python, `tests/netcdf_check.py`):
 //! every number equals the CSV files beside it, and the CF attributes are there (issue 12,
-//! item 4). Without Python, xarray or netCDF4 the test prints one line and skips, except in CI
+//! item 4); so do `sensitivities.nc` of `lidarsim select-lines` and `profiles.nc` and
+//! `summary.nc` of `lidarsim dial`. Without Python, xarray or netCDF4 the test prints one line and skips, except in CI
 //! (`CI` set), where `.ci/run` installs them and their absence is a failure.
 
 use std::path::Path;
@@ -136,4 +137,53 @@ fn sensitivities_nc_holds_the_numbers_of_sensitivities_csv() {
         String::from_utf8_lossy(&check.stderr)
     );
     assert!(stdout.contains("sensitivity rows equal"), "{stdout}");
+}
+
+#[test]
+fn dial_nc_files_hold_the_numbers_of_profiles_and_summary_csv() {
+    let Some(python) = python() else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = tmp.path().join("study.toml");
+    std::fs::write(&scene, crate::study::SCENE).unwrap();
+    let out = tmp.path().join("dial");
+    // The study scene of tests/study.rs, analytic: 4 profiles of each class and the class
+    // `all`, two line pairs (text columns, fill values where a group's spread is undefined).
+    let (sc, o) = (
+        scene.to_string_lossy().into_owned(),
+        out.to_string_lossy().into_owned(),
+    );
+    lidarsim_ok([
+        "dial",
+        &sc,
+        "--ensemble",
+        "4",
+        "--on",
+        "on,side",
+        "--no-plots",
+        "--out",
+        &o,
+    ]);
+    let check = Command::new(&python)
+        .arg(project_root().join("tests/netcdf_check.py"))
+        .arg("--dial")
+        .arg(&out)
+        .output()
+        .expect("python runs");
+    let stdout = String::from_utf8_lossy(&check.stdout);
+    print!("{stdout}");
+    assert!(
+        check.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&check.stderr)
+    );
+    assert!(
+        stdout.contains("24 profile rows equal in profiles.nc"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("summary rows equal in summary.nc"),
+        "{stdout}"
+    );
 }

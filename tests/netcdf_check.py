@@ -3,7 +3,8 @@
 
 Usage: netcdf_check.py OUT_DIR SCENE_FILE [OUT_DIR SCENE_FILE ...] (`lidarsim run` outputs;
 SCENE_FILE "-" for the embedded default scene, whose text is then not compared), or
-netcdf_check.py --sensitivities OUT_DIR ... (`lidarsim select-lines`).
+netcdf_check.py --sensitivities OUT_DIR ... (`lidarsim select-lines`), or
+netcdf_check.py --dial OUT_DIR ... (`lidarsim dial` or the merge of its shards).
 
 The file is opened twice: with xarray (as users read it: CF decoding, `_FillValue` masked to
 NaN, char arrays as strings) and with netCDF4-python (the netCDF-C library's own reader, for the
@@ -209,10 +210,75 @@ def check_sensitivities(out):
     print(f"netcdf check: {out}: {len(rows)} sensitivity rows equal in sensitivities.nc")
 
 
+def check_dial_table(out, name):
+    """`lidarsim dial`: NAME.nc against NAME.csv, column by column, read by netCDF4 and by
+    xarray. The CSV prints each double as the shortest text that reads back as it (Rust's `{}`):
+    exact equality of the parsed double; `NaN` and `inf` are missing values in the file."""
+    header, rows = read_csv(f"{out}/{name}.csv")
+    path = f"{out}/{name}.nc"
+    with netCDF4.Dataset(path) as nc:
+        if nc.data_model != "NETCDF3_64BIT_OFFSET":
+            fail(f"{name}.nc: data model {nc.data_model}")
+        if nc.Conventions != "CF-1.8" or not nc.source.startswith("lidarsim ") or not nc.title:
+            fail(f"{name}.nc: global attributes")
+        if "lidarsim" not in nc.history or not nc.history[:4].isdigit():
+            fail(f"{name}.nc: history {nc.history!r}")
+        if "row" not in nc.dimensions or len(nc.dimensions["row"]) != len(rows):
+            fail(f"{name}.nc has dimensions {list(nc.dimensions)}, the CSV {len(rows)} rows")
+        if sorted(nc.variables) != sorted(header):
+            fail(f"{name}.nc has variables {sorted(nc.variables)}, the CSV {sorted(header)}")
+        raw = {}
+        for c in header:
+            v = nc.variables[c]
+            if "long_name" not in v.ncattrs() or v.dimensions[0] != "row":
+                fail(f"{name}.nc: {c} has no long_name or is not over row")
+            if v.dtype == "S1":
+                # The raw char array, decoded here (netCDF4 would decode it by `_Encoding`).
+                v.set_auto_chartostring(False)
+                chars = v[:]
+                if chars.shape[0] != len(rows):
+                    fail(f"{name}.nc: {c} has shape {chars.shape}")
+                raw[c] = [str(t) for t in netCDF4.chartostring(chars, encoding="utf-8")]
+            else:
+                units = "1e-6" if c.endswith("_ppm") else "m" if c.endswith("_m") else "1"
+                if v.getncattr("units") != units or "_FillValue" not in v.ncattrs():
+                    fail(f"{name}.nc: {c} units {v.getncattr('units')!r} (not {units!r}) or no _FillValue")
+                raw[c] = np.ma.filled(v[:].astype(np.float64), np.nan)
+    with xr.open_dataset(path) as ds:
+        decoded = {c: ds[c].values for c in header}
+    for reader, values in [("netCDF4", raw), ("xarray", decoded)]:
+        for j, c in enumerate(header):
+            for i, row in enumerate(rows):
+                v = values[c][i]
+                if isinstance(v, str):
+                    ok = v == row[j]
+                elif row[j] in ("NaN", "inf", "-inf"):
+                    ok = math.isnan(float(v))
+                else:
+                    ok = not math.isnan(float(v)) and float(row[j]) == float(v)
+                if not ok:
+                    fail(f"{name}.csv line {i + 2}, {c}: CSV {row[j]!r}, {name}.nc by {reader} {v!r}")
+    return len(rows)
+
+
+def check_dial(out):
+    """`lidarsim dial`: profiles.nc and summary.nc against profiles.csv and summary.csv."""
+    n_profiles = check_dial_table(out, "profiles")
+    n_summary = check_dial_table(out, "summary")
+    print(
+        f"netcdf check: {out}: {n_profiles} profile rows equal in profiles.nc, "
+        f"{n_summary} summary rows equal in summary.nc"
+    )
+
+
 def main(args):
     if args and args[0] == "--sensitivities":
         for out in args[1:]:
             check_sensitivities(out)
+        return
+    if args and args[0] == "--dial":
+        for out in args[1:]:
+            check_dial(out)
         return
     if len(args) % 2:
         fail("arguments: OUT_DIR SCENE pairs")

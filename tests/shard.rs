@@ -598,8 +598,9 @@ fn merge_refuses_missing_duplicated_and_other_options(
 }
 
 /// Issue 12, item 1 for ensembles: one `lidarsim dial` and the merge of 3 dial shards give
-/// byte-identical profiles.csv, summary.csv, budget.csv, failed.csv and figures, and the same
-/// summary.json but for its timing and the scene's path (absolute in shards).
+/// byte-identical profiles.csv, summary.csv, budget.csv, failed.csv and figures, the same
+/// summary.json but for its timing and the scene's path (absolute in shards), and profiles.nc
+/// and summary.nc equal in every dimension, variable, attribute and value but `history`.
 #[test]
 fn dial_shards_merge_into_the_single_studys_bytes() {
     let dir = tempfile::tempdir().unwrap();
@@ -621,10 +622,22 @@ fn dial_shards_merge_into_the_single_studys_bytes() {
         "failed.csv",
         "summary.json",
         "ensemble.png",
+        "profiles.nc",
+        "summary.nc",
     ] {
         assert!(names.contains(&f.to_string()), "{f} in {names:?}");
     }
+    assert_eq!(names, file_names(&merged));
     for name in &names {
+        if let Some(variable) = match name.as_str() {
+            "profiles.nc" => Some("spectroscopy_ppm"),
+            "summary.nc" => Some("total_budget_ppm"),
+            _ => None,
+        } {
+            let (_, history) = assert_same_netcdf(&single.join(name), &merged.join(name), variable);
+            assert!(history.contains("lidarsim merge"), "{history}");
+            continue;
+        }
         let (a, b) = (
             fs::read(single.join(name)).unwrap(),
             fs::read(merged.join(name)).unwrap(),
@@ -852,8 +865,9 @@ fn file_names(dir: &Path) -> Vec<String> {
 
 /// Two NetCDF files with the same dimensions, variables, attributes and values (each f64 by
 /// its shortest exact decimal), read by the `netcdf3` crate's reader, but for the global
-/// attribute `history` (the time and the command line). Returns the two histories.
-fn assert_same_netcdf(a: &Path, b: &Path) -> (String, String) {
+/// attribute `history` (the time and the command line); `variable` is one of them. Returns the
+/// two histories.
+fn assert_same_netcdf(a: &Path, b: &Path, variable: &str) -> (String, String) {
     let read = |p: &Path| {
         let mut r = netcdf3::FileReader::open(p).unwrap();
         let mut vars: Vec<_> = r.read_all_vars().unwrap().into_iter().collect();
@@ -867,7 +881,7 @@ fn assert_same_netcdf(a: &Path, b: &Path) -> (String, String) {
     let (hb, vb, hist_b) = read(b);
     assert_eq!(ha, hb, "{} and {}: header", a.display(), b.display());
     assert!(va == vb, "{} and {}: values", a.display(), b.display());
-    assert!(va.contains("dxco2_per_k_ppm"), "{va}");
+    assert!(va.contains(&format!("{variable:?}")), "{variable} in {va}");
     (hist_a, hist_b)
 }
 
@@ -908,7 +922,7 @@ fn select_lines_shards_merge_into_the_single_studys_bytes() {
     for name in &names {
         let (a, b) = (single.join(name), merged.join(name));
         if name == "sensitivities.nc" {
-            let (_, history) = assert_same_netcdf(&a, &b);
+            let (_, history) = assert_same_netcdf(&a, &b, "dxco2_per_k_ppm");
             assert!(history.contains("lidarsim merge"), "{history}");
         } else {
             assert!(
@@ -1101,6 +1115,7 @@ fn select_lines_shards_of_a_profile_set_and_a_line_file() {
     assert_same_netcdf(
         &single.join("sensitivities.nc"),
         &merged.join("sensitivities.nc"),
+        "dxco2_per_k_ppm",
     );
     // `--no-plots` at the merge leaves out the figures only.
     let plain = d.join("plain");

@@ -468,7 +468,8 @@ fn studies_do_not_depend_on_the_thread_count() {
     assert_eq!(run(1), run(2));
 }
 
-/// The command line: files with their headers, failed profiles listed, errors named.
+/// The command line: files with their headers (no NetCDF with `--no-netcdf`), failed profiles
+/// listed, errors named.
 #[test]
 fn dial_command_writes_its_tables() {
     let dir = tempfile::tempdir().unwrap();
@@ -485,10 +486,14 @@ fn dial_command_writes_its_tables() {
         "--on".as_ref(),
         "on,side".as_ref(),
         "--no-plots".as_ref(),
+        "--no-netcdf".as_ref(),
         "--out".as_ref(),
         out.as_os_str(),
     ]);
     assert!(stdout.contains("4 profiles"), "{stdout}");
+    for f in ["profiles.nc", "summary.nc"] {
+        assert!(!out.join(f).exists(), "{f} written despite --no-netcdf");
+    }
     let profiles = std::fs::read_to_string(out.join("profiles.csv")).unwrap();
     let mut lines = profiles.lines();
     assert!(

@@ -79,12 +79,18 @@ pub struct Args {
     /// outputs.
     #[arg(long, value_name = "I/N", value_parser = clap::value_parser!(ShardSpec))]
     pub shard: Option<ShardSpec>,
+    /// Do not write profiles.nc and summary.nc (the CF NetCDF files of profiles.csv and
+    /// summary.csv).
+    #[arg(long)]
+    pub no_netcdf: bool,
 }
 
 /// Every file `dial` may write into its directory.
-pub const FILES: [&str; 8] = [
+pub const FILES: [&str; 10] = [
     "profiles.csv",
+    dial::PROFILES_NC,
     "summary.csv",
+    dial::SUMMARY_NC,
     "budget.csv",
     "failed.csv",
     "ensemble.png",
@@ -116,7 +122,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let result =
         pool.install(|| dial::run(&inputs.scene, &inputs.set, &inputs.options, &|| bar.tick()))?;
     bar.finish();
-    write_outputs(&args.out, args.no_plots, &inputs, &result)
+    write_outputs(&args.out, args.no_plots, !args.no_netcdf, &inputs, &result)
 }
 
 /// The scene, profiles and options of a study from the command line (a shard reads the scene
@@ -198,10 +204,12 @@ fn study_inputs(args: &Args) -> anyhow::Result<StudyInputs> {
 }
 
 /// Write a study's files into `dir` (all or none) and print its report: `lidarsim dial`, and
-/// `lidarsim merge` of dial shards.
+/// `lidarsim merge` of dial shards. With `netcdf`, profiles.nc and summary.nc too (each when
+/// its CSV has rows).
 pub fn write_outputs(
     dir: &Path,
     no_plots: bool,
+    netcdf: bool,
     inputs: &StudyInputs,
     result: &StudyResult,
 ) -> anyhow::Result<()> {
@@ -210,6 +218,31 @@ pub fn write_outputs(
     let mut files = OutputSet::new();
     files.write(dir.join("profiles.csv"), profiles_csv(result))?;
     files.write(dir.join("summary.csv"), summary_csv(&summaries))?;
+    if netcdf {
+        // `args_os`: a path that is not UTF-8 must not panic here.
+        let command: Vec<String> = std::env::args_os()
+            .map(|a| a.to_string_lossy().into_owned())
+            .collect();
+        let history = format!(
+            "{}: {}",
+            lidarsim::netcdf::utc_timestamp(std::time::SystemTime::now()),
+            command.join(" ")
+        );
+        // Not the scene's path: a merge has it absolute (summary.json holds it).
+        let title = format!("lidarsim dial: retrievals over {}", set.name);
+        if result
+            .outcomes
+            .iter()
+            .any(|o| o.records.as_ref().is_ok_and(|r| !r.is_empty()))
+        {
+            let nc = dial::profiles_netcdf(&result.outcomes, &title, &history)?;
+            files.write(dir.join(dial::PROFILES_NC), nc)?;
+        }
+        if !summaries.is_empty() {
+            let nc = dial::summary_netcdf(&summaries, &title, &history)?;
+            files.write(dir.join(dial::SUMMARY_NC), nc)?;
+        }
+    }
     files.write(
         dir.join("budget.csv"),
         budget_csv(&summaries, &options.steps, scene),
@@ -237,7 +270,7 @@ pub const PROFILES_HEADER: &str = "profile_id,class,pair,method,altitude_bottom_
 fn profiles_csv(result: &StudyResult) -> String {
     let mut s = String::from(PROFILES_HEADER);
     for src in Source::ALL {
-        let _ = write!(s, ",{}_ppm", src.label());
+        let _ = write!(s, ",{}", src.column());
     }
     s.push('\n');
     for o in &result.outcomes {

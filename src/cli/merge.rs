@@ -66,6 +66,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         return super::dial::write_outputs(
             &args.out,
             args.no_plots,
+            true,
             &merged.inputs,
             &merged.result,
         );
