@@ -219,15 +219,7 @@ pub fn write_outputs(
     files.write(dir.join("profiles.csv"), profiles_csv(result))?;
     files.write(dir.join("summary.csv"), summary_csv(&summaries))?;
     if netcdf {
-        // `args_os`: a path that is not UTF-8 must not panic here.
-        let command: Vec<String> = std::env::args_os()
-            .map(|a| a.to_string_lossy().into_owned())
-            .collect();
-        let history = format!(
-            "{}: {}",
-            lidarsim::netcdf::utc_timestamp(std::time::SystemTime::now()),
-            command.join(" ")
-        );
+        let history = super::netcdf_history();
         // Not the scene's path: a merge has it absolute (summary.json holds it).
         let title = format!("lidarsim dial: retrievals over {}", set.name);
         if result

@@ -71,3 +71,16 @@ pub fn count_u32(lo: u32, hi: u32) -> impl Fn(&str) -> Result<u32, String> + Clo
 pub fn threads() -> impl Fn(&str) -> Result<usize, String> + Clone + Send + Sync {
     count_usize(0, lidarsim::limits::MAX_THREADS)
 }
+
+/// The CF `history` attribute of a NetCDF file written now: the UTC time and the command line
+/// (`args_os`, so a path that is not UTF-8 does not panic).
+pub fn netcdf_history() -> String {
+    let command: Vec<String> = std::env::args_os()
+        .map(|a| a.to_string_lossy().into_owned())
+        .collect();
+    format!(
+        "{}: {}",
+        lidarsim::netcdf::utc_timestamp(std::time::SystemTime::now()),
+        command.join(" ")
+    )
+}

@@ -307,10 +307,6 @@ fn print_retrieval(
 fn netcdf_file(scene: &Scene, run: &RunOutput, returns: &[&Returns]) -> anyhow::Result<Vec<u8>> {
     use lidarsim::netcdf;
     let scene_text = scene.text().to_string();
-    // `args_os`: a path that is not UTF-8 must not panic here.
-    let command: Vec<String> = std::env::args_os()
-        .map(|a| a.to_string_lossy().into_owned())
-        .collect();
     let title = if scene.description.is_empty() {
         scene.path.display().to_string()
     } else {
@@ -318,11 +314,7 @@ fn netcdf_file(scene: &Scene, run: &RunOutput, returns: &[&Returns]) -> anyhow::
     };
     let attributes = netcdf::RunAttributes {
         title: format!("lidarsim run: {title}"),
-        history: format!(
-            "{}: {}",
-            netcdf::utc_timestamp(std::time::SystemTime::now()),
-            command.join(" ")
-        ),
+        history: super::netcdf_history(),
         scene_file: scene.path.display().to_string(),
         scene_text,
         seed: scene.simulation.seed,

@@ -267,14 +267,7 @@ pub fn write_outputs(
     let mut files = OutputSet::new();
     files.write(dir.join("sensitivities.csv"), select::to_csv(&rows))?;
     if !rows.is_empty() {
-        let command: Vec<String> = std::env::args_os()
-            .map(|a| a.to_string_lossy().into_owned())
-            .collect();
-        let history = format!(
-            "{}: {}",
-            lidarsim::netcdf::utc_timestamp(std::time::SystemTime::now()),
-            command.join(" ")
-        );
+        let history = super::netcdf_history();
         let nc = select::to_netcdf(
             &rows,
             "lidarsim select-lines: CO2 IPDA line selection",
