@@ -49,6 +49,9 @@ pub struct Args {
     /// Probability of drawing the first collision uniformly in range (0: off).
     #[arg(long, default_value_t = lidarsim::transport::RANGE_STRATIFICATION, allow_negative_numbers = true, value_parser = super::real(Bounds::below(0.0, 1.0)))]
     pub range_stratification: f64,
+    /// Alignment splitting's reference phase-function value (0: off; `docs/transport.md`).
+    #[arg(long, default_value_t = lidarsim::transport::ALIGNMENT_SPLITTING, allow_negative_numbers = true, value_parser = super::real(Bounds::closed(0.0, 1e6)))]
+    pub alignment_splitting: f64,
     /// Score orders ≥ 2 with the cone estimate (false: ordinary local estimates only).
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     pub cone_estimate: bool,
@@ -255,6 +258,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let method = |o: &mut TransportOptions| {
         o.ddis_epsilon = args.ddis_epsilon;
         o.range_stratification = args.range_stratification;
+        o.alignment_splitting = args.alignment_splitting;
         o.cone_estimate = args.cone_estimate;
     };
     if let (Some(dir), Some(k)) = (&args.depth, args.seeds) {
@@ -325,9 +329,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         for _ in 0..args.repeat {
             let mut opts = TransportOptions::from_scene(&scene);
             opts.threads = threads;
-            opts.ddis_epsilon = args.ddis_epsilon;
-            opts.range_stratification = args.range_stratification;
-            opts.cone_estimate = args.cone_estimate;
+            method(&mut opts);
             let r = transport::run(&scene, &atm, &opts)?;
             if best.as_ref().is_none_or(|b| r.wall_s < b.wall_s) {
                 best = Some(r);

@@ -95,6 +95,7 @@ pub fn cells(scene: &Scene, r: &McResult) -> Vec<Cell> {
 pub fn plain(opts: &mut TransportOptions) {
     opts.ddis_epsilon = 0.0;
     opts.range_stratification = 0.0;
+    opts.alignment_splitting = 0.0;
     opts.cone_estimate = false;
 }
 

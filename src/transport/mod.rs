@@ -32,6 +32,11 @@ use tally::{Accumulator, TallyShape};
 pub const DDIS_EPSILON: f64 = 0.3;
 /// Default probability of drawing the first collision uniformly in range.
 pub const RANGE_STRATIFICATION: f64 = 0.5;
+/// Default reference phase-function value of alignment splitting
+/// ([`TransportOptions::alignment_splitting`]).
+pub const ALIGNMENT_SPLITTING: f64 = 1.0;
+/// Most copies alignment splitting makes of a photon at one collision.
+const ALIGNMENT_MAX_COPIES: usize = 64;
 /// DDIS is used where the scattering point is seen from the receiver within the widest field
 /// of view plus this margin [rad]: further out, a photon sent toward the receiver stays outside
 /// the fields of view (the line to the receiver keeps its angle to the axis).
@@ -115,6 +120,11 @@ pub struct TransportOptions {
     /// Probability β of drawing the first collision uniformly in range over the gated window
     /// instead of from the exponential (0 turns it off).
     pub range_stratification: f64,
+    /// Alignment splitting: where DDIS applies, a photon whose weight times the phase
+    /// function toward the receiver, w·P(Θ_rx) (P per 4π sr), exceeds twice this value is
+    /// split before it scatters into n = ⌈w·P(Θ_rx)/value⌉ copies (at most 64), each drawing
+    /// its own new direction (0 turns it off; unbiased either way).
+    pub alignment_splitting: f64,
     /// Score orders ≥ 2 in optically narrow fields of view also by the cone estimate (a last
     /// scattering drawn inside the field of view, `docs/transport.md` step 6a), not only when
     /// collisions happen to land there.
@@ -141,6 +151,7 @@ impl TransportOptions {
             progress: false,
             ddis_epsilon: DDIS_EPSILON,
             range_stratification: RANGE_STRATIFICATION,
+            alignment_splitting: ALIGNMENT_SPLITTING,
             cone_estimate: true,
             combinations: Vec::new(),
             combination_pairs: Vec::new(),
@@ -219,6 +230,9 @@ pub(crate) struct Setup<'a> {
     ddis_epsilon: f64,
     ddis_cos: f64,
     forward_peaked: Vec<bool>,
+    /// Alignment splitting's reference phase-function value (0: off) and most copies.
+    align_split: f64,
+    align_max_copies: usize,
     /// Probability β of drawing the first collision uniformly in range over the gates.
     stratify: f64,
     /// Cone estimate on (for some annulus), the annuli it serves, and the solid angle of each
@@ -581,6 +595,8 @@ impl<'a> Plan<'a> {
                 .min(std::f64::consts::PI)
                 .cos(),
             forward_peaked: vec![false; n_layers],
+            align_split: opts.alignment_splitting,
+            align_max_copies: ALIGNMENT_MAX_COPIES,
             stratify: opts.range_stratification,
             cone: false,
             cone_annuli: Vec::new(),

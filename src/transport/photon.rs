@@ -81,6 +81,8 @@ pub(crate) struct Tracer<'a> {
     cls_p: Vec<f64>,
     /// Copies made by splitting, not yet followed.
     split: Vec<PhotonCopy>,
+    /// The weights before the scattering of a photon that alignment splitting copies.
+    pre: Vec<f64>,
     pub bins: Vec<f64>,
     pub flux: Flux,
     pub stats: RunStats,
@@ -108,6 +110,7 @@ impl<'a> Tracer<'a> {
             cls_tau: vec![0.0; s.classes.len()],
             cls_p: vec![0.0; s.classes.len()],
             split: Vec::new(),
+            pre: vec![0.0; nch],
             bins: vec![0.0; s.shape.len()],
             flux: Flux::zeros(nch),
             stats: RunStats::default(),
@@ -513,15 +516,6 @@ impl<'a> Tracer<'a> {
                 self.stats.zero_weight += 1;
                 return;
             }
-            let cls = if ncls == 1 {
-                0
-            } else {
-                let j = ((rng.random::<f64>() * n_here as f64) as usize).min(n_here - 1);
-                (0..ncls)
-                    .filter(|&c| s.classes[c].sigma[layer] > 0.0)
-                    .nth(j)
-                    .unwrap_or(0)
-            };
             let mean_phase = |mu: f64| -> f64 {
                 if ncls == 1 {
                     return s.mixture_phase(layer, 0, mu);
@@ -532,44 +526,95 @@ impl<'a> Tracer<'a> {
                     .sum::<f64>()
                     / n_here as f64
             };
-            let towards_rx = ddis && rng.random::<f64>() < s.ddis_epsilon;
-            let rep = s.classes[cls].channel;
-            let c = pick_component(
-                &atm.components[layer],
-                rep,
-                s.classes[cls].sigma[layer],
-                rng,
-            );
-            let (mu_sampled, p_sampled) = atm.phases[atm.components[layer][c].phase[rep] as usize]
-                .sample_with_value(rng.random());
-            let centre = if towards_rx { omega_rx } else { dir };
-            let new_dir = rotate(centre, mu_sampled, unit_azimuth(rng));
-            if ddis {
-                let mu_s = dir.dot(new_dir);
-                // One scatterer in one class: the density sampled is the mean phase function,
-                // and its value at the sampled angle came with the sample.
-                let sampled_is_mean = ncls == 1 && atm.components[layer].len() == 1;
-                let (p0, p_rx) = match (sampled_is_mean, towards_rx) {
-                    (true, false) => (p_sampled, mean_phase(omega_rx.dot(new_dir))),
-                    (true, true) => (mean_phase(mu_s), p_sampled),
-                    _ => (mean_phase(mu_s), mean_phase(omega_rx.dot(new_dir))),
-                };
-                let q = (1.0 - s.ddis_epsilon) * p0 + s.ddis_epsilon * p_rx;
-                for k in 0..nch {
-                    let pk = if atm.grey_scattering {
-                        p0
-                    } else {
-                        s.mixture_phase(layer, k, mu_s)
-                    };
-                    self.w[k] *= pk / q;
+            // Alignment splitting: the photon's direction makes the receiver's direction
+            // likely for the next one in proportion to P(Θ_rx), and a photon that turns into
+            // the forward peak toward the receiver with a weight near 1 is the rare event
+            // behind what is left of the local estimate's spikes (validation/ms_efficiency).
+            // Such a photon is split *before* it scatters, so that the copies draw their
+            // directions independently; after the scattering they would share one.
+            let n_split = if ddis && s.align_split > 0.0 {
+                let w_max = self.w.iter().fold(0.0f64, |m, w| m.max(*w));
+                let importance = w_max * mean_phase(dir.dot(omega_rx)) / s.align_split;
+                if importance > 2.0 && self.split.len() < MAX_SPLIT_STACK {
+                    (importance.ceil() as usize)
+                        .min(s.align_max_copies)
+                        .min(MAX_SPLIT_STACK - self.split.len() + 1)
+                } else {
+                    1
                 }
-            } else if !atm.grey_scattering {
-                let p_mean = mean_phase(mu_sampled);
-                for k in 0..nch {
-                    self.w[k] *= s.mixture_phase(layer, k, mu_sampled) / p_mean;
+            } else {
+                1
+            };
+            if n_split > 1 {
+                let f = 1.0 / n_split as f64;
+                self.w.iter_mut().for_each(|w| *w *= f);
+                self.pre.copy_from_slice(&self.w);
+                self.stats.splits += (n_split - 1) as u64;
+            }
+            for j in 0..n_split {
+                if j > 0 {
+                    self.w.copy_from_slice(&self.pre);
+                }
+                let cls = if ncls == 1 {
+                    0
+                } else {
+                    let j = ((rng.random::<f64>() * n_here as f64) as usize).min(n_here - 1);
+                    (0..ncls)
+                        .filter(|&c| s.classes[c].sigma[layer] > 0.0)
+                        .nth(j)
+                        .unwrap_or(0)
+                };
+                let towards_rx = ddis && rng.random::<f64>() < s.ddis_epsilon;
+                let rep = s.classes[cls].channel;
+                let c = pick_component(
+                    &atm.components[layer],
+                    rep,
+                    s.classes[cls].sigma[layer],
+                    rng,
+                );
+                let (mu_sampled, p_sampled) = atm.phases
+                    [atm.components[layer][c].phase[rep] as usize]
+                    .sample_with_value(rng.random());
+                let centre = if towards_rx { omega_rx } else { dir };
+                let new_dir = rotate(centre, mu_sampled, unit_azimuth(rng));
+                if ddis {
+                    let mu_s = dir.dot(new_dir);
+                    // One scatterer in one class: the density sampled is the mean phase function,
+                    // and its value at the sampled angle came with the sample.
+                    let sampled_is_mean = ncls == 1 && atm.components[layer].len() == 1;
+                    let (p0, p_rx) = match (sampled_is_mean, towards_rx) {
+                        (true, false) => (p_sampled, mean_phase(omega_rx.dot(new_dir))),
+                        (true, true) => (mean_phase(mu_s), p_sampled),
+                        _ => (mean_phase(mu_s), mean_phase(omega_rx.dot(new_dir))),
+                    };
+                    let q = (1.0 - s.ddis_epsilon) * p0 + s.ddis_epsilon * p_rx;
+                    for k in 0..nch {
+                        let pk = if atm.grey_scattering {
+                            p0
+                        } else {
+                            s.mixture_phase(layer, k, mu_s)
+                        };
+                        self.w[k] *= pk / q;
+                    }
+                } else if !atm.grey_scattering {
+                    let p_mean = mean_phase(mu_sampled);
+                    for k in 0..nch {
+                        self.w[k] *= s.mixture_phase(layer, k, mu_sampled) / p_mean;
+                    }
+                }
+                if j + 1 < n_split {
+                    self.split.push(PhotonCopy {
+                        pos,
+                        dir: new_dir,
+                        path,
+                        order,
+                        w: self.w.clone(),
+                        prev: here,
+                    });
+                } else {
+                    dir = new_dir;
                 }
             }
-            dir = new_dir;
             prev = Some(here);
             self.split_heavy(pos, dir, path, order, here);
         }
