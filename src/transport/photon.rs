@@ -558,10 +558,10 @@ impl<'a> Tracer<'a> {
                 let cls = if ncls == 1 {
                     0
                 } else {
-                    let j = ((rng.random::<f64>() * n_here as f64) as usize).min(n_here - 1);
+                    let pick = ((rng.random::<f64>() * n_here as f64) as usize).min(n_here - 1);
                     (0..ncls)
                         .filter(|&c| s.classes[c].sigma[layer] > 0.0)
-                        .nth(j)
+                        .nth(pick)
                         .unwrap_or(0)
                 };
                 let towards_rx = ddis && rng.random::<f64>() < s.ddis_epsilon;
