@@ -1,4 +1,4 @@
-"""Total-to-single ratio of C.1 at 0.5 and 1 mrad: lidarsim's run (MC total over the analytic
+"""Total-to-single ratio of C.1 at every field of view: lidarsim's run (MC total over the analytic
 single scattering) against the C tracer's seeds (its total over its own single scattering,
 summed over seeds; the error is the scatter of the per-seed ratios). Usage:
 bias_check.py DIR OUT.csv, DIR holding run/returns.csv and c_*.txt."""
@@ -11,7 +11,7 @@ out_dir, out_csv = sys.argv[1], sys.argv[2]
 seeds = [f for f in sorted(glob.glob(f"{out_dir}/c_*.txt")) if open(f).read().strip()]
 if len(seeds) < 2:
     sys.exit(f"{out_dir}: fewer than two C tracer outputs")
-# lidarmc: r_m, then (single, total) per FOV half-angle 0.25 and 0.5 mrad.
+# lidarmc: r_m, then (single, total) per FOV, half-angles 0.05 to 5 mrad.
 peer = {}
 for f in seeds:
     for line in open(f):
@@ -27,7 +27,7 @@ for r in csv.DictReader(open(f"{out_dir}/run/returns.csv")):
     if r["source"] == "analytic" and r["order"] == "1":
         single[key] = float(r["energy_j"])
 rows = []
-for i, fov in enumerate([0.5, 1.0]):
+for i, fov in enumerate([0.1, 0.5, 1.0, 2.0, 5.0, 10.0]):
     zs = []
     for range_m in sorted(peer):
         depth = range_m - 1000.0
