@@ -524,8 +524,8 @@ fn ddis_is_unbiased() {
 
 /// Alignment splitting (a photon split before it scatters, by w·P(Θ_rx) of its direction)
 /// changes the variance, not the mean. Its reference set low (0.1, below P(180°) = 0.22 of HG
-/// g = 0.5) so that every collision where DDIS applies splits: multiply scattered returns
-/// agree with plain local estimates.
+/// g = 0.5) so that nearly every collision where DDIS applies splits (all with a weight above
+/// 0.9): multiply scattered returns agree with plain local estimates.
 #[test]
 fn alignment_splitting_is_unbiased() {
     let scene = scene_text(HG_CLOUD);
