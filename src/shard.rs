@@ -252,8 +252,8 @@ pub enum ShardError {
         /// What is wrong with it.
         what: String,
     },
-    /// Two shards are not slices of the same run.
-    #[error("{} and {} are not shards of the same run: {what} differs ({first} against {second})", a.display(), b.display())]
+    /// Two shards are not slices of the same run (or study: `dial`, `select-lines`).
+    #[error("{} and {} are not shards of the same run or study: {what} differs ({first} against {second})", a.display(), b.display())]
     Mismatch {
         /// The first shard read.
         a: PathBuf,
