@@ -36,7 +36,7 @@ pub const RANGE_STRATIFICATION: f64 = 0.5;
 /// ([`TransportOptions::alignment_splitting`]).
 pub const ALIGNMENT_SPLITTING: f64 = 1.0;
 /// Most copies alignment splitting makes of a photon at one collision.
-const ALIGNMENT_MAX_COPIES: usize = 64;
+pub(crate) const ALIGNMENT_MAX_COPIES: usize = 64;
 /// DDIS is used where the scattering point is seen from the receiver within the widest field
 /// of view plus this margin [rad]: further out, a photon sent toward the receiver stays outside
 /// the fields of view (the line to the receiver keeps its angle to the axis).
@@ -230,9 +230,8 @@ pub(crate) struct Setup<'a> {
     ddis_epsilon: f64,
     ddis_cos: f64,
     forward_peaked: Vec<bool>,
-    /// Alignment splitting's reference phase-function value (0: off) and most copies.
+    /// Alignment splitting's reference phase-function value (0: off).
     align_split: f64,
-    align_max_copies: usize,
     /// Probability β of drawing the first collision uniformly in range over the gates.
     stratify: f64,
     /// Cone estimate on (for some annulus), the annuli it serves, and the solid angle of each
@@ -596,7 +595,6 @@ impl<'a> Plan<'a> {
                 .cos(),
             forward_peaked: vec![false; n_layers],
             align_split: opts.alignment_splitting,
-            align_max_copies: ALIGNMENT_MAX_COPIES,
             stratify: opts.range_stratification,
             cone: false,
             cone_annuli: Vec::new(),

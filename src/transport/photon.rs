@@ -535,13 +535,7 @@ impl<'a> Tracer<'a> {
             let n_split = if ddis && s.align_split > 0.0 {
                 let w_max = self.w.iter().fold(0.0f64, |m, w| m.max(*w));
                 let importance = w_max * mean_phase(dir.dot(omega_rx)) / s.align_split;
-                if importance > 2.0 && self.split.len() < MAX_SPLIT_STACK {
-                    (importance.ceil() as usize)
-                        .min(s.align_max_copies)
-                        .min(MAX_SPLIT_STACK - self.split.len() + 1)
-                } else {
-                    1
-                }
+                self.copies(importance, 2.0, super::ALIGNMENT_MAX_COPIES)
             } else {
                 1
             };
@@ -603,14 +597,7 @@ impl<'a> Tracer<'a> {
                     }
                 }
                 if j + 1 < n_split {
-                    self.split.push(PhotonCopy {
-                        pos,
-                        dir: new_dir,
-                        path,
-                        order,
-                        w: self.w.clone(),
-                        prev: here,
-                    });
+                    self.push_copy(pos, new_dir, path, order, here);
                 } else {
                     dir = new_dir;
                 }
@@ -630,23 +617,42 @@ impl<'a> Tracer<'a> {
     #[inline]
     fn split_heavy(&mut self, pos: DVec3, dir: DVec3, path: f64, order: u32, prev: Prev) {
         let w_max = self.w.iter().fold(0.0f64, |m, w| m.max(*w));
-        if !(w_max > SPLIT_ABOVE) || self.split.len() >= MAX_SPLIT_STACK {
+        let n = self.copies(w_max, SPLIT_ABOVE, usize::MAX);
+        if n == 1 {
             return;
         }
-        let n = (w_max.ceil() as usize).min(MAX_SPLIT_STACK - self.split.len() + 1);
         let f = 1.0 / n as f64;
         self.w.iter_mut().for_each(|w| *w *= f);
         for _ in 1..n {
-            self.split.push(PhotonCopy {
-                pos,
-                dir,
-                path,
-                order,
-                w: self.w.clone(),
-                prev,
-            });
+            self.push_copy(pos, dir, path, order, prev);
         }
         self.stats.splits += (n - 1) as u64;
+    }
+
+    /// How many a photon continues as when its splitting measure is `x`: ⌈x⌉ above
+    /// `threshold`, at most `cap` and as many as the stack has room for; 1 (no splitting)
+    /// otherwise or when the stack is full (still unbiased).
+    #[inline]
+    fn copies(&self, x: f64, threshold: f64, cap: usize) -> usize {
+        if !(x > threshold) || self.split.len() >= MAX_SPLIT_STACK {
+            return 1;
+        }
+        (x.ceil() as usize)
+            .min(cap)
+            .min(MAX_SPLIT_STACK - self.split.len() + 1)
+    }
+
+    /// Stack a copy of the photon with its current weights, to be followed later.
+    #[inline]
+    fn push_copy(&mut self, pos: DVec3, dir: DVec3, path: f64, order: u32, prev: Prev) {
+        self.split.push(PhotonCopy {
+            pos,
+            dir,
+            path,
+            order,
+            w: self.w.clone(),
+            prev,
+        });
     }
 
     /// Several scattering classes: the weights of a collision at `pos` (in `layer`, reached
