@@ -55,6 +55,13 @@ pub struct Args {
     /// Score orders ≥ 2 with the cone estimate (false: ordinary local estimates only).
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     pub cone_estimate: bool,
+    /// Score orders ≥ 2 in the wider fields of view with the crossing estimate (false: the
+    /// walk's own local estimates there).
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    pub crossing_estimate: bool,
+    /// With the crossing estimate, also the DDIS crossing (false: off; `docs/transport.md`).
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    pub ddis_crossing: bool,
     /// Write the figures as JSON here as well.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -260,6 +267,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         o.range_stratification = args.range_stratification;
         o.alignment_splitting = args.alignment_splitting;
         o.cone_estimate = args.cone_estimate;
+        o.crossing_estimate = args.crossing_estimate;
+        o.ddis_crossing = args.ddis_crossing;
     };
     if let (Some(dir), Some(k)) = (&args.depth, args.seeds) {
         return super::bench_depth::scatter(dir, args.photons, first_threads, k, method);

@@ -97,6 +97,8 @@ pub fn plain(opts: &mut TransportOptions) {
     opts.range_stratification = 0.0;
     opts.alignment_splitting = 0.0;
     opts.cone_estimate = false;
+    opts.crossing_estimate = false;
+    opts.ddis_crossing = false;
 }
 
 /// Run `scene` `repeat` times with `configure`; the fastest run (least disturbed by other load).

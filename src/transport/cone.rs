@@ -24,6 +24,8 @@ pub(crate) struct Prev {
     pub path: f64,
     pub eps: f64,
     pub layer: usize,
+    /// Probability with which the cone estimate is made from here (`Setup::cone_rate`).
+    pub cone_rate: f64,
 }
 
 /// One ray of an annulus as seen from a collision: the allowed part of t and the two densities'
@@ -157,10 +159,23 @@ impl Setup<'_> {
         let omega = v / r;
         match self.cone_ray(p.pos, p.path, omega) {
             Some(ray) => {
-                ray.density(r - ray.along) / (d_omega * r * r * self.cone_annuli.len() as f64)
+                p.cone_rate * ray.density(r - ray.along)
+                    / (d_omega * r * r * self.cone_annuli.len() as f64)
             }
             None => 0.0,
         }
+    }
+
+    /// Probability that the cone estimate is made from a collision at x: 1 within
+    /// [`super::CONE_RATE_FOOTPRINTS`] footprints of the widest annulus it serves from the axis,
+    /// falling as 1/ρ beyond, where its contributions are small (Russian roulette on the
+    /// estimate, unbiased: its density carries the rate in both MIS weights).
+    pub(crate) fn cone_rate(&self, x: DVec3) -> f64 {
+        let v = x - self.receiver;
+        let along = v.dot(self.axis);
+        let rho = (v.length_squared() - along * along).max(0.0).sqrt();
+        let reach = super::CONE_RATE_FOOTPRINTS * along.abs() * self.cone_tan;
+        if rho <= reach { 1.0 } else { reach / rho }
     }
 
     /// Density (per volume) of the walk's next collision at y after the scattering at `p`, in

@@ -10,6 +10,7 @@
 //! The numbers therefore depend on the scene and the seed, never on the thread count.
 
 mod cone;
+mod crossing;
 mod photon;
 mod tally;
 
@@ -55,6 +56,9 @@ const CONE_MIN_LEG_M: f64 = 1.0;
 /// 0.5–2 mrad fields of view (radius 0.005–0.02) by up to 100 and lowers it for 5 and 10 mrad
 /// (0.05, 0.1), where enough collisions land inside the field of view anyway.
 const CONE_MAX_FOOTPRINT_TAU: f64 = 0.03;
+/// Cone estimate: made at every collision within this many footprints (of the widest annulus it
+/// serves) of the axis, and with probability falling as 1/ρ beyond.
+const CONE_RATE_FOOTPRINTS: f64 = 1.0;
 /// Cone estimate: scale of its second, wide density along the ray, in units of the distance of
 /// the collision from the ray (at least CONE_MIN_LEG_M): 1/20 rad is a forward peak's width.
 const CONE_WIDE_SCALE: f64 = 20.0;
@@ -129,6 +133,14 @@ pub struct TransportOptions {
     /// scattering drawn inside the field of view, `docs/transport.md` step 6a), not only when
     /// collisions happen to land there.
     pub cone_estimate: bool,
+    /// Score orders ≥ 2 in the fields of view the cone estimate does not serve by the crossing
+    /// estimate: at every flight from a scattering, the walk's next local estimate in expectation
+    /// over where along the flight it collides inside them (`docs/transport.md` step 6b), not
+    /// only when it happens to collide there.
+    pub crossing_estimate: bool,
+    /// Where DDIS applies, also the DDIS crossing: a direction drawn about the receiver's at
+    /// every such scattering and the crossing estimate along it (`docs/transport.md` step 6c).
+    pub ddis_crossing: bool,
     /// Linear combinations of channels to report as well (laser lines from their quadrature
     /// nodes), folded batch by batch so that their standard errors are right.
     pub combinations: Vec<Combination>,
@@ -153,6 +165,8 @@ impl TransportOptions {
             range_stratification: RANGE_STRATIFICATION,
             alignment_splitting: ALIGNMENT_SPLITTING,
             cone_estimate: true,
+            crossing_estimate: true,
+            ddis_crossing: true,
             combinations: Vec::new(),
             combination_pairs: Vec::new(),
         }
@@ -239,6 +253,15 @@ pub(crate) struct Setup<'a> {
     cone: bool,
     cone_annuli: Vec<usize>,
     annulus_sr: Vec<f64>,
+    /// Tangent of the widest cone annulus's half-angle (`Setup::cone_rate`).
+    cone_tan: f64,
+    /// Crossing estimate: the first annulus it serves (it serves the wider ones too; the number
+    /// of annuli when off), and tan² of the half-angles of the cones bounding its region (the
+    /// inner 0 when it starts at the narrowest).
+    crossing_from: usize,
+    crossing_tan2: [f64; 2],
+    /// DDIS crossing at every DDIS scattering (`photon::Tracer::score_ddis_crossing`).
+    ddis_crossing: bool,
 }
 
 /// The free-path density of one scattering class: its cumulative vertical scattering optical
@@ -599,6 +622,10 @@ impl<'a> Plan<'a> {
             cone: false,
             cone_annuli: Vec::new(),
             annulus_sr: Vec::new(),
+            cone_tan: 0.0,
+            crossing_from: 0,
+            crossing_tan2: [0.0; 2],
+            ddis_crossing: opts.ddis_crossing,
         };
         // Which layers get DDIS: a forward-peaked scatterer mixture (in any class).
         let mut setup = setup;
@@ -646,6 +673,28 @@ impl<'a> Plan<'a> {
                 .collect();
         }
         setup.cone = !setup.cone_annuli.is_empty();
+        if let Some(&a) = setup.cone_annuli.iter().max() {
+            let c = setup.fov_cos[a];
+            setup.cone_tan = (1.0 - c * c).max(0.0).sqrt() / c;
+        }
+        // The crossing estimate for every annulus wider than the cone estimate's.
+        let n_fov = setup.fov_cos.len();
+        setup.crossing_from = if opts.crossing_estimate && setup.has_layers {
+            setup.cone_annuli.iter().map(|a| a + 1).max().unwrap_or(0)
+        } else {
+            n_fov
+        };
+        if setup.crossing_from < n_fov {
+            let tan2 = |c: f64| (1.0 - c * c).max(0.0) / (c * c);
+            setup.crossing_tan2 = [
+                if setup.crossing_from == 0 {
+                    0.0
+                } else {
+                    tan2(setup.fov_cos[setup.crossing_from - 1])
+                },
+                tan2(setup.fov_cos[n_fov - 1]),
+            ];
+        }
         let setup = setup;
 
         let batches = opts.batches;

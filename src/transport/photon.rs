@@ -1,7 +1,7 @@
 //! One photon packet's life, read from top to bottom:
 //! emit → (range check → flight → surface or collision → local estimate → roulette → scatter)*.
 //!
-//! Method (DESIGN §2; `docs/methods.md` has the derivations):
+//! Method (DESIGN §2; `docs/transport.md` has the derivations, by step):
 //! * Free paths are sampled on the scattering coefficient of channel 0 when all channels
 //!   scatter alike (one scattering class, `super::scatter_classes`); all absorption, and any
 //!   small difference in scattering between channels, rides in per-channel weights (ALIS,
@@ -26,8 +26,13 @@
 //!   ΔE_k = w_k e^{−τ_k} · ρ_k cos θ_s/π · cos θ_r/d² · e^{−τ_k(S→receiver)}; the telescope area,
 //!   optical efficiency and pulse energy per photon multiply in once, when a batch is folded.
 //! * Cone estimate for the narrow fields of view (`super::cone`, `docs/transport.md` step 6a):
-//!   at every collision one more flight and scattering drawn into a FOV annulus, scored as the
-//!   next order and combined with the walk's own local estimates there by the balance heuristic.
+//!   at a collision (always near the axis, with probability falling as 1/ρ farther out) one more
+//!   flight and scattering drawn into a FOV annulus, scored as the next order and combined with
+//!   the walk's own local estimates there by the balance heuristic.
+//! * Crossing estimate for the wider ones (`super::crossing`, step 6b): at every flight from a
+//!   scattering, the local estimate of the collision that ends it, in expectation over where
+//!   along the flight it falls inside them; and at every DDIS scattering the same along one more
+//!   direction drawn about the receiver's (step 6c), the two combined by the balance heuristic.
 //! * Russian roulette below a weight of 1e-2 (survivors continue at 5e-2).
 
 use std::f64::consts::PI;
@@ -63,6 +68,8 @@ struct PhotonCopy {
     w: Vec<f64>,
     /// The scattering that made it (at `pos`).
     prev: Prev,
+    /// Its crossing estimate's MIS factor ([`Tracer::cross_mis`]).
+    cross_mis: f64,
 }
 
 /// Per-batch state: buffers reused by every photon of the batch.
@@ -84,6 +91,11 @@ pub(crate) struct Tracer<'a> {
     /// The weights before the scattering of a photon that alignment splitting copies.
     pre: Vec<f64>,
     pub bins: Vec<f64>,
+    /// Factor of the next flight's crossing estimate: its MIS weight against the DDIS crossing
+    /// made at the scattering that started it (1 where there was none).
+    cross_mis: f64,
+    /// Scratch: the weights of a DDIS crossing.
+    virt: Vec<f64>,
     pub flux: Flux,
     pub stats: RunStats,
     shape: TallyShape,
@@ -112,6 +124,8 @@ impl<'a> Tracer<'a> {
             split: Vec::new(),
             pre: vec![0.0; nch],
             bins: vec![0.0; s.shape.len()],
+            cross_mis: 1.0,
+            virt: vec![0.0; nch],
             flux: Flux::zeros(nch),
             stats: RunStats::default(),
             shape: s.shape,
@@ -134,9 +148,11 @@ impl<'a> Tracer<'a> {
         // Emit: from the receiver position into the divergence cone around the axis.
         let dir = self.s.emit_direction(rng.random(), rng.random());
         self.w.iter_mut().for_each(|w| *w = 1.0);
+        self.cross_mis = 1.0;
         self.follow(self.s.receiver, dir, 0.0, 0, None, rng);
         while let Some(copy) = self.split.pop() {
             self.w.copy_from_slice(&copy.w);
+            self.cross_mis = copy.cross_mis;
             // Copies are made right after a scattering at their position.
             self.follow(
                 copy.pos,
@@ -147,6 +163,12 @@ impl<'a> Tracer<'a> {
                 rng,
             );
         }
+    }
+
+    /// Largest channel weight.
+    #[inline]
+    fn w_max(&self) -> f64 {
+        self.w.iter().fold(0.0f64, |m, w| m.max(*w))
     }
 
     /// Follow a photon (weights in `self.w`) from `pos` along `dir` after a path `path` and
@@ -194,28 +216,25 @@ impl<'a> Tracer<'a> {
             let horizontal = mu.abs() <= HORIZONTAL;
             // Slant factor 1/|μ| (unused, infinite, when horizontal): one division per flight.
             let inv_mu = 1.0 / mu.abs();
-            let (s_bound, boundary) = if mu > HORIZONTAL {
-                ((s.top_m - pos.z).max(0.0) / mu, End::Top)
-            } else if mu < -HORIZONTAL {
-                let end = if s.surface.is_some() {
-                    End::Surface
-                } else {
-                    End::Bottom
-                };
-                ((s.bottom_m - pos.z).min(0.0) / mu, end)
-            } else {
-                (f64::INFINITY, End::Top)
-            };
-            // Ellipsoid with foci at the photon and the receiver: path + s + |rx − x(s)| = 2 r_end.
-            // s = (b² − d0²)/(2(b − ω·(rx − x))), the denominator > 0 as b > d0: compared with
-            // the boundary's distance before dividing, so that only flights the cut ends divide.
-            let range_num = budget * budget - d0 * d0;
-            let range_den = 2.0 * (budget - dir.dot(to_rx));
-            let (s_end, end) = if range_num < s_bound * range_den {
-                (range_num / range_den, End::Cut)
-            } else {
-                (s_bound, boundary)
-            };
+            let (s_end, end) = s.useful_length(pos, dir, budget, (to_rx, d0));
+
+            // Crossing estimate: from a scattering, the next collision's local estimate in the
+            // fields of view it serves, in expectation over where along this flight the
+            // collision falls inside them; the walk's own collision then does not score there.
+            let crossing = prev.is_some()
+                && !horizontal
+                && s.classes.len() == 1
+                && s.crossing_from < self.shape.n_fov
+                && self.score_crossing(
+                    pos,
+                    dir,
+                    inv_mu,
+                    path,
+                    order + 1,
+                    s_end,
+                    self.cross_mis,
+                    rng,
+                );
 
             // Scattering optical depth of the flight for each class (class 0: channel 0's).
             let inside = pos.z >= s.bottom_m && pos.z <= s.top_m && s.has_layers;
@@ -288,6 +307,7 @@ impl<'a> Tracer<'a> {
                     order += 1;
                     self.stats.surface_reflections += 1;
                     prev = None;
+                    self.cross_mis = 1.0;
                     self.set_altitude(pos.z);
                     dir = lambertian(rng.random(), rng.random());
                     if !self.roulette(rng) {
@@ -472,6 +492,7 @@ impl<'a> Tracer<'a> {
                 path,
                 eps: if ddis { s.ddis_epsilon } else { 0.0 },
                 layer,
+                cone_rate: if s.cone { s.cone_rate(pos) } else { 0.0 },
             };
 
             // Local estimate toward the receiver, every field of view; with the cone estimate,
@@ -485,6 +506,11 @@ impl<'a> Tracer<'a> {
                 order,
                 layer,
                 if s.cone { prev.as_ref() } else { None },
+                if crossing {
+                    s.crossing_from
+                } else {
+                    self.shape.n_fov
+                },
             );
             if s.cone {
                 self.score_cone(&here, order, rng);
@@ -533,8 +559,7 @@ impl<'a> Tracer<'a> {
             // Such a photon is split *before* it scatters, so that the copies draw their
             // directions independently; after the scattering they would share one.
             let n_split = if ddis && s.align_split > 0.0 {
-                let w_max = self.w.iter().fold(0.0f64, |m, w| m.max(*w));
-                let importance = w_max * mean_phase(dir.dot(omega_rx)) / s.align_split;
+                let importance = self.w_max() * mean_phase(dir.dot(omega_rx)) / s.align_split;
                 self.copies(importance, 2.0, super::ALIGNMENT_MAX_COPIES)
             } else {
                 1
@@ -545,10 +570,19 @@ impl<'a> Tracer<'a> {
                 self.pre.copy_from_slice(&self.w);
                 self.stats.splits += (n_split - 1) as u64;
             }
+            // DDIS crossing: one more direction drawn about the receiver's, as DDIS draws it,
+            // and the crossing estimate along it, combined with the walk's own crossing estimate
+            // on its next flight by the balance heuristic over their direction densities.
+            // Each copy of alignment splitting makes its own, with its own weight.
+            let ddis_crossing =
+                ddis && s.ddis_crossing && ncls == 1 && s.crossing_from < self.shape.n_fov;
+            self.cross_mis = 1.0;
             for j in 0..n_split {
                 if j > 0 {
                     self.w.copy_from_slice(&self.pre);
                 }
+                let virtual_done = ddis_crossing
+                    && self.score_ddis_crossing(pos, dir, omega_rx, path, order, layer, rng);
                 let cls = if ncls == 1 {
                     0
                 } else {
@@ -590,6 +624,8 @@ impl<'a> Tracer<'a> {
                         };
                         self.w[k] *= pk / q;
                     }
+                    // Against the DDIS crossing made here, whose direction density is P(Θ_rx).
+                    self.cross_mis = if virtual_done { q / (q + p_rx) } else { 1.0 };
                 } else if !atm.grey_scattering {
                     let p_mean = mean_phase(mu_sampled);
                     for k in 0..nch {
@@ -652,6 +688,7 @@ impl<'a> Tracer<'a> {
             order,
             w: self.w.clone(),
             prev,
+            cross_mis: self.cross_mis,
         });
     }
 
@@ -794,7 +831,8 @@ impl<'a> Tracer<'a> {
     }
 
     /// Local estimate from a collision at `x` in `layer` of a photon travelling along `dir`;
-    /// `(v, d)`: rx − x and its length.
+    /// `(v, d)`: rx − x and its length. Annuli from `skip_from` on are left out (the crossing
+    /// estimate of the flight that ends here scored them).
     #[allow(clippy::too_many_arguments)]
     fn score_collision(
         &mut self,
@@ -805,6 +843,7 @@ impl<'a> Tracer<'a> {
         order: u32,
         layer: usize,
         mis: Option<&Prev>,
+        skip_from: usize,
     ) {
         let s = self.s;
         // Outside the widest field of view: (x − rx)·axis < cos α_max · d.
@@ -815,7 +854,7 @@ impl<'a> Tracer<'a> {
         let d2 = d * d;
         let omega = v * (1.0 / d);
         let cos_axis = along / d;
-        let Some(annulus) = self.annulus(cos_axis) else {
+        let Some(annulus) = self.annulus(cos_axis).filter(|a| *a < skip_from) else {
             return;
         };
         let Some(gate) = self.gate(path + d) else {
@@ -854,6 +893,175 @@ impl<'a> Tracer<'a> {
         }
     }
 
+    /// Crossing estimate (`docs/transport.md` step 6b): the local estimate of the collision
+    /// that ends the flight from `pos` along `dir` (slant factor `inv_mu`, useful length
+    /// `s_end`, after a path `path`; the collision's order `order`), in the annuli the
+    /// crossing estimate serves, as its expected value over where along the flight the
+    /// collision falls inside them. The walk's collision density along the flight is
+    /// w σ_s e^{−τ(s)} whatever the forced-collision and surface branches made of it; over the
+    /// parts [a, b] of the flight inside the annuli its mass is P = Σ e^{−τ(a)} − e^{−τ(b)}
+    /// (class 0), so one point y drawn from the exponential truncated to them, scored with
+    /// weight w_k P e^{−τ_a,k} (and ALIS's scattering ratio), has the walk's local estimate
+    /// there as its expectation. Every flight that crosses a field of view thus scores, not
+    /// only the fraction P of them that collide inside it. True if the flight was estimated
+    /// (the walk's own collision then leaves these annuli out).
+    #[allow(clippy::too_many_arguments)]
+    #[inline(never)]
+    fn score_crossing(
+        &mut self,
+        pos: DVec3,
+        dir: DVec3,
+        inv_mu: f64,
+        path: f64,
+        order: u32,
+        s_end: f64,
+        scale: f64,
+        rng: &mut Rng,
+    ) -> bool {
+        let s = self.s;
+        let atm = s.atm;
+        let mu = dir.z;
+        let spans = s.crossing_spans(pos, dir, s_end);
+        let t0 = self.ts[s.classes[0].channel];
+        let tau_at = |sv: f64| (s.class_tau_at(0, pos.z + mu * sv) - t0).abs() * inv_mu;
+        // Per span: τ at its start, 1 − e^{−Δτ} across it, and its mass e^{−τ_a}(1 − e^{−Δτ}).
+        let mut parts = [(0.0, 0.0, 0.0); 2];
+        let mut total = 0.0;
+        for (part, (a, b)) in parts.iter_mut().zip(spans) {
+            if b > a {
+                let ta = tau_at(a);
+                let p_span = one_minus_exp_neg((tau_at(b) - ta).max(0.0));
+                let mass = (-ta).exp() * p_span;
+                *part = (ta, p_span, mass);
+                total += mass;
+            }
+        }
+        if !(total > 0.0) {
+            // Nothing scatters inside: the walk's collision cannot land there either.
+            return true;
+        }
+        let i = usize::from(parts[0].2 < rng.random::<f64>() * total);
+        let (ta, p_span, _) = parts[i];
+        let (a, b) = spans[i];
+        let tau_star = ta - (1.0 - rng.random::<f64>() * p_span).ln();
+        let (z, layer) = s.altitude_at_tau(0, t0, mu, tau_star);
+        let s_y = ((z - pos.z).abs() * inv_mu).clamp(a, b);
+        let y = pos + dir * s_y;
+        // The receiver as seen from y.
+        let v = s.receiver - y;
+        let d = v.length();
+        let along = -v.dot(s.axis);
+        if along <= 0.0 || along < s.fov_cos_widest * d {
+            return true;
+        }
+        let cos_axis = along / d;
+        let Some(annulus) = self.annulus(cos_axis).filter(|a| *a >= s.crossing_from) else {
+            return true;
+        };
+        let Some(gate) = self.gate(path + s_y + d) else {
+            return true;
+        };
+        let omega = v * (1.0 / d);
+        let mu_s = dir.dot(omega);
+        let grey = atm.grey_scattering;
+        let nch = self.w.len();
+        let i0 = layer * nch;
+        let p_ref = if grey {
+            s.mixture_phase(layer, 0, mu_s)
+        } else {
+            1.0
+        };
+        let geometric = scale * total * p_ref * (0.25 / PI) * cos_axis / (d * d);
+        let base = self.shape.base(gate, s.order_bin(order), annulus);
+        for k in 0..nch {
+            if self.w[k] == 0.0 {
+                continue;
+            }
+            let (ts_y, ta_y) = atm.cumulative_tau_in(layer, y.z, k);
+            let mut f = exp_neg((ta_y - self.ta[k]).abs() * inv_mu);
+            if !grey {
+                let dts = (ts_y - self.ts[k]).abs() * inv_mu;
+                f *= atm.sigma_s_per_m[i0 + k] / atm.sigma_s_per_m[i0]
+                    * (-(dts - tau_star)).exp()
+                    * s.mixture_phase(layer, k, mu_s);
+            }
+            let tau = s.tau_to_receiver(y.z, omega.z, d, layer, k, ts_y + ta_y);
+            self.bins[base + k] += self.w[k] * f * geometric * (-tau).exp();
+        }
+        true
+    }
+
+    /// DDIS crossing (`docs/transport.md` step 6c): at a collision at `pos` (photon arriving
+    /// along `dir`, receiver direction `omega_rx`, after `path` and `order` scatterings, in
+    /// `layer`), a direction ω drawn from the phase function centred on the receiver's
+    /// direction, density P(ω_rx·ω) per 4π, and the crossing estimate of the flight along it,
+    /// weighted w_k P_k(Θ)/(q + P(ω_rx·ω)) with q the walk's own direction density (DDIS's
+    /// mixture): the balance heuristic, whose partner is the walk's crossing estimate on its
+    /// next flight, weighted q/(q + P(ω_rx·ω')) at its direction ω' ([`Tracer::cross_mis`]).
+    /// The walk turns toward the receiver at a fraction ε of its DDIS scatterings; this estimate
+    /// does at every one, without changing the walk. False if the flight would end at once.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(never)]
+    fn score_ddis_crossing(
+        &mut self,
+        pos: DVec3,
+        dir: DVec3,
+        omega_rx: DVec3,
+        path: f64,
+        order: u32,
+        layer: usize,
+        rng: &mut Rng,
+    ) -> bool {
+        let s = self.s;
+        let atm = s.atm;
+        let to_rx = s.receiver - pos;
+        let d0 = to_rx.length();
+        let budget = 2.0 * s.r_end_m - path;
+        if d0 >= budget {
+            return false;
+        }
+        let rep = s.classes[0].channel;
+        let c = pick_component(&atm.components[layer], rep, s.classes[0].sigma[layer], rng);
+        let (mu_sampled, p_sampled) = atm.phases[atm.components[layer][c].phase[rep] as usize]
+            .sample_with_value(rng.random());
+        let omega = rotate(omega_rx, mu_sampled, unit_azimuth(rng));
+        if omega.z.abs() <= HORIZONTAL {
+            return true;
+        }
+        let single = atm.components[layer].len() == 1;
+        let mu_in = dir.dot(omega);
+        let p_b = if single {
+            p_sampled
+        } else {
+            s.mixture_phase(layer, 0, omega_rx.dot(omega))
+        };
+        let p0 = s.mixture_phase(layer, 0, mu_in);
+        let q = (1.0 - s.ddis_epsilon) * p0 + s.ddis_epsilon * p_b;
+        let norm = 1.0 / (q + p_b);
+        for k in 0..self.w.len() {
+            let pk = if atm.grey_scattering {
+                p0
+            } else {
+                s.mixture_phase(layer, k, mu_in)
+            };
+            self.virt[k] = self.w[k] * pk * norm;
+        }
+        let (s_end, _) = s.useful_length(pos, omega, budget, (to_rx, d0));
+        std::mem::swap(&mut self.w, &mut self.virt);
+        self.score_crossing(
+            pos,
+            omega,
+            1.0 / omega.z.abs(),
+            path,
+            order + 1,
+            s_end,
+            1.0,
+            rng,
+        );
+        std::mem::swap(&mut self.w, &mut self.virt);
+        true
+    }
+
     /// Cone estimate (a double local estimate, Marchuk et al. 1980, with the last point drawn
     /// inside the fields of view; `cone` module): the order-(n + 1) return of a photon that has
     /// just collided for the n-th time at x (`p`), as the expected value over one more flight
@@ -863,6 +1071,7 @@ impl<'a> Tracer<'a> {
     /// is weighted against the walk's own collisions by the balance heuristic: f_k/(p_cone +
     /// p_walk) with p_cone = p_t/(ΔΩ r²). Every collision thus contributes to every field of
     /// view, however narrow, instead of only the rare ones that land inside it.
+    #[inline(never)]
     fn score_cone(&mut self, p: &Prev, order: u32, rng: &mut Rng) {
         let s = self.s;
         let atm = s.atm;
@@ -873,6 +1082,10 @@ impl<'a> Tracer<'a> {
         if !s.has_layers
             || (0..nch).all(|k| (self.ts[k] + self.ta[k] - s.tau_rx[k]).abs() > super::DDIS_MAX_TAU)
         {
+            return;
+        }
+        // Russian roulette on the estimate far from the axis (its rate is in p_cone).
+        if p.cone_rate < 1.0 && rng.random::<f64>() >= p.cone_rate {
             return;
         }
         let grey = atm.grey_scattering;
@@ -909,7 +1122,7 @@ impl<'a> Tracer<'a> {
         if atm.components[layer_y].is_empty() {
             return;
         }
-        let p_cone = ray.density(t) / (d_omega * r * r * n_cone as f64);
+        let p_cone = p.cone_rate * ray.density(t) / (d_omega * r * r * n_cone as f64);
         let p_walk = s.walk_density(p, y, layer_y);
         // f_k/(p_cone + p_walk), the geometric part of f_k: cos θ/(l² r²) and the 1/4π².
         let factor = ct / (l2 * r * r) * (0.25 / PI) * (0.25 / PI) / (p_cone + p_walk);
@@ -1088,6 +1301,42 @@ fn lambertian(u1: f64, u2: f64) -> DVec3 {
 }
 
 impl Setup<'_> {
+    /// The useful part of a flight from `pos` along `dir` with `budget` = 2 r_end − path left,
+    /// `(to_rx, d0)` = rx − pos and its length (d0 < budget), and where it ends: at the top of
+    /// the atmosphere, its bottom or the surface, or on the ellipsoid with foci at the photon
+    /// and the receiver beyond which no gate can receive it (path + s + |rx − x(s)| = 2 r_end).
+    #[inline]
+    pub(crate) fn useful_length(
+        &self,
+        pos: DVec3,
+        dir: DVec3,
+        budget: f64,
+        (to_rx, d0): (DVec3, f64),
+    ) -> (f64, End) {
+        let mu = dir.z;
+        let (s_bound, boundary) = if mu > HORIZONTAL {
+            ((self.top_m - pos.z).max(0.0) / mu, End::Top)
+        } else if mu < -HORIZONTAL {
+            let end = if self.surface.is_some() {
+                End::Surface
+            } else {
+                End::Bottom
+            };
+            ((self.bottom_m - pos.z).min(0.0) / mu, end)
+        } else {
+            (f64::INFINITY, End::Top)
+        };
+        // s = (b² − d0²)/(2(b − ω·(rx − x))), the denominator > 0 as b > d0: compared with the
+        // boundary's distance before dividing, so that only flights the cut ends divide.
+        let range_num = budget * budget - d0 * d0;
+        let range_den = 2.0 * (budget - dir.dot(to_rx));
+        if range_num < s_bound * range_den {
+            (range_num / range_den, End::Cut)
+        } else {
+            (s_bound, boundary)
+        }
+    }
+
     /// A direction inside the beam's divergence around the axis.
     pub(crate) fn emit_direction(&self, u1: f64, u2: f64) -> DVec3 {
         if self.beam_half_angle_rad == 0.0 {
