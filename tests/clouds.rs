@@ -128,3 +128,115 @@ phase = {{ kind = "henyey_greenstein", g = {g} }}
         );
     }
 }
+
+/// Chandrasekhar's H-function of isotropic scattering with single-scattering albedo ϖ < 1, from
+/// its nonlinear integral equation in the form (Chandrasekhar 1950, Radiative Transfer, §V.39)
+///   1/H(μ) = √(1 − ϖ) + (ϖ/2) ∫₀¹ μ' H(μ')/(μ + μ') dμ',
+/// iterated on 64 Gauss-Legendre nodes of [0, 1]: H at μ, and its zeroth moment ∫₀¹ H dμ.
+/// Independent of the transport.
+fn chandrasekhar_h(omega0: f64, mu: f64) -> (f64, f64) {
+    let n = 64;
+    // Gauss-Legendre nodes and weights on [−1, 1] by Newton on P_n, mapped to [0, 1].
+    let mut x = vec![0.0; n];
+    let mut w = vec![0.0; n];
+    for i in 0..n {
+        let mut z = (std::f64::consts::PI * (i as f64 + 0.75) / (n as f64 + 0.5)).cos();
+        for _ in 0..100 {
+            let (mut p0, mut p1) = (1.0, z);
+            for k in 2..=n {
+                let p2 = ((2 * k - 1) as f64 * z * p1 - (k - 1) as f64 * p0) / k as f64;
+                p0 = p1;
+                p1 = p2;
+            }
+            let dp = n as f64 * (z * p1 - p0) / (z * z - 1.0);
+            let dz = p1 / dp;
+            z -= dz;
+            if dz.abs() < 1e-15 {
+                w[i] = 2.0 / ((1.0 - z * z) * dp * dp);
+                break;
+            }
+        }
+        x[i] = 0.5 * (z + 1.0);
+        w[i] *= 0.5;
+    }
+    let inv_h = |h: &[f64], m: f64| -> f64 {
+        (1.0 - omega0).sqrt()
+            + 0.5 * omega0 * (0..n).map(|j| w[j] * x[j] * h[j] / (m + x[j])).sum::<f64>()
+    };
+    let mut h = vec![1.0; n];
+    for _ in 0..20_000 {
+        let next: Vec<f64> = x.iter().map(|&m| 1.0 / inv_h(&h, m)).collect();
+        let change = next
+            .iter()
+            .zip(&h)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        h = next;
+        if change < 1e-14 {
+            break;
+        }
+    }
+    let moment = (0..n).map(|j| w[j] * h[j]).sum();
+    (1.0 / inv_h(&h, mu), moment)
+}
+
+/// The H-function above has the zeroth moment its equation implies exactly,
+/// ∫₀¹ H dμ = 2(1 − √(1 − ϖ))/ϖ (Chandrasekhar 1950, §V.39), to rounding. (The iteration
+/// does not converge for ϖ = 1, which the test below does not need.)
+#[test]
+fn chandrasekhar_h_has_its_exact_moment() {
+    for omega0 in [0.5, 0.9, 0.99] {
+        let (_, m) = chandrasekhar_h(omega0, 1.0);
+        let exact = 2.0 * (1.0 - (1.0 - omega0).sqrt()) / omega0;
+        assert!((m - exact).abs() < 1e-12, "ϖ {omega0}: {m} against {exact}");
+    }
+}
+
+/// A lidar 1000 km above a semi-infinite cloud of isotropic scatterers (single-scattering
+/// albedo 0.9, extinction 40 km⁻¹, 3 km deep: 120 optical depths), with a field of view (2.5
+/// km radius at the cloud) that sees the whole spot, receives over all gates the energy the
+/// cloud's reflection function gives (Chandrasekhar 1950, §IV.27; the bidirectional
+/// reflectance is R(μ, μ₀)/π with R(μ, μ₀) = (ϖ/4) H(μ) H(μ₀)/(μ + μ₀) for isotropic
+/// scattering): E = E₀ A/r² · R(1, 1)/π at normal incidence and view, r the distance to the
+/// cloud top. Every order of scattering, the crossing estimate and the range gating together
+/// against a closed form; the gates reach 1.5 km of apparent depth, where what is still to
+/// come is below e^{−(1−ϖ)σ·3 km} ≈ 6e-6 of it. (Runs of 4e5 photons, with and without the
+/// crossing estimate, fell within 0.13–0.29 % of it, z −1.8 to 0.8.)
+#[test]
+fn semi_infinite_isotropic_cloud_reflects_chandrasekhar_h() {
+    let scene = scene_text(
+        &FAR_CLOUD
+            .replace("end_m = 1000300.0", "end_m = 1001500.0")
+            .replace("width_m = 15.0", "width_m = 50.0")
+            .replace("top_m = 600.0", "top_m = 3000.0")
+            .replace("altitude_m = 1000600.0", "altitude_m = 1003000.0")
+            .replace(
+                "single_scattering_albedo = 1.0",
+                "single_scattering_albedo = 0.9",
+            )
+            .replace(
+                r#"phase = { kind = "henyey_greenstein", g = 0.85 }"#,
+                r#"phase = { kind = "isotropic" }"#,
+            )
+            .replace("ABSORPTION", ""),
+    );
+    let r = run(&scene, 400_000, |_| {});
+    let n = r.returns.range_m.len();
+    let total: f64 = (0..n)
+        .map(|g| r.returns.energy(0, 0, g, Order::Total).unwrap())
+        .sum();
+    // Gates share photons: the error of the sum is at most the sum of the errors.
+    let bound: f64 = (0..n)
+        .map(|g| r.returns.stderr(0, 0, g, Order::Total).unwrap())
+        .sum();
+    let (h1, _) = chandrasekhar_h(0.9, 1.0);
+    let reflection = 0.9 / 4.0 * h1 * h1 / 2.0;
+    let area = std::f64::consts::PI * 0.25;
+    let expected = area / (1.0e6f64).powi(2) * reflection / std::f64::consts::PI;
+    eprintln!("received {total:.5e} (± {bound:.1e} at most), Chandrasekhar {expected:.5e}");
+    assert!(bound < 0.01 * expected, "error bound {bound:e} too wide");
+    assert!(
+        (total - expected).abs() < 3.0 * bound + 1e-3 * expected,
+        "received {total:e} ± {bound:e}, expected {expected:e}"
+    );
+}

@@ -561,12 +561,38 @@ fn cone_estimate_is_unbiased() {
     multiple_scattering_agrees(&plain, &cone);
 }
 
-/// Plain local estimates: no DDIS (and so no alignment splitting), no cone estimate; the
-/// reference the variance reductions are checked against.
+/// The crossing estimate (the walk's next local estimate in expectation over where along the
+/// flight it collides inside the fields of view) and the DDIS crossing (the same along a
+/// direction drawn about the receiver's at every DDIS scattering, combined with the walk's by
+/// the balance heuristic) change the variance, not the mean: alone (no cone estimate, so they
+/// serve both fields of view) and with the cone estimate at its rate (it serves the 1 mrad
+/// field of view, they the 20 mrad one), multiply scattered returns agree with plain local
+/// estimates.
+#[test]
+fn crossing_estimates_are_unbiased() {
+    // 20 mrad: a footprint of optical depth 0.07, beyond the cone estimate's 0.03.
+    let scene = scene_text(&HG_CLOUD.replace("[1.0, 5.0]", "[1.0, 20.0]"));
+    let plain = run(&scene, 400_000, |o| {
+        plain_local_estimates(o);
+        o.range_stratification = 0.0;
+    });
+    let crossing = run(&scene, 100_000, |o| {
+        o.cone_estimate = false;
+        o.seed = 5
+    });
+    multiple_scattering_agrees(&plain, &crossing);
+    let both = run(&scene, 100_000, |o| o.seed = 6);
+    multiple_scattering_agrees(&plain, &both);
+}
+
+/// Plain local estimates: no DDIS (and so no alignment splitting or DDIS crossing), no cone or
+/// crossing estimate; the reference the variance reductions are checked against.
 fn plain_local_estimates(o: &mut TransportOptions) {
     o.ddis_epsilon = 0.0;
     o.alignment_splitting = 0.0;
     o.cone_estimate = false;
+    o.crossing_estimate = false;
+    o.ddis_crossing = false;
 }
 
 /// Orders 2, 3, 4+ and the total of two runs of one scene agree within 4.5 combined standard
