@@ -6,6 +6,7 @@
 
 pub mod cache;
 pub mod distribution;
+pub mod matrix;
 pub mod mie;
 pub mod opac;
 pub mod phase;
