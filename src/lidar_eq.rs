@@ -17,8 +17,9 @@
 //! half-angle β.
 
 use crate::optics::OpticalAtmosphere;
+use crate::particles::matrix::{MatrixElements, ScatteringMatrix};
 use crate::returns::{Order, Returns, Source};
-use crate::scene::{BeamProfile, Lidar, Scene};
+use crate::scene::{BeamProfile, Lidar, Polarisation, Scene};
 
 /// Geometric overlap of the beam with a field of view (full angles in mrad).
 pub fn overlap(lidar: &Lidar, fov_full_angle_mrad: f64) -> f64 {
@@ -56,6 +57,61 @@ const GL_W: [f64; 4] = [
 
 /// Single-scatter returns of a scene (analytic; `stderr_j` = 0).
 pub fn single_scatter(scene: &Scene, atm: &OpticalAtmosphere) -> Returns {
+    single_scatter_of(scene, atm, backscatter_phase, 1.0)
+}
+
+/// The co- and cross-polarised parts of the single-scatter returns of a scene whose lidar
+/// emits polarised light (`None` for unpolarised light). From the scattering matrices at 180°,
+/// σ-weighted over a layer's scatterers (`docs/transport.md`, "Polarisation"): for linearly
+/// polarised light co = (F₁₁ + 2F₁₂ + F₂₂)/2 and cross = (F₁₁ − F₂₂)/2, for circular light
+/// co = (F₁₁ − F₄₄)/2 and cross = (F₁₁ + F₄₄)/2, in place of the phase function F₁₁(180°);
+/// a Lambertian surface returns half of its echo each way.
+pub fn single_scatter_polarised(
+    scene: &Scene,
+    atm: &OpticalAtmosphere,
+) -> Option<(Returns, Returns)> {
+    let circular = match scene.lidar.polarisation {
+        Polarisation::None => return None,
+        Polarisation::Linear => false,
+        Polarisation::Circular => true,
+    };
+    let part = |cross: bool| {
+        move |atm: &OpticalAtmosphere, layer: usize, k: usize| -> f64 {
+            let total = atm.sigma_s_per_m[layer * atm.n_channels + k];
+            atm.components[layer]
+                .iter()
+                .map(|c| {
+                    let m = backscatter_matrix(atm, c.phase[k] as usize);
+                    let (co, x) = if circular {
+                        (0.5 * (m.f11 - m.f44), 0.5 * (m.f11 + m.f44))
+                    } else {
+                        (0.5 * (m.f11 + 2.0 * m.f12 + m.f22), 0.5 * (m.f11 - m.f22))
+                    };
+                    c.sigma_s_per_m[k] * if cross { x } else { co }
+                })
+                .sum::<f64>()
+                / total
+        }
+    };
+    Some((
+        single_scatter_of(scene, atm, part(false), 0.5),
+        single_scatter_of(scene, atm, part(true), 0.5),
+    ))
+}
+
+/// The scattering matrix at 180° of the atmosphere's phase function `i`.
+fn backscatter_matrix(atm: &OpticalAtmosphere, i: usize) -> MatrixElements {
+    ScatteringMatrix::of_phase(&atm.phases[i]).eval(-1.0)
+}
+
+/// Single-scatter returns with the backscatter phase function of a layer and channel given by
+/// `back` (per 4π) and the surface's echo times `surface_share`.
+fn single_scatter_of(
+    scene: &Scene,
+    atm: &OpticalAtmosphere,
+    back: impl Fn(&OpticalAtmosphere, usize, usize) -> f64,
+    surface_share: f64,
+) -> Returns {
     let lidar = &scene.lidar;
     let nch = scene.channels.len();
     let gates = &scene.gates;
@@ -135,7 +191,7 @@ pub fn single_scatter(scene: &Scene, atm: &OpticalAtmosphere) -> Returns {
                 if sigma_s <= 0.0 {
                     continue;
                 }
-                let beta = sigma_s * backscatter_phase(atm, l, k) / (4.0 * std::f64::consts::PI);
+                let beta = sigma_s * back(atm, l, k) / (4.0 * std::f64::consts::PI);
                 let sigma_e = sigma_s + atm.sigma_a_per_m[i];
                 let tau_a = tau_at(a, k);
                 // Sub-intervals: two-way optical depth ≤ 0.25 and width ≤ 5 % of the range.
@@ -167,7 +223,9 @@ pub fn single_scatter(scene: &Scene, atm: &OpticalAtmosphere) -> Returns {
             let g = x as usize;
             for k in 0..nch {
                 let t2 = (-2.0 * tau_at(rs, k)).exp();
-                let e = e0 / (rs * rs) * surface.albedo[k] * mu.abs() / std::f64::consts::PI * t2;
+                let e = e0 / (rs * rs) * surface.albedo[k] * mu.abs() / std::f64::consts::PI
+                    * t2
+                    * surface_share;
                 for (f, o) in overlaps.iter().enumerate() {
                     let idx = out.index(k, f, g, 0);
                     out.energy_j[idx] += e * o;

@@ -41,6 +41,18 @@ pub struct RunOutput {
     pub retrieval: Option<Retrieval>,
     /// Retrieved products, for every set of signals and field of view.
     pub products: Vec<Product>,
+    /// Co- and cross-polarised line returns, when the lidar's light is polarised.
+    pub polarised: Option<PolarisedLines>,
+}
+
+/// The co- and cross-polarised parts of the line returns of a run with polarised light.
+#[derive(Debug, Clone)]
+pub struct PolarisedLines {
+    /// Analytic single scattering: co, cross.
+    pub analytic: (Returns, Returns),
+    /// Monte Carlo, if it ran: co, cross and the covariance of their means \[J²\] bin by bin
+    /// ([`Returns::index`]).
+    pub mc: Option<(Returns, Returns, Vec<f64>)>,
 }
 
 impl RunOutput {
@@ -137,6 +149,26 @@ pub fn run_with(
             )?;
         }
     }
+    let polarised = lidar_eq::single_scatter_polarised(scene, &atmosphere).map(|(co, cross)| {
+        let lines = |r: &Returns| scene.sampling.combine(r).mean;
+        let n = scene.sampling.lines.len();
+        let first: Vec<usize> = (0..n).collect();
+        PolarisedLines {
+            analytic: (lines(&co), lines(&cross)),
+            mc: mc
+                .as_ref()
+                .and_then(|m| m.polarised.as_ref())
+                .and_then(|p| p.combined.as_ref())
+                .map(|c| {
+                    let b = c.co.bins_per_channel();
+                    (
+                        c.co.channel_subset(&first),
+                        c.cross.channel_subset(&first),
+                        c.cov_j2[..n * b].to_vec(),
+                    )
+                }),
+        }
+    });
     Ok(RunOutput {
         atmosphere,
         analytic,
@@ -147,6 +179,7 @@ pub fn run_with(
         signals,
         retrieval,
         products,
+        polarised,
     })
 }
 

@@ -2,7 +2,10 @@
 //! output of the Monte Carlo transport and the analytic lidar equation, and its CSV form.
 //!
 //! **contract** (DESIGN §4): `returns.csv` has the columns
-//! `source,channel,fov_full_angle_mrad,range_m,order,energy_j,stderr_j`.
+//! `source,channel,fov_full_angle_mrad,range_m,order,energy_j,stderr_j`, then `polarisation`:
+//! `total` on every row of an unpolarised run; with polarised light also `co` and `cross`
+//! rows (what a sphere's single backscatter returns, and the rest; `docs/transport.md`,
+//! "Polarisation").
 
 use std::fmt::Write as _;
 
@@ -243,8 +246,9 @@ impl Returns {
         Some(self.stderr_j[self.index(channel, fov, gate, o)])
     }
 
-    /// The CSV rows (no header), one per bin, ordered by channel, FOV, gate, order.
-    pub fn csv_rows(&self, out: &mut String) {
+    /// The CSV rows (no header), one per bin, ordered by channel, FOV, gate, order, with
+    /// `polarisation` in the last column.
+    pub fn csv_rows(&self, out: &mut String, polarisation: &str) {
         let src = self.source.label();
         let labels: Vec<String> = self.orders.iter().map(|o| o.label()).collect();
         for (c, ch) in self.channels.iter().enumerate() {
@@ -255,7 +259,7 @@ impl Returns {
                         let i = self.index(c, f, g, o);
                         let _ = writeln!(
                             out,
-                            "{src},{ch},{fov},{r},{label},{:.9e},{:.9e}",
+                            "{src},{ch},{fov},{r},{label},{:.9e},{:.9e},{polarisation}",
                             self.energy_j[i], self.stderr_j[i]
                         );
                     }
@@ -266,15 +270,63 @@ impl Returns {
 }
 
 /// The header line of `returns.csv`.
-pub const CSV_HEADER: &str = "source,channel,fov_full_angle_mrad,range_m,order,energy_j,stderr_j";
+pub const CSV_HEADER: &str =
+    "source,channel,fov_full_angle_mrad,range_m,order,energy_j,stderr_j,polarisation";
 
-/// Several sets of returns as the text of one CSV file (header and rows).
-pub fn to_csv(sets: &[&Returns]) -> String {
+/// Several sets of returns, each with its `polarisation` label (`total`, `co`, `cross`), as the
+/// text of one CSV file (header and rows).
+pub fn to_csv(sets: &[(&Returns, &str)]) -> String {
     let mut s = String::with_capacity(1 << 20);
     s.push_str(CSV_HEADER);
     s.push('\n');
-    for r in sets {
-        r.csv_rows(&mut s);
+    for (r, label) in sets {
+        r.csv_rows(&mut s, label);
     }
     s
+}
+
+/// The header line of `depolarisation.csv`.
+pub const DEPOLARISATION_HEADER: &str =
+    "source,channel,fov_full_angle_mrad,range_m,order,delta,delta_stderr";
+
+/// The depolarisation ratio δ = cross/co of every bin of a pair of co- and cross-polarised
+/// returns (same grid), with its standard error from the two errors and the covariance of the
+/// two means (`cov_j2`, index [`Returns::index`]; `None` for analytic returns, whose error is
+/// 0), by the first-order propagation
+/// σ²_δ = δ² (σ²_x/x² + σ²_c/c² − 2 cov/(x c)). Bins whose co-polarised return is 0 give NaN.
+pub fn depolarisation_rows(
+    out: &mut String,
+    co: &Returns,
+    cross: &Returns,
+    cov_j2: Option<&[f64]>,
+) {
+    let src = co.source.label();
+    let labels: Vec<String> = co.orders.iter().map(|o| o.label()).collect();
+    for (c, ch) in co.channels.iter().enumerate() {
+        let ch = csv_field(ch);
+        for (f, fov) in co.fov_full_angle_mrad.iter().enumerate() {
+            for (g, r) in co.range_m.iter().enumerate() {
+                for (o, label) in labels.iter().enumerate() {
+                    let i = co.index(c, f, g, o);
+                    let (a, x) = (co.energy_j[i], cross.energy_j[i]);
+                    let delta = if a > 0.0 { x / a } else { f64::NAN };
+                    let se = match cov_j2 {
+                        None => 0.0,
+                        Some(cov) => {
+                            let (sa, sx) = (co.stderr_j[i], cross.stderr_j[i]);
+                            if x == 0.0 {
+                                // δ = 0: its error is that of the cross-polarised return alone.
+                                sx / a
+                            } else {
+                                let rel =
+                                    (sa / a).powi(2) + (sx / x).powi(2) - 2.0 * cov[i] / (a * x);
+                                delta.abs() * rel.max(0.0).sqrt()
+                            }
+                        }
+                    };
+                    let _ = writeln!(out, "{src},{ch},{fov},{r},{label},{delta:.9e},{se:.9e}");
+                }
+            }
+        }
+    }
 }

@@ -3,7 +3,8 @@
 
 use crate::util::{lidarsim, lidarsim_ok};
 
-const HEADER: &str = "source,channel,fov_full_angle_mrad,range_m,order,energy_j,stderr_j";
+const HEADER: &str =
+    "source,channel,fov_full_angle_mrad,range_m,order,energy_j,stderr_j,polarisation";
 
 #[test]
 fn run_default_scene_writes_contract_columns() {
@@ -27,7 +28,8 @@ fn run_default_scene_writes_contract_columns() {
     let (mut mc, mut analytic) = (0, 0);
     for line in lines {
         let f: Vec<&str> = line.split(',').collect();
-        assert_eq!(f.len(), 7, "{line}");
+        assert_eq!(f.len(), 8, "{line}");
+        assert_eq!(f[7], "total", "{line}");
         let energy: f64 = f[5].parse().unwrap();
         let stderr: f64 = f[6].parse().unwrap();
         let _: f64 = f[2].parse().unwrap();

@@ -1139,7 +1139,7 @@ mod scenes {
     const MEMORY_LIMIT_KIB: u64 = 4 << 20;
 
     /// Columns of the CSV outputs that hold text; every other field must be a finite number.
-    const TEXT_COLUMNS: [&str; 7] = [
+    const TEXT_COLUMNS: [&str; 8] = [
         "source",
         "channel",
         "order",
@@ -1147,6 +1147,7 @@ mod scenes {
         "channel_pair",
         "quantity",
         "unit",
+        "polarisation",
     ];
     /// Columns that are energies, counts or standard deviations: never negative.
     const NON_NEGATIVE: [&str; 11] = [

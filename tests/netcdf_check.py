@@ -75,6 +75,10 @@ def check_grid_file(ds, csv_path, columns, what):
             fail(f"{c} has dimensions {ds[c].dims}")
     seen = np.zeros(arrays[columns[0]].shape, dtype=bool)
     for n, row in enumerate(rows, start=2):
+        # run.nc holds the totals; the co- and cross-polarised rows of a polarised run are in
+        # returns.csv and depolarisation.csv only.
+        if "polarisation" in col and row[col["polarisation"]] != "total":
+            continue
         try:
             idx = (
                 pos["source"][row[col["source"]]],

@@ -232,13 +232,14 @@ max_order = 2
             "range_m",
             "order",
             "energy_j",
-            "stderr_j"
+            "stderr_j",
+            "polarisation"
         ]
     );
     let mut rows = [0usize; 2];
     for rec in reader.records() {
         let rec = rec.unwrap();
-        assert_eq!(rec.len(), 7);
+        assert_eq!(rec.len(), 8);
         match &rec[1] {
             "plain" => rows[0] += 1,
             c if c == odd => rows[1] += 1,

@@ -21,6 +21,9 @@ mod netcdf;
 mod output;
 /// Particles: Mie, size distributions, phase-function tables and sampling.
 mod particles;
+/// Polarised transport: co- and cross-polarised returns and depolarisation ratios against
+/// exact values (issue 16, item 4).
+mod polarisation;
 /// Instrument and retrieval: line shapes, noise, retrievals against the truth.
 mod retrieval;
 /// Scenes: parsing, validation and their documented errors.

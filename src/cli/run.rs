@@ -48,8 +48,9 @@ pub struct Args {
 }
 
 /// Every file `run` may write into its directory.
-pub(super) const FILES: [&str; 7] = [
+pub(super) const FILES: [&str; 8] = [
     "returns.csv",
+    "depolarisation.csv",
     lidarsim::netcdf::RUN_FILE,
     "signals.csv",
     "retrieval.csv",
@@ -107,7 +108,34 @@ pub(super) fn write_outputs(
         .map(|m| &m.mean)
         .chain([&run.analytic_lines.mean])
         .collect();
-    files.write(out_dir.join("returns.csv"), returns::to_csv(&sets))?;
+    // returns.csv: every set's total, then with polarised light its co and cross rows.
+    let mut labelled: Vec<(&Returns, &str)> = sets.iter().map(|r| (*r, "total")).collect();
+    if let Some(p) = &run.polarised {
+        let mc = p.mc.as_ref();
+        for (part, label) in [(0, "co"), (1, "cross")] {
+            if let Some((co, cross, _)) = mc {
+                labelled.push((if part == 0 { co } else { cross }, label));
+            }
+            labelled.push((
+                if part == 0 {
+                    &p.analytic.0
+                } else {
+                    &p.analytic.1
+                },
+                label,
+            ));
+        }
+    }
+    files.write(out_dir.join("returns.csv"), returns::to_csv(&labelled))?;
+    if let Some(p) = &run.polarised {
+        let mut s = String::from(returns::DEPOLARISATION_HEADER);
+        s.push('\n');
+        if let Some((co, cross, cov)) = &p.mc {
+            returns::depolarisation_rows(&mut s, co, cross, Some(cov));
+        }
+        returns::depolarisation_rows(&mut s, &p.analytic.0, &p.analytic.1, None);
+        files.write(out_dir.join("depolarisation.csv"), s)?;
+    }
     if !run.signals.is_empty() {
         let mut s = String::from(signals::CSV_HEADER);
         s.push('\n');

@@ -117,6 +117,7 @@ pub(super) struct LidarFile {
     pub telescope_diameter_m: f64,
     pub optical_efficiency: f64,
     pub fov_full_angle_mrad: PerChannel,
+    pub polarisation: Option<String>,
 }
 
 #[derive(Debug, Deserialize)]

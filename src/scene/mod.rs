@@ -110,6 +110,29 @@ pub enum BeamProfile {
     Gaussian,
 }
 
+/// The polarisation of the emitted light (`[lidar] polarisation`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Polarisation {
+    /// Unpolarised light and scalar transport (the default).
+    #[default]
+    None,
+    /// Linearly polarised along the lidar frame's first axis perpendicular to the pointing.
+    Linear,
+    /// Circularly polarised (Stokes V = +1 about the direction of emission).
+    Circular,
+}
+
+impl Polarisation {
+    /// The scene-file word.
+    pub fn name(self) -> &'static str {
+        match self {
+            Polarisation::None => "none",
+            Polarisation::Linear => "linear",
+            Polarisation::Circular => "circular",
+        }
+    }
+}
+
 /// A monostatic, coaxial lidar.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Lidar {
@@ -132,6 +155,9 @@ pub struct Lidar {
     pub optical_efficiency: f64,
     /// Receiver fields of view, full angles \[mrad\], all tallied in one run.
     pub fov_full_angle_mrad: Vec<f64>,
+    /// Polarisation of the emitted light; not `None`: Stokes-vector transport and co- and
+    /// cross-polarised returns.
+    pub polarisation: Polarisation,
 }
 
 impl Lidar {
@@ -820,6 +846,17 @@ impl Validator<'_> {
                 ));
             }
         };
+        let polarisation = match l.polarisation.as_deref() {
+            None | Some("none") => Polarisation::None,
+            Some("linear") => Polarisation::Linear,
+            Some("circular") => Polarisation::Circular,
+            Some(other) => {
+                return Err(self.err(
+                    &sec.key("polarisation"),
+                    format!("`{other}` is not a polarisation (none, linear, circular)"),
+                ));
+            }
+        };
         let telescope_diameter_m = self.range(
             &sec.key("telescope_diameter_m"),
             l.telescope_diameter_m,
@@ -857,6 +894,7 @@ impl Validator<'_> {
                 telescope_diameter_m,
                 optical_efficiency,
                 fov_full_angle_mrad,
+                polarisation,
             },
             pulse_energy_j,
         ))

@@ -12,6 +12,7 @@
 mod cone;
 mod crossing;
 mod photon;
+mod stokes;
 mod tally;
 
 use std::io::IsTerminal;
@@ -22,9 +23,10 @@ use rayon::prelude::*;
 use thiserror::Error;
 
 use crate::optics::OpticalAtmosphere;
+use crate::particles::matrix::{MatrixElements, ScatteringMatrix};
 use crate::returns::{Combination, Returns};
 use crate::rng::{self, Stream};
-use crate::scene::{BeamProfile, Scene};
+use crate::scene::{BeamProfile, Polarisation, Scene};
 
 pub use tally::Flux;
 use tally::{Accumulator, TallyShape};
@@ -198,6 +200,8 @@ pub struct McResult {
     pub flux: Flux,
     /// Standard errors of `flux`.
     pub flux_stderr: Flux,
+    /// Co- and cross-polarised returns, when the lidar's light is polarised.
+    pub polarised: Option<PolarisedMc>,
     /// Counters.
     pub stats: RunStats,
     /// Wall-clock time of the transport \[s\].
@@ -206,6 +210,115 @@ pub struct McResult {
     pub photons: u64,
     /// Worker threads used.
     pub threads: usize,
+}
+
+/// The co- and cross-polarised parts of a set of returns (their sum is the total), and the
+/// covariance of the two means bin by bin, for the depolarisation ratio's error.
+#[derive(Debug, Clone)]
+pub struct Polarised {
+    /// What a sphere's single backscatter returns (`docs/transport.md`, "Polarisation").
+    pub co: Returns,
+    /// The rest.
+    pub cross: Returns,
+    /// Covariance of the means of `co` and `cross` \[J²\], index [`Returns::index`].
+    pub cov_j2: Vec<f64>,
+}
+
+/// Polarised Monte Carlo returns: per channel, and per combination of channels (laser lines).
+#[derive(Debug, Clone)]
+pub struct PolarisedMc {
+    /// The monochromatic channels.
+    pub channels: Polarised,
+    /// The combinations of [`TransportOptions::combinations`], if any.
+    pub combined: Option<Polarised>,
+}
+
+/// How a polarised run's tallies are laid out: co-polarised returns as channels 0..n, cross
+/// as n..2n; the accumulator then folds, as combinations, per channel its total, co and cross
+/// (3n), and per user combination its total, co and cross (3m); its pairs are (co, cross) of
+/// each channel, then of each user combination, then the user's own pairs of totals.
+#[derive(Debug, Clone)]
+struct PolarisedLayout {
+    n: usize,
+    m: usize,
+}
+
+impl PolarisedLayout {
+    /// The combinations and pairs the accumulator folds for `n` channels, `user` combinations
+    /// and `user_pairs` of them.
+    fn combinations(
+        n: usize,
+        user: &[Combination],
+        user_pairs: &[(usize, usize)],
+    ) -> (Self, Vec<Combination>, Vec<(usize, usize)>) {
+        let m = user.len();
+        let mut c = Vec::with_capacity(3 * (n + m));
+        for (part, terms) in [
+            ("total", [1.0, 1.0]),
+            ("co", [1.0, 0.0]),
+            ("cross", [0.0, 1.0]),
+        ] {
+            for k in 0..n {
+                c.push(Combination {
+                    name: format!("{part} {k}"),
+                    terms: [(k, terms[0]), (n + k, terms[1])]
+                        .into_iter()
+                        .filter(|(_, w)| *w != 0.0)
+                        .collect(),
+                });
+            }
+        }
+        for (part, on) in [
+            ("total", [true, true]),
+            ("co", [true, false]),
+            ("cross", [false, true]),
+        ] {
+            for u in user {
+                let mut terms = Vec::new();
+                for (k, w) in &u.terms {
+                    if on[0] {
+                        terms.push((*k, *w));
+                    }
+                    if on[1] {
+                        terms.push((n + k, *w));
+                    }
+                }
+                c.push(Combination {
+                    name: format!("{part} {}", u.name),
+                    terms,
+                });
+            }
+        }
+        let mut pairs: Vec<(usize, usize)> = (0..n).map(|k| (n + k, 2 * n + k)).collect();
+        pairs.extend((0..m).map(|j| (3 * n + m + j, 3 * n + 2 * m + j)));
+        pairs.extend(user_pairs.iter().map(|(a, b)| (3 * n + a, 3 * n + b)));
+        (PolarisedLayout { n, m }, c, pairs)
+    }
+}
+
+/// Channels `start..start + n` of a set of returns, named `names`.
+fn channel_slice(r: &Returns, start: usize, names: &[String]) -> Returns {
+    let b = r.bins_per_channel();
+    let mut out = Returns::zeros(
+        r.source,
+        names.to_vec(),
+        r.fov_full_angle_mrad.clone(),
+        r.range_m.clone(),
+        r.orders.clone(),
+    );
+    let span = start * b..(start + names.len()) * b;
+    out.energy_j.copy_from_slice(&r.energy_j[span.clone()]);
+    out.stderr_j.copy_from_slice(&r.stderr_j[span]);
+    out
+}
+
+/// The covariances of pairs `first..first + count` of `r`, one channel's bins after another.
+fn pair_covariances(r: &Returns, first: usize, count: usize) -> Vec<f64> {
+    let b = r.bins_per_channel();
+    r.covariance
+        .as_ref()
+        .map(|c| c.cov_j2[first * b..(first + count) * b].to_vec())
+        .unwrap_or_else(|| vec![f64::NAN; count * b])
 }
 
 /// Read-only set-up shared by all batches.
@@ -262,6 +375,10 @@ pub(crate) struct Setup<'a> {
     crossing_tan2: [f64; 2],
     /// DDIS crossing at every DDIS scattering (`photon::Tracer::score_ddis_crossing`).
     ddis_crossing: bool,
+    /// Polarised transport: the receiver's analyser (`None`: scalar transport), and the
+    /// scattering matrix of each of the atmosphere's phase functions (same index).
+    analyser: Option<stokes::Analyser>,
+    matrices: Vec<ScatteringMatrix>,
 }
 
 /// The free-path density of one scattering class: its cumulative vertical scattering optical
@@ -382,6 +499,32 @@ impl Setup<'_> {
             / total
     }
 
+    /// Scattering matrix of the scatterer mixture of `layer` for channel k at μ (weighted as
+    /// [`Self::mixture_phase`], so its F₁₁ is that phase function).
+    #[inline]
+    fn mixture_matrix(&self, layer: usize, k: usize, mu: f64) -> MatrixElements {
+        let comps = &self.atm.components[layer];
+        if comps.len() == 1 {
+            return self.matrices[comps[0].phase[k] as usize].eval(mu);
+        }
+        let total = self.atm.sigma_s_per_m[layer * self.atm.n_channels + k];
+        let mut m = MatrixElements::non_depolarising(0.0);
+        if total <= 0.0 {
+            return m;
+        }
+        for c in comps {
+            let w = c.sigma_s_per_m[k] / total;
+            let e = self.matrices[c.phase[k] as usize].eval(mu);
+            m.f11 += w * e.f11;
+            m.f22 += w * e.f22;
+            m.f33 += w * e.f33;
+            m.f44 += w * e.f44;
+            m.f12 += w * e.f12;
+            m.f34 += w * e.f34;
+        }
+        m
+    }
+
     /// Extinction optical depth from altitude z (cumulative value `t_here`) to the receiver along
     /// a straight line with vertical direction cosine `omega_z` and length d.
     #[inline]
@@ -493,6 +636,9 @@ pub struct Plan<'a> {
     channels: Vec<String>,
     fov_full_angle_mrad: Vec<f64>,
     range_m: Vec<f64>,
+    /// The user's combinations' names, and the layout of a polarised run's tallies.
+    combination_names: Vec<String>,
+    polarised: Option<PolarisedLayout>,
 }
 
 impl<'a> Plan<'a> {
@@ -518,8 +664,14 @@ impl<'a> Plan<'a> {
             .and_then(|_| check_count(opts.threads as u64, 0, MAX_THREADS))
             .and_then(|_| check_count(opts.max_order.into(), 1, 1000))
             .map_err(TransportError::Options)?;
-        let n_series =
-            scene.channels.len() + opts.combinations.len() + opts.combination_pairs.len();
+        // A polarised run folds co, cross and total of every series.
+        let n_pol_series = if scene.lidar.polarisation == Polarisation::None {
+            1
+        } else {
+            3
+        };
+        let n_series = n_pol_series
+            * (scene.channels.len() + opts.combinations.len() + opts.combination_pairs.len());
         check_product(
             "the returns",
             &[
@@ -570,11 +722,13 @@ impl<'a> Plan<'a> {
             .map(|i| (0.5e-3 * lidar.fov_full_angle_mrad[*i]).cos())
             .collect();
 
+        // A polarised run tallies co-polarised returns as channels 0..n and cross as n..2n.
+        let polarised_run = lidar.polarisation != Polarisation::None;
         let shape = TallyShape {
             n_gates: scene.gates.count,
             n_order_bins: opts.max_order as usize + 1,
             n_fov: fov_order.len(),
-            n_channels: nch,
+            n_channels: if polarised_run { 2 * nch } else { nch },
         };
         let n_layers = atm.n_layers();
         let widest = fov_cos.last().copied().unwrap_or(1.0);
@@ -626,6 +780,12 @@ impl<'a> Plan<'a> {
             crossing_from: 0,
             crossing_tan2: [0.0; 2],
             ddis_crossing: opts.ddis_crossing,
+            analyser: match lidar.polarisation {
+                Polarisation::None => None,
+                Polarisation::Linear => Some(stokes::Analyser::Linear(axis_e1)),
+                Polarisation::Circular => Some(stokes::Analyser::Circular),
+            },
+            matrices: atm.phases.iter().map(ScatteringMatrix::of_phase).collect(),
         };
         // Which layers get DDIS: a forward-peaked scatterer mixture (in any class).
         let mut setup = setup;
@@ -699,6 +859,17 @@ impl<'a> Plan<'a> {
 
         let batches = opts.batches;
         let per_batch = opts.photons.div_ceil(batches as u64);
+        let (polarised, combinations, combination_pairs) = if polarised_run {
+            let (layout, c, p) =
+                PolarisedLayout::combinations(nch, &opts.combinations, &opts.combination_pairs);
+            (Some(layout), c, p)
+        } else {
+            (
+                None,
+                opts.combinations.clone(),
+                opts.combination_pairs.clone(),
+            )
+        };
         Ok(Plan {
             setup,
             fov_order,
@@ -710,8 +881,10 @@ impl<'a> Plan<'a> {
             scale: lidar.pulse_energy_j * lidar.optical_efficiency * lidar.telescope_area_m2()
                 / per_batch as f64,
             flux_scale: 1.0 / per_batch as f64,
-            combinations: opts.combinations.clone(),
-            combination_pairs: opts.combination_pairs.clone(),
+            combinations,
+            combination_pairs,
+            combination_names: opts.combinations.iter().map(|c| c.name.clone()).collect(),
+            polarised,
             channels: scene.channels.iter().map(|c| c.name.clone()).collect(),
             fov_full_angle_mrad: lidar.fov_full_angle_mrad.clone(),
             range_m: (0..scene.gates.count)
@@ -738,7 +911,7 @@ impl<'a> Plan<'a> {
 
     /// Monochromatic channels of the run (the length of each part of [`BatchTally::flux`]).
     pub fn channels(&self) -> usize {
-        self.setup.shape.n_channels
+        self.channels.len()
     }
 
     /// Trace batch `index` from its own random stream: the same tallies on any thread, process
@@ -763,8 +936,12 @@ impl<'a> Plan<'a> {
     /// An empty fold of this plan's batches.
     pub fn fold(&self) -> Fold<'_> {
         Fold {
-            acc: Accumulator::new(self.setup.shape, self.fov_order.clone())
-                .with_combinations(self.combinations.clone(), self.combination_pairs.clone()),
+            acc: Accumulator::new(
+                self.setup.shape,
+                self.channels.len(),
+                self.fov_order.clone(),
+            )
+            .with_combinations(self.combinations.clone(), self.combination_pairs.clone()),
             plan: self,
             stats: RunStats::default(),
             next: 0,
@@ -789,7 +966,7 @@ impl Fold<'_> {
     /// Fold the next batch. Batches must come in order, each once, with this plan's shape.
     pub fn add(&mut self, mut batch: BatchTally) -> Result<(), TransportError> {
         let shape = self.plan.setup.shape;
-        let n = shape.n_channels;
+        let n = self.plan.channels.len();
         if batch.index != self.next {
             return Err(TransportError::Options(format!(
                 "batch {} folded where batch {} was expected",
@@ -825,16 +1002,62 @@ impl Fold<'_> {
                 self.next, plan.batches
             )));
         }
+        // A polarised run's accumulator knows co as channels 0..n and cross as n..2n.
+        let tally_names: Vec<String> = match &plan.polarised {
+            None => plan.channels.clone(),
+            Some(_) => ["co", "cross"]
+                .iter()
+                .flat_map(|p| plan.channels.iter().map(move |c| format!("{c} {p}")))
+                .collect(),
+        };
         let (returns, flux, flux_stderr, combined) = self.acc.finish(
-            plan.channels.clone(),
+            tally_names,
             plan.fov_full_angle_mrad.clone(),
             plan.range_m.clone(),
         );
+        let (returns, combined, polarised) = match (&plan.polarised, combined) {
+            (Some(l), Some(all)) => {
+                let (n, m) = (l.n, l.m);
+                let names = &plan.channels;
+                let user = &plan.combination_names;
+                let channels = Polarised {
+                    co: channel_slice(&all, n, names),
+                    cross: channel_slice(&all, 2 * n, names),
+                    cov_j2: pair_covariances(&all, 0, n),
+                };
+                let (combined, combined_pol) = if m > 0 {
+                    let mut totals = channel_slice(&all, 3 * n, user);
+                    let pairs = &plan.combination_pairs[n + m..];
+                    totals.covariance = Some(crate::returns::Covariance {
+                        pairs: pairs.iter().map(|(a, b)| (a - 3 * n, b - 3 * n)).collect(),
+                        cov_j2: pair_covariances(&all, n + m, pairs.len()),
+                    });
+                    let pol = Polarised {
+                        co: channel_slice(&all, 3 * n + m, user),
+                        cross: channel_slice(&all, 3 * n + 2 * m, user),
+                        cov_j2: pair_covariances(&all, n, m),
+                    };
+                    (Some(totals), Some(pol))
+                } else {
+                    (None, None)
+                };
+                (
+                    channel_slice(&all, 0, names),
+                    combined,
+                    Some(PolarisedMc {
+                        channels,
+                        combined: combined_pol,
+                    }),
+                )
+            }
+            (_, combined) => (returns, combined, None),
+        };
         Ok(McResult {
             returns,
             combined,
             flux,
             flux_stderr,
+            polarised,
             stats: self.stats,
             wall_s,
             photons: plan.per_batch * plan.batches as u64,

@@ -41,6 +41,7 @@ use glam::DVec3;
 use rand::RngExt;
 
 use super::cone::Prev;
+use super::stokes::{self, Reduced, Turn};
 use super::tally::{Flux, TallyShape};
 use super::{RunStats, Setup};
 use crate::rng::Rng;
@@ -70,6 +71,9 @@ struct PhotonCopy {
     prev: Prev,
     /// Its crossing estimate's MIS factor ([`Tracer::cross_mis`]).
     cross_mis: f64,
+    /// Polarised runs: its reference axis and reduced Stokes vectors ([`Tracer::e1`]).
+    e1: DVec3,
+    pol: Vec<Reduced>,
 }
 
 /// Per-batch state: buffers reused by every photon of the batch.
@@ -96,6 +100,17 @@ pub(crate) struct Tracer<'a> {
     cross_mis: f64,
     /// Scratch: the weights of a DDIS crossing.
     virt: Vec<f64>,
+    /// Polarised runs (`super::stokes`): the photon's reference axis ⊥ its direction and, per
+    /// channel, its reduced Stokes vector (Q, U, V)/I (I is the weight); their values before a
+    /// scattering that alignment splitting repeats, and those of a DDIS crossing.
+    e1: DVec3,
+    pol: Vec<Reduced>,
+    e1_pre: DVec3,
+    pol_pre: Vec<Reduced>,
+    e1_virt: DVec3,
+    pol_virt: Vec<Reduced>,
+    /// Scratch: a local estimate's factor per channel, without the scattering matrix.
+    le: Vec<f64>,
     pub flux: Flux,
     pub stats: RunStats,
     shape: TallyShape,
@@ -126,6 +141,13 @@ impl<'a> Tracer<'a> {
             bins: vec![0.0; s.shape.len()],
             cross_mis: 1.0,
             virt: vec![0.0; nch],
+            e1: DVec3::X,
+            pol: vec![[0.0; 3]; nch],
+            e1_pre: DVec3::X,
+            pol_pre: vec![[0.0; 3]; nch],
+            e1_virt: DVec3::X,
+            pol_virt: vec![[0.0; 3]; nch],
+            le: vec![0.0; nch],
             flux: Flux::zeros(nch),
             stats: RunStats::default(),
             shape: s.shape,
@@ -149,10 +171,23 @@ impl<'a> Tracer<'a> {
         let dir = self.s.emit_direction(rng.random(), rng.random());
         self.w.iter_mut().for_each(|w| *w = 1.0);
         self.cross_mis = 1.0;
+        if let Some(an) = &self.s.analyser {
+            let (e1, p) = stokes::emitted(
+                dir,
+                self.s.axis_e1,
+                matches!(an, stokes::Analyser::Circular),
+            );
+            self.e1 = e1;
+            self.pol.iter_mut().for_each(|x| *x = p);
+        }
         self.follow(self.s.receiver, dir, 0.0, 0, None, rng);
         while let Some(copy) = self.split.pop() {
             self.w.copy_from_slice(&copy.w);
             self.cross_mis = copy.cross_mis;
+            if self.s.analyser.is_some() {
+                self.e1 = copy.e1;
+                self.pol.copy_from_slice(&copy.pol);
+            }
             // Copies are made right after a scattering at their position.
             self.follow(
                 copy.pos,
@@ -162,6 +197,52 @@ impl<'a> Tracer<'a> {
                 Some(copy.prev),
                 rng,
             );
+        }
+    }
+
+    /// Polarised runs: the scattering from `dir` to `new_dir` in `layer` acting on every
+    /// channel's Stokes vector; the weights take the factor (F₁₁ + F₁₂ q)/F₁₁ (`super::stokes`).
+    fn polarise(&mut self, layer: usize, dir: DVec3, new_dir: DVec3) {
+        let s = self.s;
+        let turn = Turn::new(dir, self.e1, new_dir);
+        let mu = dir.dot(new_dir);
+        let grey = s
+            .atm
+            .grey_scattering
+            .then(|| s.mixture_matrix(layer, 0, mu));
+        for k in 0..self.w.len() {
+            let m = grey.unwrap_or_else(|| s.mixture_matrix(layer, k, mu));
+            let (r, p) = stokes::reduce(turn.apply(self.pol[k], &m), m.f11);
+            self.w[k] *= r;
+            self.pol[k] = p;
+        }
+        self.e1 = turn.e1;
+    }
+
+    /// Polarised local estimate: every channel's light arriving along `dir` (the photon's
+    /// reference axis and Stokes vectors) scattered in `layer` toward `omega`, split by the
+    /// analyser and scored into co (`base + k`) and cross (`base + n + k`, n channels), each
+    /// times `self.le[k]`, the estimate's factor without the scattering matrix. Returns the
+    /// scattered reference axis.
+    fn score_polarised(&mut self, layer: usize, dir: DVec3, omega: DVec3, base: usize) {
+        let s = self.s;
+        let Some(an) = &s.analyser else { return };
+        let turn = Turn::new(dir, self.e1, omega);
+        let analysis = an.toward(omega, turn.e1);
+        let mu = dir.dot(omega);
+        let grey = s
+            .atm
+            .grey_scattering
+            .then(|| s.mixture_matrix(layer, 0, mu));
+        let n = self.w.len();
+        for k in 0..n {
+            if self.le[k] == 0.0 {
+                continue;
+            }
+            let m = grey.unwrap_or_else(|| s.mixture_matrix(layer, k, mu));
+            let (co, cross) = analysis.split(turn.apply(self.pol[k], &m));
+            self.bins[base + k] += self.le[k] * co;
+            self.bins[base + n + k] += self.le[k] * cross;
         }
     }
 
@@ -304,6 +385,11 @@ impl<'a> Tracer<'a> {
                     self.cross_mis = 1.0;
                     self.set_altitude(pos.z);
                     dir = lambertian(rng.random(), rng.random());
+                    // A Lambertian surface reflects unpolarised light.
+                    if s.analyser.is_some() {
+                        self.e1 = dir.any_orthonormal_vector();
+                        self.pol.iter_mut().for_each(|p| *p = [0.0; 3]);
+                    }
                     if !self.roulette(rng) {
                         return;
                     }
@@ -563,6 +649,10 @@ impl<'a> Tracer<'a> {
                 self.w.iter_mut().for_each(|w| *w *= f);
                 self.pre.copy_from_slice(&self.w);
                 self.stats.splits += (n_split - 1) as u64;
+                if s.analyser.is_some() {
+                    self.e1_pre = self.e1;
+                    self.pol_pre.copy_from_slice(&self.pol);
+                }
             }
             // DDIS crossing: one more direction drawn about the receiver's, as DDIS draws it,
             // and the crossing estimate along it, combined with the walk's own crossing estimate
@@ -574,6 +664,10 @@ impl<'a> Tracer<'a> {
             for j in 0..n_split {
                 if j > 0 {
                     self.w.copy_from_slice(&self.pre);
+                    if s.analyser.is_some() {
+                        self.e1 = self.e1_pre;
+                        self.pol.copy_from_slice(&self.pol_pre);
+                    }
                 }
                 let virtual_done = ddis_crossing
                     && self.score_ddis_crossing(pos, dir, omega_rx, path, order, layer, rng);
@@ -625,6 +719,9 @@ impl<'a> Tracer<'a> {
                     for k in 0..nch {
                         self.w[k] *= s.mixture_phase(layer, k, mu_sampled) / p_mean;
                     }
+                }
+                if s.analyser.is_some() {
+                    self.polarise(layer, dir, new_dir);
                 }
                 if j + 1 < n_split {
                     self.push_copy(pos, new_dir, path, order, here);
@@ -683,6 +780,12 @@ impl<'a> Tracer<'a> {
             w: self.w.clone(),
             prev,
             cross_mis: self.cross_mis,
+            e1: self.e1,
+            pol: if self.s.analyser.is_some() {
+                self.pol.clone()
+            } else {
+                Vec::new()
+            },
         });
     }
 
@@ -856,9 +959,9 @@ impl<'a> Tracer<'a> {
         };
         self.stats.local_estimates += 1;
         let mu_s = dir.dot(omega);
-        // Grey scattering: one phase function for every channel.
+        // Grey scattering: one phase function for every channel (polarised: a matrix, below).
         let grey = s.atm.grey_scattering;
-        let p_ref = if grey {
+        let p_ref = if grey && s.analyser.is_none() {
             s.mixture_phase(layer, 0, mu_s)
         } else {
             1.0
@@ -874,6 +977,15 @@ impl<'a> Tracer<'a> {
         }
         let base = self.shape.base(gate, s.order_bin(order), annulus);
         let nch = self.w.len();
+        if s.analyser.is_some() {
+            // The scattering matrix instead of the phase function.
+            for k in 0..nch {
+                let tau = s.tau_to_receiver(x.z, omega.z, d, layer, k, self.ts[k] + self.ta[k]);
+                self.le[k] = self.w[k] * geometric * (-tau).exp();
+            }
+            self.score_polarised(layer, dir, omega, base);
+            return;
+        }
         for k in 0..nch {
             if self.w[k] == 0.0 {
                 continue;
@@ -960,9 +1072,11 @@ impl<'a> Tracer<'a> {
         let omega = v * (1.0 / d);
         let mu_s = dir.dot(omega);
         let grey = atm.grey_scattering;
+        let polarised = s.analyser.is_some();
         let nch = self.w.len();
         let i0 = layer * nch;
-        let p_ref = if grey {
+        // The phase function per channel below, or (polarised) the scattering matrix.
+        let p_ref = if grey && !polarised {
             s.mixture_phase(layer, 0, mu_s)
         } else {
             1.0
@@ -971,18 +1085,30 @@ impl<'a> Tracer<'a> {
         let base = self.shape.base(gate, s.order_bin(order), annulus);
         for k in 0..nch {
             if self.w[k] == 0.0 {
+                self.le[k] = 0.0;
                 continue;
             }
             let (ts_y, ta_y) = atm.cumulative_tau_in(layer, y.z, k);
             let mut f = exp_neg((ta_y - self.ta[k]).abs() * inv_mu);
             if !grey {
                 let dts = (ts_y - self.ts[k]).abs() * inv_mu;
-                f *= atm.sigma_s_per_m[i0 + k] / atm.sigma_s_per_m[i0]
-                    * (-(dts - tau_star)).exp()
-                    * s.mixture_phase(layer, k, mu_s);
+                let ratio = atm.sigma_s_per_m[i0 + k] / atm.sigma_s_per_m[i0];
+                f *= if polarised {
+                    ratio * (-(dts - tau_star)).exp()
+                } else {
+                    ratio * (-(dts - tau_star)).exp() * s.mixture_phase(layer, k, mu_s)
+                };
             }
             let tau = s.tau_to_receiver(y.z, omega.z, d, layer, k, ts_y + ta_y);
-            self.bins[base + k] += self.w[k] * f * geometric * (-tau).exp();
+            let e = self.w[k] * f * geometric * (-tau).exp();
+            if polarised {
+                self.le[k] = e;
+            } else {
+                self.bins[base + k] += e;
+            }
+        }
+        if polarised {
+            self.score_polarised(layer, dir, omega, base);
         }
     }
 
@@ -1041,6 +1167,23 @@ impl<'a> Tracer<'a> {
             };
             self.virt[k] = self.w[k] * pk * norm;
         }
+        let polarised = s.analyser.is_some();
+        if polarised {
+            // The virtual scattering acts on the Stokes vectors as the walk's would.
+            let turn = Turn::new(dir, self.e1, omega);
+            let grey = atm
+                .grey_scattering
+                .then(|| s.mixture_matrix(layer, 0, mu_in));
+            for k in 0..self.w.len() {
+                let m = grey.unwrap_or_else(|| s.mixture_matrix(layer, k, mu_in));
+                let (r, p) = stokes::reduce(turn.apply(self.pol[k], &m), m.f11);
+                self.virt[k] *= r;
+                self.pol_virt[k] = p;
+            }
+            self.e1_virt = turn.e1;
+            std::mem::swap(&mut self.pol, &mut self.pol_virt);
+            std::mem::swap(&mut self.e1, &mut self.e1_virt);
+        }
         let (s_end, _) = s.useful_length(pos, omega, budget, (to_rx, d0));
         std::mem::swap(&mut self.w, &mut self.virt);
         self.score_crossing(
@@ -1054,6 +1197,10 @@ impl<'a> Tracer<'a> {
             rng,
         );
         std::mem::swap(&mut self.w, &mut self.virt);
+        if polarised {
+            std::mem::swap(&mut self.pol, &mut self.pol_virt);
+            std::mem::swap(&mut self.e1, &mut self.e1_virt);
+        }
         true
     }
 
@@ -1136,6 +1283,12 @@ impl<'a> Tracer<'a> {
         };
         let base = self.shape.base(gate, order_bin, a);
         let horizontal = e_xy.z.abs() < HORIZONTAL;
+        // Polarised: the two scatterings' geometry, and the analyser for the beam from y.
+        let polarised = s.analyser.map(|an| {
+            let t1 = Turn::new(p.dir_in, self.e1, e_xy);
+            let t2 = Turn::new(e_xy, t1.e1, -omega);
+            (t1, t2, an.toward(-omega, t2.e1))
+        });
         for k in 0..nch {
             if self.w[k] == 0.0 {
                 continue;
@@ -1153,6 +1306,17 @@ impl<'a> Tracer<'a> {
                 ((tsy + tay) - (self.ts[k] + self.ta[k])).abs() / e_xy.z.abs()
             };
             let tau_back = s.tau_to_receiver(y.z, -omega.z, r, layer_y, k, tsy + tay);
+            if let Some((t1, t2, analysis)) = &polarised {
+                // The phase functions' product becomes I after x times co (cross) after y.
+                let e = self.w[k] * sigma_y * factor * (-(tau_xy + tau_back)).exp();
+                let s1 = t1.apply(self.pol[k], &s.mixture_matrix(p.layer, k, mu_x));
+                let (i1, p1) = stokes::reduce(s1, 1.0);
+                let s2 = t2.apply(p1, &s.mixture_matrix(layer_y, k, mu_y));
+                let (co, cross) = analysis.split(s2);
+                self.bins[base + k] += e * i1 * co;
+                self.bins[base + nch + k] += e * i1 * cross;
+                continue;
+            }
             let (px, py) = if grey {
                 (px0, py0)
             } else {
@@ -1189,11 +1353,18 @@ impl<'a> Tracer<'a> {
         let geometric = omega.z / PI * cos_axis / d2;
         let base = self.shape.base(gate, s.order_bin(order), annulus);
         let layer = 0;
-        for k in 0..self.w.len() {
+        let n = self.w.len();
+        for k in 0..n {
             let (ts, ta) = s.atm.cumulative_tau(hit.z, k);
             let tau_back = s.tau_to_receiver(hit.z, omega.z, d, layer, k, ts + ta);
-            self.bins[base + k] +=
-                self.w[k] * (-self.tmp[k]).exp() * albedo[k] * geometric * (-tau_back).exp();
+            let e = self.w[k] * (-self.tmp[k]).exp() * albedo[k] * geometric * (-tau_back).exp();
+            if s.analyser.is_some() {
+                // A Lambertian surface reflects unpolarised light: half of it each way.
+                self.bins[base + k] += 0.5 * e;
+                self.bins[base + n + k] += 0.5 * e;
+            } else {
+                self.bins[base + k] += e;
+            }
         }
     }
 

@@ -109,7 +109,9 @@ struct Combined {
 }
 
 impl Accumulator {
-    pub fn new(shape: TallyShape, fov_of_annulus: Vec<usize>) -> Self {
+    /// `n_flux`: the channels of the flux tally (those of the tally's shape, but in a polarised
+    /// run, where the shape counts co- and cross-polarised returns as channels of their own).
+    pub fn new(shape: TallyShape, n_flux: usize, fov_of_annulus: Vec<usize>) -> Self {
         let reported = shape.n_channels * shape.n_fov * shape.n_gates * (shape.n_order_bins + 1);
         Accumulator {
             shape,
@@ -117,9 +119,9 @@ impl Accumulator {
             mean: vec![0.0; reported],
             m2: vec![0.0; reported],
             m2_scale: vec![0.0; reported],
-            flux_mean: Flux::zeros(shape.n_channels),
-            flux_m2: Flux::zeros(shape.n_channels),
-            flux_scale: Flux::zeros(shape.n_channels),
+            flux_mean: Flux::zeros(n_flux),
+            flux_m2: Flux::zeros(n_flux),
+            flux_scale: Flux::zeros(n_flux),
             fov_of_annulus,
             scratch: vec![0.0; reported],
             combined: None,
@@ -270,7 +272,7 @@ impl Accumulator {
             r
         });
         let mean = self.flux_mean.clone();
-        let mut err = Flux::zeros(self.shape.n_channels);
+        let mut err = Flux::zeros(self.flux_mean.up.len());
         for (e, (m2, sc)) in err.parts_mut().into_iter().zip(
             self.flux_m2
                 .parts()
