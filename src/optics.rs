@@ -7,6 +7,12 @@
 //! phase functions, and cumulative vertical optical depths at the edges so that the optical depth
 //! of any straight segment is O(1) per channel: τ = |T(z₂) − T(z₁)|/|μ| (DESIGN §2).
 //!
+//! Every phase function comes with the scatterer's scattering matrix (`phases[i]` ↔
+//! `matrices[i]`, F11 of the matrix = the phase function) for polarised transport: molecules the
+//! molecular matrix with their depolarisation factor, Mie and `matrix_table` layers their
+//! tables, other scalar phase functions a non-depolarising stand-in
+//! ([`OpticalAtmosphere::stand_in_layers`] says where).
+//!
 //! Molecular scattering: σ_R(λ) · n̄, with n̄ the layer mean of the air number density, ln n
 //! linear in altitude between profile levels (exact integral), and the Bucholtz (1995) cross-section.
 
@@ -14,6 +20,7 @@ use std::sync::Arc;
 
 use thiserror::Error;
 
+use crate::particles::matrix::ScatteringMatrix;
 use crate::particles::phase::{PhaseFunction, RayleighPhase};
 use crate::particles::rayleigh;
 use crate::scene::{Atmosphere, Scene};
@@ -43,7 +50,8 @@ pub enum OpticsError {
 pub struct Component {
     /// Scattering coefficient per channel [1/m].
     pub sigma_s_per_m: Vec<f64>,
-    /// Index into [`OpticalAtmosphere::phases`] per channel.
+    /// Index into [`OpticalAtmosphere::phases`] (and [`OpticalAtmosphere::matrices`]) per
+    /// channel.
     pub phase: Vec<u32>,
 }
 
@@ -63,6 +71,10 @@ pub struct OpticalAtmosphere {
     pub components: Vec<Vec<Component>>,
     /// Distinct phase functions referenced by the components.
     pub phases: Vec<Arc<PhaseFunction>>,
+    /// The scattering matrix of each entry of `phases`, same length and index (F11 of
+    /// `matrices[i]` is `phases[i]`). Entries are distinct as pairs: two scatterers with the
+    /// same phase function and different matrices keep separate indices.
+    pub matrices: Vec<Arc<ScatteringMatrix>>,
     /// Cumulative vertical scattering optical depth from the bottom edge, `edge * n_channels + k`.
     pub cum_tau_s: Vec<f64>,
     /// Cumulative vertical absorption optical depth, same index.
@@ -96,11 +108,19 @@ impl OpticalAtmosphere {
         let edges = layer_edges(scene);
         let n_layers = edges.len().saturating_sub(1);
         let mut phases: Vec<Arc<PhaseFunction>> = Vec::new();
-        let mut phase_index = |p: &Arc<PhaseFunction>| -> u32 {
-            match phases.iter().position(|q| Arc::ptr_eq(q, p) || **q == **p) {
+        let mut matrices: Vec<Arc<ScatteringMatrix>> = Vec::new();
+        // Equal phase functions share an index only when their matrices are equal too (a
+        // scalar table and a matrix table with the same F11 must stay apart).
+        let mut phase_index = |p: &Arc<PhaseFunction>, m: &Arc<ScatteringMatrix>| -> u32 {
+            let same = |i: usize| {
+                (Arc::ptr_eq(&phases[i], p) || *phases[i] == **p)
+                    && (Arc::ptr_eq(&matrices[i], m) || *matrices[i] == **m)
+            };
+            match (0..phases.len()).find(|&i| same(i)) {
                 Some(i) => i as u32,
                 None => {
                     phases.push(p.clone());
+                    matrices.push(m.clone());
                     (phases.len() - 1) as u32
                 }
             }
@@ -120,9 +140,13 @@ impl OpticalAtmosphere {
                         rayleigh::cross_section_m2(c.wavelength_nm())
                             .map_err(|e| err(e.to_string()))?,
                     );
-                    let rp = RayleighPhase::from_depolarisation(a.depolarisation_factor[k])
-                        .map_err(|e| err(e.to_string()))?;
-                    phase.push(phase_index(&Arc::new(PhaseFunction::Rayleigh(rp))));
+                    let rho = a.depolarisation_factor[k];
+                    let rp =
+                        RayleighPhase::from_depolarisation(rho).map_err(|e| err(e.to_string()))?;
+                    phase.push(phase_index(
+                        &Arc::new(PhaseFunction::Rayleigh(rp)),
+                        &Arc::new(ScatteringMatrix::rayleigh(rho)),
+                    ));
                 }
                 Some((a, sigma, phase))
             }
@@ -131,7 +155,13 @@ impl OpticalAtmosphere {
         let layer_phases: Vec<Vec<u32>> = scene
             .layers
             .iter()
-            .map(|l| l.phase.iter().map(&mut phase_index).collect())
+            .map(|l| {
+                l.phase
+                    .iter()
+                    .zip(&l.matrix)
+                    .map(|(p, m)| phase_index(p, m))
+                    .collect()
+            })
             .collect();
 
         let mut sigma_s = vec![0.0; n_layers * nch];
@@ -189,6 +219,7 @@ impl OpticalAtmosphere {
             sigma_a_per_m: sigma_a,
             components,
             phases,
+            matrices,
             cum_tau_s: Vec::new(),
             cum_tau_a: Vec::new(),
             grey_scattering,
@@ -244,6 +275,26 @@ impl OpticalAtmosphere {
                     self.cum_tau_a[l * nch + k] + self.sigma_a_per_m[l * nch + k] * dz;
             }
         }
+    }
+
+    /// The layers (indices into the layers of `edges_m`, increasing) where some scatterer
+    /// scatters, in some channel, through a non-depolarising stand-in for its matrix (a scalar
+    /// phase function such as Henyey-Greenstein or a scalar table): a polarised run is exact
+    /// only where this is empty, and says so once.
+    pub fn stand_in_layers(&self) -> Vec<usize> {
+        (0..self.components.len())
+            .filter(|&l| {
+                self.components[l].iter().any(|c| {
+                    c.phase.iter().zip(&c.sigma_s_per_m).any(|(i, s)| {
+                        *s > 0.0
+                            && self
+                                .matrices
+                                .get(*i as usize)
+                                .is_some_and(|m| m.is_stand_in())
+                    })
+                })
+            })
+            .collect()
     }
 
     /// Number of layers.

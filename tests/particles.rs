@@ -15,18 +15,18 @@ use num_complex::Complex64;
 
 use crate::util::shared_file;
 
-struct Row {
-    case: String,
-    source: String,
-    m: Complex64,
-    x: f64,
-    quantity: String,
-    theta_deg: Option<f64>,
-    re_text: String,
-    value: Complex64,
+pub(crate) struct Row {
+    pub(crate) case: String,
+    pub(crate) source: String,
+    pub(crate) m: Complex64,
+    pub(crate) x: f64,
+    pub(crate) quantity: String,
+    pub(crate) theta_deg: Option<f64>,
+    pub(crate) re_text: String,
+    pub(crate) value: Complex64,
 }
 
-fn read_reference(path: &Path) -> Vec<Row> {
+pub(crate) fn read_reference(path: &Path) -> Vec<Row> {
     let t = CsvTable::read(path).unwrap();
     let col = |n: &str| t.column(n).unwrap();
     let (c_case, c_src, c_mr, c_mi, c_x, c_q, c_th, c_vr, c_vi) = (
@@ -69,7 +69,7 @@ fn read_reference(path: &Path) -> Vec<Row> {
 
 /// Half a unit in the last significant digit printed (`digits` significant digits, or as many as
 /// the text shows once trailing zeros are dropped when `digits` is None).
-fn half_unit(text: &str, digits: Option<i32>) -> f64 {
+pub(crate) fn half_unit(text: &str, digits: Option<i32>) -> f64 {
     let v: f64 = text.parse().unwrap();
     if v == 0.0 {
         return 0.0;
@@ -84,7 +84,7 @@ fn half_unit(text: &str, digits: Option<i32>) -> f64 {
     0.5 * 10f64.powi(e - d + 1)
 }
 
-fn coefficients(m: Complex64, x: f64) -> MieCoefficients {
+pub(crate) fn coefficients(m: Complex64, x: f64) -> MieCoefficients {
     if m.re == 0.0 && m.im == 0.0 {
         // m = 0 marks MIEV0's perfectly conducting sphere in the reference file.
         MieCoefficients::perfect_conductor(x).unwrap()

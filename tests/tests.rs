@@ -15,6 +15,9 @@ mod clouds;
 /// Fuzzing: property tests over the readers, a mutation fuzz of the shipped scenes through the
 /// binary (issue 11, item 4).
 mod fuzz;
+/// Scattering matrices (issue 16): Mie matrices against reference amplitudes and BH's output,
+/// the dipole limit, the Mueller inequalities, C.1 near backscatter, scalar tables unchanged.
+mod matrices;
 /// `run.nc` read by xarray and netCDF4-python against the CSV files (issue 12, item 4).
 mod netcdf;
 /// Output written whole or not at all; CSV quoting.

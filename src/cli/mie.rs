@@ -34,7 +34,8 @@ pub enum Distribution {
 ///
 /// A size distribution: `lidarsim mie --distribution c1 --refractive-index 1.3205+1.28e-6i
 /// --wavelength-nm 1064 --out table.txt` writes a phase-function table and prints the bulk
-/// properties (per-particle cross-sections, single-scattering albedo, g, lidar ratio) as JSON.
+/// properties (per-particle cross-sections, single-scattering albedo, g, lidar ratio) as JSON;
+/// `--matrix-out matrix.txt` writes the scattering-matrix table on the same angles.
 ///
 /// An OPAC aerosol type (dry components, refractive indices built in): `lidarsim mie
 /// --distribution opac --aerosol-type continental-average --wavelength-nm 532 --out table.txt`.
@@ -103,6 +104,10 @@ pub struct Args {
     /// Write the phase-function table here (distributions).
     #[arg(long)]
     out: Option<PathBuf>,
+    /// Write the scattering-matrix table (F11, F22, F33, F44, F12, F34 on the same angles; the
+    /// format of `phase = { kind = "matrix_table" }`) here (distributions).
+    #[arg(long, value_name = "PATH")]
+    matrix_out: Option<PathBuf>,
     /// Extra metadata line KEY=VALUE for the table (repeatable), e.g. the refractive index's source.
     #[arg(long = "meta", value_name = "KEY=VALUE")]
     meta: Vec<String>,
@@ -239,7 +244,7 @@ fn bulk_opts(args: &Args) -> BulkOptions {
     BulkOptions {
         tail_fraction: args.tail_fraction,
         rel_tol: args.rel_tol,
-        angles_deg: if args.out.is_some() {
+        angles_deg: if args.out.is_some() || args.matrix_out.is_some() {
             None
         } else {
             Some(Vec::new())
@@ -322,11 +327,11 @@ fn add_meta(
         if b.phase.meta(k).is_some() {
             bail!("--meta `{kv}`: key `{k}` is already set");
         }
-        // Keep `source` last.
-        let at = b.phase.meta.len().saturating_sub(1);
-        b.phase
-            .meta
-            .insert(at, (k.to_string(), v.trim().to_string()));
+        // Keep `source` last (the matrix table carries the same metadata).
+        for meta in [&mut b.phase.meta, &mut b.matrix.meta] {
+            let at = meta.len().saturating_sub(1);
+            meta.insert(at, (k.to_string(), v.trim().to_string()));
+        }
     }
     Ok(())
 }
@@ -341,6 +346,9 @@ fn finish(
 ) -> anyhow::Result<()> {
     if let Some(path) = &args.out {
         b.phase.write(path)?;
+    }
+    if let Some(path) = &args.matrix_out {
+        b.matrix.write(path)?;
     }
     let out = json!({
         "wavelength_nm": wavelength_nm,
@@ -362,6 +370,7 @@ fn finish(
             "points": c.points, "last_rel_change": c.last_rel_change, "converged": c.converged,
         })).collect::<Vec<_>>(),
         "table": args.out.as_ref().map(|p| p.display().to_string()),
+        "matrix_table": args.matrix_out.as_ref().map(|p| p.display().to_string()),
     });
     outln!("{}", serde_json::to_string_pretty(&out)?);
     Ok(())

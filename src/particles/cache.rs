@@ -3,8 +3,10 @@
 //!
 //! The key is the full text fingerprint of the inputs ([`fingerprint`]: components, wavelength,
 //! size-integration options, solver version). A disk entry is `mie-<hash>.txt` in the
-//! `phase_functions/` format with the fingerprint and the bulk numbers in its metadata; an entry
-//! whose fingerprint text differs (a hash collision, or a file edited by hand) is recomputed and
+//! scattering-matrix format of [`super::matrix_table`] (whose F11 column is the phase
+//! function) with the fingerprint and the bulk numbers in its metadata; an entry whose
+//! fingerprint text differs (a hash collision, a file edited by hand, or an entry of an earlier
+//! version — `lidarsim-mie-v1` entries hold the phase function only) is recomputed and
 //! replaced, never trusted.
 
 use std::collections::HashMap;
@@ -14,6 +16,7 @@ use std::sync::{Arc, Mutex, OnceLock};
 use super::distribution::{
     BulkOptions, Component, bulk_optics_mixture, fingerprint, fingerprint_hash,
 };
+use super::matrix_table::MatrixTable;
 use super::table::PhaseTable;
 use crate::input::parse_f64;
 use crate::output::OutputError;
@@ -27,6 +30,8 @@ pub struct LayerOptics {
     pub single_scattering_albedo: f64,
     /// Phase function table (normalised to 4π).
     pub phase: PhaseTable,
+    /// Scattering matrix on the same angles (its F11 column is `phase`, number for number).
+    pub matrix: MatrixTable,
 }
 
 /// Where a result came from.
@@ -71,14 +76,17 @@ pub fn layer_optics(
         return Ok((hit, CacheUse::Disk));
     }
     let bulk = bulk_optics_mixture(components, wavelength_m, opts).map_err(|e| e.to_string())?;
-    // Pass the table through its text form, as a disk entry would, so that a run gives the
-    // same numbers whether or not it found the entry.
+    // Pass the tables through their text form, as a disk entry would, so that a run gives the
+    // same numbers whether or not it found the entry (F11 is printed as the phase is).
     let phase = PhaseTable::parse(Path::new("<mie>"), &bulk.phase.to_text())
         .map_err(|e| format!("Mie phase table: {e}"))?;
+    let matrix = MatrixTable::parse(Path::new("<mie>"), &bulk.matrix.to_text())
+        .map_err(|e| format!("Mie scattering matrix: {e}"))?;
     let optics = Arc::new(LayerOptics {
         extinction_cross_section_m2: bulk.extinction_cross_section_m2,
         single_scattering_albedo: bulk.single_scattering_albedo,
         phase,
+        matrix,
     });
     if let (Some(dir), Some(f)) = (cache_dir, &file) {
         // A cache that cannot be written only costs time next run; the result stands.
@@ -93,7 +101,7 @@ pub fn layer_optics(
 }
 
 fn write_entry(path: &Path, key: &str, o: &LayerOptics) -> Result<(), OutputError> {
-    let mut t = o.phase.clone();
+    let mut t = o.matrix.clone();
     t.meta.retain(|(k, _)| {
         !matches!(
             k.as_str(),
@@ -113,15 +121,16 @@ fn write_entry(path: &Path, key: &str, o: &LayerOptics) -> Result<(), OutputErro
 }
 
 fn read_entry(path: &Path, key: &str) -> Option<LayerOptics> {
-    let t = PhaseTable::read(path).ok()?;
-    if t.meta("fingerprint")? != key {
+    let t = MatrixTable::read(path).ok()?;
+    if t.meta("fingerprint")? != key || !t.circular {
         return None;
     }
     let num = |k: &str| t.meta(k).and_then(|v| parse_f64(path, 0, k, v).ok());
     Some(LayerOptics {
         extinction_cross_section_m2: num("cache_extinction_cross_section_m2")?,
         single_scattering_albedo: num("cache_single_scattering_albedo")?,
-        phase: t,
+        phase: t.f11_table(),
+        matrix: t,
     })
 }
 
@@ -157,6 +166,61 @@ mod tests {
             a.extinction_cross_section_m2
         );
         assert_eq!(back.single_scattering_albedo, a.single_scattering_albedo);
+        // The disk entry gives the same phase function and matrix as the computed result.
+        assert_eq!(back.phase.phase_4pi, a.phase.phase_4pi);
+        assert_eq!(back.phase.theta_deg, a.phase.theta_deg);
+        assert_eq!(back.matrix.elements, a.matrix.elements);
+        let f11: Vec<f64> = a.matrix.elements.iter().map(|e| e.f11).collect();
+        assert_eq!(f11, a.phase.phase_4pi);
         assert!(read_entry(&file, &fingerprint(&[comp(1.51)], 1.064e-6, &opts)).is_none());
+    }
+
+    /// An entry of the previous cache version (a scalar phase table, fingerprint
+    /// `lidarsim-mie-v1…`) under the current file name is not read: it is recomputed and
+    /// replaced by an entry with the matrix.
+    #[test]
+    fn entries_of_the_scalar_cache_version_are_recomputed() {
+        let dir = tempfile::tempdir().unwrap();
+        let comp = Component {
+            name: "p".into(),
+            distribution: SizeDistribution::lognormal(1.0, 0.2, 1.5).unwrap(),
+            refractive_index: Complex64::new(1.45, 1e-4),
+        };
+        let opts = BulkOptions {
+            angles_deg: Some((0..=36).map(|i| 5.0 * i as f64).collect()),
+            ..Default::default()
+        };
+        let key = fingerprint(std::slice::from_ref(&comp), 532e-9, &opts);
+        let file = dir.path().join(format!(
+            "mie-{}.txt",
+            fingerprint_hash(std::slice::from_ref(&comp), 532e-9, &opts)
+        ));
+        // A v1 entry: the phase table format, with the old fingerprint text.
+        let mut old = PhaseTable {
+            meta: crate::particles::table::REQUIRED_KEYS
+                .iter()
+                .map(|k| (k.to_string(), "none".to_string()))
+                .collect(),
+            theta_deg: vec![0.0, 180.0],
+            phase_4pi: vec![1.0, 1.0],
+        };
+        old.meta.push((
+            "fingerprint".into(),
+            key.replacen("lidarsim-mie-v2", "lidarsim-mie-v1", 1),
+        ));
+        old.meta
+            .push(("cache_extinction_cross_section_m2".into(), "1e-12".into()));
+        old.meta
+            .push(("cache_single_scattering_albedo".into(), "1".into()));
+        old.write(&file).unwrap();
+        assert!(read_entry(&file, &key).is_none());
+        let (o, how) =
+            layer_optics(std::slice::from_ref(&comp), 532e-9, &opts, Some(dir.path())).unwrap();
+        assert_eq!(how, CacheUse::Computed);
+        assert_eq!(o.matrix.theta_deg.len(), 37);
+        assert!(
+            read_entry(&file, &key).is_some(),
+            "replaced by the new entry"
+        );
     }
 }

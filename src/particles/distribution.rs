@@ -28,7 +28,14 @@
 //! ⟨dC/dΩ⟩(θ) = (1/N) Σ_modes ∫ n(r) (|S1|² + |S2|²)/(2k²) dr,   k = 2π/λ
 //! P(θ) = 4π ⟨dC/dΩ⟩ / ⟨Csca⟩   (normalised to 4π),   g = ⟨g Csca⟩ / ⟨Csca⟩
 //! lidar ratio S = ⟨Cext⟩ / ⟨dC/dΩ(180°)⟩ = 4π ⟨Cext⟩ / ⟨Cback⟩
+//! F_ij(θ) = 4π ⟨S_ij/k²⟩ / ⟨Csca⟩   for S11, S12, S33, S34 (Bohren & Huffman 1983, eq. 4.77);
+//!           F11 = P, and for spheres F22 = F11, F44 = F33
 //! ```
+//!
+//! The scattering matrix ([`BulkOptics::matrix`], the conventions of
+//! [`super::matrix`]) comes from the same matrix products as the phase function, at no
+//! measurable extra cost: S12, S33, S34 are products of the same S± = S1 ± S2
+//! ([`super::mie::four_s_from_s_pm`]).
 //!
 //! Each mode is integrated on a uniform grid in size parameter with the trapezoid rule over the
 //! radius range that holds all but `tail_fraction` of the mode's geometric cross-section
@@ -51,7 +58,9 @@ use num_complex::Complex64;
 use rayon::prelude::*;
 use statrs::function::gamma::{gamma_lr, ln_gamma};
 
-use super::mie::{MieCoefficients, MieError, check_refractive_index, n_terms};
+use super::matrix::MatrixElements;
+use super::matrix_table::MatrixTable;
+use super::mie::{MieCoefficients, MieError, check_refractive_index, four_s_from_s_pm, n_terms};
 use super::table::PhaseTable;
 
 fn param(name: &'static str, value: f64, reason: &'static str) -> MieError {
@@ -500,6 +509,10 @@ pub struct BulkOptics {
     pub effective_radius_um: f64,
     /// Phase function (normalised to 4π) with metadata; empty angles if none was asked for.
     pub phase: PhaseTable,
+    /// The scattering matrix on the same angles with the same metadata, every element
+    /// normalised like the phase function (its F11 column is `phase`, number for number); for
+    /// spheres F22 = F11 and F44 = F33.
+    pub matrix: MatrixTable,
     /// Per mode: range, step and convergence of the size integration.
     pub convergence: Vec<ModeConvergence>,
 }
@@ -582,7 +595,9 @@ pub fn format_refractive_index(m: Complex64) -> String {
 /// options, solver version): equal inputs give equal text on every machine (shortest round-trip
 /// number formatting). Use [`fingerprint_hash`] for a short file name.
 pub fn fingerprint(components: &[Component], wavelength_m: f64, opts: &BulkOptions) -> String {
-    let mut s = format!("lidarsim-mie-v1;wavelength_m={wavelength_m:e}");
+    // v2: results carry the scattering matrix (cache entries of v1 hold the phase function
+    // only, and must be recomputed rather than read).
+    let mut s = format!("lidarsim-mie-v2;wavelength_m={wavelength_m:e}");
     for c in components {
         s.push_str(&format!(
             ";component={}:m={:e}{:+e}i:{}",
@@ -812,8 +827,46 @@ fn angle_tables(theta_deg: &[f64], n_max: usize) -> AngleTables {
     AngleTables { plus, minus }
 }
 
-/// ∫ n(r) (|S1|²+|S2|²)/(2k²) dr over a mode's final grid, per angle [cm⁻³ µm² sr⁻¹].
-fn phase_integral(g: &ModeGrid, tables: &AngleTables) -> Result<Vec<f64>, MieError> {
+/// Per angle, ∫ n(r) S_ij/k² dr over a mode's final grid for S11, S12, S33, S34 [cm⁻³ µm² sr⁻¹]
+/// (Bohren & Huffman 1983, eq. 4.77; S11/k² = (|S1|²+|S2|²)/(2k²) = dCsca/dΩ).
+#[derive(Debug, Clone, Default)]
+struct MatrixSums {
+    s11: Vec<f64>,
+    s12: Vec<f64>,
+    s33: Vec<f64>,
+    s34: Vec<f64>,
+}
+
+impl MatrixSums {
+    fn zeros(n: usize) -> Self {
+        MatrixSums {
+            s11: vec![0.0; n],
+            s12: vec![0.0; n],
+            s33: vec![0.0; n],
+            s34: vec![0.0; n],
+        }
+    }
+
+    fn add(&mut self, o: &MatrixSums) {
+        for (a, b) in [
+            (&mut self.s11, &o.s11),
+            (&mut self.s12, &o.s12),
+            (&mut self.s33, &o.s33),
+            (&mut self.s34, &o.s34),
+        ] {
+            for (t, v) in a.iter_mut().zip(b) {
+                *t += v;
+            }
+        }
+    }
+}
+
+/// The matrix products give S± = S1 ± S2 (the angle tables hold c_n(π_n ± τ_n), the
+/// coefficients a_n ± b_n); the elements are products of S+ and S−
+/// ([`super::mie::four_s_from_s_pm`]). The coefficients are stored in Bohren & Huffman's
+/// convention, so these S± are BH's amplitudes — not the conjugates that
+/// [`MieCoefficients::amplitudes`] returns — and S34 = ½ Im(S+ S−*) has BH's sign.
+fn matrix_integral(g: &ModeGrid, tables: &AngleTables) -> Result<MatrixSums, MieError> {
     const R: usize = 32;
     let kk = tables.plus.nrows();
     let npts = g.points + 1;
@@ -829,7 +882,7 @@ fn phase_integral(g: &ModeGrid, tables: &AngleTables) -> Result<Vec<f64>, MieErr
             DMatrix::<f64>::zeros(kk, 2 * R),
         )
     };
-    let blocks: Vec<Result<Vec<f64>, MieError>> = (0..npts.div_ceil(R))
+    let blocks: Vec<Result<MatrixSums, MieError>> = (0..npts.div_ceil(R))
         .into_par_iter()
         .map_init(scratch, |(bp, bm, cp, cm), b| {
             let idx: Vec<usize> = (b * R..((b + 1) * R).min(npts)).collect();
@@ -855,7 +908,7 @@ fn phase_integral(g: &ModeGrid, tables: &AngleTables) -> Result<Vec<f64>, MieErr
                 .max()
                 .unwrap_or(0)
                 .min(n_max);
-            let mut acc = vec![0.0; kk];
+            let mut acc = MatrixSums::zeros(kk);
             if nb == 0 {
                 return Ok(acc);
             }
@@ -879,26 +932,27 @@ fn phase_integral(g: &ModeGrid, tables: &AngleTables) -> Result<Vec<f64>, MieErr
                 if *w == 0.0 {
                     continue;
                 }
-                // |S1|²+|S2|² = (|S+|² + |S−|²)/2 with S± = S1 ± S2; dC/dΩ = (|S1|²+|S2|²)/(2k²).
+                // 4 S_ij from S± (four_s_from_s_pm); S_ij/k² = f · 4 S_ij with f = w/(4k²).
                 let f = w / (4.0 * k * k);
                 let (p_re, p_im) = (cp.column(j), cp.column(R + j));
                 let (m_re, m_im) = (cm.column(j), cm.column(R + j));
                 for a in 0..kk {
-                    acc[a] += f
-                        * (p_re[a] * p_re[a]
-                            + p_im[a] * p_im[a]
-                            + m_re[a] * m_re[a]
-                            + m_im[a] * m_im[a]);
+                    let [s11, s12, s33, s34] = four_s_from_s_pm(
+                        Complex64::new(p_re[a], p_im[a]),
+                        Complex64::new(m_re[a], m_im[a]),
+                    );
+                    acc.s11[a] += f * s11;
+                    acc.s12[a] += f * s12;
+                    acc.s33[a] += f * s33;
+                    acc.s34[a] += f * s34;
                 }
             }
             Ok(acc)
         })
         .collect();
-    let mut total = vec![0.0; kk];
+    let mut total = MatrixSums::zeros(kk);
     for b in blocks {
-        for (t, v) in total.iter_mut().zip(b?) {
-            *t += v;
-        }
+        total.add(&b?);
     }
     Ok(total)
 }
@@ -978,6 +1032,7 @@ pub fn bulk_optics_mixture(
         None => default_angle_grid(x_eff),
     };
     let mut phase_4pi = Vec::new();
+    let mut elements = Vec::new();
     if !theta.is_empty() {
         let n_max = grids
             .iter()
@@ -985,13 +1040,24 @@ pub fn bulk_optics_mixture(
             .max()
             .unwrap_or(1);
         let tables = angle_tables(&theta, n_max);
-        let mut dcdo = vec![0.0; theta.len()];
+        let mut dcdo = MatrixSums::zeros(theta.len());
         for g in &grids {
-            for (t, v) in dcdo.iter_mut().zip(phase_integral(g, &tables)?) {
-                *t += v;
-            }
+            dcdo.add(&matrix_integral(g, &tables)?);
         }
-        phase_4pi = dcdo.iter().map(|d| 4.0 * PI * d / sca).collect();
+        // F_ij = 4π ⟨dC_ij/dΩ⟩/⟨Csca⟩: every element normalised like the phase function; for
+        // spheres F22 = F11 and F44 = F33.
+        let norm = |d: f64| 4.0 * PI * d / sca;
+        phase_4pi = dcdo.s11.iter().map(|d| norm(*d)).collect();
+        elements = (0..theta.len())
+            .map(|a| MatrixElements {
+                f11: phase_4pi[a],
+                f22: phase_4pi[a],
+                f33: norm(dcdo.s33[a]),
+                f44: norm(dcdo.s33[a]),
+                f12: norm(dcdo.s12[a]),
+                f34: norm(dcdo.s34[a]),
+            })
+            .collect();
     }
 
     let refr = if components.len() == 1 {
@@ -1095,6 +1161,12 @@ pub fn bulk_optics_mixture(
         lidar_ratio_sr: lidar_ratio,
         number_density_per_m3: number_density * 1e6,
         effective_radius_um: r_eff,
+        matrix: MatrixTable {
+            meta: meta.clone(),
+            theta_deg: theta.clone(),
+            elements,
+            circular: true,
+        },
         phase: PhaseTable {
             meta,
             theta_deg: theta,

@@ -38,6 +38,8 @@
 
 use num_complex::Complex64;
 
+use super::matrix::MatrixElements;
+
 /// Largest real and imaginary parts of a refractive index accepted: beyond any material at
 /// optical and infrared wavelengths (metals in the far infrared reach a few tens), and a range
 /// where the solver is checked to give finite results.
@@ -397,6 +399,74 @@ impl MieCoefficients {
         }
         (s1.conj(), s2.conj())
     }
+}
+
+impl MieCoefficients {
+    /// The scattering matrix of this sphere at the cosines `mu`, normalised like the phase
+    /// function (F11 = 2(|S1|² + |S2|²)/(x² Qsca), ½∫F11 dμ = 1): F_ij = 4 S_ij/(x² Qsca) with
+    /// Bohren & Huffman's S_ij (eq. 4.77) from their amplitudes (the conjugates of
+    /// [`Self::amplitudes`]), through [`four_s_from_s_pm`]. For a sphere F22 = F11 and
+    /// F44 = F33.
+    pub fn matrix(&self, mu: &[f64]) -> Result<Vec<MatrixElements>, MieError> {
+        let (s1, s2) = self.amplitudes(mu)?;
+        let norm = 1.0 / (self.x * self.x * self.efficiencies().qsca);
+        Ok(s1
+            .iter()
+            .zip(&s2)
+            .map(|(w1, w2)| {
+                // Wiscombe's amplitudes are the conjugates of BH's.
+                let (a1, a2) = (w1.conj(), w2.conj());
+                let [s11, s12, s33, s34] = four_s_from_s_pm(a1 + a2, a1 - a2);
+                MatrixElements {
+                    f11: s11 * norm,
+                    f22: s11 * norm,
+                    f33: s33 * norm,
+                    f44: s33 * norm,
+                    f12: s12 * norm,
+                    f34: s34 * norm,
+                }
+            })
+            .collect())
+    }
+}
+
+/// 4 S11, 4 S12, 4 S33, 4 S34 of Bohren & Huffman (1983, eq. 4.77),
+///
+/// ```text
+/// S11 = ½(|S2|² + |S1|²),  S12 = ½(|S2|² − |S1|²),  S33 = Re(S1 S2*),  S34 = Im(S2 S1*),
+/// ```
+///
+/// from S± = S1 ± S2 of **their** amplitudes (the size integral forms S± by matrix products;
+/// with Wiscombe's conjugate amplitudes S34 changes sign, the others do not). With
+/// S1 = (S+ + S−)/2 and S2 = (S+ − S−)/2:
+///
+/// ```text
+/// |S1|² + |S2|² = (|S+|² + |S−|²)/2                 → 4 S11 = |S+|² + |S−|²
+/// |S2|² − |S1|² = −Re(S+ S−*)                       → 4 S12 = −2 Re(S+ S−*)
+/// S1 S2* = (|S+|² − |S−|² − 2i Im(S+ S−*))/4         → 4 S33 = |S+|² − |S−|²
+/// S2 S1* = (|S+|² − |S−|² + 2i Im(S+ S−*))/4         → 4 S34 = 2 Im(S+ S−*)
+/// ```
+///
+/// (S+ S−* − S− S+* = 2i Im(S+ S−*) is imaginary, so it drops from the real parts.) The first
+/// sum is written in the order the phase function has always been summed in, so that its
+/// numbers do not change.
+#[inline]
+pub(crate) fn four_s_from_s_pm(sp: Complex64, sm: Complex64) -> [f64; 4] {
+    let (p_re, p_im, m_re, m_im) = (sp.re, sp.im, sm.re, sm.im);
+    let plus = p_re * p_re + p_im * p_im;
+    let minus = m_re * m_re + m_im * m_im;
+    [
+        p_re * p_re + p_im * p_im + m_re * m_re + m_im * m_im,
+        -2.0 * (p_re * m_re + p_im * m_im),
+        plus - minus,
+        2.0 * (p_im * m_re - p_re * m_im),
+    ]
+}
+
+/// The scattering matrix of a sphere (normalised like its phase function) at the cosines `mu`:
+/// see [`MieCoefficients::matrix`].
+pub fn mie_matrix(m: Complex64, x: f64, mu: &[f64]) -> Result<Vec<MatrixElements>, MieError> {
+    MieCoefficients::compute(m, x)?.matrix(mu)
 }
 
 /// Efficiencies, backscatter and asymmetry of a sphere: see [`MieCoefficients::efficiencies`].

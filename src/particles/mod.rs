@@ -7,6 +7,7 @@
 pub mod cache;
 pub mod distribution;
 pub mod matrix;
+pub mod matrix_table;
 pub mod mie;
 pub mod opac;
 pub mod phase;

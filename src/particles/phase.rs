@@ -280,22 +280,17 @@ impl TabulatedPhase {
     /// From nodes in angle (degrees, increasing from 0 to 180) and values; the values are
     /// rescaled so the function integrates to exactly 4π (linear in μ between nodes).
     pub fn from_angles(theta_deg: &[f64], phase: &[f64]) -> Result<Self, PhaseError> {
-        // Reverse so that μ increases.
-        let mu: Vec<f64> = theta_deg
-            .iter()
-            .rev()
-            .map(|t| {
-                if *t == 180.0 {
-                    -1.0
-                } else if *t == 0.0 {
-                    1.0
-                } else {
-                    t.to_radians().cos()
-                }
-            })
-            .collect();
+        Ok(Self::from_angles_scaled(theta_deg, phase)?.0)
+    }
+
+    /// [`Self::from_angles`], with the factor by which the values were multiplied to integrate
+    /// to exactly 4π (a scattering-matrix table rescales its other elements by the same factor).
+    pub(crate) fn from_angles_scaled(
+        theta_deg: &[f64],
+        phase: &[f64],
+    ) -> Result<(Self, f64), PhaseError> {
         let p: Vec<f64> = phase.iter().rev().copied().collect();
-        Self::from_mu(mu, p)
+        Self::from_mu(mu_nodes(theta_deg), p)
     }
 
     /// From a validated [`PhaseTable`].
@@ -303,7 +298,7 @@ impl TabulatedPhase {
         Self::from_angles(&table.theta_deg, &table.phase_4pi)
     }
 
-    fn from_mu(mu: Vec<f64>, mut p: Vec<f64>) -> Result<Self, PhaseError> {
+    fn from_mu(mu: Vec<f64>, mut p: Vec<f64>) -> Result<(Self, f64), PhaseError> {
         let n = mu.len();
         // ∫ P dμ by the trapezoid rule, exact for P linear in μ.
         let mut cdf = vec![0.0; n];
@@ -365,16 +360,19 @@ impl TabulatedPhase {
             })
             .collect();
 
-        Ok(TabulatedPhase {
-            mu,
-            p,
-            slope,
-            cdf,
-            sample_guide,
-            eval_guide_fwd,
-            eval_guide_bwd,
-            asymmetry,
-        })
+        Ok((
+            TabulatedPhase {
+                mu,
+                p,
+                slope,
+                cdf,
+                sample_guide,
+                eval_guide_fwd,
+                eval_guide_bwd,
+                asymmetry,
+            },
+            scale,
+        ))
     }
 
     /// Number of nodes.
@@ -466,6 +464,24 @@ impl TabulatedPhase {
         };
         ((self.mu[i] + t).clamp(-1.0, 1.0), a + b * t)
     }
+}
+
+/// The nodes μ = cos θ of a table given at angles `theta_deg` (increasing from 0 to 180), in
+/// increasing order (reversed), with 0° and 180° mapped to exactly 1 and −1.
+pub(crate) fn mu_nodes(theta_deg: &[f64]) -> Vec<f64> {
+    theta_deg
+        .iter()
+        .rev()
+        .map(|t| {
+            if *t == 180.0 {
+                -1.0
+            } else if *t == 0.0 {
+                1.0
+            } else {
+                t.to_radians().cos()
+            }
+        })
+        .collect()
 }
 
 /// The ratio P/(4π): density of scattered directions per steradian.

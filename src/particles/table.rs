@@ -53,45 +53,7 @@ impl PhaseTable {
 
     /// Parse and validate table text; `path` names the file in errors.
     pub fn parse(path: &Path, text: &str) -> Result<Self, InputError> {
-        let mut meta = Vec::new();
-        for (i, line) in text.lines().enumerate() {
-            let Some(c) = line.trim().strip_prefix('#') else {
-                continue;
-            };
-            if let Some((k, v)) = c.split_once('=') {
-                let key = k.trim();
-                if !key.is_empty()
-                    && key
-                        .chars()
-                        .all(|ch| ch.is_ascii_alphanumeric() || ch == '_')
-                {
-                    if meta.iter().any(|(k2, _): &(String, String)| k2 == key) {
-                        return Err(InputError::at(path, i + 1, key, "metadata key given twice"));
-                    }
-                    meta.push((key.to_string(), v.trim().to_string()));
-                }
-            }
-        }
-        for key in REQUIRED_KEYS {
-            if !meta.iter().any(|(k, _)| k == key) {
-                return Err(InputError {
-                    field: Some(key.to_string()),
-                    ..InputError::file(
-                        path,
-                        format!(
-                            "missing metadata line `# {key} = ...` (write `none` if it does not apply)"
-                        ),
-                    )
-                });
-            }
-        }
-        if let Some((_, v)) = meta.iter().find(|(k, _)| k == "wavelength_nm")
-            && v != "none"
-        {
-            let line = line_of_key(text, "wavelength_nm");
-            // 10 nm to 1 cm: any wavelength a phase function of particles is computed for.
-            parse_f64_in(path, line, "wavelength_nm", v, Bounds::closed(10.0, 1e7))?;
-        }
+        let meta = parse_meta(path, text)?;
         let t = CsvTable::parse(path, text)?;
         if t.header() != ["theta_deg", "phase_4pi"] {
             return Err(InputError::at(
@@ -105,74 +67,20 @@ impl PhaseTable {
             ));
         }
         let theta_deg = t.f64_column_in("theta_deg", Bounds::closed(0.0, 180.0))?;
-        // The forward peak of droplets at size parameter 10⁵ is near 10¹⁰ (∝ x²).
-        let phase_4pi = t.f64_column_in("phase_4pi", Bounds::closed(0.0, 1e12))?;
-        if theta_deg.len() < 2 {
-            return Err(InputError::file(
-                path,
-                "needs at least two angles (0 and 180)",
-            ));
-        }
-        for r in 0..theta_deg.len() {
-            let line = t.line_of(r);
-            if r > 0 && theta_deg[r] <= theta_deg[r - 1] {
-                return Err(InputError::at(
-                    path,
-                    line,
-                    "theta_deg",
-                    "angles must strictly increase",
-                ));
-            }
-        }
-        if theta_deg[0] != 0.0 {
-            return Err(InputError::at(
-                path,
-                t.line_of(0),
-                "theta_deg",
-                "first angle must be 0",
-            ));
-        }
-        if *theta_deg.last().unwrap_or(&0.0) != 180.0 {
-            let line = t.line_of(theta_deg.len() - 1);
-            return Err(InputError::at(
-                path,
-                line,
-                "theta_deg",
-                "last angle must be 180",
-            ));
-        }
+        let phase_4pi = t.f64_column_in("phase_4pi", PHASE_BOUNDS)?;
+        check_angles(&t, &theta_deg)?;
         let table = PhaseTable {
             meta,
             theta_deg,
             phase_4pi,
         };
-        let norm = table.normalisation();
-        if (norm - 1.0).abs() > 0.02 {
-            return Err(InputError::at(
-                path,
-                t.line_of(0),
-                "phase_4pi",
-                format!(
-                    "integrates to {:.6} × 4π over the sphere; the format requires 4π (within 2 %)",
-                    norm
-                ),
-            ));
-        }
+        check_normalisation(&t, "phase_4pi", table.normalisation())?;
         Ok(table)
     }
 
     /// (1/4π) ∫ P dΩ = ½ ∫ P dμ with P linear in μ = cos θ between nodes.
     pub fn normalisation(&self) -> f64 {
-        let mu: Vec<f64> = self
-            .theta_deg
-            .iter()
-            .map(|t| t.to_radians().cos())
-            .collect();
-        let mut s = 0.0;
-        for i in 0..mu.len() - 1 {
-            s += 0.5 * (self.phase_4pi[i] + self.phase_4pi[i + 1]) * (mu[i] - mu[i + 1]);
-        }
-        0.5 * s
+        normalisation(&self.theta_deg, &self.phase_4pi)
     }
 
     /// A metadata value.
@@ -211,6 +119,123 @@ fn line_of_key(text: &str, key: &str) -> usize {
                 .is_some_and(|(k, _)| k.trim() == key)
         })
         .map_or(1, |i| i + 1)
+}
+
+/// Range of a tabulated phase function (and of every matrix element in magnitude): the forward
+/// peak of droplets at size parameter 10⁵ is near 10¹⁰ (∝ x²).
+pub(crate) const PHASE_BOUNDS: Bounds = Bounds::closed(0.0, 1e12);
+
+/// The `# key = value` metadata of a table file, checked: no key twice, the
+/// [`REQUIRED_KEYS`] present, `wavelength_nm` a wavelength or `none`.
+pub(crate) fn parse_meta(path: &Path, text: &str) -> Result<Vec<(String, String)>, InputError> {
+    let mut meta = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        let Some(c) = line.trim().strip_prefix('#') else {
+            continue;
+        };
+        if let Some((k, v)) = c.split_once('=') {
+            let key = k.trim();
+            if !key.is_empty()
+                && key
+                    .chars()
+                    .all(|ch| ch.is_ascii_alphanumeric() || ch == '_')
+            {
+                if meta.iter().any(|(k2, _): &(String, String)| k2 == key) {
+                    return Err(InputError::at(path, i + 1, key, "metadata key given twice"));
+                }
+                meta.push((key.to_string(), v.trim().to_string()));
+            }
+        }
+    }
+    for key in REQUIRED_KEYS {
+        if !meta.iter().any(|(k, _)| k == key) {
+            return Err(InputError {
+                field: Some(key.to_string()),
+                ..InputError::file(
+                    path,
+                    format!(
+                        "missing metadata line `# {key} = ...` (write `none` if it does not apply)"
+                    ),
+                )
+            });
+        }
+    }
+    if let Some((_, v)) = meta.iter().find(|(k, _)| k == "wavelength_nm")
+        && v != "none"
+    {
+        let line = line_of_key(text, "wavelength_nm");
+        // 10 nm to 1 cm: any wavelength a phase function of particles is computed for.
+        parse_f64_in(path, line, "wavelength_nm", v, Bounds::closed(10.0, 1e7))?;
+    }
+    Ok(meta)
+}
+
+/// At least two angles, strictly increasing from exactly 0 to exactly 180 (`theta_deg` is the
+/// parsed column of `t`).
+pub(crate) fn check_angles(t: &CsvTable, theta_deg: &[f64]) -> Result<(), InputError> {
+    let path = t.path();
+    if theta_deg.len() < 2 {
+        return Err(InputError::file(
+            path,
+            "needs at least two angles (0 and 180)",
+        ));
+    }
+    for r in 1..theta_deg.len() {
+        if theta_deg[r] <= theta_deg[r - 1] {
+            return Err(InputError::at(
+                path,
+                t.line_of(r),
+                "theta_deg",
+                "angles must strictly increase",
+            ));
+        }
+    }
+    if theta_deg[0] != 0.0 {
+        return Err(InputError::at(
+            path,
+            t.line_of(0),
+            "theta_deg",
+            "first angle must be 0",
+        ));
+    }
+    if *theta_deg.last().unwrap_or(&0.0) != 180.0 {
+        let line = t.line_of(theta_deg.len() - 1);
+        return Err(InputError::at(
+            path,
+            line,
+            "theta_deg",
+            "last angle must be 180",
+        ));
+    }
+    Ok(())
+}
+
+/// (1/4π) ∫ P dΩ = ½ ∫ P dμ with P linear in μ = cos θ between the nodes `theta_deg`.
+pub(crate) fn normalisation(theta_deg: &[f64], p: &[f64]) -> f64 {
+    let mu: Vec<f64> = theta_deg.iter().map(|t| t.to_radians().cos()).collect();
+    let mut s = 0.0;
+    for i in 0..mu.len().saturating_sub(1) {
+        s += 0.5 * (p[i] + p[i + 1]) * (mu[i] - mu[i + 1]);
+    }
+    0.5 * s
+}
+
+/// The format's 2 % rule on the normalisation `norm` = (1/4π) ∫ P dΩ of column `column`
+/// (a table normalised to 1 or to 1/(4π) by mistake is caught; smaller quadrature differences
+/// are removed by rescaling when the table is used).
+pub(crate) fn check_normalisation(t: &CsvTable, column: &str, norm: f64) -> Result<(), InputError> {
+    if !((norm - 1.0).abs() <= 0.02) {
+        return Err(InputError::at(
+            t.path(),
+            t.line_of(0),
+            column,
+            format!(
+                "integrates to {:.6} × 4π over the sphere; the format requires 4π (within 2 %)",
+                norm
+            ),
+        ));
+    }
+    Ok(())
 }
 
 #[cfg(test)]

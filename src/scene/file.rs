@@ -200,6 +200,9 @@ pub(super) enum PhaseSpecFile {
         file: Option<String>,
         builtin: Option<String>,
     },
+    MatrixTable {
+        file: String,
+    },
 }
 
 #[derive(Debug, Deserialize)]

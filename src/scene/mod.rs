@@ -21,6 +21,8 @@ use crate::atmosphere::{Profile, StandardAtmosphere};
 use crate::input::{Bounds, InputError, check_count, check_finite_range};
 use crate::instrument::laser::{Filter, Laser, Line, SpectralSampling};
 use crate::instrument::signals::Receiver;
+use crate::particles::matrix::ScatteringMatrix;
+use crate::particles::matrix_table::MatrixTable;
 use crate::particles::phase::{HenyeyGreenstein, PhaseFunction, RayleighPhase, TabulatedPhase};
 use crate::particles::table::PhaseTable;
 use crate::particles::{builtin_table, rayleigh};
@@ -245,8 +247,24 @@ pub struct Layer {
     pub single_scattering_albedo: Vec<f64>,
     /// Particle phase function per channel.
     pub phase: Vec<Arc<PhaseFunction>>,
+    /// Particle scattering matrix per channel, whose F11 is `phase` (for polarised transport):
+    /// Mie layers and `matrix_table` layers their tabulated matrix, `rayleigh` layers the
+    /// molecular matrix, other scalar phase functions a non-depolarising stand-in
+    /// ([`ScatteringMatrix::NonDepolarising`]).
+    pub matrix: Vec<Arc<ScatteringMatrix>>,
     /// Extra (e.g. gas) absorption coefficient per channel [1/m].
     pub absorption_per_m: Vec<f64>,
+}
+
+impl Layer {
+    /// True when the layer scatters in some channel through a non-depolarising stand-in for
+    /// its matrix (a scalar phase function with no polarisation behind it).
+    pub fn uses_stand_in(&self) -> bool {
+        (0..self.matrix.len()).any(|k| {
+            self.matrix[k].is_stand_in()
+                && self.extinction_per_m[k] * self.single_scattering_albedo[k] > 0.0
+        })
+    }
 }
 
 /// A Lambertian surface.
@@ -1184,7 +1202,7 @@ impl Validator<'_> {
             (None, None) => None,
         };
         let has_particles = ext.is_some();
-        let (extinction_per_m, single_scattering_albedo, phase) = match ext {
+        let (extinction_per_m, single_scattering_albedo, phase, matrix) = match ext {
             Some((at, v, scale, bounds)) => {
                 let mut e = self.per_channel(&at, v, nch)?;
                 for x in e.iter_mut() {
@@ -1218,15 +1236,21 @@ impl Validator<'_> {
                     }
                 };
                 let mut phase: Vec<Arc<PhaseFunction>> = Vec::new();
+                let mut matrix: Vec<Arc<ScatteringMatrix>> = Vec::new();
                 for (k, s) in specs.iter().enumerate() {
                     // Identical specs share one phase function (tables are large).
                     if let Some(j) = (0..k).find(|&j| specs[j] == *s) {
                         phase.push(phase[j].clone());
+                        matrix.push(matrix[j].clone());
                     } else {
-                        phase.push(Arc::new(self.phase(&phase_at, s, &channels[k])?));
+                        let (p, m) = self.phase(&phase_at, s, &channels[k])?;
+                        let p = Arc::new(p);
+                        let m = m.unwrap_or_else(|| ScatteringMatrix::NonDepolarising(p.clone()));
+                        phase.push(p);
+                        matrix.push(Arc::new(m));
                     }
                 }
-                (e, ssa, phase)
+                (e, ssa, phase, matrix)
             }
             None => {
                 if l.single_scattering_albedo.is_some() || l.phase.is_some() {
@@ -1235,13 +1259,10 @@ impl Validator<'_> {
                         "`single_scattering_albedo` and `phase` need `extinction_per_m` or `extinction_per_km`",
                     ));
                 }
-                (
-                    vec![0.0; nch],
-                    vec![1.0; nch],
-                    (0..nch)
-                        .map(|_| Arc::new(PhaseFunction::Isotropic))
-                        .collect(),
-                )
+                // Nothing scatters: isotropic placeholders.
+                let p = Arc::new(PhaseFunction::Isotropic);
+                let m = Arc::new(ScatteringMatrix::NonDepolarising(p.clone()));
+                (vec![0.0; nch], vec![1.0; nch], vec![p; nch], vec![m; nch])
             }
         };
         let absorption_per_m = self.absorption(&sec, l, nch)?;
@@ -1258,6 +1279,7 @@ impl Validator<'_> {
             extinction_per_m,
             single_scattering_albedo,
             phase,
+            matrix,
             absorption_per_m,
         })
     }
@@ -1457,13 +1479,20 @@ impl Validator<'_> {
             }
         };
         let mut phase: Vec<Arc<PhaseFunction>> = Vec::with_capacity(nch);
+        let mut matrix: Vec<Arc<ScatteringMatrix>> = Vec::with_capacity(nch);
         for (k, o) in optics.iter().enumerate() {
             if let Some(j) = (0..k).find(|&j| Arc::ptr_eq(&optics[j], o)) {
                 phase.push(phase[j].clone());
+                matrix.push(matrix[j].clone());
             } else {
-                phase.push(Arc::new(PhaseFunction::Tabulated(Box::new(
-                    TabulatedPhase::from_table(&o.phase).map_err(|e| mie_err(e.to_string()))?,
-                ))));
+                // Both from the matrix table, whose F11 column is the phase table number for
+                // number: the phase function is the one `o.phase` gives.
+                let (p, m) = o
+                    .matrix
+                    .phase_and_matrix()
+                    .map_err(|e| mie_err(e.to_string()))?;
+                phase.push(Arc::new(p));
+                matrix.push(Arc::new(m));
             }
         }
         let absorption_per_m = self.absorption(sec, l, nch)?;
@@ -1477,19 +1506,24 @@ impl Validator<'_> {
                 .collect(),
             single_scattering_albedo: optics.iter().map(|o| o.single_scattering_albedo).collect(),
             phase,
+            matrix,
             absorption_per_m,
         })
     }
 
+    /// The phase function of a layer's `phase` spec at one channel, and its scattering matrix
+    /// where the spec gives one (`None`: a scalar phase function, for which the caller makes a
+    /// non-depolarising stand-in).
     fn phase(
         &self,
         at: &KeyPath,
         spec: &PhaseSpecFile,
         channel: &Channel,
-    ) -> Result<PhaseFunction, InputError> {
+    ) -> Result<(PhaseFunction, Option<ScatteringMatrix>), InputError> {
         let bad = |m: String| self.err(at, m);
+        let scalar = |p: PhaseFunction| (p, None);
         Ok(match spec {
-            PhaseSpecFile::Isotropic {} => PhaseFunction::Isotropic,
+            PhaseSpecFile::Isotropic {} => scalar(PhaseFunction::Isotropic),
             PhaseSpecFile::Rayleigh {
                 depolarization_factor,
             } => {
@@ -1498,15 +1532,20 @@ impl Validator<'_> {
                     None => rayleigh::depolarisation_factor(channel.wavelength_nm())
                         .map_err(|e| bad(e.to_string()))?,
                 };
-                PhaseFunction::Rayleigh(
-                    RayleighPhase::from_depolarisation(rho).map_err(|e| bad(e.to_string()))?,
+                // Molecule-like scatterers: the molecular matrix with the same ρ, whose F11 is
+                // this phase function.
+                (
+                    PhaseFunction::Rayleigh(
+                        RayleighPhase::from_depolarisation(rho).map_err(|e| bad(e.to_string()))?,
+                    ),
+                    Some(ScatteringMatrix::rayleigh(rho)),
                 )
             }
-            PhaseSpecFile::HenyeyGreenstein { g } => PhaseFunction::HenyeyGreenstein(
+            PhaseSpecFile::HenyeyGreenstein { g } => scalar(PhaseFunction::HenyeyGreenstein(
                 HenyeyGreenstein::new(*g).map_err(|e| bad(e.to_string()))?,
-            ),
+            )),
             PhaseSpecFile::DoubleHenyeyGreenstein { f, g1, g2 } => {
-                PhaseFunction::double_hg(*f, *g1, *g2).map_err(|e| bad(e.to_string()))?
+                scalar(PhaseFunction::double_hg(*f, *g1, *g2).map_err(|e| bad(e.to_string()))?)
             }
             PhaseSpecFile::Table { file, builtin } => {
                 let table = match (file, builtin) {
@@ -1522,9 +1561,18 @@ impl Validator<'_> {
                         ));
                     }
                 };
-                PhaseFunction::Tabulated(Box::new(
+                scalar(PhaseFunction::Tabulated(Box::new(
                     TabulatedPhase::from_table(&table).map_err(|e| bad(e.to_string()))?,
-                ))
+                )))
+            }
+            PhaseSpecFile::MatrixTable { file } => {
+                let p = self.path.parent().unwrap_or(Path::new(".")).join(file);
+                let table = MatrixTable::read(&p)
+                    .map_err(|e| bad(format!("scattering-matrix table: {e}")))?;
+                let (phase, matrix) = table
+                    .phase_and_matrix()
+                    .map_err(|e| bad(format!("scattering-matrix table {}: {e}", p.display())))?;
+                (phase, Some(matrix))
             }
         })
     }
@@ -1611,6 +1659,7 @@ impl Scene {
             remap(&mut l.extinction_per_m, index);
             remap(&mut l.single_scattering_albedo, index);
             remap(&mut l.phase, index);
+            remap(&mut l.matrix, index);
             remap(&mut l.absorption_per_m, index);
         }
         if let Some(s) = &mut self.surface {
