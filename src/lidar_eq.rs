@@ -17,7 +17,7 @@
 //! half-angle β.
 
 use crate::optics::OpticalAtmosphere;
-use crate::particles::matrix::{MatrixElements, ScatteringMatrix};
+use crate::particles::matrix::MatrixElements;
 use crate::returns::{Order, Returns, Source};
 use crate::scene::{BeamProfile, Lidar, Polarisation, Scene};
 
@@ -99,9 +99,9 @@ pub fn single_scatter_polarised(
     ))
 }
 
-/// The scattering matrix at 180° of the atmosphere's phase function `i`.
+/// The scattering matrix at 180° of the atmosphere's scatterer `i` (its phase function's).
 fn backscatter_matrix(atm: &OpticalAtmosphere, i: usize) -> MatrixElements {
-    ScatteringMatrix::of_phase(&atm.phases[i]).eval(-1.0)
+    atm.matrices[i].eval(-1.0)
 }
 
 /// Single-scatter returns with the backscatter phase function of a layer and channel given by

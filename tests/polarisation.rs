@@ -233,3 +233,171 @@ fn unknown_polarisation_is_refused() {
         "{err}"
     );
 }
+
+/// A ground lidar at 532 nm looking up into a small-droplet water cloud (log-normal, median
+/// radius 1 µm: spheres by Mie), pencil beam or `DIV`, fields of view `FOV`; no air.
+const SPHERES: &str = r#"
+[lidar]
+altitude_m = 0.0
+zenith_angle_deg = 0.0
+pulse_energy_j = 1.0
+beam_divergence_full_angle_mrad = DIV
+telescope_diameter_m = 1.0
+optical_efficiency = 1.0
+fov_full_angle_mrad = FOV
+polarisation = "POL"
+[[channel]]
+name = "532"
+wavelength_nm = 532.0
+[gates]
+start_m = 900.0
+end_m = 1400.0
+width_m = 25.0
+[[layer]]
+name = "droplets"
+base_m = 1000.0
+top_m = 1200.0
+extinction_per_km = 10.0
+particles = { distribution = "lognormal", median_radius_um = 1.0, sigma_g = 1.5, refractive_index = "1.337+1.8e-9i" }
+[simulation]
+max_order = 3
+multiple_scattering = "always"
+"#;
+
+fn spheres(pol: &str, fov: &str, div: &str) -> lidarsim::scene::Scene {
+    scene_text(
+        &SPHERES
+            .replace("POL", pol)
+            .replace("FOV", fov)
+            .replace("DIV", div),
+    )
+}
+
+/// (a) Single backscatter by spheres does not depolarise: the order-1 cross-polarised return
+/// is 0 in every gate and field of view, analytic and Monte Carlo, for linear and circular
+/// light (F22 = F11 and F44 = F33 = −F11 at 180° for spheres). Multiple scattering then
+/// depolarises: δ of order 2 is positive.
+#[test]
+fn single_backscatter_by_spheres_does_not_depolarise() {
+    for pol in ["linear", "circular"] {
+        let scene = spheres(pol, "[1.0, 10.0]", "0.0");
+        let atm = OpticalAtmosphere::build(&scene).unwrap();
+        let (co, cross) = lidar_eq::single_scatter_polarised(&scene, &atm).unwrap();
+        let r = run(&scene, 20_000, |_| {});
+        let p = &r.polarised.as_ref().unwrap().channels;
+        let o1 = p.co.order_index(Order::Exactly(1)).unwrap();
+        let mut lit = 0;
+        for f in 0..2 {
+            for g in 0..co.range_m.len() {
+                let i = co.index(0, f, g, 0);
+                assert!(
+                    cross.energy_j[i].abs() <= 1e-12 * co.energy_j[i],
+                    "{pol} analytic"
+                );
+                let j = p.co.index(0, f, g, o1);
+                assert!(
+                    p.cross.energy_j[j].abs() <= 1e-12 * p.co.energy_j[j].max(1e-300),
+                    "{pol} MC FOV {f} gate {g}: co {:e} cross {:e}",
+                    p.co.energy_j[j],
+                    p.cross.energy_j[j]
+                );
+                lit += usize::from(p.co.energy_j[j] > 0.0);
+            }
+        }
+        assert!(lit >= 10, "{pol}: {lit}");
+        let (d2, s2) = mc_delta(&r, 1, 8, Order::Exactly(2));
+        assert!(d2 > 5.0 * s2, "{pol}: order-2 δ {d2} ± {s2}");
+    }
+}
+
+/// (d) for spheres: with a uniform beam as wide as the field of view, δ_C = 2δ_L/(1 − δ_L) in
+/// every gate and order the two runs resolve (Mishchenko & Hovenier 1995): spheres' Jones
+/// matrices are diagonal in their scattering planes, so every path's is symmetric in
+/// backscattering (`docs/transport.md`, "Polarisation").
+#[test]
+fn spheres_obey_mishchenko_hovenier() {
+    let lin = run(&spheres("linear", "10.0", "10.0"), 40_000, |_| {});
+    let circ = run(&spheres("circular", "10.0", "10.0"), 40_000, |o| o.seed = 2);
+    let mut judged = 0;
+    for g in 0..lin.returns.range_m.len() {
+        for order in [Order::Exactly(2), Order::Exactly(3), Order::Total] {
+            let (dl, sl) = mc_delta(&lin, 0, g, order);
+            let (dc, sc) = mc_delta(&circ, 0, g, order);
+            if !(dl > 0.0 && sl < 0.1 * dl && sc < 0.1 * dc) {
+                continue;
+            }
+            judged += 1;
+            let predicted = 2.0 * dl / (1.0 - dl);
+            let s_pred = 2.0 * sl / (1.0 - dl).powi(2);
+            assert!(
+                (dc - predicted).abs() <= 3.0 * (sc * sc + s_pred * s_pred).sqrt(),
+                "gate {g} {order:?}: δ_C {dc} ± {sc}, 2δ_L/(1 − δ_L) {predicted} ± {s_pred}"
+            );
+        }
+    }
+    assert!(judged >= 10, "{judged}");
+}
+
+/// (c) A tabulated matrix of non-spherical particles: the order-1 δ_L is
+/// (F11 − F22)/(F11 + F22) at 180°, analytic to 1e-9 and Monte Carlo (exact here, all order-1
+/// estimates being backscatter). The table (isotropic F11, F22 = 0.5, F33 = F44 = 0.5 cos Θ)
+/// gives 1/3; with circular light (F11 + F44)/(F11 − F44) = 1/3 too. A linear-only table is
+/// refused for a circular source, naming the key and the file.
+#[test]
+fn tabulated_matrix_backscatter_depolarises_as_its_elements() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut t = String::from(
+        "# wavelength_nm = 532\n# refractive_index = none\n# distribution = none\ntheta_deg,F11,F22,F33,F44,F12,F34\n",
+    );
+    let mut lin = String::from(
+        "# wavelength_nm = 532\n# refractive_index = none\n# distribution = none\ntheta_deg,F11,F22,F33,F12\n",
+    );
+    for i in 0..=180 {
+        let c = (i as f64).to_radians().cos();
+        t.push_str(&format!("{i},1,0.5,{},{},0,0\n", 0.5 * c, 0.5 * c));
+        lin.push_str(&format!("{i},1,0.5,{},0\n", 0.5 * c));
+    }
+    std::fs::write(dir.path().join("m.csv"), t).unwrap();
+    std::fs::write(dir.path().join("lin.csv"), lin).unwrap();
+    let text = |pol: &str, file: &str| {
+        SPHERES
+            .replace("POL", pol)
+            .replace("FOV", "[1.0, 10.0]")
+            .replace("DIV", "0.0")
+            .replace(
+                r#"particles = { distribution = "lognormal", median_radius_um = 1.0, sigma_g = 1.5, refractive_index = "1.337+1.8e-9i" }"#,
+                &format!("single_scattering_albedo = 1.0\nphase = {{ kind = \"matrix_table\", file = \"{file}\" }}"),
+            )
+    };
+    for pol in ["linear", "circular"] {
+        let path = dir.path().join(format!("{pol}.toml"));
+        let scene = lidarsim::scene::Scene::from_toml(&path, &text(pol, "m.csv")).unwrap();
+        let atm = OpticalAtmosphere::build(&scene).unwrap();
+        let (co, cross) = lidar_eq::single_scatter_polarised(&scene, &atm).unwrap();
+        let expected = 1.0 / 3.0;
+        let mut lit = 0;
+        for i in 0..co.energy_j.len() {
+            if co.energy_j[i] > 0.0 {
+                lit += 1;
+                assert!((cross.energy_j[i] / co.energy_j[i] - expected).abs() < 1e-9);
+            }
+        }
+        assert!(lit >= 10);
+        let r = run(&scene, 10_000, |_| {});
+        let (d, se) = mc_delta(&r, 0, 6, Order::Exactly(1));
+        assert!(
+            (d - expected).abs() <= 3.0 * se + 1e-12,
+            "{pol}: {d} ± {se}"
+        );
+    }
+    let path = dir.path().join("c.toml");
+    let err = lidarsim::scene::Scene::from_toml(&path, &text("circular", "lin.csv"))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("c.toml") && err.contains("phase") && err.contains("lin.csv"),
+        "{err}"
+    );
+    // The same linear-only table serves a linear source.
+    lidarsim::scene::Scene::from_toml(&path, &text("linear", "lin.csv")).unwrap();
+}

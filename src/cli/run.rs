@@ -181,6 +181,28 @@ fn print_summary(out: &mut impl Write, scene: &Scene, run: &RunOutput) -> std::i
     };
     writeln!(out, "scene: {name}")?;
     writeln!(out, "{}", run.monte_carlo.reason)?;
+    if scene.lidar.polarisation != lidarsim::scene::Polarisation::None {
+        // Once: which layers' scalar phase functions stand in for scattering matrices.
+        let stand_ins: Vec<&str> = scene
+            .layers
+            .iter()
+            .filter(|l| l.uses_stand_in())
+            .map(|l| l.name.as_str())
+            .collect();
+        writeln!(
+            out,
+            "polarisation: {} source, co- and cross-polarised returns in returns.csv and depolarisation.csv{}",
+            scene.lidar.polarisation.name(),
+            if stand_ins.is_empty() {
+                String::new()
+            } else {
+                format!(
+                    "; layers {} scatter through a scalar phase function taken as non-depolarising (F22 = F33 = F44 = F11, F12 = F34 = 0)",
+                    stand_ins.join(", ")
+                )
+            }
+        )?;
+    }
     let analytic = &run.analytic_lines.mean;
     match (&run.mc, &run.mc_lines) {
         (Some(mc), Some(lines)) => {

@@ -237,19 +237,6 @@ impl ScatteringMatrix {
         }
     }
 
-    /// The matrix a scalar phase function stands for: molecules' from their depolarisation
-    /// factor (ρ = 2γ/(1 + γ) of the scalar form's γ = ρ/(2 − ρ)); any other scatters without
-    /// depolarising.
-    pub fn of_phase(p: &Arc<PhaseFunction>) -> Self {
-        match &**p {
-            PhaseFunction::Rayleigh(r) => {
-                let g = r.gamma();
-                ScatteringMatrix::rayleigh(2.0 * g / (1.0 + g))
-            }
-            _ => ScatteringMatrix::NonDepolarising(p.clone()),
-        }
-    }
-
     /// The six elements at μ = cos Θ.
     #[inline]
     pub fn eval(&self, mu: f64) -> MatrixElements {

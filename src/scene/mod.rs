@@ -460,7 +460,7 @@ impl Validator<'_> {
         let mut layers = Vec::new();
         let cache_dir = self.cache_dir(&raw);
         for (i, l) in raw.layer.iter().enumerate() {
-            layers.push(self.layer(i, l, &channels, cache_dir.as_deref())?);
+            layers.push(self.layer(i, l, &channels, cache_dir.as_deref(), lidar.polarisation)?);
         }
         let surface = match &raw.surface {
             Some(s) => {
@@ -1175,6 +1175,7 @@ impl Validator<'_> {
         l: &file::LayerFile,
         channels: &[Channel],
         cache_dir: Option<&Path>,
+        polarisation: Polarisation,
     ) -> Result<Layer, InputError> {
         let nch = channels.len();
         let sec = KeyPath::array("layer", i);
@@ -1244,6 +1245,21 @@ impl Validator<'_> {
                         matrix.push(matrix[j].clone());
                     } else {
                         let (p, m) = self.phase(&phase_at, s, &channels[k])?;
+                        if let (Polarisation::Circular, Some(ScatteringMatrix::Tabulated(t))) =
+                            (polarisation, &m)
+                            && !t.circular
+                        {
+                            let file = match s {
+                                PhaseSpecFile::MatrixTable { file } => file.as_str(),
+                                _ => "",
+                            };
+                            return Err(self.err(
+                                &phase_at,
+                                format!(
+                                    "`{file}` is a linear-only scattering-matrix table (no F44, F34): a circularly polarised lidar needs all six elements"
+                                ),
+                            ));
+                        }
                         let p = Arc::new(p);
                         let m = m.unwrap_or_else(|| ScatteringMatrix::NonDepolarising(p.clone()));
                         phase.push(p);

@@ -785,7 +785,7 @@ impl<'a> Plan<'a> {
                 Polarisation::Linear => Some(stokes::Analyser::Linear(axis_e1)),
                 Polarisation::Circular => Some(stokes::Analyser::Circular),
             },
-            matrices: atm.phases.iter().map(ScatteringMatrix::of_phase).collect(),
+            matrices: atm.matrices.iter().map(|m| (**m).clone()).collect(),
         };
         // Which layers get DDIS: a forward-peaked scatterer mixture (in any class).
         let mut setup = setup;
