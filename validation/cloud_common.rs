@@ -18,9 +18,9 @@ pub struct Gate {
     pub stderr_j: f64,
 }
 
-/// Key of a series: (source, FOV full angle in µrad, order), the FOV as an integer so that
-/// it can be ordered and looked up exactly.
-type Key = (String, u64, String);
+/// Key of a series: (source, FOV full angle in µrad, order, polarisation), the FOV as an
+/// integer so that it can be ordered and looked up exactly.
+type Key = (String, u64, String, String);
 
 /// The returns of one run, by source, field of view and order, each a list of gates in range
 /// order.
@@ -50,7 +50,14 @@ impl Returns {
                     .parse::<f64>()
                     .with_context(|| format!("{} line {} column {}", path.display(), i + 2, j + 1))
             };
-            let key = (rec[0].to_string(), fov_key(num(2)?), rec[4].to_string());
+            // `polarisation` (the eighth column): `total`, or `co`/`cross` in a polarised run.
+            let pol = rec.get(7).unwrap_or("total").to_string();
+            let key = (
+                rec[0].to_string(),
+                fov_key(num(2)?),
+                rec[4].to_string(),
+                pol,
+            );
             series.entry(key).or_default().push(Gate {
                 range_m: num(3)?,
                 energy_j: num(5)?,
@@ -65,10 +72,30 @@ impl Returns {
 
     /// The gates of `source` (`mc` or `analytic`), field of view and order (`total`, `1`, …).
     pub fn get(&self, source: &str, fov_mrad: f64, order: &str) -> Result<&[Gate]> {
+        self.get_polarised(source, fov_mrad, order, "total")
+    }
+
+    /// As [`Self::get`], for the `polarisation` part `total`, `co` or `cross`.
+    pub fn get_polarised(
+        &self,
+        source: &str,
+        fov_mrad: f64,
+        order: &str,
+        polarisation: &str,
+    ) -> Result<&[Gate]> {
         self.series
-            .get(&(source.to_string(), fov_key(fov_mrad), order.to_string()))
+            .get(&(
+                source.to_string(),
+                fov_key(fov_mrad),
+                order.to_string(),
+                polarisation.to_string(),
+            ))
             .map(|v| v.as_slice())
-            .with_context(|| format!("no {source} returns of order {order} at FOV {fov_mrad} mrad"))
+            .with_context(|| {
+                format!(
+                    "no {source} {polarisation} returns of order {order} at FOV {fov_mrad} mrad"
+                )
+            })
     }
 }
 

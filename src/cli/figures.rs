@@ -1,5 +1,7 @@
 //! Figures of a run: on/off returns against range (`returns.png`) and, with a DIAL retrieval,
-//! the retrieved mixing-ratio profile with its error bars against the truth (`dial.png`).
+//! the retrieved mixing-ratio profile with its error bars against the truth (`dial.png`); with
+//! polarised light the depolarisation ratio against range per field of view
+//! (`depolarisation.png`).
 
 use std::path::Path;
 
@@ -34,6 +36,95 @@ pub fn draw(
     if !dial.is_empty() {
         files.write_via(dir.join("dial.png"), |p| dial_figure(p, &dial))?;
     }
+    Ok(())
+}
+
+/// The depolarisation ratio δ = cross/co of the first line against range, one colour per field
+/// of view: Monte Carlo (all orders) as points with ±1 standard error, analytic single
+/// scattering as a line.
+pub fn depolarisation_figure(path: &Path, run: &RunOutput) -> DrawResult {
+    let Some(pol) = &run.polarised else {
+        return Err("not a polarised run".into());
+    };
+    let root = BitMapBackend::new(path, (1000, 650)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let (aco, across) = &pol.analytic;
+    let fovs = &aco.fov_full_angle_mrad;
+    let ratio = |co: &Returns, cross: &Returns, f: usize, g: usize, order: Order| {
+        let (c, x) = (co.energy(0, f, g, order)?, cross.energy(0, f, g, order)?);
+        (c > 0.0).then(|| x / c)
+    };
+    // Monte Carlo δ and its error per FOV (first-order propagation, as depolarisation.csv).
+    let mc: Vec<Vec<(f64, f64, f64)>> = match &pol.mc {
+        Some((co, cross, cov)) => (0..fovs.len())
+            .map(|f| {
+                (0..co.range_m.len())
+                    .filter_map(|g| {
+                        let o = co.order_index(Order::Total)?;
+                        let i = co.index(0, f, g, o);
+                        let (c, x) = (co.energy_j[i], cross.energy_j[i]);
+                        if !(c > 0.0 && x > 0.0) {
+                            return None;
+                        }
+                        let rel = (co.stderr_j[i] / c).powi(2) + (cross.stderr_j[i] / x).powi(2)
+                            - 2.0 * cov[i] / (c * x);
+                        let d = x / c;
+                        Some((co.range_m[g], d, d * rel.max(0.0).sqrt()))
+                    })
+                    .collect()
+            })
+            .collect(),
+        None => vec![Vec::new(); fovs.len()],
+    };
+    let hi = mc
+        .iter()
+        .flatten()
+        .map(|p| p.1 + p.2)
+        .chain((0..fovs.len()).flat_map(|f| {
+            (0..aco.range_m.len()).filter_map(move |g| ratio(aco, across, f, g, Order::Exactly(1)))
+        }))
+        .filter(|v| v.is_finite())
+        .fold(0.0f64, f64::max)
+        .max(1e-3);
+    let (x0, x1) = (
+        aco.range_m.first().copied().unwrap_or(0.0),
+        aco.range_m.last().copied().unwrap_or(1.0),
+    );
+    let mut chart = ChartBuilder::on(&root)
+        .caption(
+            format!("depolarisation ratio δ = cross/co, {}", aco.channels[0]),
+            (FONT, 18),
+        )
+        .margin(12)
+        .x_label_area_size(45)
+        .y_label_area_size(60)
+        .build_cartesian_2d(x0..x1.max(x0 + 1.0), 0.0..(1.1 * hi).min(2.0))?;
+    chart
+        .configure_mesh()
+        .x_desc("range [m]")
+        .y_desc("δ")
+        .label_style((FONT, 13))
+        .draw()?;
+    let colours = [BLUE, RED, GREEN, MAGENTA, CYAN, BLACK];
+    for (f, fov) in fovs.iter().enumerate() {
+        let c = colours[f % colours.len()];
+        chart
+            .draw_series(
+                mc[f]
+                    .iter()
+                    .map(|&(r, d, e)| ErrorBar::new_vertical(r, d - e, d, d + e, c.filled(), 4)),
+            )?
+            .label(format!("{fov} mrad, Monte Carlo (all orders)"))
+            .legend(move |(x, y)| Circle::new((x + 10, y), 3, c.filled()));
+        chart.draw_series(LineSeries::new(
+            (0..aco.range_m.len()).filter_map(|g| {
+                ratio(aco, across, f, g, Order::Exactly(1)).map(|d| (aco.range_m[g], d))
+            }),
+            c.stroke_width(1),
+        ))?;
+    }
+    super::plot::draw_legend(&mut chart)?;
+    root.present()?;
     Ok(())
 }
 

@@ -48,9 +48,10 @@ pub struct Args {
 }
 
 /// Every file `run` may write into its directory.
-pub(super) const FILES: [&str; 8] = [
+pub(super) const FILES: [&str; 9] = [
     "returns.csv",
     "depolarisation.csv",
+    "depolarisation.png",
     lidarsim::netcdf::RUN_FILE,
     "signals.csv",
     "retrieval.csv",
@@ -159,6 +160,12 @@ pub(super) fn write_outputs(
     }
     if !no_plots && scene.retrieval.is_some() {
         super::figures::draw(&mut files, out_dir, scene, run)?;
+    }
+    if !no_plots && run.polarised.is_some() {
+        super::plot::init_font();
+        files.write_via(out_dir.join("depolarisation.png"), |p| {
+            super::figures::depolarisation_figure(p, run)
+        })?;
     }
     files.write(out_dir.join("summary.json"), summary_json(scene, run))?;
     let written = files.commit()?;

@@ -50,7 +50,7 @@
 
 use std::sync::Arc;
 
-use super::phase::PhaseFunction;
+use super::phase::{PhaseFunction, SegmentGuide};
 
 /// The six elements at one scattering angle.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -288,6 +288,8 @@ pub struct TabulatedMatrix {
     values: Vec<[f64; 6]>,
     /// False for a table without F44 and F34, which only linear polarisation may use.
     pub circular: bool,
+    /// Segment lookup (the scalar table's: O(1) at the forward peak and the glory alike).
+    guide: SegmentGuide,
 }
 
 impl TabulatedMatrix {
@@ -295,6 +297,7 @@ impl TabulatedMatrix {
     /// normalised and checked.
     pub fn from_nodes(mu: Vec<f64>, values: Vec<[f64; 6]>, circular: bool) -> Self {
         TabulatedMatrix {
+            guide: SegmentGuide::new(&mu),
             mu,
             values,
             circular,
@@ -305,12 +308,7 @@ impl TabulatedMatrix {
     #[inline]
     pub fn eval(&self, mu: f64) -> MatrixElements {
         let mu = mu.clamp(-1.0, 1.0);
-        let n = self.mu.len();
-        let i = self
-            .mu
-            .partition_point(|m| *m <= mu)
-            .saturating_sub(1)
-            .min(n - 2);
+        let i = self.guide.segment(&self.mu, mu);
         let t = (mu - self.mu[i]) / (self.mu[i + 1] - self.mu[i]);
         let (a, b) = (&self.values[i], &self.values[i + 1]);
         let v = |j: usize| a[j] + t * (b[j] - a[j]);

@@ -248,6 +248,71 @@ impl RayleighPhase {
 const SAMPLE_GUIDE_CELLS: usize = 8192;
 const EVAL_GUIDE_CELLS: usize = 4096;
 
+/// Segment lookup on nodes μ_i (strictly increasing from −1 to 1) dense at both poles: cells
+/// equal in s = sin(Θ/2) for μ ≥ 0 and in c = cos(Θ/2) for μ < 0, both nearly linear in
+/// angle at their pole, each holding the segment at its start; then a short walk. O(1) on
+/// average, for tables resolved finely at the forward peak and in the glory alike.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct SegmentGuide {
+    /// Segment index for cells in s = sqrt((1−μ)/2) ∈ [0, √½] (μ ≥ 0).
+    fwd: Vec<u32>,
+    /// Segment index for cells in c = sqrt((1+μ)/2) ∈ [0, √½] (μ < 0).
+    bwd: Vec<u32>,
+}
+
+impl SegmentGuide {
+    /// For the nodes `mu` (at least two).
+    pub(crate) fn new(mu: &[f64]) -> Self {
+        let n = mu.len();
+        // For each cell, the segment holding the cell's smallest |Θ| edge toward the pole, i.e.
+        // the segment containing μ at the cell start (moving away from the pole μ decreases in
+        // the forward table and increases in the backward one).
+        let segment_of = |m: f64| -> usize {
+            // Largest i with mu[i] <= m, capped to the last segment.
+            let i = mu.partition_point(|&x| x <= m);
+            i.saturating_sub(1).min(n - 2)
+        };
+        let half = std::f64::consts::FRAC_1_SQRT_2;
+        let fwd = (0..=EVAL_GUIDE_CELLS)
+            .map(|c| {
+                // s at the cell's far edge from the pole: μ = 1 − 2 s².
+                let s = half * (c + 1).min(EVAL_GUIDE_CELLS) as f64 / EVAL_GUIDE_CELLS as f64;
+                segment_of(1.0 - 2.0 * s * s) as u32
+            })
+            .collect();
+        let bwd = (0..=EVAL_GUIDE_CELLS)
+            .map(|c| {
+                let cc = half * c as f64 / EVAL_GUIDE_CELLS as f64;
+                segment_of(2.0 * cc * cc - 1.0) as u32
+            })
+            .collect();
+        SegmentGuide { fwd, bwd }
+    }
+
+    /// The segment i of `mu` (the nodes it was built for) with μ_i ≤ μ ≤ μ_{i+1}.
+    #[inline]
+    pub(crate) fn segment(&self, mu_nodes: &[f64], mu: f64) -> usize {
+        let last = mu_nodes.len() - 2;
+        let half = std::f64::consts::FRAC_1_SQRT_2;
+        let cells = EVAL_GUIDE_CELLS as f64;
+        let mut i = if mu >= 0.0 {
+            let s = (0.5 * (1.0 - mu)).max(0.0).sqrt();
+            self.fwd[((s / half * cells) as usize).min(EVAL_GUIDE_CELLS)] as usize
+        } else {
+            let c = (0.5 * (1.0 + mu)).max(0.0).sqrt();
+            self.bwd[((c / half * cells) as usize).min(EVAL_GUIDE_CELLS)] as usize
+        };
+        // Rounding in s can start one segment high; step back, then walk up.
+        while i > 0 && mu_nodes[i] > mu {
+            i -= 1;
+        }
+        while i < last && mu_nodes[i + 1] < mu {
+            i += 1;
+        }
+        i
+    }
+}
+
 /// A tabulated phase function, linear in μ between nodes, normalised to exactly 4π.
 ///
 /// Sampling inverts the exact CDF of that piecewise-linear function (a quadratic in each
@@ -269,10 +334,8 @@ pub struct TabulatedPhase {
     /// CDF at nodes, cdf[0] = 0, cdf[n-1] = 1.
     cdf: Vec<f64>,
     sample_guide: Vec<u32>,
-    /// Segment index for cells in s = sqrt((1−μ)/2) ∈ [0, √½] (μ ≥ 0).
-    eval_guide_fwd: Vec<u32>,
-    /// Segment index for cells in c = sqrt((1+μ)/2) ∈ [0, √½] (μ < 0).
-    eval_guide_bwd: Vec<u32>,
+    /// Segment lookup for evaluation.
+    guide: SegmentGuide,
     asymmetry: f64,
 }
 
@@ -337,28 +400,7 @@ impl TabulatedPhase {
             sample_guide.push(seg as u32);
         }
 
-        // Evaluation guides: for each cell, the segment holding the cell's smallest |Θ| edge
-        // toward the pole, i.e. the segment containing μ at the cell start (moving away from
-        // the pole μ decreases in the forward table and increases in the backward one).
-        let segment_of = |m: f64| -> usize {
-            // Largest i with mu[i] <= m, capped to the last segment.
-            let i = mu.partition_point(|&x| x <= m);
-            i.saturating_sub(1).min(n - 2)
-        };
-        let half = std::f64::consts::FRAC_1_SQRT_2;
-        let eval_guide_fwd = (0..=EVAL_GUIDE_CELLS)
-            .map(|c| {
-                // s at the cell's far edge from the pole: μ = 1 − 2 s².
-                let s = half * (c + 1).min(EVAL_GUIDE_CELLS) as f64 / EVAL_GUIDE_CELLS as f64;
-                segment_of(1.0 - 2.0 * s * s) as u32
-            })
-            .collect();
-        let eval_guide_bwd = (0..=EVAL_GUIDE_CELLS)
-            .map(|c| {
-                let cc = half * c as f64 / EVAL_GUIDE_CELLS as f64;
-                segment_of(2.0 * cc * cc - 1.0) as u32
-            })
-            .collect();
+        let guide = SegmentGuide::new(&mu);
 
         Ok((
             TabulatedPhase {
@@ -367,8 +409,7 @@ impl TabulatedPhase {
                 slope,
                 cdf,
                 sample_guide,
-                eval_guide_fwd,
-                eval_guide_bwd,
+                guide,
                 asymmetry,
             },
             scale,
@@ -393,34 +434,7 @@ impl TabulatedPhase {
     /// The segment i with μ_i ≤ μ ≤ μ_{i+1}.
     #[inline]
     fn segment(&self, mu: f64) -> usize {
-        let last = self.mu.len() - 2;
-        let half = std::f64::consts::FRAC_1_SQRT_2;
-        let cells = EVAL_GUIDE_CELLS as f64;
-        if mu >= 0.0 {
-            // Start at a segment at or below μ and walk up.
-            let s = (0.5 * (1.0 - mu)).max(0.0).sqrt();
-            let cell = ((s / half * cells) as usize).min(EVAL_GUIDE_CELLS);
-            let mut i = self.eval_guide_fwd[cell] as usize;
-            // Rounding in s can start one segment high; step back, then walk up.
-            while i > 0 && self.mu[i] > mu {
-                i -= 1;
-            }
-            while i < last && self.mu[i + 1] < mu {
-                i += 1;
-            }
-            i
-        } else {
-            let c = (0.5 * (1.0 + mu)).max(0.0).sqrt();
-            let cell = ((c / half * cells) as usize).min(EVAL_GUIDE_CELLS);
-            let mut i = self.eval_guide_bwd[cell] as usize;
-            while i > 0 && self.mu[i] > mu {
-                i -= 1;
-            }
-            while i < last && self.mu[i + 1] < mu {
-                i += 1;
-            }
-            i
-        }
+        self.guide.segment(&self.mu, mu)
     }
 
     /// P(μ), linear in μ between nodes.
