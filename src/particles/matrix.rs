@@ -98,7 +98,7 @@ impl std::fmt::Display for MuellerViolation {
 
 impl MatrixElements {
     /// The first inequality of (M1)–(M4) (module documentation) broken by more than
-    /// `rel_tol` × F11, or `None`. F11 must be > 0. (M4) is tested in the equivalent form
+    /// `rel_tol` × F11, or `None`; F11 ≤ 0 (or NaN) is reported first. (M4) is tested in the equivalent form
     /// √((F33 + F44)² + 4F34² + 4F12²) ≤ F11 + F22 (equivalent once F11 + F22 ≥ 0, which (M1)
     /// checks first), linear in the elements so that the tolerance means the same everywhere.
     pub fn mueller_violation(&self, rel_tol: f64) -> Option<MuellerViolation> {
@@ -110,29 +110,14 @@ impl MatrixElements {
             f12,
             f34,
         } = *self;
-        if !(f11 > 0.0) {
-            return Some(MuellerViolation {
-                element: "F11",
-                inequality: "F11 > 0",
-                excess: f64::INFINITY,
-            });
-        }
-        let checks = [
+        let m1 = [
             ("F22", "(M1) |F22| ≤ F11", f22.abs() - f11),
             ("F33", "(M1) |F33| ≤ F11", f33.abs() - f11),
             ("F44", "(M1) |F44| ≤ F11", f44.abs() - f11),
             ("F12", "(M1) |F12| ≤ F11", f12.abs() - f11),
             ("F34", "(M1) |F34| ≤ F11", f34.abs() - f11),
-            (
-                "F12",
-                "(M2) |F22 − F12| ≤ F11 − F12",
-                (f22 - f12).abs() - (f11 - f12),
-            ),
-            (
-                "F12",
-                "(M2) |F22 + F12| ≤ F11 + F12",
-                (f22 + f12).abs() - (f11 + f12),
-            ),
+        ];
+        let m34 = [
             (
                 "F44",
                 "(M3) |F33 − F44| ≤ F11 − F22",
@@ -144,7 +129,7 @@ impl MatrixElements {
                 (f33 + f44).hypot(2.0 * f34).hypot(2.0 * f12) - (f11 + f22),
             ),
         ];
-        first_violation(&checks, f11, rel_tol)
+        first_violation(self, &m1, &m34, rel_tol)
     }
 
     /// The check of [`Self::mueller_violation`] for a table without F44 and F34 (linear
@@ -162,34 +147,17 @@ impl MatrixElements {
         let MatrixElements {
             f11, f22, f33, f12, ..
         } = *self;
-        if !(f11 > 0.0) {
-            return Some(MuellerViolation {
-                element: "F11",
-                inequality: "F11 > 0",
-                excess: f64::INFINITY,
-            });
-        }
-        let checks = [
+        let m1 = [
             ("F22", "(M1) |F22| ≤ F11", f22.abs() - f11),
             ("F33", "(M1) |F33| ≤ F11", f33.abs() - f11),
             ("F12", "(M1) |F12| ≤ F11", f12.abs() - f11),
-            (
-                "F12",
-                "(M2) |F22 − F12| ≤ F11 − F12",
-                (f22 - f12).abs() - (f11 - f12),
-            ),
-            (
-                "F12",
-                "(M2) |F22 + F12| ≤ F11 + F12",
-                (f22 + f12).abs() - (f11 + f12),
-            ),
-            (
-                "F33",
-                "(M3–M4 without F44, F34) max(0, 2|F33| − (F11 − F22))² + 4F12² ≤ (F11 + F22)²",
-                (2.0 * f33.abs() - (f11 - f22)).max(0.0).hypot(2.0 * f12) - (f11 + f22),
-            ),
         ];
-        first_violation(&checks, f11, rel_tol)
+        let m34 = [(
+            "F33",
+            "(M3–M4 without F44, F34) max(0, 2|F33| − (F11 − F22))² + 4F12² ≤ (F11 + F22)²",
+            (2.0 * f33.abs() - (f11 - f22)).max(0.0).hypot(2.0 * f12) - (f11 + f22),
+        )];
+        first_violation(self, &m1, &m34, rel_tol)
     }
 
     /// The matrix of a scatterer that does not change the state of polarisation:
@@ -264,19 +232,51 @@ impl ScatteringMatrix {
     }
 }
 
+/// (element, inequality, left side minus right side) of one Mueller inequality.
+type Check = (&'static str, &'static str, f64);
+
+/// The first inequality `m` breaks by more than `rel_tol`·F11, or None.
+///
+/// Both checks share F11 > 0 (first, so that the excesses below are relative to a positive
+/// F11) and the two (M2) inequalities, which involve only F11, F22 and F12; they come after
+/// the element-wise (M1) bounds, so a violation is reported by the simplest rule it breaks.
 fn first_violation(
-    checks: &[(&'static str, &'static str, f64)],
-    f11: f64,
+    m: &MatrixElements,
+    m1: &[Check],
+    rest: &[Check],
     rel_tol: f64,
 ) -> Option<MuellerViolation> {
-    checks.iter().find_map(|&(element, inequality, diff)| {
-        // `!(… <= …)` also catches NaN.
-        (!(diff <= rel_tol * f11)).then_some(MuellerViolation {
-            element,
-            inequality,
-            excess: diff / f11,
+    let MatrixElements { f11, f22, f12, .. } = *m;
+    if !(f11 > 0.0) {
+        return Some(MuellerViolation {
+            element: "F11",
+            inequality: "F11 > 0",
+            excess: f64::INFINITY,
+        });
+    }
+    let m2 = [
+        (
+            "F12",
+            "(M2) |F22 − F12| ≤ F11 − F12",
+            (f22 - f12).abs() - (f11 - f12),
+        ),
+        (
+            "F12",
+            "(M2) |F22 + F12| ≤ F11 + F12",
+            (f22 + f12).abs() - (f11 + f12),
+        ),
+    ];
+    m1.iter()
+        .chain(&m2)
+        .chain(rest)
+        .find_map(|&(element, inequality, diff)| {
+            // `!(… <= …)` also catches NaN.
+            (!(diff <= rel_tol * f11)).then_some(MuellerViolation {
+                element,
+                inequality,
+                excess: diff / f11,
+            })
         })
-    })
 }
 
 /// Six elements tabulated on nodes μ_i (strictly increasing from −1 to 1), linear in μ between
