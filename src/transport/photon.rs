@@ -222,8 +222,7 @@ impl<'a> Tracer<'a> {
     /// Polarised local estimate: every channel's light arriving along `dir` (the photon's
     /// reference axis and Stokes vectors) scattered in `layer` toward `omega`, split by the
     /// analyser and scored into co (`base + k`) and cross (`base + n + k`, n channels), each
-    /// times `self.le[k]`, the estimate's factor without the scattering matrix. Returns the
-    /// scattered reference axis.
+    /// times `self.le[k]`, the estimate's factor without the scattering matrix.
     fn score_polarised(&mut self, layer: usize, dir: DVec3, omega: DVec3, base: usize) {
         let s = self.s;
         let Some(an) = &s.analyser else { return };
