@@ -8,9 +8,8 @@ use lidarsim::transport::McResult;
 
 use crate::transport::{run, scene_text};
 
-/// A ground lidar at 355 nm looking up, polarisation `POL`, fields of view `FOV`, divergence
-/// `DIV`, gates 500–3000 m; the medium `BODY` follows, and up to order 2 is traced.
-const LIDAR_355: &str = r#"
+/// A ground lidar looking up, polarisation `POL`, fields of view `FOV`, divergence `DIV`.
+const LIDAR: &str = r#"
 [lidar]
 altitude_m = 0.0
 zenith_angle_deg = 0.0
@@ -20,6 +19,19 @@ telescope_diameter_m = 1.0
 optical_efficiency = 1.0
 fov_full_angle_mrad = FOV
 polarisation = "POL"
+"#;
+
+/// [`LIDAR`] followed by `rest`.
+fn lidar(pol: &str, fov: &str, div: &str, rest: &str) -> String {
+    LIDAR
+        .replace("POL", pol)
+        .replace("FOV", fov)
+        .replace("DIV", div)
+        + rest
+}
+
+/// At 355 nm, gates 500–3000 m; the medium `BODY` follows, and up to order 2 is traced.
+const AT_355: &str = r#"
 [[channel]]
 name = "355"
 wavelength_nm = 355.0
@@ -34,14 +46,10 @@ multiple_scattering = "always"
 "#;
 
 fn lidar_355(pol: &str, fov: &str, div: &str, body: &str) -> String {
-    LIDAR_355
-        .replace("POL", pol)
-        .replace("FOV", fov)
-        .replace("DIV", div)
-        .replace("BODY", body)
+    lidar(pol, fov, div, &AT_355.replace("BODY", body))
 }
 
-/// [`LIDAR_355`] through Rayleigh air (US standard atmosphere), then `extra` (an optional HG
+/// [`lidar_355`] through Rayleigh air (US standard atmosphere), then `extra` (an optional HG
 /// cloud).
 fn air(pol: &str, fov: &str, div: &str, extra: &str) -> String {
     let body =
@@ -113,7 +121,7 @@ fn single_backscatter_by_air_depolarises_rho_over_two_minus_rho() {
 }
 
 /// A layer of non-depolarising dipoles (Rayleigh phase matrix with ρ = 0, extinction
-/// 0.5 km⁻¹ over 3 km: multiple scattering a few per cent) and no other air, for [`LIDAR_355`].
+/// 0.5 km⁻¹ over 3 km: multiple scattering a few per cent) and no other air, for [`lidar_355`].
 const DIPOLES: &str = r#"
 [[layer]]
 name = "dipoles"
@@ -221,18 +229,9 @@ fn unknown_polarisation_is_refused() {
     );
 }
 
-/// A ground lidar at 532 nm looking up into a small-droplet water cloud (log-normal, median
-/// radius 1 µm: spheres by Mie), pencil beam or `DIV`, fields of view `FOV`; no air.
+/// At 532 nm, a small-droplet water cloud (log-normal, median radius 1 µm: spheres by Mie),
+/// no air, for [`LIDAR`].
 const SPHERES: &str = r#"
-[lidar]
-altitude_m = 0.0
-zenith_angle_deg = 0.0
-pulse_energy_j = 1.0
-beam_divergence_full_angle_mrad = DIV
-telescope_diameter_m = 1.0
-optical_efficiency = 1.0
-fov_full_angle_mrad = FOV
-polarisation = "POL"
 [[channel]]
 name = "532"
 wavelength_nm = 532.0
@@ -252,12 +251,7 @@ multiple_scattering = "always"
 "#;
 
 fn spheres(pol: &str, fov: &str, div: &str) -> lidarsim::scene::Scene {
-    scene_text(
-        &SPHERES
-            .replace("POL", pol)
-            .replace("FOV", fov)
-            .replace("DIV", div),
-    )
+    scene_text(&lidar(pol, fov, div, SPHERES))
 }
 
 /// (a) Single backscatter by spheres does not depolarise: the order-1 cross-polarised return
@@ -332,11 +326,7 @@ fn tabulated_matrix_backscatter_depolarises_as_its_elements() {
     std::fs::write(dir.path().join("m.csv"), t).unwrap();
     std::fs::write(dir.path().join("lin.csv"), lin).unwrap();
     let text = |pol: &str, file: &str| {
-        SPHERES
-            .replace("POL", pol)
-            .replace("FOV", "[1.0, 10.0]")
-            .replace("DIV", "0.0")
-            .replace(
+        lidar(pol, "[1.0, 10.0]", "0.0", SPHERES).replace(
                 r#"particles = { distribution = "lognormal", median_radius_um = 1.0, sigma_g = 1.5, refractive_index = "1.337+1.8e-9i" }"#,
                 &format!("single_scattering_albedo = 1.0\nphase = {{ kind = \"matrix_table\", file = \"{file}\" }}"),
             )
@@ -390,15 +380,10 @@ fn channels_at_two_wavelengths_keep_their_own_polarisation() {
     );
     // The amount as a number density: an extinction would be that of the first channel.
     let text = |t: &str| {
-        scene_text(
-            &t.replace("POL", "linear")
-                .replace("FOV", "[1.0, 10.0]")
-                .replace("DIV", "0.0")
-                .replace(
-                    "extinction_per_km = 10.0",
-                    "number_density_per_cm3 = 1000.0",
-                ),
-        )
+        scene_text(&lidar("linear", "[1.0, 10.0]", "0.0", t).replace(
+            "extinction_per_km = 10.0",
+            "number_density_per_cm3 = 1000.0",
+        ))
     };
     let both = run(&text(&two), 40_000, |_| {});
     let alone = [
