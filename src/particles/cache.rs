@@ -17,7 +17,6 @@ use super::distribution::{
     BulkOptions, Component, bulk_optics_mixture, fingerprint, fingerprint_hash,
 };
 use super::matrix_table::MatrixTable;
-use super::table::PhaseTable;
 use crate::input::parse_f64;
 use crate::output::OutputError;
 
@@ -28,9 +27,8 @@ pub struct LayerOptics {
     pub extinction_cross_section_m2: f64,
     /// Single-scattering albedo.
     pub single_scattering_albedo: f64,
-    /// Phase function table (normalised to 4π).
-    pub phase: PhaseTable,
-    /// Scattering matrix on the same angles (its F11 column is `phase`, number for number).
+    /// Scattering matrix, normalised to 4π (its F11 column is the Mie stage's phase table,
+    /// number for number: [`MatrixTable::f11_table`]).
     pub matrix: MatrixTable,
 }
 
@@ -76,16 +74,13 @@ pub fn layer_optics(
         return Ok((hit, CacheUse::Disk));
     }
     let bulk = bulk_optics_mixture(components, wavelength_m, opts).map_err(|e| e.to_string())?;
-    // Pass the tables through their text form, as a disk entry would, so that a run gives the
+    // Pass the table through its text form, as a disk entry would, so that a run gives the
     // same numbers whether or not it found the entry (F11 is printed as the phase is).
-    let phase = PhaseTable::parse(Path::new("<mie>"), &bulk.phase.to_text())
-        .map_err(|e| format!("Mie phase table: {e}"))?;
     let matrix = MatrixTable::parse(Path::new("<mie>"), &bulk.matrix.to_text())
         .map_err(|e| format!("Mie scattering matrix: {e}"))?;
     let optics = Arc::new(LayerOptics {
         extinction_cross_section_m2: bulk.extinction_cross_section_m2,
         single_scattering_albedo: bulk.single_scattering_albedo,
-        phase,
         matrix,
     });
     if let (Some(dir), Some(f)) = (cache_dir, &file) {
@@ -129,7 +124,6 @@ fn read_entry(path: &Path, key: &str) -> Option<LayerOptics> {
     Some(LayerOptics {
         extinction_cross_section_m2: num("cache_extinction_cross_section_m2")?,
         single_scattering_albedo: num("cache_single_scattering_albedo")?,
-        phase: t.f11_table(),
         matrix: t,
     })
 }
@@ -138,6 +132,7 @@ fn read_entry(path: &Path, key: &str) -> Option<LayerOptics> {
 mod tests {
     use super::*;
     use crate::particles::distribution::SizeDistribution;
+    use crate::particles::table::PhaseTable;
     use num_complex::Complex64;
 
     #[test]
@@ -166,12 +161,14 @@ mod tests {
             a.extinction_cross_section_m2
         );
         assert_eq!(back.single_scattering_albedo, a.single_scattering_albedo);
-        // The disk entry gives the same phase function and matrix as the computed result.
-        assert_eq!(back.phase.phase_4pi, a.phase.phase_4pi);
-        assert_eq!(back.phase.theta_deg, a.phase.theta_deg);
+        // The disk entry gives the same matrix as the computed result, and its F11 column is
+        // the Mie stage's phase table as that table prints itself.
+        assert_eq!(back.matrix.theta_deg, a.matrix.theta_deg);
         assert_eq!(back.matrix.elements, a.matrix.elements);
-        let f11: Vec<f64> = a.matrix.elements.iter().map(|e| e.f11).collect();
-        assert_eq!(f11, a.phase.phase_4pi);
+        let bulk = bulk_optics_mixture(&[comp(1.5)], 1.064e-6, &opts).unwrap();
+        let phase = PhaseTable::parse(Path::new("p"), &bulk.phase.to_text()).unwrap();
+        assert_eq!(back.matrix.f11_table().phase_4pi, phase.phase_4pi);
+        assert_eq!(back.matrix.theta_deg, phase.theta_deg);
         assert!(read_entry(&file, &fingerprint(&[comp(1.51)], 1.064e-6, &opts)).is_none());
     }
 

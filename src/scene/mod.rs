@@ -1501,8 +1501,8 @@ impl Validator<'_> {
                 phase.push(phase[j].clone());
                 matrix.push(matrix[j].clone());
             } else {
-                // Both from the matrix table, whose F11 column is the phase table number for
-                // number: the phase function is the one `o.phase` gives.
+                // Both from the matrix table, whose F11 column is the Mie phase table number
+                // for number: the phase function is the one that table gives.
                 let (p, m) = o
                     .matrix
                     .phase_and_matrix()
