@@ -1,0 +1,94 @@
+"""Fold one cargo-mutants run of one file into validation/mutation (called by mutants.sh).
+
+usage: mutants_table.py MUTANTS_OUT OUTCOMES_TSV CSV FILE TOTAL COMMIT [--iterate]
+
+Reads MUTANTS_OUT/outcomes.json; writes OUTCOMES_TSV (outcome <TAB> mutant, one line per mutant
+tested: with --iterate the mutants not tested again keep their earlier outcome); replaces FILE's
+row of CSV (file,mutants,caught,missed,unviable,timeouts,date,commit), where `mutants` counts the
+mutants tested (the sample) and the README states the file's total.
+"""
+
+import datetime
+import json
+import sys
+
+NAMES = {
+    "CaughtMutant": "caught",
+    "MissedMutant": "missed",
+    "Unviable": "unviable",
+    "Timeout": "timeout",
+}
+
+
+def mutant_name(scenario):
+    m = scenario.get("Mutant") if isinstance(scenario, dict) else None
+    if m is None:
+        return None
+    if "name" in m:
+        return m["name"]
+    # Older layouts: file:line:col: replacement
+    span = m.get("span", {}).get("start", {})
+    return f'{m.get("file")}:{span.get("line")}:{span.get("column")}: {m.get("genre")} {m.get("replacement")}'
+
+
+def main():
+    out_dir, tsv, csv, file, total, commit = sys.argv[1:7]
+    iterate = "--iterate" in sys.argv[7:]
+    with open(f"{out_dir}/outcomes.json") as fh:
+        outcomes = json.load(fh)["outcomes"]
+    new = {}
+    for o in outcomes:
+        name = mutant_name(o["scenario"])
+        if name is None:
+            continue  # the baseline
+        summary = o["summary"]
+        if summary not in NAMES:
+            sys.exit(f"mutants_table.py: {out_dir}/outcomes.json: unknown outcome {summary!r} of {name}")
+        new[name] = NAMES[summary]
+    old = {}
+    if iterate:
+        try:
+            with open(tsv) as fh:
+                for line in fh:
+                    outcome, name = line.rstrip("\n").split("\t", 1)
+                    old[name] = outcome
+        except FileNotFoundError:
+            pass
+    merged = {**old, **new}
+    with open(tsv, "w") as fh:
+        for name in sorted(merged):
+            fh.write(f"{merged[name]}\t{name}\n")
+    counts = {k: 0 for k in NAMES.values()}
+    for v in merged.values():
+        counts[v] += 1
+    row = ",".join(
+        [
+            file,
+            str(len(merged)),
+            str(counts["caught"]),
+            str(counts["missed"]),
+            str(counts["unviable"]),
+            str(counts["timeout"]),
+            datetime.date.today().isoformat(),
+            commit[:12],
+        ]
+    )
+    with open(csv) as fh:
+        lines = fh.read().splitlines()
+    header, rows = lines[0], [r for r in lines[1:] if r and r.split(",")[0] != file]
+    rows.append(row)
+    rows.sort()
+    with open(csv, "w") as fh:
+        fh.write("\n".join([header] + rows) + "\n")
+    viable = counts["caught"] + counts["missed"]
+    score = 100.0 * counts["caught"] / viable if viable else float("nan")
+    print(f"{file}: {len(merged)} of {total} tested, {counts['caught']} caught, "
+          f"{counts['missed']} missed, {counts['unviable']} unviable, {counts['timeout']} timeouts "
+          f"({score:.1f} % of viable caught)")
+    for name, outcome in sorted(merged.items()):
+        if outcome == "missed":
+            print(f"  missed: {name}")
+
+
+if __name__ == "__main__":
+    main()
