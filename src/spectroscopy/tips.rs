@@ -1,11 +1,13 @@
 //! Total internal partition sums Q(T) from TIPS-2021.
 //!
-//! Q(T) on the native TIPS-2021 temperature grids (1 K, then every 10 K up to 1000 K) of Gamache
-//! et al. (2021)[^1] for every isotopologue of H2O, CO2, O3, N2O, CO, CH4 and O2, as embedded in
-//! HAPI 1.3 and copied to `data/tips/tips2021_q.csv` by `validation/hapi_tips/make_tables.py`.
-//! Between grid points Q is interpolated exactly as HAPI's `partitionSum` does (4-point Lagrange,
-//! 3-point in the first and last interval; HAPI `AtoB`), so lidarsim's Q(T) equals HAPI's to
-//! rounding. Both Q(296 K) of the intensity scaling and Q(T) come from this one table.
+//! Q(T) on the native TIPS-2021 temperature grids (1 K, then every 10 K) of Gamache et al.
+//! (2021)[^1] for every isotopologue of H2O, CO2, O3, N2O, CO, CH4 and O2, as embedded in HAPI 1.3
+//! and copied to `data/tips/tips2021_q.csv` by `validation/hapi_tips/make_tables.py`, up to
+//! 1000 K and one grid point beyond. Between grid points Q is interpolated exactly as HAPI's
+//! `partitionSum` does (4-point Lagrange, 3-point in the first and last interval of HAPI's grid;
+//! HAPI `AtoB`), so lidarsim's Q(T) equals HAPI's to rounding up to 1000 K: the point beyond
+//! 1000 K is there for the 4-point interpolation between 990 and 1000 K, which a table ending at
+//! 1000 K would make through 3 points (2.5e-6 from HAPI's). Both Q(296 K) of the intensity scaling and Q(T) come from this one table.
 //!
 //! [^1]: R. R. Gamache et al. (2021), "Total internal partition sums for the HITRAN2020 database",
 //!     JQSRT 271, 107713, doi:10.1016/j.jqsrt.2021.107713.
@@ -18,6 +20,8 @@ use crate::input::{CsvTable, InputError};
 
 const EMBEDDED: &str = include_str!("../../data/tips/tips2021_q.csv");
 const EMBEDDED_NAME: &str = "<embedded data/tips/tips2021_q.csv>";
+/// Upper end of the temperatures served: the embedded grids' last point lies beyond it.
+const MAX_TEMPERATURE_K: f64 = 1000.0;
 
 /// The TIPS grid of one isotopologue.
 #[derive(Debug, Clone)]
@@ -66,8 +70,9 @@ pub fn grids() -> &'static HashMap<(u8, u8), TipsGrid> {
 
 /// Total internal partition sum Q(T) of an isotopologue (TIPS-2021, Gamache et al. 2021).
 ///
-/// `temperature_k` must lie within the embedded grid (1–1000 K); outside, or for an
-/// isotopologue without a table, the error says so. Interpolation as HAPI 1.3 `partitionSum`.
+/// `temperature_k` must lie within 1–1000 K (or the isotopologue's grid, where it ends
+/// sooner); outside, or for an isotopologue without a table, the error says so. Interpolation as
+/// HAPI 1.3 `partitionSum`.
 pub fn partition_sum(
     molecule_id: u8,
     iso_id: u8,
@@ -82,7 +87,13 @@ pub fn partition_sum(
     let g = grids()
         .get(&(molecule_id, iso_id))
         .ok_or_else(|| err("isotopologue not in the embedded table".into()))?;
-    let (lo, hi) = (g.temperature_k[0], *g.temperature_k.last().unwrap_or(&0.0));
+    let (lo, hi) = (
+        g.temperature_k[0],
+        g.temperature_k
+            .last()
+            .unwrap_or(&0.0)
+            .min(MAX_TEMPERATURE_K),
+    );
     if !(temperature_k >= lo && temperature_k <= hi) {
         return Err(err(format!("outside the table's range {lo}–{hi} K")));
     }
@@ -132,9 +143,13 @@ mod tests {
     fn grid_points_are_reproduced_and_out_of_range_is_an_error() {
         let g = &grids()[&(1, 1)];
         for (t, q) in g.temperature_k.iter().zip(&g.q) {
-            assert_eq!(partition_sum(1, 1, *t).unwrap(), *q);
+            if *t <= MAX_TEMPERATURE_K {
+                assert_eq!(partition_sum(1, 1, *t).unwrap(), *q);
+            }
         }
+        assert!(partition_sum(1, 1, 1000.0).is_ok());
         assert!(partition_sum(1, 1, 1000.5).is_err());
+        assert!(partition_sum(1, 1, 1.0).is_ok());
         assert!(partition_sum(1, 1, 0.5).is_err());
         assert!(partition_sum(9, 1, 296.0).is_err());
     }
