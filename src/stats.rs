@@ -73,7 +73,8 @@ pub fn rel_err(mean: f64, std_error: f64) -> f64 {
 }
 
 /// Figure of merit 1/(rel_err² · wall_s), wall-clock seconds (MCNP uses CPU time; we report
-/// wall-clock at a stated thread count). Zero where the relative error is infinite.
+/// wall-clock at a stated thread count). Zero where it has no meaning: a relative error that is
+/// infinite (no score), NaN (one batch) or zero (no scatter), or a time that is not positive.
 pub fn figure_of_merit(rel_err: f64, wall_s: f64) -> f64 {
     if rel_err.is_finite() && rel_err > 0.0 && wall_s > 0.0 {
         1.0 / (rel_err * rel_err * wall_s)
@@ -110,7 +111,14 @@ mod tests {
             "{}",
             std_error(m2, 4)
         );
+        // Two values, 1 and 3: sample variance 2, SE = 1 (the smallest n with an error bar).
+        let (_, m2) = fold(&[1.0, 3.0]);
+        assert_eq!(std_error(m2, 2), 1.0);
         assert!((figure_of_merit(0.1, 2.0) - 50.0).abs() < 1e-12);
+        assert!((figure_of_merit(0.5, 0.25) - 16.0).abs() < 1e-12);
+        for (r, t) in [(0.0, 1.0), (f64::NAN, 1.0), (0.1, 0.0), (0.1, -1.0)] {
+            assert_eq!(figure_of_merit(r, t), 0.0, "{r} {t}");
+        }
         assert!((rel_err(-2.0, 0.5) - 0.25).abs() < 1e-15);
         assert_eq!(rel_err(0.0, 1.0), f64::INFINITY);
         assert_eq!(figure_of_merit(rel_err(0.0, 1.0), 1.0), 0.0);

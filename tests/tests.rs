@@ -12,6 +12,10 @@ mod cli;
 /// Multiple scattering in clouds against closed forms (issue 10, item 3): absorption in a
 /// far-viewed cloud, the single-scatter Platt integral.
 mod clouds;
+/// Edge-case scenes (issue 17, item 3): gates below, between and above particle layers, a
+/// downward beam with no surface, slant paths to 89°, an optically thick layer; the analytic
+/// lidar equation and the Monte Carlo against closed-form quadratures and each other.
+mod edges;
 /// Fuzzing: property tests over the readers, a mutation fuzz of the shipped scenes through the
 /// binary (issue 11, item 4).
 mod fuzz;
