@@ -251,7 +251,8 @@ pub struct MultipleScatteringBound {
 }
 
 impl MultipleScatteringBound {
-    /// The largest bound over every field of view and gate, and the field of view it belongs to.
+    /// The largest bound over every field of view and gate, and the field of view it belongs to
+    /// (the first such, on a tie); (0, the first field of view) when every bound is 0.
     pub fn worst(&self) -> (f64, f64) {
         let n = self.range_m.len().max(1);
         let first = self.fov_full_angle_mrad.first().copied().unwrap_or(0.0);
@@ -408,9 +409,19 @@ phase = { kind = "isotropic" }
     fn homogeneous_medium_matches_closed_form() {
         // β = ϖσ/(4π), α = σ: ∫ β e^{−2σr}/r² dr has no elementary form, so compare with an
         // independent fine midpoint rule on the closed-form integrand.
-        let s = scene(HOMOGENEOUS);
-        let atm = OpticalAtmosphere::build(&s).unwrap();
-        let r = single_scatter(&s, &atm);
+        // Looking up, at 30° and horizontally (where the optical depth is taken along the
+        // level path, not from the layer edges), from 1 km inside the 5 km medium.
+        for zenith in [0.0, 30.0, 90.0] {
+            let mut s = scene(HOMOGENEOUS);
+            s.lidar.altitude_m = 1000.0;
+            s.lidar.zenith_angle_deg = zenith;
+            homogeneous_gates_match_closed_form(&s);
+        }
+    }
+
+    fn homogeneous_gates_match_closed_form(s: &Scene) {
+        let atm = OpticalAtmosphere::build(s).unwrap();
+        let r = single_scatter(s, &atm);
         let area = std::f64::consts::PI * 0.25;
         let beta = 0.8e-3 / (4.0 * std::f64::consts::PI);
         for g in 0..4 {
@@ -427,9 +438,31 @@ phase = { kind = "isotropic" }
             let got = r.energy(0, 0, g, Order::Exactly(1)).unwrap();
             assert!(
                 (got / exact - 1.0).abs() < 1e-8,
-                "gate {g}: {got} vs {exact}"
+                "zenith {}°, gate {g}: {got} vs {exact}",
+                s.lidar.zenith_angle_deg
             );
         }
+    }
+
+    /// All orders ≥ 2 bounded by the geometric series Σₙ≥₁ Kⁿ = K/(1 − K); the largest bound
+    /// and its field of view, the first on a tie.
+    #[test]
+    fn bound_on_all_orders_and_the_worst_field_of_view() {
+        assert_eq!(MultipleScatteringBound::all_orders(0.5), 1.0);
+        assert_eq!(MultipleScatteringBound::all_orders(0.2), 0.25);
+        assert_eq!(MultipleScatteringBound::all_orders(0.0), 0.0);
+        assert_eq!(MultipleScatteringBound::all_orders(1.0), f64::INFINITY);
+        let b = MultipleScatteringBound {
+            fov_full_angle_mrad: vec![1.0, 2.0, 3.0],
+            range_m: vec![100.0, 200.0],
+            ratio: vec![0.1, 0.2, 0.3, 0.05, 0.3, 0.0],
+        };
+        assert_eq!(b.worst(), (0.3, 2.0));
+        let zero = MultipleScatteringBound {
+            ratio: vec![0.0; 6],
+            ..b
+        };
+        assert_eq!(zero.worst(), (0.0, 1.0));
     }
 
     #[test]
