@@ -18,8 +18,8 @@ use lidarsim::transport::{self, McResult, TransportOptions};
 use crate::util::project_root;
 
 pub(crate) const K_SIGMA: f64 = 4.0;
-const REL_SLACK: f64 = 0.01;
-const MAX_REL_SE: f64 = 0.10;
+pub(crate) const REL_SLACK: f64 = 0.01;
+pub(crate) const MAX_REL_SE: f64 = 0.10;
 
 pub(crate) fn run(
     scene: &Scene,
