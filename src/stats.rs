@@ -45,10 +45,9 @@ fn power_of_two_scale(x: f64) -> f64 {
 pub fn welford_add_scaled(mean: &mut f64, m2: &mut f64, scale: &mut f64, n: usize, x: f64) {
     let new = power_of_two_scale(x);
     if new > *scale {
-        if *scale > 0.0 {
-            let r = *scale / new;
-            *m2 *= r * r;
-        }
+        // M2 is 0 while the scale is (every value so far was 0), so r = 0 then is harmless.
+        let r = *scale / new;
+        *m2 *= r * r;
         *scale = new;
     }
     let delta = x - *mean;
