@@ -79,11 +79,12 @@ for f in "${files[@]}"; do
     [ "$shards" -ge 1 ] || shards=1
     shard=()
     [ "$shards" -gt 1 ] && shard=(--shard "0/$shards" --sharding round-robin)
-    echo "== $f: $total mutants, testing $(( (total + shards - 1) / shards )) (every ${shards}th)"
+    echo "== $f: $total mutants, testing $(( (total + shards - 1) / shards )) (every k-th, k = $shards)"
+    (cd "$tree" && cargo mutants --list -f "$f" "${shard[@]}") > "$out/sample.txt"
     # cargo-mutants exits non-zero when mutants are missed; the outcomes say what happened.
     (cd "$tree" && cargo mutants --in-place -f "$f" --profile release --test-tool nextest \
         "${shard[@]}" --timeout 300 --build-timeout 600 \
         --output "$out" "${iterate[@]}") || true
     python3 "$root/scripts/mutants_table.py" "$out/mutants.out" "$results/outcomes/$slug.tsv" \
-        "$csv" "$f" "$total" "$commit" ${iterate:+--iterate}
+        "$csv" "$f" "$total" "$commit" "$out/sample.txt" ${iterate:+--iterate}
 done

@@ -1,12 +1,15 @@
 """Fold one cargo-mutants run of one file into validation/mutation (called by mutants.sh).
 
-usage: mutants_table.py MUTANTS_OUT OUTCOMES_TSV CSV FILE TOTAL COMMIT [--iterate]
+usage: mutants_table.py MUTANTS_OUT OUTCOMES_TSV CSV FILE TOTAL COMMIT SAMPLE [--iterate]
 
 Reads MUTANTS_OUT/outcomes.json; writes OUTCOMES_TSV (outcome <TAB> mutant, one line per mutant
-tested: with --iterate the mutants not tested again keep their earlier outcome); replaces FILE's
-row of CSV (file,mutants,caught,missed,unviable,timeouts,date,commit), where `mutants` counts the
-mutants tested (the sample) and the README states the file's total.
+of the sample, the list of mutant names in the file SAMPLE); replaces FILE's row of CSV
+(file,mutants,caught,missed,unviable,timeouts,date,commit), where `mutants` counts the sample.
+With --iterate, cargo-mutants tested only the mutants of the sample it did not find caught or
+unviable in the previous run; each of the others takes a caught or unviable outcome of the
+previous run with the same name but for its line and column (edits move them).
 """
+import re
 
 import datetime
 import json
@@ -31,9 +34,16 @@ def mutant_name(scenario):
     return f'{m.get("file")}:{span.get("line")}:{span.get("column")}: {m.get("genre")} {m.get("replacement")}'
 
 
+def strip_position(name):
+    """`src/x.rs:12:5: replace …` → `src/x.rs: replace …`."""
+    return re.sub(r"^([^:]+):\d+:\d+:", r"\1:", name)
+
+
 def main():
-    out_dir, tsv, csv, file, total, commit = sys.argv[1:7]
-    iterate = "--iterate" in sys.argv[7:]
+    out_dir, tsv, csv, file, total, commit, sample_file = sys.argv[1:8]
+    iterate = "--iterate" in sys.argv[8:]
+    with open(sample_file) as fh:
+        sample = [line.rstrip("\n") for line in fh if line.strip()]
     with open(f"{out_dir}/outcomes.json") as fh:
         outcomes = json.load(fh)["outcomes"]
     new = {}
@@ -45,16 +55,27 @@ def main():
         if summary not in NAMES:
             sys.exit(f"mutants_table.py: {out_dir}/outcomes.json: unknown outcome {summary!r} of {name}")
         new[name] = NAMES[summary]
-    old = {}
+    merged = {}
     if iterate:
-        try:
-            with open(tsv) as fh:
-                for line in fh:
-                    outcome, name = line.rstrip("\n").split("\t", 1)
-                    old[name] = outcome
-        except FileNotFoundError:
-            pass
-    merged = {**old, **new}
+        # Earlier outcomes that let cargo-mutants skip a mutant, by name without line:column.
+        earlier = {}
+        with open(tsv) as fh:
+            for line in fh:
+                outcome, name = line.rstrip("\n").split("\t", 1)
+                if outcome in ("caught", "unviable"):
+                    earlier.setdefault(strip_position(name), []).append(outcome)
+        for name in sample:
+            if name in new:
+                merged[name] = new[name]
+            elif earlier.get(strip_position(name)):
+                merged[name] = earlier[strip_position(name)].pop()
+            else:
+                sys.exit(f"mutants_table.py: {name}: neither tested now nor caught before")
+    else:
+        merged = new
+        missing = [n for n in sample if n not in new]
+        if missing:
+            sys.exit(f"mutants_table.py: {len(missing)} mutants of the sample were not tested (run interrupted?), e.g. {missing[0]}")
     with open(tsv, "w") as fh:
         for name in sorted(merged):
             fh.write(f"{merged[name]}\t{name}\n")
