@@ -13,8 +13,9 @@
 # * A file with at most N mutants (default 60) gets all of them; a larger one a round-robin
 #   sample of at least N (the first of k = ⌊mutants/N⌋ shards: every k-th mutant in source
 #   order).
-# * --iterate tests again only the mutants the file's last run did not catch (after new tests
-#   are committed); the others keep their outcome.
+# * --iterate tests again only the mutants the file's last run missed (after new tests are
+#   committed; by exact name, so not after edits to the file itself); the others keep their
+#   outcome.
 #
 # Results: validation/mutation/outcomes/<file>.tsv (outcome and name of every mutant tested),
 # one row per file in validation/mutation/mutants.csv
@@ -81,10 +82,29 @@ for f in "${files[@]}"; do
     [ "$shards" -gt 1 ] && shard=(--shard "0/$shards" --sharding round-robin)
     echo "== $f: $total mutants, testing $(( (total + shards - 1) / shards )) (every k-th, k = $shards)"
     (cd "$tree" && cargo mutants --list -f "$f" "${shard[@]}") > "$out/sample.txt"
+    select=("${shard[@]}")
+    if [ ${#iterate[@]} -gt 0 ]; then
+        # Only the mutants the last run did not catch, by exact name (cargo-mutants' own
+        # --iterate would shard what is left: another sample). Names carry line and column:
+        # after editing the file itself, run it whole.
+        tsv="$results/outcomes/$slug.tsv"
+        [ -f "$tsv" ] || { echo "mutants.sh: --iterate: no earlier run of $f ($tsv)" >&2; exit 2; }
+        select=()
+        while IFS= read -r re; do select+=(--re "$re"); done < <(python3 -c '
+import re, sys
+for line in open(sys.argv[1]):
+    outcome, name = line.rstrip("\n").split("\t", 1)
+    if outcome in ("missed", "timeout"):
+        print("^" + re.escape(name) + "$")
+' "$tsv")
+        if [ ${#select[@]} -eq 0 ]; then
+            echo "== $f: nothing missed in the last run"
+            continue
+        fi
+    fi
     # cargo-mutants exits non-zero when mutants are missed; the outcomes say what happened.
     (cd "$tree" && cargo mutants --in-place -f "$f" --profile release --test-tool nextest \
-        "${shard[@]}" --timeout 300 --build-timeout 600 \
-        --output "$out" "${iterate[@]}") || true
+        "${select[@]}" --timeout 300 --build-timeout 600 --output "$out") || true
     python3 "$root/scripts/mutants_table.py" "$out/mutants.out" "$results/outcomes/$slug.tsv" \
         "$csv" "$f" "$total" "$commit" "$out/sample.txt" ${iterate:+--iterate}
 done

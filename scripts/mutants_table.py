@@ -5,9 +5,9 @@ usage: mutants_table.py MUTANTS_OUT OUTCOMES_TSV CSV FILE TOTAL COMMIT SAMPLE [-
 Reads MUTANTS_OUT/outcomes.json; writes OUTCOMES_TSV (outcome <TAB> mutant, one line per mutant
 of the sample, the list of mutant names in the file SAMPLE); replaces FILE's row of CSV
 (file,mutants,caught,missed,unviable,timeouts,date,commit), where `mutants` counts the sample.
-With --iterate, cargo-mutants tested only the mutants of the sample it did not find caught or
-unviable in the previous run; each of the others takes a caught or unviable outcome of the
-previous run with the same name but for its line and column (edits move them).
+With --iterate, only the mutants the previous run missed (or timed out on) were tested again;
+each of the others keeps its caught or unviable outcome of the previous run (matched by name
+without line and column, so that a run of cargo-mutants' own --iterate folds too).
 """
 import re
 
