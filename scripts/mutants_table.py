@@ -5,9 +5,9 @@ usage: mutants_table.py MUTANTS_OUT OUTCOMES_TSV CSV FILE TOTAL COMMIT SAMPLE [-
 Reads MUTANTS_OUT/outcomes.json; writes OUTCOMES_TSV (outcome <TAB> mutant, one line per mutant
 of the sample, the list of mutant names in the file SAMPLE); replaces FILE's row of CSV
 (file,mutants,caught,missed,unviable,timeouts,date,commit), where `mutants` counts the sample.
-With --iterate, only the mutants the previous run missed (or timed out on) were tested again;
-each of the others keeps its caught or unviable outcome of the previous run (matched by name
-without line and column, so that a run of cargo-mutants' own --iterate folds too).
+With --iterate, only some mutants of the sample were tested again (those the previous run
+missed); each of the others keeps its outcome of the previous run (matched by name without line
+and column, so that a run of cargo-mutants' own --iterate folds too).
 """
 import re
 
@@ -57,20 +57,19 @@ def main():
         new[name] = NAMES[summary]
     merged = {}
     if iterate:
-        # Earlier outcomes that let cargo-mutants skip a mutant, by name without line:column.
+        # Earlier outcomes, by name without line:column.
         earlier = {}
         with open(tsv) as fh:
             for line in fh:
                 outcome, name = line.rstrip("\n").split("\t", 1)
-                if outcome in ("caught", "unviable"):
-                    earlier.setdefault(strip_position(name), []).append(outcome)
+                earlier.setdefault(strip_position(name), []).append(outcome)
         for name in sample:
             if name in new:
                 merged[name] = new[name]
             elif earlier.get(strip_position(name)):
                 merged[name] = earlier[strip_position(name)].pop()
             else:
-                sys.exit(f"mutants_table.py: {name}: neither tested now nor caught before")
+                sys.exit(f"mutants_table.py: {name}: neither tested now nor before")
     else:
         merged = new
         missing = [n for n in sample if n not in new]
