@@ -7,7 +7,8 @@
 //! `partitionSum` does (4-point Lagrange, 3-point in the first and last interval of HAPI's grid;
 //! HAPI `AtoB`), so lidarsim's Q(T) equals HAPI's to rounding up to 1000 K: the point beyond
 //! 1000 K is there for the 4-point interpolation between 990 and 1000 K, which a table ending at
-//! 1000 K would make through 3 points (2.5e-6 from HAPI's). Both Q(296 K) of the intensity scaling and Q(T) come from this one table.
+//! 1000 K would make through 3 points (2.5e-6 from HAPI's). Both Q(296 K) of the intensity
+//! scaling and Q(T) come from this one table.
 //!
 //! [^1]: R. R. Gamache et al. (2021), "Total internal partition sums for the HITRAN2020 database",
 //!     JQSRT 271, 107713, doi:10.1016/j.jqsrt.2021.107713.
