@@ -57,17 +57,23 @@ def main():
         new[name] = NAMES[summary]
     merged = {}
     if iterate:
-        # Earlier outcomes, by name without line:column.
-        earlier = {}
+        # Earlier outcomes by exact name; those whose names no longer occur (the file was
+        # edited) by name without line:column, in source order.
+        exact, moved = {}, {}
         with open(tsv) as fh:
             for line in fh:
                 outcome, name = line.rstrip("\n").split("\t", 1)
-                earlier.setdefault(strip_position(name), []).append(outcome)
+                exact[name] = outcome
+        for name, outcome in exact.items():
+            if name not in sample:
+                moved.setdefault(strip_position(name), []).append(outcome)
         for name in sample:
             if name in new:
                 merged[name] = new[name]
-            elif earlier.get(strip_position(name)):
-                merged[name] = earlier[strip_position(name)].pop()
+            elif name in exact:
+                merged[name] = exact[name]
+            elif moved.get(strip_position(name)):
+                merged[name] = moved[strip_position(name)].pop(0)
             else:
                 sys.exit(f"mutants_table.py: {name}: neither tested now nor before")
     else:
