@@ -465,6 +465,66 @@ phase = { kind = "isotropic" }
         assert_eq!(zero.worst(), (0.0, 1.0));
     }
 
+    /// Eq. S4's dependence on the scatterers and the surface, as ratios of bounds in one
+    /// geometry (σ, r, α and O cancel): a phase function whose maximum lies at 90° (neither
+    /// end, so only a scan over angle finds it) multiplies K by P_max · P_max/P_π against the
+    /// isotropic one (P ≡ 1); a Lambertian surface met at incidence cosine |μ| = ½ by P_max/P_π
+    /// → max(1, 1/|μ|) = 2, for gates short of the surface too (the scattered light it returns
+    /// arrives no earlier than the farther point).
+    #[test]
+    fn bound_scales_with_the_phase_maximum_and_the_surface_incidence() {
+        use crate::particles::phase::{PhaseFunction, TabulatedPhase};
+        let mut s = scene(HOMOGENEOUS);
+        s.lidar.altitude_m = 3000.0;
+        s.lidar.zenith_angle_deg = 120.0;
+        let atm = OpticalAtmosphere::build(&s).unwrap();
+        let isotropic = multiple_scattering_bound(&s, &atm);
+        assert!(isotropic.ratio.iter().all(|&k| k > 0.0));
+
+        // P linear in μ between the nodes 0°, 45°, 90°, 135°, 180° with values 1, 1, 4, 1, 1,
+        // scaled to ½∫P dμ = 1: ∫ = 2((1 − c) + 2.5c), c = cos 45°, so the scale is 1/(1 + 1.5c)
+        // and P_max · P_max/P_π = 4s · 4.
+        let mut lobe = atm.clone();
+        let table = TabulatedPhase::from_angles(
+            &[0.0, 45.0, 90.0, 135.0, 180.0],
+            &[1.0, 1.0, 4.0, 1.0, 1.0],
+        )
+        .unwrap();
+        let lobed = std::sync::Arc::new(PhaseFunction::Tabulated(Box::new(table)));
+        lobe.phases.iter_mut().for_each(|p| *p = lobed.clone());
+        let side = multiple_scattering_bound(&s, &lobe);
+        let expected = 16.0 / (1.0 + 1.5 * std::f64::consts::FRAC_1_SQRT_2);
+        for (a, b) in side.ratio.iter().zip(&isotropic.ratio) {
+            assert!(
+                (a / b / expected - 1.0).abs() < 1e-12,
+                "{a} / {b} vs {expected}"
+            );
+        }
+
+        let with_surface = scene(&format!(
+            "{HOMOGENEOUS}[surface]\naltitude_m = 0.0\nalbedo = 0.5\n"
+        ));
+        let mut surf = with_surface.clone();
+        surf.lidar = s.lidar.clone();
+        let lit = multiple_scattering_bound(&surf, &atm);
+        assert!(
+            surf.gates.end_m() < 6000.0,
+            "gates end before the surface, 6 km away"
+        );
+        for (a, b) in lit.ratio.iter().zip(&isotropic.ratio) {
+            assert!((a / b - 2.0).abs() < 1e-12, "{a} / {b}");
+        }
+        // Looking up, the surface is never met.
+        let mut up = surf.clone();
+        up.lidar.zenith_angle_deg = 60.0;
+        let mut up_clear = s.clone();
+        up_clear.lidar.zenith_angle_deg = 60.0;
+        assert_eq!(
+            multiple_scattering_bound(&up, &atm).ratio,
+            multiple_scattering_bound(&up_clear, &atm).ratio
+        );
+    }
+
     #[test]
     fn overlap_of_uniform_and_gaussian_beams() {
         let mut s = scene(HOMOGENEOUS);
