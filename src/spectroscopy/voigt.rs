@@ -244,6 +244,28 @@ mod tests {
         assert!(worst < 1e-9, "max relative error of w {worst:e}");
     }
 
+    /// Below the real axis the asymptotic expansion misses the term 2e^{−z²} of the
+    /// reflection formula w(z) = 2e^{−z²} − w(−z) (A&S 7.1.11), which grows without bound
+    /// there; `w_fast` must take the exact function for every Im z < 0, however far out.
+    #[test]
+    fn fast_w_below_the_real_axis_obeys_the_reflection_formula() {
+        for (x, y) in [
+            (1.0, -9.0),
+            (10.0, -1.0),
+            (-30.0, -0.5),
+            (300.0, -1e-3),
+            (0.0, -20.0),
+        ] {
+            let z = Complex64::new(x, y);
+            let reflected = 2.0 * (-z * z).exp() - errorfunctions::w_with_relerror(-z, 0.0);
+            let f = w_fast(z);
+            assert!(
+                (f - reflected).norm() <= 1e-10 * reflected.norm(),
+                "w({z}): {f} vs 2e^(−z²) − w(−z) = {reflected}"
+            );
+        }
+    }
+
     /// The embedded coefficients are Weideman's recipe (his eq. 38 and Matlab listing),
     /// recomputed here by a direct DFT of f(t) = e^{−t²}(L² + t²) at t = L tan(θ/2).
     #[test]
