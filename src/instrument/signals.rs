@@ -383,6 +383,87 @@ mod tests {
     use super::*;
     use crate::rng::{Stream, streams};
 
+    /// A window of gates is one integration of the summed echo over the gates' joint duration:
+    /// its energy, slope and curvature are the sums over the gates, its background and dark
+    /// electrons n times one gate's (N_b = η P_b nτ/(hν), N_d = I_d nτ/e), with the background
+    /// power of its own line and field of view. Two lines at different wavenumbers, two fields
+    /// of view, and every per-gate value distinct, so a wrong sign or index shows.
+    #[test]
+    fn a_window_integrates_its_gates_with_its_own_background() {
+        let (n_lines, n_fov, n_gates) = (2, 2, 3);
+        let value = |l: usize, f: usize, g: usize, kind: f64| {
+            kind * (1.0 + l as f64 + 3.0 * f as f64 + 7.0 * g as f64)
+        };
+        let mut sig = Signals {
+            source: Source::Analytic,
+            order: Order::Total,
+            lines: vec![
+                Line {
+                    name: "on".into(),
+                    wavenumber_cm1: 6359.97,
+                },
+                Line {
+                    name: "off".into(),
+                    wavenumber_cm1: 6358.0,
+                },
+            ],
+            fov_full_angle_mrad: vec![0.2, 1.0],
+            range_m: vec![1000.0, 1030.0, 1060.0],
+            gate_duration_s: 2.0e-7,
+            detector: Detector {
+                dark_current_a: 3e-9,
+                ..Detector::ideal_photon_counter()
+            },
+            // P_b of (line, fov): 1, 2, 5, 11 nW.
+            background_power_w: vec![1e-9, 2e-9, 5e-9, 11e-9],
+            energy_j: Vec::new(),
+            slope_j_per_mhz: Vec::new(),
+            curvature_j_per_mhz2: Vec::new(),
+            noise: Vec::new(),
+        };
+        for l in 0..n_lines {
+            for f in 0..n_fov {
+                for g in 0..n_gates {
+                    sig.energy_j.push(value(l, f, g, 1e-15));
+                    sig.slope_j_per_mhz.push(value(l, f, g, -2e-17));
+                    sig.curvature_j_per_mhz2.push(value(l, f, g, 3e-19));
+                }
+            }
+        }
+        let planck_c = 6.626_070_15e-34 * 299_792_458.0;
+        for l in 0..n_lines {
+            for f in 0..n_fov {
+                let w = sig.window(l, f, 0..n_gates);
+                let sum = |kind: f64| (0..n_gates).map(|g| value(l, f, g, kind)).sum::<f64>();
+                let close = |a: f64, b: f64| (a / b - 1.0).abs() < 1e-12;
+                assert!(close(w.energy_j, sum(1e-15)), "line {l} fov {f}: energy");
+                assert!(
+                    close(w.slope_j_per_mhz, sum(-2e-17)),
+                    "line {l} fov {f}: slope"
+                );
+                assert!(
+                    close(w.curvature_j_per_mhz2, sum(3e-19)),
+                    "line {l} fov {f}: curvature"
+                );
+                let photon_j = planck_c * sig.lines[l].wavenumber_cm1 * 100.0;
+                let duration_s = n_gates as f64 * sig.gate_duration_s;
+                let p_b = [1e-9, 2e-9, 5e-9, 11e-9][l * n_fov + f];
+                assert!(
+                    close(w.noise.signal_pe, sum(1e-15) / photon_j),
+                    "line {l} fov {f}"
+                );
+                assert!(
+                    close(w.noise.background_pe, p_b * duration_s / photon_j),
+                    "line {l} fov {f}: background"
+                );
+                assert!(
+                    close(w.noise.dark_pe, 3e-9 * duration_s / 1.602_176_634e-19),
+                    "line {l} fov {f}: dark"
+                );
+            }
+        }
+    }
+
     #[test]
     fn shot_sums_have_the_stated_moments() {
         // Every moment `draw_shots` documents, shot by shot (N = 50) and from the joint normal
