@@ -464,6 +464,20 @@ mod tests {
         }
     }
 
+    /// σ_j S/P̄, signed, and 0 without signal (not 0/0).
+    #[test]
+    fn jitter_relative_is_signed_and_zero_without_signal() {
+        let w = |energy_j: f64, slope_j_per_mhz: f64| WindowSignal {
+            noise: Detector::ideal_photon_counter().gate(energy_j, 0.0, 6360.0, 1e-7),
+            energy_j,
+            slope_j_per_mhz,
+            curvature_j_per_mhz2: 0.0,
+        };
+        assert_eq!(w(2e-15, -1e-17).jitter_relative(0.4), -0.002);
+        assert_eq!(w(0.0, 0.0).jitter_relative(0.4), 0.0);
+        assert_eq!(w(0.0, 1e-17).jitter_relative(0.4), 0.0);
+    }
+
     #[test]
     fn shot_sums_have_the_stated_moments() {
         // Every moment `draw_shots` documents, shot by shot (N = 50) and from the joint normal
