@@ -9,10 +9,9 @@ With --iterate, only some mutants of the sample were tested again (those the pre
 missed); each of the others keeps its outcome of the previous run (matched by name without line
 and column, so that a run of cargo-mutants' own --iterate folds too).
 """
-import re
-
 import datetime
 import json
+import re
 import sys
 
 NAMES = {

@@ -501,10 +501,9 @@ phase = { kind = "isotropic" }
             );
         }
 
-        let with_surface = scene(&format!(
+        let mut surf = scene(&format!(
             "{HOMOGENEOUS}[surface]\naltitude_m = 0.0\nalbedo = 0.5\n"
         ));
-        let mut surf = with_surface.clone();
         surf.lidar = s.lidar.clone();
         let lit = multiple_scattering_bound(&surf, &atm);
         assert!(

@@ -391,6 +391,8 @@ mod tests {
     #[test]
     fn a_window_integrates_its_gates_with_its_own_background() {
         let (n_lines, n_fov, n_gates) = (2, 2, 3);
+        // P_b of (line, fov) [W].
+        let p_b_w = [1e-9, 2e-9, 5e-9, 11e-9];
         let value = |l: usize, f: usize, g: usize, kind: f64| {
             kind * (1.0 + l as f64 + 3.0 * f as f64 + 7.0 * g as f64)
         };
@@ -414,8 +416,7 @@ mod tests {
                 dark_current_a: 3e-9,
                 ..Detector::ideal_photon_counter()
             },
-            // P_b of (line, fov): 1, 2, 5, 11 nW.
-            background_power_w: vec![1e-9, 2e-9, 5e-9, 11e-9],
+            background_power_w: p_b_w.to_vec(),
             energy_j: Vec::new(),
             slope_j_per_mhz: Vec::new(),
             curvature_j_per_mhz2: Vec::new(),
@@ -447,7 +448,7 @@ mod tests {
                 );
                 let photon_j = planck_c * sig.lines[l].wavenumber_cm1 * 100.0;
                 let duration_s = n_gates as f64 * sig.gate_duration_s;
-                let p_b = [1e-9, 2e-9, 5e-9, 11e-9][l * n_fov + f];
+                let p_b = p_b_w[l * n_fov + f];
                 assert!(
                     close(w.noise.signal_pe, sum(1e-15) / photon_j),
                     "line {l} fov {f}"
