@@ -164,11 +164,8 @@ pub fn curtis_godson_layers(
         let mut i = first;
         let mut a = zb;
         while a < zt {
-            let b = if i + 1 < z.len() - 1 {
-                z[i + 1].min(zt)
-            } else {
-                zt
-            };
+            // i ≤ len − 2 here, and zt ≤ the top level (check_edges).
+            let b = z[i + 1].min(zt);
             let (mid, half) = (0.5 * (a + b), 0.5 * (b - a));
             for (x, wq) in GL8 {
                 let zz = mid + half * x;
@@ -389,6 +386,63 @@ mod tests {
             / (2.0 * ((-zb / h).exp() - (-zt / h).exp()));
         assert!((l.pressure_pa / pbar - 1.0).abs() < 1e-12);
         assert!((l.temperature_k - 250.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn cg_temperature_matches_the_closed_form_under_a_constant_lapse_rate() {
+        // T = T0 − Γz and n = n0 e^{−z/H} at the levels (p = n k T there), so between levels T is
+        // exactly linear and n exactly log-linear: T̄ = T0 − Γ z̄ with the column-weighted mean
+        // height z̄ = [(a + H)e^{−a/H} − (b + H)e^{−b/H}] / (e^{−a/H} − e^{−b/H}).
+        let (h, n0, t0, lapse) = (8000.0_f64, 2.5e25, 288.15, 6.5e-3);
+        let mut prof = isothermal();
+        prof.temperature_k = prof.altitude_m.iter().map(|z| t0 - lapse * z).collect();
+        prof.pressure_pa = prof
+            .altitude_m
+            .iter()
+            .zip(&prof.temperature_k)
+            .map(|(z, t)| n0 * (-z / h).exp() * crate::constants::BOLTZMANN_J_PER_K * t)
+            .collect();
+        for (a, b) in [(1500.0, 2700.0), (0.0, 20_000.0), (9100.0, 9900.0)] {
+            let l = &curtis_godson_layers(&prof, &[a, b]).unwrap()[0];
+            let (ea, eb) = ((-a / h).exp(), (-b / h).exp());
+            let zbar = ((a + h) * ea - (b + h) * eb) / (ea - eb);
+            assert!(
+                (l.temperature_k - (t0 - lapse * zbar)).abs() < 1e-9,
+                "[{a}, {b}]: {} vs {}",
+                l.temperature_k,
+                t0 - lapse * zbar
+            );
+            assert!((l.air_column_per_cm2 / (n0 * h * (ea - eb) * 1e-4) - 1.0).abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn a_gas_absent_at_one_level_is_linear_in_number_density_there() {
+        // vmr 0 at 2 km and 4e-4 at 4 km (and the reverse): ln n_g is undefined at the empty
+        // level, so n_g is linear between the two and its column over [2 km, 3 km] is the
+        // trapezoid ∫ n₄ (z − 2 km)/(2 km) dz = n₄ · 250 m (n₄ · 750 m when the empty level is
+        // at 4 km).
+        let mut prof = isothermal();
+        let n_air = prof.air_number_density_per_m3();
+        for (empty, full, share_m) in [(1, 2, 250.0), (2, 1, 750.0)] {
+            prof.gases[0].vmr = vec![4e-4; prof.len()];
+            prof.gases[0].vmr[empty] = 0.0;
+            let l = &curtis_godson_layers(&prof, &[2000.0, 3000.0]).unwrap()[0];
+            let want = 4e-4 * n_air[full] * share_m * 1e-4;
+            assert!(
+                (l.gas_columns_per_cm2[0] / want - 1.0).abs() < 1e-12,
+                "empty level {empty}: {} vs {want}",
+                l.gas_columns_per_cm2[0]
+            );
+        }
+    }
+
+    #[test]
+    fn a_level_without_pressure_is_refused() {
+        let mut prof = isothermal();
+        *prof.pressure_pa.last_mut().unwrap() = 0.0;
+        let e = curtis_godson_layers(&prof, &[0.0, 1000.0]).unwrap_err();
+        assert!(e.to_string().contains("must be positive"), "{e}");
     }
 
     #[test]
