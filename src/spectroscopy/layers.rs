@@ -477,5 +477,17 @@ mod tests {
             ..down
         };
         assert!(flat.mu().is_err());
+        // Beyond [0°, 180°] is refused even where |cos θ| is fine.
+        for zenith_angle_deg in [-10.0, 190.0, f64::NAN] {
+            let los = LineOfSight {
+                zenith_angle_deg,
+                ..down
+            };
+            assert!(los.mu().is_err(), "{zenith_angle_deg}");
+        }
+        // 9 800 m in 0.05 m layers is 196 000 layers, beyond the limit of 100 000; 0.1 m is
+        // 98 000, within it.
+        assert!(down.layer_edges(&prof, 0.05).is_err());
+        assert_eq!(down.layer_edges(&prof, 0.1).unwrap().len(), 98_001);
     }
 }
