@@ -206,6 +206,73 @@ fn cross_sections_follow_the_hitran_conventions() {
     }
 }
 
+/// Correlation alone (η > 0 with Γ₂ = Δ₂ = ν_VC = 0) is not the Voigt: the partially correlated
+/// profile then has ν̃_VC = −ηC₀. lidarsim's Hartmann-Tran cross-section of such a line, divided
+/// by its peak, against an independent evaluation that uses no complex probability function:
+/// the speed average of Ngo et al. (2013, JQSRT 129, 89, Eqs. 9–12) as `hapi_correlated.py`
+/// computes it, A = ⟨1/(w − ik·v)⟩ with w = (1 − η)C₀ − i(ν − ν₀), the direction average in
+/// closed form arctan(a x/w)/(a x) and the Maxwell speeds by Simpson's rule,
+/// I = A/(1 + ηC₀A)/π.
+#[test]
+fn correlation_alone_follows_the_speed_average() {
+    use num_complex::Complex64;
+    let text =
+        format!("{CSV_HEAD}\n2,1,6359.967248,1.76E-23,106.1297,0.0739,0.67,-0.0054,0,0,0.3,0,1\n");
+    let lines = LineList::parse_csv("eta.csv", &text, &LineFilter::default()).unwrap();
+    let (p_atm, t_k, eta) = (0.2, 296.0, 0.3);
+    let nu0 = 6359.967248;
+    // At 296 K and x_self = 0 HITRAN's conventions give Γ₀ = γ_air p and Δ₀ = δ_air p.
+    let c0 = Complex64::new(0.0739 * p_atm, -0.0054 * p_atm);
+    // Doppler HWHM of ¹²C¹⁶O₂ (43.98983 u), CODATA 2018; a = γ_D/√ln2 = ν₀ v_p/c.
+    let mass_kg: f64 = 43.98983 * 1.660_539_066_60e-27;
+    let a = nu0 * (2.0 * 1.380_649e-23 * t_k / mass_kg).sqrt() / 299_792_458.0;
+    let profile = |nu: f64| {
+        let (n, x_max) = (4000, 8.0);
+        let h = x_max / n as f64;
+        let w = (1.0 - eta) * c0 - Complex64::new(0.0, nu - nu0);
+        let mut avg = Complex64::new(0.0, 0.0);
+        for i in 0..=n {
+            let x = i as f64 * h;
+            let simpson = if i == 0 || i == n {
+                1.0
+            } else if i % 2 == 1 {
+                4.0
+            } else {
+                2.0
+            };
+            let g = if x == 0.0 {
+                1.0 / w
+            } else {
+                (a * x / w).atan() / (a * x)
+            };
+            let maxwell = 4.0 / std::f64::consts::PI.sqrt() * x * x * (-x * x).exp();
+            avg += g * (simpson * h / 3.0 * maxwell);
+        }
+        (avg / (1.0 + eta * c0 * avg)).re / std::f64::consts::PI
+    };
+    let nus: Vec<f64> = (0..161).map(|i| nu0 - 0.08 + i as f64 * 0.001).collect();
+    let state = GasState {
+        pressure_pa: p_atm * 101_325.0,
+        temperature_k: t_k,
+        self_vmr: 0.0,
+    };
+    let opts = LblOptions {
+        line_shape: LineShapeModel::HartmannTran,
+        voigt: lidarsim::spectroscopy::VoigtMethod::Exact,
+        ..Default::default()
+    };
+    let sigma = cross_section_at(&lines, 2, &state, &nus, &opts).unwrap();
+    let want: Vec<f64> = nus.iter().map(|&nu| profile(nu)).collect();
+    let k = (0..want.len())
+        .max_by(|i, j| want[*i].total_cmp(&want[*j]))
+        .unwrap();
+    let err = (0..want.len())
+        .map(|i| (sigma[i] / sigma[k] - want[i] / want[k]).abs())
+        .fold(0.0, f64::max);
+    println!("η alone: the cross-section's shape within {err:.1e} of the speed average's peak");
+    assert!(err < 1e-10, "shape differs by {err:e} of the peak");
+}
+
 const CSV_HEAD: &str = "molec_id,local_iso_id,nu,sw,elower,gamma0_air,n_gamma0_air,delta0_air,SD_gamma_air,nuVC_air,eta_air,y_air,n_y_air";
 
 /// Where Γ₂ (and for Hartmann-Tran ν_VC and η) is exactly 0, the profile is the Voigt, bit for

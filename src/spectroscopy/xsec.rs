@@ -1312,6 +1312,31 @@ mod tests {
     }
 
     #[test]
+    fn a_list_in_any_order_gives_the_same_cross_section() {
+        // `LineList::lines` is public; the multigrid's searches need ν₀ order. Reversed (strictly
+        // decreasing) and shuffled lists are the sorted one's lines, so the sums are the same.
+        let sorted = synthetic(30, 6320.0, 2.0);
+        let grid = WavenumberGrid::new(6340.0, 6350.0, 0.01).unwrap();
+        let state = GasState {
+            pressure_pa: 50_000.0,
+            temperature_k: 250.0,
+            self_vmr: 0.0004,
+        };
+        let want = cross_section(&sorted, 2, &state, &grid, &LblOptions::default()).unwrap();
+        let mut reversed = sorted.clone();
+        reversed.lines.reverse();
+        let mut shuffled = sorted.clone();
+        let n = shuffled.lines.len();
+        for i in 0..n {
+            shuffled.lines.swap(i, (i * 17 + 5) % n);
+        }
+        for list in [reversed, shuffled] {
+            let got = cross_section(&list, 2, &state, &grid, &LblOptions::default()).unwrap();
+            assert_eq!(got, want);
+        }
+    }
+
+    #[test]
     fn window_follows_hapi_convention() {
         // One line; grid points exactly at ν₀ ± W: ν₀ − W excluded, ν₀ + W included.
         let lines = synthetic(1, 6350.0, 1.0);
