@@ -396,6 +396,72 @@ fn noise_free_retrievals_return_the_truth() {
     }
 }
 
+/// A beam 30° off nadir: the noise-free retrievals return the truth, and the truths are the
+/// hydrostatic atmosphere's. The slant column is the vertical one over |cos θ|, and that is
+/// 420 ppm of the dry-air column Δp/(m_air g₀) (to 1 %: the water vapour's weight and g's fall
+/// with height are 0.2 % and 0.1 %); a DIAL cell's number density is 420 ppm of p/(kT) at its
+/// centre (to 2 %: the cell's mean against its centre, and up to 0.8 % water vapour near the
+/// ground).
+#[test]
+fn slant_retrievals_return_the_hydrostatic_columns() {
+    let s = scene(
+        &SCENE
+            .replacen("zenith_angle_deg = 180.0", "zenith_angle_deg = 150.0", 1)
+            .replacen("end_m = 8100.0", "end_m = 9400.0", 1),
+    );
+    let out = run(&s, 0);
+    let mu = 30f64.to_radians().cos();
+    let fov = 0.2;
+    let of = |m, q| out.products_of(m, q, Source::Analytic, Order::Exactly(1), fov);
+    let column = of(Method::IpdaVirtual, Quantity::SlantColumn);
+    assert_eq!(column.len(), 1);
+    let column = column[0];
+    assert!(
+        (column.retrieved / column.truth - 1.0).abs() < 1e-5,
+        "{column:?}"
+    );
+    let prof = lidarsim::atmosphere::StandardAtmosphere::UsStandard.profile();
+    let level = |z: f64| prof.altitude_m.iter().position(|&a| a == z).unwrap();
+    let (p0, p8) = (
+        prof.pressure_pa[level(0.0)],
+        prof.pressure_pa[level(8000.0)],
+    );
+    let (avogadro, m_air_kg_per_mol, g0) = (6.022_140_76e23, 28.9644e-3, 9.80665);
+    let dry_per_m2 = (p0 - p8) / g0 / m_air_kg_per_mol * avogadro;
+    let slant = 420e-6 * dry_per_m2 / mu;
+    assert!(
+        (column.truth / slant - 1.0).abs() < 0.01,
+        "slant column {:e} against {slant:e}",
+        column.truth
+    );
+    let ipda = of(Method::Ipda, Quantity::MixingRatio)[0];
+    assert!(
+        (ipda.truth - 420.0).abs() < 1.0 && ipda.bias().abs() < 1e-3,
+        "{ipda:?}"
+    );
+    let dial = of(Method::Dial, Quantity::NumberDensity);
+    assert!(dial.len() >= 6);
+    for p in dial {
+        assert!((p.retrieved / p.truth - 1.0).abs() < 1e-4, "{p:?}");
+        // p/(kT) at the cell's centre, ln p and T linear between the profile's levels.
+        let z = 0.5 * (p.altitude_m.0 + p.altitude_m.1);
+        assert!(
+            (p.altitude_m.1 - p.altitude_m.0 - 1000.0 * mu).abs() < 1e-6,
+            "{p:?}"
+        );
+        let i = prof.altitude_m.partition_point(|&a| a <= z) - 1;
+        let t = (z - prof.altitude_m[i]) / (prof.altitude_m[i + 1] - prof.altitude_m[i]);
+        let pz = prof.pressure_pa[i] * (prof.pressure_pa[i + 1] / prof.pressure_pa[i]).powf(t);
+        let tz = prof.temperature_k[i] + t * (prof.temperature_k[i + 1] - prof.temperature_k[i]);
+        let n = 420e-6 * pz / (1.380_649e-23 * tz);
+        assert!(
+            (p.truth / n - 1.0).abs() < 0.02,
+            "cell at {z:.0} m: {:e} against {n:e}",
+            p.truth
+        );
+    }
+}
+
 /// A laser whose on-line sits x MHz off its nominal frequency, retrieved by a retrieval that
 /// assumes the nominal one: XCO2 comes out as truth × DAOD(ν_on + x)/DAOD(ν_on), both
 /// differential optical depths computed here straight from the spectroscopy stage on the
@@ -623,6 +689,27 @@ fn multiple_scattering_biases_ipda_more_at_wider_fields_of_view() {
         "{biases:?}"
     );
     assert!(biases[2].0 > 4.0 * biases[2].1, "{biases:?}");
+}
+
+/// A study re-pairs one retrieval set-up (`Retrieval::set_pair`): a pair must be two different
+/// lines of the scene's, and its on-line must absorb more than its off-line.
+#[test]
+fn a_pair_is_two_different_lines_the_on_line_absorbing_more() {
+    let mut r = pipeline::retrieval_setup(&scene(SCENE)).unwrap();
+    for (on, off) in [(0, 0), (1, 1), (0, 2), (2, 1), (7, 9)] {
+        let e = r.set_pair(on, off, "x".into()).unwrap_err();
+        assert!(
+            matches!(e, lidarsim::retrieval::RetrievalError::Gas(_))
+                && e.to_string().contains("is not two different lines of 2"),
+            "({on}, {off}): {e}"
+        );
+    }
+    let e = r.set_pair(1, 0, "off/on".into()).unwrap_err();
+    assert!(
+        matches!(e, lidarsim::retrieval::RetrievalError::NotAbsorbing(_)),
+        "{e}"
+    );
+    r.set_pair(0, 1, "on/off".into()).unwrap();
 }
 
 /// Retrievals that cannot be done give one error naming the scene key.
