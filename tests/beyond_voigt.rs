@@ -155,6 +155,17 @@ fn correlated_profiles_match_hapi() {
     }
 }
 
+/// The largest difference of two profiles on the same wavenumbers, each divided by its value
+/// at `want`'s peak: a comparison of shapes that the line strength cancels from.
+fn shape_error(got: &[f64], want: &[f64]) -> f64 {
+    let k = (0..want.len())
+        .max_by(|a, b| want[*a].total_cmp(&want[*b]))
+        .unwrap();
+    (0..want.len())
+        .map(|i| (got[i] / got[k] - want[i] / want[k]).abs())
+        .fold(0.0, f64::max)
+}
+
 /// The cross-section of a line list's line is S(T) times Re I + Y·Im I with HITRAN's
 /// conventions for Γ₀, Δ₀, Γ₂, ν_VC and Y (mole-fraction weighted, 296 K reference): its
 /// shape, divided by its value at the grid's peak, equals HAPI's profile so divided to 1e-9,
@@ -193,12 +204,7 @@ fn cross_sections_follow_the_hitran_conventions() {
         let sigma = cross_section_at(&lines, 2, &state, &nus, &opts).unwrap();
         let y = v[8];
         let want: Vec<f64> = rows.iter().map(|r| r[1] + y * r[2]).collect();
-        let k = (0..want.len())
-            .max_by(|a, b| want[*a].total_cmp(&want[*b]))
-            .unwrap();
-        let err = (0..want.len())
-            .map(|i| (sigma[i] / sigma[k] - want[i] / want[k]).abs())
-            .fold(0.0, f64::max);
+        let err = shape_error(&sigma, &want);
         assert!(
             err < 1e-9,
             "{profile} {line} {p} atm {t} K x {x}: shape differs by {err:e} of the peak"
@@ -263,12 +269,7 @@ fn correlation_alone_follows_the_speed_average() {
     };
     let sigma = cross_section_at(&lines, 2, &state, &nus, &opts).unwrap();
     let want: Vec<f64> = nus.iter().map(|&nu| profile(nu)).collect();
-    let k = (0..want.len())
-        .max_by(|i, j| want[*i].total_cmp(&want[*j]))
-        .unwrap();
-    let err = (0..want.len())
-        .map(|i| (sigma[i] / sigma[k] - want[i] / want[k]).abs())
-        .fold(0.0, f64::max);
+    let err = shape_error(&sigma, &want);
     println!("η alone: the cross-section's shape within {err:.1e} of the speed average's peak");
     assert!(err < 1e-10, "shape differs by {err:e} of the peak");
 }
