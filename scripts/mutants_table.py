@@ -49,7 +49,11 @@ def main():
     for o in outcomes:
         name = mutant_name(o["scenario"])
         if name is None:
-            continue  # the baseline
+            # The baseline: if the unmutated tree did not build or pass, no mutant was tested,
+            # and the earlier outcomes must not be stamped with this commit.
+            if o["summary"] != "Success":
+                sys.exit(f"mutants_table.py: {out_dir}: the unmutated baseline failed ({o['summary']}): nothing recorded")
+            continue
         summary = o["summary"]
         if summary not in NAMES:
             sys.exit(f"mutants_table.py: {out_dir}/outcomes.json: unknown outcome {summary!r} of {name}")
