@@ -10,7 +10,7 @@ use lidarsim::instrument::signals::Signals;
 use lidarsim::lidar_eq;
 use lidarsim::optics::OpticalAtmosphere;
 use lidarsim::pipeline::{self, RunError, RunOutput};
-use lidarsim::retrieval::{Method, Quantity};
+use lidarsim::retrieval::{Method, Quantity, RetrievalError};
 use lidarsim::returns::{Order, Source};
 use lidarsim::rng::{Stream, streams};
 use lidarsim::scene::Scene;
@@ -699,16 +699,13 @@ fn a_pair_is_two_different_lines_the_on_line_absorbing_more() {
     for (on, off) in [(0, 0), (1, 1), (0, 2), (2, 1), (7, 9)] {
         let e = r.set_pair(on, off, "x".into()).unwrap_err();
         assert!(
-            matches!(e, lidarsim::retrieval::RetrievalError::Gas(_))
+            matches!(e, RetrievalError::Gas(_))
                 && e.to_string().contains("is not two different lines of 2"),
             "({on}, {off}): {e}"
         );
     }
     let e = r.set_pair(1, 0, "off/on".into()).unwrap_err();
-    assert!(
-        matches!(e, lidarsim::retrieval::RetrievalError::NotAbsorbing(_)),
-        "{e}"
-    );
+    assert!(matches!(e, RetrievalError::NotAbsorbing(_)), "{e}");
     r.set_pair(0, 1, "on/off".into()).unwrap();
 }
 
