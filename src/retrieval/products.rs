@@ -224,7 +224,8 @@ struct Target {
     path: PathDepths,
     /// DIAL: the path to the near end of the cell, for `offset`.
     near: Option<PathDepths>,
-    /// The reference's slant gas column of the path (for virtual cross-sections).
+    /// The reference's slant gas column of the path; read only by the virtual cross-section
+    /// method, NaN for the others so that a stray read shows.
     slant_reference: f64,
     /// D of the reference at the near end (DIAL), subtracted before solving.
     offset: f64,
@@ -355,7 +356,7 @@ impl Retrieval {
                 other_daod: 0.0,
                 path: path.clone(),
                 near: None,
-                slant_reference: gas_ref / self.mu.abs(),
+                slant_reference: f64::NAN,
                 windows: window.clone(),
             });
             out.push(Target {
@@ -404,7 +405,7 @@ impl Retrieval {
                         other_daod: 0.0,
                         path: path.clone(),
                         near: Some(near.clone()),
-                        slant_reference: gas_ref / self.mu.abs(),
+                        slant_reference: f64::NAN,
                         windows: vec![a..a + 1, b..b + 1],
                     });
                 }
