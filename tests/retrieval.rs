@@ -462,6 +462,90 @@ fn slant_retrievals_return_the_hydrostatic_columns() {
     }
 }
 
+/// Water vapour absorbing at the on-line (HITRAN 2016: an H2O line 0.015 cm⁻¹ from it, in the
+/// tropical atmosphere's humid boundary layer): the reference state carries the other gases, so
+/// the noise-free IPDA and virtual-cross-section retrievals still return the truth, although
+/// H2O's own one-way differential optical depth, computed here straight from the spectroscopy
+/// stage, is about a thousandth of the CO2's (its sign flipped or the term dropped would move
+/// the column by twice or once that, against the 1e-5 asked).
+#[test]
+fn water_vapour_at_the_on_line_is_removed_by_the_reference_state() {
+    let (Some(co2), Some(h2o)) = (
+        crate::util::shared_file("data/hitran/CO2_626_6000-6400_HITRAN2016.par"),
+        crate::util::shared_file("data/hitran/H2O_161_6000-6400_HITRAN2016.par"),
+    ) else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let window = |f: &Path| -> String {
+        std::fs::read_to_string(f)
+            .unwrap()
+            .lines()
+            .filter(|l| {
+                l.get(3..15)
+                    .and_then(|nu| nu.trim().parse::<f64>().ok())
+                    .is_some_and(|nu| (6340.0..6380.0).contains(&nu))
+            })
+            .map(|l| format!("{l}\n"))
+            .collect()
+    };
+    std::fs::write(dir.path().join("lines.par"), window(&co2) + &window(&h2o)).unwrap();
+    let text = SCENE
+        .replacen("standard = \"us_standard\"", "standard = \"tropical\"", 1)
+        .replacen(
+            "molecules = [\"CO2\"]",
+            "molecules = [\"CO2\", \"H2O\"]\nlines = \"lines.par\"",
+            1,
+        )
+        .replacen("dial_cell_m = 1000.0\n", "", 1);
+    let s = Scene::from_toml(&dir.path().join("h2o.toml"), &text).expect("scene");
+    let out = run(&s, 0);
+    let of = |m, q| out.products_of(m, q, Source::Analytic, Order::Exactly(1), 0.2)[0];
+    let column = of(Method::IpdaVirtual, Quantity::SlantColumn);
+    let ipda = of(Method::Ipda, Quantity::MixingRatio);
+
+    // One-way DAOD of each gas from 8 km down to the surface, on the scene's molecular layers.
+    let atm = s.atmosphere.as_ref().unwrap();
+    let gas = s.gas.as_ref().unwrap();
+    let edges: Vec<f64> = s
+        .molecular_edges()
+        .unwrap()
+        .into_iter()
+        .filter(|e| *e <= 8000.0)
+        .collect();
+    let daod = |molecule: u8| -> f64 {
+        let lines = gas.lines.filtered(&lidarsim::spectroscopy::LineFilter {
+            molecules: Some(vec![molecule]),
+            ..Default::default()
+        });
+        let tau = layer_optical_depths_at(
+            &atm.profile,
+            &lines,
+            &edges,
+            &[6360.04, 6360.61],
+            &gas.options,
+        )
+        .unwrap();
+        tau.iter().map(|l| l[0] - l[1]).sum()
+    };
+    let (d_co2, d_h2o) = (daod(2), daod(1));
+    println!(
+        "one-way DAOD: CO2 {d_co2:.4}, H2O {d_h2o:.3e}; column retrieved/truth − 1 = {:.1e}, \
+         XCO2 bias {:.1e} ppm",
+        column.retrieved / column.truth - 1.0,
+        ipda.bias()
+    );
+    assert!(
+        d_h2o > 5e-4 * d_co2,
+        "H2O must matter: {d_h2o:e} vs {d_co2:e}"
+    );
+    assert!(
+        (column.retrieved / column.truth - 1.0).abs() < 1e-5,
+        "{column:?}"
+    );
+    assert!(ipda.bias().abs() < 1e-3, "{ipda:?}");
+}
+
 /// A laser whose on-line sits x MHz off its nominal frequency, retrieved by a retrieval that
 /// assumes the nominal one: XCO2 comes out as truth × DAOD(ν_on + x)/DAOD(ν_on), both
 /// differential optical depths computed here straight from the spectroscopy stage on the
