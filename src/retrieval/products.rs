@@ -605,15 +605,13 @@ impl Retrieval {
     ) -> Vec<Measurement> {
         let streams = rng::streams(self.seed, Stream::Instrument, 2 * reals);
         let lines = [self.config.on, self.config.off];
+        // Realisation r draws from stream r: N shot pairs for the first `reals`, one after.
+        let shots = std::iter::repeat_n(self.config.averaging_shots, reals)
+            .chain(std::iter::repeat_n(1, reals));
         streams
             .into_iter()
-            .enumerate()
-            .map(|(r, mut rng)| {
-                let shots = if r < reals {
-                    self.config.averaging_shots
-                } else {
-                    1
-                };
+            .zip(shots)
+            .map(|(mut rng, shots)| {
                 let mut m = Measurement {
                     ln_signal: [Vec::new(), Vec::new()],
                     ln_energy: [0.0; 2],
