@@ -659,3 +659,29 @@ fn mean_sd(v: &[f64]) -> (f64, f64) {
     let var = ok.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / (n - 1.0);
     (m, var.sqrt())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The textbook sample (2, 4, 4, 4, 5, 5, 7, 9): mean 5, Σ(x − x̄)² = 32, so the sample
+    /// standard deviation with Bessel's correction is √(32/7); NaNs are left out.
+    #[test]
+    fn mean_sd_is_the_sample_mean_and_standard_deviation_of_the_finite_values() {
+        let x = [2.0, 4.0, 4.0, 4.0, 5.0, 5.0, 7.0, 9.0];
+        let (m, sd) = mean_sd(&x);
+        assert_eq!(m, 5.0);
+        assert!((sd - (32.0f64 / 7.0).sqrt()).abs() < 1e-15, "{sd}");
+        // Nine finite values of ten are enough; eight of ten are not.
+        let mut v: Vec<f64> = x.iter().copied().chain([5.0]).collect();
+        assert_eq!(v.len(), 9);
+        v.push(f64::NAN);
+        let (m, sd) = mean_sd(&v);
+        assert_eq!(m, 5.0);
+        assert!((sd - (32.0f64 / 8.0).sqrt()).abs() < 1e-15, "{sd}");
+        v[0] = f64::INFINITY;
+        assert!(mean_sd(&v).0.is_nan() && mean_sd(&v).1.is_nan());
+        // One value has no spread to give.
+        assert!(mean_sd(&[1.0]).1.is_nan());
+    }
+}
