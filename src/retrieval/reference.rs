@@ -254,13 +254,13 @@ impl ReferenceState {
     }
 
     /// The scale s of the scaled part of the target gas for which D(s) = `daod` (Newton's
-    /// method, D being nearly linear in s); NaN if `daod` is not finite or there is no solution.
+    /// method from the reference, s = 1, D being nearly linear in s); NaN if `daod` is not
+    /// finite or D stops growing with s on the way (no unique solution).
     pub fn solve_scale(&self, p: &PathDepths, on: usize, off: usize, daod: f64) -> f64 {
-        let (d1, g1) = self.daod(p, on, off, 1.0);
-        if !daod.is_finite() || !(g1 > 0.0) {
+        if !daod.is_finite() {
             return f64::NAN;
         }
-        let mut s = 1.0 + (daod - d1) / g1;
+        let mut s = 1.0;
         for _ in 0..50 {
             let (d, g) = self.daod(p, on, off, s);
             if !(g > 0.0) {
@@ -289,5 +289,102 @@ impl ReferenceState {
             t += w * (-2.0 * (p.target_fixed[line][i] + p.target_scaled[line][i])).exp();
         }
         -t.ln() / (2.0 * slant_column_per_m2)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Two layers, two lines (on, off) of two quadrature nodes each, every optical depth
+    /// different and the off-line absorbing too, so that no term of D or dD/ds cancels.
+    fn state() -> ReferenceState {
+        ReferenceState {
+            columns: LayerColumns {
+                edges_m: vec![0.0, 400.0, 1000.0],
+                dry_air_per_m2: vec![1e29, 1e29],
+                gas_per_m2: vec![4e25, 4e25],
+            },
+            weights: vec![vec![0.3, 0.7], vec![0.6, 0.4]],
+            target_tau: vec![
+                vec![vec![0.4, 0.8], vec![0.1, 0.25]],
+                vec![vec![0.6, 1.2], vec![0.15, 0.3]],
+            ],
+            other_tau: vec![
+                vec![vec![0.05, 0.1], vec![0.2, 0.02]],
+                vec![vec![0.02, 0.04], vec![0.1, 0.01]],
+            ],
+        }
+    }
+
+    /// D(s) = ½ ln(T̄²_off/T̄²_on) with T̄²_ℓ = Σᵢ wᵢ exp(−2 (s τ_t + τ_o)/|μ|) written out
+    /// for the path from 1000 m to 100 m: the whole upper layer and ¾ of the lower.
+    fn closed_form_d(s: f64, mu: f64) -> f64 {
+        let st = state();
+        let t2 = |line: usize| -> f64 {
+            (0..2)
+                .map(|i| {
+                    let col = |tau: &Vec<Vec<Vec<f64>>>| tau[1][line][i] + 0.75 * tau[0][line][i];
+                    st.weights[line][i]
+                        * (-2.0 * (s * col(&st.target_tau) + col(&st.other_tau)) / mu.abs()).exp()
+                })
+                .sum()
+        };
+        0.5 * (t2(1) / t2(0)).ln()
+    }
+
+    /// D against its closed form on a slant path, and dD/ds against a central difference of it.
+    #[test]
+    fn differential_optical_depth_and_its_slope_follow_the_closed_form() {
+        let st = state();
+        for mu in [-1.0, -0.5] {
+            let p = st.path(1000.0, 100.0, mu);
+            for s in [0.0, 1.0, 2.5] {
+                let (d, g) = st.daod(&p, 0, 1, s);
+                let want = closed_form_d(s, mu);
+                assert!((d - want).abs() < 1e-14, "μ {mu}, s {s}: D {d} vs {want}");
+                let h = 1e-5;
+                let fd = (closed_form_d(s + h, mu) - closed_form_d(s - h, mu)) / (2.0 * h);
+                assert!(
+                    (g - fd).abs() < 1e-8 * fd,
+                    "μ {mu}, s {s}: dD/ds {g} vs {fd}"
+                );
+            }
+        }
+    }
+
+    /// `solve_scale` inverts D: from D(s) of the closed form it returns s, also where D is far
+    /// from linear and its slope exceeds 2 (so only a method that uses the slope converges); NaN
+    /// for a D that is not finite and for one that two scales give.
+    #[test]
+    fn solve_scale_inverts_the_differential_optical_depth() {
+        let st = state();
+        let mu = -0.25;
+        let p = st.path(1000.0, 100.0, mu);
+        let slope = st.daod(&p, 0, 1, 1.0).1;
+        assert!(slope > 2.0, "{slope}");
+        for s in [0.0, 0.3, 1.0, 4.0] {
+            let got = st.solve_scale(&p, 0, 1, closed_form_d(s, mu));
+            assert!((got - s).abs() < 1e-12, "s {s}: solved {got}");
+        }
+        assert!(st.solve_scale(&p, 0, 1, f64::NAN).is_nan());
+        assert!(st.solve_scale(&p, 0, 1, f64::INFINITY).is_nan());
+
+        // An on-line half transparent, half opaque (τ 0 and 4 per layer thickness) against an
+        // off-line of τ ½: D(s) = −s/2 − ½ ln(½(1 + e^{−8s})) on the vertical path through the
+        // upper layer rises to a peak at s = ln 7 / 8 and falls after it, so D(0.1) is reached
+        // twice: no unique solution.
+        let two_valued = ReferenceState {
+            weights: vec![vec![0.5, 0.5], vec![0.5, 0.5]],
+            target_tau: vec![vec![vec![0.0; 2]; 2], vec![vec![0.0, 4.0], vec![0.5, 0.5]]],
+            other_tau: vec![vec![vec![0.0; 2]; 2]; 2],
+            ..state()
+        };
+        let p = two_valued.path(1000.0, 400.0, -1.0);
+        let d = |s: f64| -s / 2.0 - 0.5 * (0.5 * (1.0 + (-8.0 * s).exp())).ln();
+        let peak = 7f64.ln() / 8.0;
+        assert!(d(0.1) < d(peak) && d(0.1) > d(1.0));
+        assert!((two_valued.daod(&p, 0, 1, 0.1).0 - d(0.1)).abs() < 1e-15);
+        assert!(two_valued.solve_scale(&p, 0, 1, d(0.1)).is_nan());
     }
 }
