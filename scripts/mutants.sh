@@ -86,7 +86,10 @@ for f in "${files[@]}"; do
     if [ ${#iterate[@]} -gt 0 ]; then
         # Only the mutants the last run did not catch, by exact name (cargo-mutants' own
         # --iterate would shard what is left: another sample). Names carry line and column:
-        # after editing the file itself, run it whole.
+        # after editing the file itself, run it whole. cargo-mutants 27.1 applies neither --re
+        # nor --exclude-re to struct-field deletions ("delete field … from struct … expression"):
+        # every such mutant of the file is tested again too, and mutants_table.py keeps only the
+        # outcomes of the sample.
         tsv="$results/outcomes/$slug.tsv"
         [ -f "$tsv" ] || { echo "mutants.sh: --iterate: no earlier run of $f ($tsv)" >&2; exit 2; }
         select=()
