@@ -198,6 +198,39 @@ fn small_spheres_scatter_as_dipoles() {
     }
 }
 
+/// One sphere's matrix is normalised like a phase function: ½∫F11 dμ = 1, and its first moment
+/// ½∫F11 μ dμ is the asymmetry parameter of the efficiencies' own series (BH Eq. 4.62 and the
+/// g Qsca series), for a lossless and an absorbing sphere. F11 is a polynomial in μ of degree
+/// 2N (N ≈ 20 terms at x = 10), so 200 Gauss–Legendre nodes integrate it to rounding.
+#[test]
+fn one_sphere_matrix_is_normalised_like_the_phase_function() {
+    let nodes = lidarsim::instrument::line_shape::gauss_legendre(200);
+    let mu: Vec<f64> = nodes.iter().map(|q| q.offset_mhz).collect();
+    for (m, x) in [(C::new(1.33, 0.0), 10.0), (C::new(1.5, 0.01), 5.2)] {
+        let k = MieCoefficients::compute(m, x).unwrap();
+        let e = k.matrix(&mu).unwrap();
+        let half = |f: &dyn Fn(usize) -> f64| -> f64 {
+            0.5 * nodes
+                .iter()
+                .enumerate()
+                .map(|(i, q)| q.weight * f(i))
+                .sum::<f64>()
+        };
+        let norm = half(&|i| e[i].f11);
+        let g = half(&|i| e[i].f11 * mu[i]);
+        let want_g = k.efficiencies().g;
+        assert!(
+            (norm - 1.0).abs() < 1e-12,
+            "m {m}, x {x}: ½∫F11 dμ = {norm}"
+        );
+        assert!(
+            (g - want_g).abs() < 1e-12,
+            "m {m}, x {x}: g {g} vs {want_g}"
+        );
+        assert!(want_g > 0.5, "a forward-scattering sphere: {want_g}");
+    }
+}
+
 /// The size integral (matrix products of S±) against the same trapezoid sum written out: the
 /// grid that `bulk_optics` reports (range, step, points), single spheres through
 /// `MieCoefficients::amplitudes` (Wiscombe's, conjugated) and BH's formulas. An aerosol
