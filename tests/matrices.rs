@@ -183,6 +183,7 @@ fn small_spheres_scatter_as_dipoles() {
             ("one sphere", &single),
             ("distribution", &bulk.matrix.elements),
         ] {
+            assert_eq!(elements.len(), mu.len(), "{name}");
             let mut worst = 0.0f64;
             for (e, u) in elements.iter().zip(&mu) {
                 let (ours, want) = (ratios(e), dipole(*u));
