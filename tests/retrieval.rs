@@ -14,7 +14,7 @@ use lidarsim::retrieval::{Method, Quantity, RetrievalError};
 use lidarsim::returns::{Order, Source};
 use lidarsim::rng::{Stream, streams};
 use lidarsim::scene::Scene;
-use lidarsim::spectroscopy::layer_optical_depths_at;
+use lidarsim::spectroscopy::{LineFilter, LineList, layer_optical_depths_at};
 use lidarsim::transport::{self, TransportOptions};
 
 /// An airborne CO2 IPDA/DIAL at 8 km, nadir, no particles: Rayleigh air, CO2 (built-in band
@@ -98,6 +98,23 @@ fn surface_return(s: &Scene, line: usize) -> f64 {
     lines.mean.energy(line, 0, g, Order::Exactly(1)).unwrap()
 }
 
+/// Vertical optical depth of `lines` from the ground to the lidar at 8 km at each of `nus`,
+/// straight from the spectroscopy stage on the scene's molecular layers.
+fn vertical_depths_below_8_km(s: &Scene, lines: &LineList, nus: &[f64]) -> Vec<f64> {
+    let atm = s.atmosphere.as_ref().unwrap();
+    let gas = s.gas.as_ref().unwrap();
+    let edges: Vec<f64> = s
+        .molecular_edges()
+        .unwrap()
+        .into_iter()
+        .filter(|e| *e <= 8000.0)
+        .collect();
+    let tau = layer_optical_depths_at(&atm.profile, lines, &edges, nus, &gas.options).unwrap();
+    (0..nus.len())
+        .map(|i| tau.iter().map(|l| l[i]).sum())
+        .collect()
+}
+
 /// Laser line shapes ride as channels: a narrow line converges to the monochromatic return (as
 /// FWHM², the first non-vanishing term of a symmetric line), and a wide Gaussian or Lorentzian
 /// line gives the line-shape-weighted two-way transmission computed here independently, by a
@@ -137,21 +154,13 @@ fn line_shape_narrow_converges_to_monochromatic_and_wide_to_the_spectral_average
     // Wide: T̄² = ∫ g(x) T²(ν₀ + x) dx against the mono return T²(ν₀). Independent truth: the
     // slant optical depth from the spectroscopy stage on the scene's molecular grid at every
     // frequency of a dense grid, integrated by the midpoint rule.
-    let atm = mono.atmosphere.as_ref().unwrap();
-    let gas = mono.gas.as_ref().unwrap();
-    let edges: Vec<f64> = mono
-        .molecular_edges()
-        .unwrap()
-        .into_iter()
-        .filter(|e| *e <= 8000.0)
-        .collect();
+    let lines = &mono.gas.as_ref().unwrap().lines;
     let nu0 = 6360.04;
     let t2 = |offsets_mhz: &[f64]| -> Vec<f64> {
         let nus: Vec<f64> = offsets_mhz.iter().map(|x| nu0 + x / 29_979.245_8).collect();
-        let tau =
-            layer_optical_depths_at(&atm.profile, &gas.lines, &edges, &nus, &gas.options).unwrap();
-        (0..nus.len())
-            .map(|i| (-2.0 * tau.iter().map(|l| l[i]).sum::<f64>()).exp())
+        vertical_depths_below_8_km(&mono, lines, &nus)
+            .into_iter()
+            .map(|tau| (-2.0 * tau).exp())
             .collect()
     };
     let t2_0 = t2(&[0.0])[0];
@@ -545,30 +554,15 @@ fn water_vapour_at_the_on_line_is_removed_by_the_reference_state() {
     let column = of(Method::IpdaVirtual, Quantity::SlantColumn);
     let ipda = of(Method::Ipda, Quantity::MixingRatio);
 
-    // One-way vertical DAOD of each gas from 8 km down to the surface, on the scene's
-    // molecular layers (their ratio is the slant path's).
-    let atm = s.atmosphere.as_ref().unwrap();
-    let gas = s.gas.as_ref().unwrap();
-    let edges: Vec<f64> = s
-        .molecular_edges()
-        .unwrap()
-        .into_iter()
-        .filter(|e| *e <= 8000.0)
-        .collect();
+    // One-way vertical DAOD of each gas from 8 km down to the surface (their ratio is the
+    // slant path's).
     let daod = |molecule: u8| -> f64 {
-        let lines = gas.lines.filtered(&lidarsim::spectroscopy::LineFilter {
+        let lines = s.gas.as_ref().unwrap().lines.filtered(&LineFilter {
             molecules: Some(vec![molecule]),
             ..Default::default()
         });
-        let tau = layer_optical_depths_at(
-            &atm.profile,
-            &lines,
-            &edges,
-            &[6360.04, 6360.61],
-            &gas.options,
-        )
-        .unwrap();
-        tau.iter().map(|l| l[0] - l[1]).sum()
+        let tau = vertical_depths_below_8_km(&s, &lines, &[6360.04, 6360.61]);
+        tau[0] - tau[1]
     };
     let (d_co2, d_h2o) = (daod(2), daod(1));
     println!(
@@ -617,18 +611,9 @@ fn a_frequency_offset_biases_ipda_as_the_shifted_differential_optical_depth() {
         Order::Exactly(1),
         0.2,
     )[0];
-    let atm = s.atmosphere.as_ref().unwrap();
-    let gas = s.gas.as_ref().unwrap();
-    let edges: Vec<f64> = s
-        .molecular_edges()
-        .unwrap()
-        .into_iter()
-        .filter(|e| *e <= 8000.0)
-        .collect();
     let nus = [6360.04 + 60.0 / 29_979.245_8, 6360.04, 6360.61];
-    let tau =
-        layer_optical_depths_at(&atm.profile, &gas.lines, &edges, &nus, &gas.options).unwrap();
-    let column = |i: usize| tau.iter().map(|l| l[i]).sum::<f64>();
+    let tau = vertical_depths_below_8_km(&s, &s.gas.as_ref().unwrap().lines, &nus);
+    let column = |i: usize| tau[i];
     let ratio = (column(0) - column(2)) / (column(1) - column(2));
     println!(
         "60 MHz offset: retrieved/truth {} vs DAOD ratio {ratio}",
