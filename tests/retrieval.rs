@@ -525,18 +525,7 @@ fn water_vapour_at_the_on_line_is_removed_by_the_reference_state() {
         return;
     };
     let dir = tempfile::tempdir().unwrap();
-    let window = |f: &Path| -> String {
-        std::fs::read_to_string(f)
-            .unwrap()
-            .lines()
-            .filter(|l| {
-                l.get(3..15)
-                    .and_then(|nu| nu.trim().parse::<f64>().ok())
-                    .is_some_and(|nu| (6340.0..6380.0).contains(&nu))
-            })
-            .map(|l| format!("{l}\n"))
-            .collect()
-    };
+    let window = |f: &Path| crate::util::par_records_in(f, 6340.0, 6380.0);
     std::fs::write(dir.path().join("lines.par"), window(&co2) + &window(&h2o)).unwrap();
     let text = SCENE
         .replacen("standard = \"us_standard\"", "standard = \"tropical\"", 1)

@@ -1149,16 +1149,7 @@ fn select_lines_shards_of_a_profile_set_and_a_line_file() {
         return;
     };
     let lines_file = d.join("co2.par");
-    let window: String = fs::read_to_string(hitran)
-        .unwrap()
-        .lines()
-        .filter(|l| {
-            l.get(3..15)
-                .and_then(|nu| nu.trim().parse::<f64>().ok())
-                .is_some_and(|nu| (6330.0..6390.0).contains(&nu))
-        })
-        .map(|l| format!("{l}\n"))
-        .collect();
+    let window = crate::util::par_records_in(&hitran, 6330.0, 6390.0);
     fs::write(&lines_file, &window).unwrap();
     let lines_arg = s(&lines_file);
     let args = [

@@ -23,6 +23,21 @@ pub fn shared_file(relative: &str) -> Option<PathBuf> {
     }
 }
 
+/// The records of a HITRAN `.par` file whose line position (columns 4–15) lies in
+/// [`lo_cm1`, `hi_cm1`), each with its newline: a small line file for a test scene.
+pub fn par_records_in(path: &Path, lo_cm1: f64, hi_cm1: f64) -> String {
+    std::fs::read_to_string(path)
+        .unwrap()
+        .lines()
+        .filter(|l| {
+            l.get(3..15)
+                .and_then(|nu| nu.trim().parse::<f64>().ok())
+                .is_some_and(|nu| (lo_cm1..hi_cm1).contains(&nu))
+        })
+        .map(|l| format!("{l}\n"))
+        .collect()
+}
+
 /// Path of the lidarsim binary built for these tests.
 pub fn lidarsim_bin() -> &'static Path {
     Path::new(env!("CARGO_BIN_EXE_lidarsim"))
