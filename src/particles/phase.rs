@@ -176,15 +176,11 @@ impl HenyeyGreenstein {
     /// evaluated for g > 0 as μ = 1 − (1 − g)(1 − u)(s + 1 − g)/(1 − g + 2gu) (the same
     /// number, with no difference of nearly equal terms as g → 1), and for g < 0 through the
     /// symmetry μ_g(u) = −μ_{−g}(1 − u). μ is then right to the double's resolution for |g| up to
-    /// 1 − 1e-12 (`hg_at_extreme_asymmetry`).
+    /// 1 − 1e-12 (`hg_at_extreme_asymmetry`) and down to 0, where this form, unlike the first,
+    /// divides by nothing small (`hg_sampling_is_exact_at_tiny_asymmetry`).
     #[inline]
     pub fn sample(&self, u: f64) -> f64 {
         let g = self.g;
-        if g.abs() < 1e-6 {
-            // The closed form loses all digits as g → 0; the limit is isotropic, and the
-            // first-order correction is below 1e-6 in μ.
-            return 2.0 * u - 1.0;
-        }
         let (a, v) = if g > 0.0 { (g, u) } else { (-g, 1.0 - u) };
         let q = 1.0 - a + 2.0 * a * v;
         let s = (1.0 - a) * (1.0 + a) / q;
@@ -551,14 +547,50 @@ mod tests {
                 "{name}: {g} vs {}",
                 pf.asymmetry()
             );
+            // The public accessor of a lobe's parameter is that mean cosine too.
+            if let PhaseFunction::HenyeyGreenstein(hg) = &pf {
+                assert!((g - hg.g()).abs() < 1e-6, "{name}: {g} vs g() = {}", hg.g());
+            }
         }
     }
 
     #[test]
     fn rayleigh_backscatter_matches_bucholtz() {
-        // P(180°) = 3(1+γ)/(2(1+2γ)); 1.4798 at ρ_n = 0.0273 (shared/data/rayleigh).
-        let r = RayleighPhase::from_depolarisation(0.0273).unwrap();
-        assert!((r.eval(-1.0) - 1.4798).abs() < 1e-4);
+        // P(180°) = 3(1+γ)/(2(1+2γ)), and γ is the molecular linear depolarisation ratio of
+        // the backscatter (shared/data/rayleigh: P180 and delta_mol at 355, 532, 1064 nm).
+        for (rho_n, p180, delta_mol) in [
+            (0.0301, 1.47776, 0.01528),
+            (0.02842, 1.47898, 0.0144148),
+            (0.0273, 1.4798, 0.0138389),
+        ] {
+            let r = RayleighPhase::from_depolarisation(rho_n).unwrap();
+            assert!(
+                (r.eval(-1.0) - p180).abs() < 1e-5,
+                "ρ_n {rho_n}: {}",
+                r.eval(-1.0)
+            );
+            assert!(
+                (r.gamma() - delta_mol).abs() < 1e-6,
+                "ρ_n {rho_n}: {}",
+                r.gamma()
+            );
+        }
+    }
+
+    #[test]
+    fn hg_sampling_is_exact_at_tiny_asymmetry() {
+        // For |g| ≤ 1e-6, P = 1 + 3gμ + O(g²) and the CDF is F(μ) = (μ + 1)/2 + 3g(μ² − 1)/4
+        // to 1e-12: the sample must invert it to that level, not fall back to isotropy (which
+        // is off by 3g(1 − μ²)/4, up to 3.8e-7 at g = 5e-7).
+        for g in [5e-7, -5e-7, 1e-9, -1e-12, 0.0] {
+            let hg = HenyeyGreenstein::new(g).unwrap();
+            for i in 0..=20 {
+                let u = i as f64 / 20.0;
+                let mu = hg.sample(u);
+                let f = 0.5 * (mu + 1.0) + 0.75 * g * (mu * mu - 1.0);
+                assert!((f - u).abs() < 1e-12, "g {g}, u {u}: F(μ) = {f}");
+            }
+        }
     }
 
     #[test]
