@@ -285,19 +285,25 @@ impl SegmentGuide {
         SegmentGuide { fwd, bwd }
     }
 
-    /// The segment i of `mu` (the nodes it was built for) with μ_i ≤ μ ≤ μ_{i+1}.
+    /// The guide's first guess for μ: the segment at the edge of μ's cell nearest the pole.
     #[inline]
-    pub(crate) fn segment(&self, mu_nodes: &[f64], mu: f64) -> usize {
-        let last = mu_nodes.len() - 2;
+    fn start(&self, mu: f64) -> usize {
         let half = std::f64::consts::FRAC_1_SQRT_2;
         let cells = EVAL_GUIDE_CELLS as f64;
-        let mut i = if mu >= 0.0 {
+        if mu >= 0.0 {
             let s = (0.5 * (1.0 - mu)).max(0.0).sqrt();
             self.fwd[((s / half * cells) as usize).min(EVAL_GUIDE_CELLS)] as usize
         } else {
             let c = (0.5 * (1.0 + mu)).max(0.0).sqrt();
             self.bwd[((c / half * cells) as usize).min(EVAL_GUIDE_CELLS)] as usize
-        };
+        }
+    }
+
+    /// The segment i of `mu` (the nodes it was built for) with μ_i ≤ μ ≤ μ_{i+1}.
+    #[inline]
+    pub(crate) fn segment(&self, mu_nodes: &[f64], mu: f64) -> usize {
+        let last = mu_nodes.len() - 2;
+        let mut i = self.start(mu);
         // Rounding in s can start one segment high; step back, then walk up.
         while i > 0 && mu_nodes[i] > mu {
             i -= 1;
@@ -653,6 +659,31 @@ mod tests {
             );
         }
         assert!((tab.eval(-1.0) - 0.64154 * scale).abs() < 1e-4);
+    }
+
+    #[test]
+    fn evaluation_guide_starts_within_a_few_segments_of_the_answer() {
+        // What makes `eval` O(1): 4096 cells in s = sin(Θ/2) up to √½ (and likewise from the
+        // back) are at most 2·(√½/4096)/cos 45° = 0.028° wide, and the C.1 table's nodes are
+        // at least 0.01° apart, so a cell holds at most 3 nodes: the guess is at most 3
+        // segments below the answer, or 1 above it by rounding.
+        let t = crate::particles::builtin_table("bissonnette_c1_1064nm").unwrap();
+        let tab = TabulatedPhase::from_table(&t).unwrap();
+        let n = 200_000;
+        for j in 0..=n {
+            let mu = -1.0 + 2.0 * j as f64 / n as f64;
+            let answer = tab
+                .mu
+                .partition_point(|&x| x <= mu)
+                .saturating_sub(1)
+                .min(tab.mu.len() - 2);
+            assert_eq!(tab.segment(mu), answer, "μ = {mu}");
+            let start = tab.guide.start(mu);
+            assert!(
+                start <= answer + 1 && answer <= start + 3,
+                "μ = {mu}: guess {start}, answer {answer}"
+            );
+        }
     }
 
     #[test]
