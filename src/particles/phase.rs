@@ -662,6 +662,22 @@ mod tests {
     }
 
     #[test]
+    fn sampling_guide_holds_the_segment_of_each_cells_start() {
+        // Cell c of the sampling guide starts at u = c/G; its entry must be the segment whose
+        // CDF interval holds that u (found here by bisection), so that the walk from it is
+        // short. A wrong entry would still sample right, only slowly: this is what sees it.
+        let t = crate::particles::builtin_table("bissonnette_c1_1064nm").unwrap();
+        let tab = TabulatedPhase::from_table(&t).unwrap();
+        let last = tab.mu.len() - 2;
+        assert_eq!(tab.sample_guide.len(), SAMPLE_GUIDE_CELLS + 1);
+        for (c, &guess) in tab.sample_guide.iter().enumerate() {
+            let u = c as f64 / SAMPLE_GUIDE_CELLS as f64;
+            let answer = (tab.cdf.partition_point(|&x| x <= u) - 1).min(last);
+            assert_eq!(guess as usize, answer, "cell {c}, u = {u}");
+        }
+    }
+
+    #[test]
     fn evaluation_guide_starts_within_a_few_segments_of_the_answer() {
         // What makes `eval` O(1): 4096 cells in s = sin(Θ/2) up to √½ (and likewise from the
         // back) are at most 2·(√½/4096)/cos 45° = 0.028° wide, and the C.1 table's nodes are
