@@ -242,6 +242,7 @@ impl RayleighPhase {
 /// Number of cells of the sampling guide table (in u) and of the evaluation guide table (per
 /// hemisphere, in sin(Θ/2) or cos(Θ/2)).
 const SAMPLE_GUIDE_CELLS: usize = 8192;
+const _: () = assert!(SAMPLE_GUIDE_CELLS.is_power_of_two());
 const EVAL_GUIDE_CELLS: usize = 4096;
 
 /// Segment lookup on nodes μ_i (strictly increasing from −1 to 1) dense at both poles: cells
@@ -457,11 +458,10 @@ impl TabulatedPhase {
     #[inline]
     pub fn sample_with_value(&self, u: f64) -> (f64, f64) {
         let cell = ((u * SAMPLE_GUIDE_CELLS as f64) as usize).min(SAMPLE_GUIDE_CELLS);
+        // The cell's entry holds its start c/G, and c/G ≤ u exactly (G a power of two: u·G and
+        // c/G are exact), so the segment is never below it: walk up only.
         let mut i = self.sample_guide[cell] as usize;
         let last = self.mu.len() - 2;
-        while i > 0 && self.cdf[i] > u {
-            i -= 1;
-        }
         while i < last && self.cdf[i + 1] <= u {
             i += 1;
         }
