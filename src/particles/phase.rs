@@ -36,6 +36,9 @@ pub enum PhaseError {
     /// A table that integrates to zero.
     #[error("the phase-function table has no positive values")]
     EmptyTable,
+    /// Nodes that do not make a table: what is wrong with them.
+    #[error("phase-function table: {0}")]
+    Nodes(&'static str),
 }
 
 /// A phase function (normalised to 4π); see the module documentation.
@@ -355,6 +358,23 @@ impl TabulatedPhase {
         theta_deg: &[f64],
         phase: &[f64],
     ) -> Result<(Self, f64), PhaseError> {
+        // What a file's reader checks (particles::table) holds here too, for tables built in code.
+        let bad = if theta_deg.len() != phase.len() {
+            Some("as many values as angles are needed")
+        } else if theta_deg.len() < 2 {
+            Some("at least two angles (0 and 180) are needed")
+        } else if theta_deg[0] != 0.0 || theta_deg[theta_deg.len() - 1] != 180.0 {
+            Some("the angles must run from exactly 0 to exactly 180 degrees")
+        } else if theta_deg.windows(2).any(|w| !(w[1] > w[0])) {
+            Some("the angles must strictly increase")
+        } else if phase.iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
+            Some("the values must be finite and non-negative")
+        } else {
+            None
+        };
+        if let Some(why) = bad {
+            return Err(PhaseError::Nodes(why));
+        }
         let p: Vec<f64> = phase.iter().rev().copied().collect();
         Self::from_mu(mu_nodes(theta_deg), p)
     }
@@ -744,6 +764,27 @@ mod tests {
             TabulatedPhase::from_angles(&[0.0, 180.0], &[0.0, 0.0]),
             Err(PhaseError::EmptyTable)
         );
+        // Nodes that make no table are refused, not a panic or a silent table.
+        let bad: [(&[f64], &[f64]); 7] = [
+            (&[], &[]),
+            (&[0.0], &[1.0]),
+            (&[0.0, 180.0], &[1.0]),
+            (&[0.0, 90.0], &[1.0, 1.0]),
+            (&[0.0, 120.0, 60.0, 180.0], &[1.0; 4]),
+            (&[0.0, 90.0, 90.0, 180.0], &[1.0; 4]),
+            (&[0.0, 90.0, 180.0], &[1.0, f64::NAN, 1.0]),
+        ];
+        for (theta, p) in bad {
+            assert!(
+                matches!(
+                    TabulatedPhase::from_angles(theta, p),
+                    Err(PhaseError::Nodes(_))
+                ),
+                "{theta:?} {p:?}"
+            );
+        }
+        assert!(TabulatedPhase::from_angles(&[0.0, 90.0, 180.0], &[2.0, -1.0, 1.0]).is_err());
+        assert!(TabulatedPhase::from_angles(&[1.0, 180.0], &[1.0, 1.0]).is_err());
     }
 
     // 60-digit values from validation/hg_extremes/hg_reference.py (mpmath).
