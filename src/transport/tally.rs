@@ -156,10 +156,12 @@ impl Accumulator {
         self
     }
 
+    /// Index of the total (order bin 0) of (channel, FOV, gate) in the reported layout; the
+    /// exact orders and the overflow follow it.
     #[inline]
-    fn reported_index(&self, k: usize, fov: usize, gate: usize, order: usize) -> usize {
+    fn reported_start(&self, k: usize, fov: usize, gate: usize) -> usize {
         let s = &self.shape;
-        ((k * s.n_fov + fov) * s.n_gates + gate) * (s.n_order_bins + 1) + order
+        ((k * s.n_fov + fov) * s.n_gates + gate) * (s.n_order_bins + 1)
     }
 
     /// Fold one batch (already normalised to energy per pulse) into the running moments.
@@ -177,7 +179,7 @@ impl Accumulator {
                     let fov = self.fov_of_annulus[a];
                     for k in 0..s.n_channels {
                         acc[k] += bins[base + k];
-                        let i = self.reported_index(k, fov, gate, 0);
+                        let i = self.reported_start(k, fov, gate);
                         self.scratch[i + 1 + ob] = acc[k];
                         self.scratch[i] += acc[k];
                     }
