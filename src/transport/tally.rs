@@ -167,7 +167,6 @@ impl Accumulator {
     /// Fold one batch (already normalised to energy per pulse) into the running moments.
     pub fn add_batch(&mut self, bins: &[f64], flux: &Flux) {
         let s = self.shape;
-        let n_rep = s.n_order_bins + 1;
         self.scratch.iter_mut().for_each(|v| *v = 0.0);
         let mut acc = vec![0.0; s.n_channels];
         for gate in 0..s.n_gates {
@@ -186,7 +185,6 @@ impl Accumulator {
                 }
             }
         }
-        debug_assert_eq!(self.scratch.len() % n_rep, 0);
         let n = self.n_batches + 1;
         for (i, v) in self.scratch.iter().enumerate() {
             stats::welford_add_scaled(
