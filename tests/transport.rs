@@ -322,6 +322,41 @@ fn slab_conserves_energy() {
     }
 }
 
+/// The same slab seen from above, over a Lambertian surface of albedo 0.3: energy is conserved
+/// too when photons meet the ground, where the collision forced before it leaves the surface
+/// its share of the absorption in expectation (`down` counts what the ground absorbs).
+#[test]
+fn slab_over_a_surface_conserves_energy() {
+    for ssa in [1.0, 0.9] {
+        let text = SLAB.replace("SSA", &ssa.to_string()).replace(
+            "altitude_m = 0.0\nzenith_angle_deg = 0.0",
+            "altitude_m = 3000.0\nzenith_angle_deg = 180.0",
+        ) + "[surface]\naltitude_m = 0.0\nalbedo = 0.3\n";
+        assert!(text.contains("zenith_angle_deg = 180.0"));
+        let scene = scene_text(&text);
+        let mc = run(&scene, 100_000, |o| o.flux_tally = true);
+        let (f, e) = (&mc.flux, &mc.flux_stderr);
+        let total = f.up[0] + f.down[0] + f.absorbed[0] + f.cut[0];
+        let se =
+            (e.up[0].powi(2) + e.down[0].powi(2) + e.absorbed[0].powi(2) + e.cut[0].powi(2)).sqrt();
+        assert!(
+            (total - 1.0).abs() <= K_SIGMA * se + 1e-9,
+            "ϖ = {ssa}: {total} ± {se} (up {}, down {}, absorbed {}, cut {})",
+            f.up[0],
+            f.down[0],
+            f.absorbed[0],
+            f.cut[0]
+        );
+        assert!(f.cut[0] < 1e-6, "ϖ = {ssa}: cut {}", f.cut[0]);
+        // The ground absorbs 0.7 of what reaches it, at least the direct beam's e^{−2}.
+        assert!(
+            f.down[0] > 0.7 * (-2.0f64).exp(),
+            "ϖ = {ssa}: down {}",
+            f.down[0]
+        );
+    }
+}
+
 /// Same scene and seed → the same numbers, bit for bit, at 1 and 2 threads.
 #[test]
 fn identical_results_at_one_and_two_threads() {
