@@ -431,7 +431,7 @@ base_m = 1000.0
 top_m = 1300.0
 extinction_per_km = EXTINCTION
 single_scattering_albedo = 1.0
-phase = { kind = "henyey_greenstein", g = 0.85 }
+phase = [PHASES]
 [simulation]
 max_order = 4
 seed = 3
@@ -442,16 +442,25 @@ seed = 3
 /// in either order, equals the same channel run alone within 4.5 combined standard errors in
 /// every gate and order both runs resolve, its single scattering equals the lidar equation,
 /// and every number is finite. (Sampling on channel 0 alone gave NaN beyond 1260 m for the
-/// thin channel when the thick one came first.)
+/// thin channel when the thick one came first.) The two also scatter with different phase
+/// functions (HG g = 0.85 and 0.5), so that a direction drawn from one class's phase function
+/// must be weighted by the classes' mean, DDIS included (weighting by the drawn class's own
+/// value put the thick channel's total 21 % low).
 #[test]
 fn channels_whose_scattering_differs_2500_fold_match_each_run_alone() {
     let channel = |name: &str| format!("[[channel]]\nname = \"{name}\"\nwavelength_nm = 1064.0\n");
+    let phase = |name: &str| {
+        let g = if name == "thick" { 0.85 } else { 0.5 };
+        format!("{{ kind = \"henyey_greenstein\", g = {g} }}")
+    };
     let scene = |names: &[&str], ext: &str| {
         let chans: String = names.iter().map(|n| channel(n)).collect();
+        let phases: Vec<String> = names.iter().map(|n| phase(n)).collect();
         scene_text(
             &DISPARATE_PAIR
                 .replace("CHANNELS", &chans)
-                .replace("EXTINCTION", ext),
+                .replace("EXTINCTION", ext)
+                .replace("PHASES", &phases.join(", ")),
         )
     };
     let photons = 200_000;
@@ -550,6 +559,35 @@ fn ddis_is_unbiased() {
         o.alignment_splitting = 0.0;
         o.cone_estimate = false;
         o.seed = 2
+    });
+    multiple_scattering_agrees(&plain, &ddis);
+}
+
+/// DDIS in a layer of two scatterers with different phase functions (HG g = 0.6 and 0.2, equal
+/// extinction; the mixture's P(0°) = 5.9 is above the DDIS threshold): a direction is drawn from
+/// the phase function of one scatterer, picked by its share, so the density of the directions
+/// is the mixture's, and the DDIS weight must use the mixture's phase function, not the picked
+/// scatterer's. Multiply scattered returns agree with plain local estimates of the same scene.
+#[test]
+fn ddis_is_unbiased_in_a_mixture_of_scatterers() {
+    let text = HG_CLOUD
+        .replace("extinction_per_km = 10.0", "extinction_per_km = 5.0")
+        .replace("g = 0.5 }", "g = 0.6 }")
+        + r#"[[layer]]
+name = "cloud, second scatterer"
+base_m = 500.0
+top_m = 700.0
+extinction_per_km = 5.0
+single_scattering_albedo = 0.99
+phase = { kind = "henyey_greenstein", g = 0.2 }
+"#;
+    let scene = scene_text(&text);
+    let plain = run(&scene, 200_000, plain_local_estimates);
+    let ddis = run(&scene, 200_000, |o| {
+        o.ddis_epsilon = 0.3;
+        o.alignment_splitting = 0.0;
+        o.cone_estimate = false;
+        o.seed = 7
     });
     multiple_scattering_agrees(&plain, &ddis);
 }
