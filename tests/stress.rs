@@ -12,7 +12,7 @@ use lidarsim::returns::Returns;
 use lidarsim::scene::Scene;
 use lidarsim::transport::McResult;
 
-use crate::transport::{K_SIGMA, analytic, check_order1, run, scene_text};
+use crate::transport::{analytic, assert_energy_conserved, check_order1, run, scene_text};
 
 const BASE: &str = r#"
 [lidar]
@@ -75,14 +75,7 @@ fn check(name: &str, s: &Scene, photons: u64, flux: bool) -> McResult {
         t.elapsed().as_secs_f64()
     );
     if flux {
-        let (f, e) = (&mc.flux, &mc.flux_stderr);
-        let total = f.up[0] + f.down[0] + f.absorbed[0] + f.cut[0];
-        let se =
-            (e.up[0].powi(2) + e.down[0].powi(2) + e.absorbed[0].powi(2) + e.cut[0].powi(2)).sqrt();
-        assert!(
-            (total - 1.0).abs() <= K_SIGMA * se + 1e-9,
-            "{name}: energy {total} ± {se}"
-        );
+        assert_energy_conserved(name, &mc);
     }
     mc
 }

@@ -298,15 +298,8 @@ fn slab_conserves_energy() {
     for ssa in [1.0, 0.9] {
         let scene = scene_text(&SLAB.replace("SSA", &ssa.to_string()));
         let mc = run(&scene, 100_000, |o| o.flux_tally = true);
-        let (f, e) = (&mc.flux, &mc.flux_stderr);
-        let total = f.up[0] + f.down[0] + f.absorbed[0] + f.cut[0];
-        // The parts are anti-correlated, so this error bound is conservative.
-        let se =
-            (e.up[0].powi(2) + e.down[0].powi(2) + e.absorbed[0].powi(2) + e.cut[0].powi(2)).sqrt();
-        assert!(
-            (total - 1.0).abs() <= K_SIGMA * se + 1e-9,
-            "ϖ = {ssa}: {total} ± {se}"
-        );
+        assert_energy_conserved(&format!("ϖ = {ssa}"), &mc);
+        let f = &mc.flux;
         assert!(f.cut[0] < 1e-6, "ϖ = {ssa}: cut {}", f.cut[0]);
         if ssa == 1.0 {
             assert_eq!(f.absorbed[0], 0.0);
@@ -322,6 +315,24 @@ fn slab_conserves_energy() {
     }
 }
 
+/// Energy conservation in a flux tally (channel 0): what leaves up, leaves down, is absorbed or
+/// is cut adds up to what was emitted, within K_SIGMA of the parts' errors added in quadrature
+/// (conservative: the parts are anti-correlated).
+pub(crate) fn assert_energy_conserved(what: &str, mc: &McResult) {
+    let (f, e) = (&mc.flux, &mc.flux_stderr);
+    let total = f.up[0] + f.down[0] + f.absorbed[0] + f.cut[0];
+    let se =
+        (e.up[0].powi(2) + e.down[0].powi(2) + e.absorbed[0].powi(2) + e.cut[0].powi(2)).sqrt();
+    assert!(
+        (total - 1.0).abs() <= K_SIGMA * se + 1e-9,
+        "{what}: energy {total} ± {se} (up {}, down {}, absorbed {}, cut {})",
+        f.up[0],
+        f.down[0],
+        f.absorbed[0],
+        f.cut[0]
+    );
+}
+
 /// The same slab seen from above, over a Lambertian surface of albedo 0.3: energy is conserved
 /// too when photons meet the ground, where the collision forced before it leaves the surface
 /// its share of the absorption in expectation (`down` counts what the ground absorbs).
@@ -335,18 +346,8 @@ fn slab_over_a_surface_conserves_energy() {
         assert!(text.contains("zenith_angle_deg = 180.0"));
         let scene = scene_text(&text);
         let mc = run(&scene, 100_000, |o| o.flux_tally = true);
-        let (f, e) = (&mc.flux, &mc.flux_stderr);
-        let total = f.up[0] + f.down[0] + f.absorbed[0] + f.cut[0];
-        let se =
-            (e.up[0].powi(2) + e.down[0].powi(2) + e.absorbed[0].powi(2) + e.cut[0].powi(2)).sqrt();
-        assert!(
-            (total - 1.0).abs() <= K_SIGMA * se + 1e-9,
-            "ϖ = {ssa}: {total} ± {se} (up {}, down {}, absorbed {}, cut {})",
-            f.up[0],
-            f.down[0],
-            f.absorbed[0],
-            f.cut[0]
-        );
+        assert_energy_conserved(&format!("ϖ = {ssa}, over the ground"), &mc);
+        let f = &mc.flux;
         assert!(f.cut[0] < 1e-6, "ϖ = {ssa}: cut {}", f.cut[0]);
         // The ground absorbs 0.7 of what reaches it, at least the direct beam's e^{−2}.
         assert!(
