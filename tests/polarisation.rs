@@ -176,6 +176,9 @@ fn assert_mishchenko_hovenier(lin: &McResult, circ: &McResult, orders: &[Order])
 /// through Henyey-Greenstein scatterers, which stand in as non-depolarising matrices, co +
 /// cross of a linearly polarised run equals the unpolarised run's total of the same seed in
 /// every bin (to rounding: the same random numbers, and the matrix weight (F₁₁ + F₁₂q)/F₁₁ is 1).
+/// So too with a second channel that scatters a little more (5.5 against 5 km⁻¹, one
+/// scattering class): its ALIS ratio (σ_1/σ_0) e^{−(τ_1 − τ_0)} takes the polarised paths of the
+/// crossing estimate (the 20 mrad field of view) as it takes the scalar ones.
 /// Through air it does not beyond single scattering: a polarised source changes the intensity
 /// of multiply scattered light (Mishchenko, Lacis & Travis 1994, JQSRT 51, 491), order 2 of
 /// the air in these scenes by +15 to +20 % (`docs/transport.md`, "Polarisation").
@@ -196,23 +199,38 @@ phase = { kind = "henyey_greenstein", g = 0.8 }
             "layer_thickness_m = 100.0\nrayleigh = false",
         )
     };
-    let scalar = run(&scene_text(&no_air("none")), 20_000, |_| {});
-    let pol = run(&scene_text(&no_air("linear")), 20_000, |_| {});
-    assert!(scalar.polarised.is_none());
-    let (a, b) = (&scalar.returns, &pol.returns);
-    let mut nonzero = 0;
-    for (i, (x, y)) in a.energy_j.iter().zip(&b.energy_j).enumerate() {
-        assert!(
-            (x - y).abs() <= 1e-12 * x.abs().max(1e-300),
-            "bin {i}: scalar {x:e}, polarised {y:e}"
-        );
-        nonzero += usize::from(*x > 0.0);
-    }
-    assert!(nonzero >= 16, "{nonzero}");
-    let p = &pol.polarised.as_ref().unwrap().channels;
-    for i in 0..b.energy_j.len() {
-        let sum = p.co.energy_j[i] + p.cross.energy_j[i];
-        assert!((sum - b.energy_j[i]).abs() <= 1e-12 * b.energy_j[i].abs().max(1e-300));
+    let two_channels = |pol: &str| {
+        no_air(pol)
+            .replace(
+                "[[channel]]\nname = \"355\"\nwavelength_nm = 355.0\n",
+                "[[channel]]\nname = \"355\"\nwavelength_nm = 355.0\n\
+                 [[channel]]\nname = \"355b\"\nwavelength_nm = 355.0\n",
+            )
+            .replace("extinction_per_km = 5.0", "extinction_per_km = [5.0, 5.5]")
+    };
+    assert!(two_channels("none").contains("[5.0, 5.5]") && two_channels("none").contains("355b"));
+    for (what, text) in [
+        ("one channel", &no_air as &dyn Fn(&str) -> String),
+        ("two channels", &two_channels),
+    ] {
+        let scalar = run(&scene_text(&text("none")), 20_000, |_| {});
+        let pol = run(&scene_text(&text("linear")), 20_000, |_| {});
+        assert!(scalar.polarised.is_none());
+        let (a, b) = (&scalar.returns, &pol.returns);
+        let mut nonzero = 0;
+        for (i, (x, y)) in a.energy_j.iter().zip(&b.energy_j).enumerate() {
+            assert!(
+                (x - y).abs() <= 1e-12 * x.abs().max(1e-300),
+                "{what}: bin {i}: scalar {x:e}, polarised {y:e}"
+            );
+            nonzero += usize::from(*x > 0.0);
+        }
+        assert!(nonzero >= 16 * a.channels.len(), "{what}: {nonzero}");
+        let p = &pol.polarised.as_ref().unwrap().channels;
+        for i in 0..b.energy_j.len() {
+            let sum = p.co.energy_j[i] + p.cross.energy_j[i];
+            assert!((sum - b.energy_j[i]).abs() <= 1e-12 * b.energy_j[i].abs().max(1e-300));
+        }
     }
 }
 

@@ -13,7 +13,7 @@ use lidarsim::lidar_eq;
 use lidarsim::optics::OpticalAtmosphere;
 use lidarsim::returns::{Order, Returns};
 use lidarsim::scene::Scene;
-use lidarsim::transport::{self, McResult, TransportOptions};
+use lidarsim::transport::{self, McResult, RunStats, TransportOptions};
 
 use crate::util::project_root;
 
@@ -115,6 +115,7 @@ fn order1_matches_lidar_equation_for_every_shipped_scene() {
         // space-borne one is then well sampled up to about 12 km), few enough for CI (one to
         // three seconds each on two cores).
         let mc = run(&scene, 1_000_000, |_| {});
+        assert_histories_end_once(&path.display().to_string(), &mc.stats);
         let an = analytic(&scene);
         let (judged, with_signal) = check_order1(&path.display().to_string(), &mc.returns, &an);
         assert!(
@@ -299,6 +300,7 @@ fn slab_conserves_energy() {
         let scene = scene_text(&SLAB.replace("SSA", &ssa.to_string()));
         let mc = run(&scene, 100_000, |o| o.flux_tally = true);
         assert_energy_conserved(&format!("ϖ = {ssa}"), &mc);
+        assert_histories_end_once(&format!("ϖ = {ssa}"), &mc.stats);
         let f = &mc.flux;
         assert!(f.cut[0] < 1e-6, "ϖ = {ssa}: cut {}", f.cut[0]);
         if ssa == 1.0 {
@@ -333,6 +335,22 @@ pub(crate) fn assert_energy_conserved(what: &str, mc: &McResult) {
     );
 }
 
+/// Every photon history ends exactly once: the packets emitted and the copies split off them
+/// are each ended in one of four ways, cut (no gate can still receive it), escaped, ended by
+/// Russian roulette, or given zero weight (a range-stratified collision where nothing
+/// scatters: the disparate pair's gates start below its cloud, so some of its histories end
+/// so). A count of histories, independent of their weights.
+pub(crate) fn assert_histories_end_once(what: &str, s: &RunStats) {
+    let begun = s.photons + s.splits;
+    let ended = s.cut + s.escaped + s.roulette_kills + s.zero_weight;
+    assert_eq!(
+        begun, ended,
+        "{what}: {begun} histories begun ({} photons, {} copies), {ended} ended ({} cut, {} \
+         escaped, {} by roulette, {} with zero weight)",
+        s.photons, s.splits, s.cut, s.escaped, s.roulette_kills, s.zero_weight
+    );
+}
+
 /// The same slab seen from above, over a Lambertian surface of albedo 0.3: energy is conserved
 /// too when photons meet the ground, where the collision forced before it leaves the surface
 /// its share of the absorption in expectation (`down` counts what the ground absorbs).
@@ -347,6 +365,7 @@ fn slab_over_a_surface_conserves_energy() {
         let scene = scene_text(&text);
         let mc = run(&scene, 100_000, |o| o.flux_tally = true);
         assert_energy_conserved(&format!("ϖ = {ssa}, over the ground"), &mc);
+        assert_histories_end_once(&format!("ϖ = {ssa}, over the ground"), &mc.stats);
         let f = &mc.flux;
         assert!(f.cut[0] < 1e-6, "ϖ = {ssa}: cut {}", f.cut[0]);
         // The ground absorbs 0.7 of what reaches it, at least the direct beam's e^{−2}.
@@ -473,6 +492,7 @@ fn channels_whose_scattering_differs_2500_fold_match_each_run_alone() {
     ] {
         let pair_scene = scene(&names, ext);
         let pair = run(&pair_scene, photons, |o| o.seed = 4);
+        assert_histories_end_once(&format!("{names:?}"), &pair.stats);
         let r = &pair.returns;
         assert!(
             r.energy_j
@@ -658,6 +678,90 @@ fn crossing_estimates_are_unbiased() {
     multiple_scattering_agrees(&plain, &both);
 }
 
+/// The cone estimate in a strongly forward-peaked cloud (HG g = 0.9). The walk's own local
+/// estimates inside a field of view are weighted against the cone estimate from the previous
+/// collision by the balance heuristic, and here they keep a large share: without them the
+/// double scattering at 5 mrad is about a fifth lower (4 % at g = 0.5), so the two weights must
+/// add up to one. The reference is the same scene without the cone estimate (DDIS and the
+/// crossing estimates, each checked against plain local estimates above); plain local
+/// estimates would need millions of photons here, where P(0°)/P(180°) = 6859.
+#[test]
+fn cone_estimate_is_unbiased_in_a_forward_peaked_cloud() {
+    let scene = scene_text(&HG_CLOUD.replace("g = 0.5 }", "g = 0.9 }"));
+    let reference = run(&scene, 400_000, |o| {
+        o.cone_estimate = false;
+        o.seed = 8
+    });
+    let cone = run(&scene, 100_000, |o| o.seed = 3);
+    multiple_scattering_agrees(&reference, &cone);
+}
+
+/// The cone estimate seen from above: a lidar at 2 km looking down on the cloud (now 1300 to
+/// 1500 m), over a layer of optical depth 40 far below the gates (isotropic, so it does not
+/// narrow the fields of view the cone estimate serves). Optical depths are cumulative from the
+/// ground, so the receiver's is 42, not 0, and the distance in optical depth from a collision to
+/// the receiver, which decides whether the cone estimate is worth making, must be taken from it.
+/// Multiply scattered returns agree with plain local estimates.
+#[test]
+fn cone_estimate_is_unbiased_seen_from_above_an_optically_thick_column() {
+    let text = HG_CLOUD
+        .replace(
+            "altitude_m = 0.0\nzenith_angle_deg = 0.0",
+            "altitude_m = 2000.0\nzenith_angle_deg = 180.0",
+        )
+        .replace(
+            "base_m = 500.0\ntop_m = 700.0",
+            "base_m = 1300.0\ntop_m = 1500.0",
+        )
+        + r#"[[layer]]
+name = "fog"
+base_m = 0.0
+top_m = 100.0
+extinction_per_km = 400.0
+single_scattering_albedo = 1.0
+phase = { kind = "henyey_greenstein", g = 0.0 }
+"#;
+    assert!(text.contains("zenith_angle_deg = 180.0") && text.contains("top_m = 1500.0"));
+    let scene = scene_text(&text);
+    let plain = run(&scene, 400_000, |o| {
+        plain_local_estimates(o);
+        o.range_stratification = 0.0;
+    });
+    let cone = run(&scene, 100_000, |o| o.seed = 3);
+    multiple_scattering_agrees(&plain, &cone);
+}
+
+/// Two channels that scatter alike, 10 and 11 km⁻¹: one scattering class, whose second channel
+/// carries the ratio (σ_1/σ_0) e^{−(τ_1 − τ_0)} of its scattering to channel 0's (ALIS). The
+/// crossing estimate's point, drawn on channel 0's optical depth along the flight, must carry
+/// that ratio too. Alone (no cone estimate, so it serves both fields of view), the multiply
+/// scattered returns of both channels agree with plain local estimates.
+#[test]
+fn crossing_estimate_is_unbiased_for_channels_that_scatter_alike() {
+    let text = HG_CLOUD
+        .replace("[1.0, 5.0]", "[1.0, 20.0]")
+        .replace(
+            "[[channel]]\nname = \"a\"\nwavelength_nm = 1064.0\n",
+            "[[channel]]\nname = \"a\"\nwavelength_nm = 1064.0\n\
+             [[channel]]\nname = \"b\"\nwavelength_nm = 1064.0\n",
+        )
+        .replace(
+            "extinction_per_km = 10.0",
+            "extinction_per_km = [10.0, 11.0]",
+        );
+    assert!(text.contains("name = \"b\"") && text.contains("[10.0, 11.0]"));
+    let scene = scene_text(&text);
+    let plain = run(&scene, 400_000, |o| {
+        plain_local_estimates(o);
+        o.range_stratification = 0.0;
+    });
+    let crossing = run(&scene, 100_000, |o| {
+        o.cone_estimate = false;
+        o.seed = 5
+    });
+    multiple_scattering_agrees(&plain, &crossing);
+}
+
 /// Plain local estimates: no DDIS (and so no alignment splitting or DDIS crossing), no cone or
 /// crossing estimate; the reference the variance reductions are checked against.
 fn plain_local_estimates(o: &mut TransportOptions) {
@@ -668,39 +772,44 @@ fn plain_local_estimates(o: &mut TransportOptions) {
     o.ddis_crossing = false;
 }
 
+/// Every (channel, field of view, gate) of a run's returns.
+fn bins(r: &Returns) -> impl Iterator<Item = (usize, usize, usize)> + '_ {
+    let (nf, ng) = (r.fov_full_angle_mrad.len(), r.range_m.len());
+    (0..r.channels.len())
+        .flat_map(move |k| (0..nf).flat_map(move |f| (0..ng).map(move |g| (k, f, g))))
+}
+
 /// Orders 2, 3, 4+ and the total of two runs of one scene agree within 4.5 combined standard
-/// errors wherever both resolve them to 10 %.
+/// errors, in every channel, wherever both resolve them to 10 %.
 fn multiple_scattering_agrees(a: &McResult, b: &McResult) {
     let r = &a.returns;
     let mut judged = 0;
     let mut chi2 = 0.0;
-    for f in 0..r.fov_full_angle_mrad.len() {
-        for g in 0..r.range_m.len() {
-            for order in [
-                Order::Exactly(2),
-                Order::Exactly(3),
-                Order::AtLeast(4),
-                Order::Total,
-            ] {
-                let (x, sx) = (
-                    r.energy(0, f, g, order).unwrap(),
-                    r.stderr(0, f, g, order).unwrap(),
-                );
-                let (y, sy) = (
-                    b.returns.energy(0, f, g, order).unwrap(),
-                    b.returns.stderr(0, f, g, order).unwrap(),
-                );
-                if !(sx < MAX_REL_SE * x && sy < MAX_REL_SE * y) {
-                    continue;
-                }
-                let z = (x - y) / (sx * sx + sy * sy).sqrt();
-                judged += 1;
-                chi2 += z * z;
-                assert!(
-                    z.abs() < 4.5,
-                    "FOV {f} gate {g} {order:?}: {x:e} ± {sx:e} vs {y:e} ± {sy:e}"
-                );
+    for (k, f, g) in bins(r) {
+        for order in [
+            Order::Exactly(2),
+            Order::Exactly(3),
+            Order::AtLeast(4),
+            Order::Total,
+        ] {
+            let (x, sx) = (
+                r.energy(k, f, g, order).unwrap(),
+                r.stderr(k, f, g, order).unwrap(),
+            );
+            let (y, sy) = (
+                b.returns.energy(k, f, g, order).unwrap(),
+                b.returns.stderr(k, f, g, order).unwrap(),
+            );
+            if !(sx < MAX_REL_SE * x && sy < MAX_REL_SE * y) {
+                continue;
             }
+            let z = (x - y) / (sx * sx + sy * sy).sqrt();
+            judged += 1;
+            chi2 += z * z;
+            assert!(
+                z.abs() < 4.5,
+                "channel {k} FOV {f} gate {g} {order:?}: {x:e} ± {sx:e} vs {y:e} ± {sy:e}"
+            );
         }
     }
     assert!(judged > 20, "{judged}");
