@@ -731,6 +731,28 @@ phase = { kind = "henyey_greenstein", g = 0.0 }
     multiple_scattering_agrees(&plain, &cone);
 }
 
+/// The cone estimate on a slant path: the lidar of [`HG_CLOUD`] tilted 60° from the zenith, so
+/// the cloud (500 to 700 m up) lies 1000 to 1400 m along the beam. The cone estimate's rays
+/// cross the layers over a range 1/cos θ of their depth. Multiply scattered returns agree
+/// with plain local estimates.
+#[test]
+fn cone_estimate_is_unbiased_on_a_slant_path() {
+    let text = HG_CLOUD
+        .replace("zenith_angle_deg = 0.0", "zenith_angle_deg = 60.0")
+        .replace(
+            "start_m = 500.0\nend_m = 800.0\nwidth_m = 20.0",
+            "start_m = 1000.0\nend_m = 1600.0\nwidth_m = 40.0",
+        );
+    assert!(text.contains("zenith_angle_deg = 60.0") && text.contains("end_m = 1600.0"));
+    let scene = scene_text(&text);
+    let plain = run(&scene, 400_000, |o| {
+        plain_local_estimates(o);
+        o.range_stratification = 0.0;
+    });
+    let cone = run(&scene, 100_000, |o| o.seed = 3);
+    multiple_scattering_agrees(&plain, &cone);
+}
+
 /// Two channels that scatter alike, 10 and 11 km⁻¹: one scattering class, whose second channel
 /// carries the ratio (σ_1/σ_0) e^{−(τ_1 − τ_0)} of its scattering to channel 0's (ALIS). The
 /// crossing estimate's point, drawn on channel 0's optical depth along the flight, must carry

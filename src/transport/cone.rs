@@ -207,3 +207,129 @@ impl Setup<'_> {
         phase * (0.25 / std::f64::consts::PI) * sigma * (-tau).exp() / l2
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use std::path::Path;
+
+    use super::*;
+    use crate::optics::OpticalAtmosphere;
+    use crate::scene::Scene;
+    use crate::transport::{Plan, TransportOptions};
+
+    /// A cloud from 500 to 700 m over a ground lidar, gates to 10 km (a budget that cuts no ray
+    /// below).
+    const CLOUD: &str = r#"
+[lidar]
+altitude_m = 0.0
+zenith_angle_deg = 0.0
+pulse_energy_j = 1.0
+beam_divergence_full_angle_mrad = 0.5
+telescope_diameter_m = 1.0
+optical_efficiency = 1.0
+fov_full_angle_mrad = [1.0]
+[[channel]]
+name = "a"
+wavelength_nm = 1064.0
+[gates]
+start_m = 100.0
+end_m = 10000.0
+width_m = 100.0
+[[layer]]
+name = "cloud"
+base_m = 500.0
+top_m = 700.0
+extinction_per_km = 10.0
+single_scattering_albedo = 1.0
+phase = { kind = "henyey_greenstein", g = 0.8 }
+"#;
+
+    /// The allowed part of t as one list of intervals.
+    fn allowed(ray: &ConeRay) -> Vec<(f64, f64)> {
+        ray.pieces.iter().copied().filter(|(a, b)| b > a).collect()
+    }
+
+    /// Rays 0°, 30°, 60° and 85° from the zenith, seen from collisions off the ray (ρ from
+    /// 0.3 m, where legs shorter than ℓ = 1 m are cut out, to 200 m). The allowed part of t runs
+    /// from the layers' bottom to their top (y = rx + (r∥ + t) ω at 500 and 700 m), less the
+    /// points within ℓ of x (|x − y| = ℓ at the cut's ends), and ½ p_A + ½ p_B integrates to 1
+    /// over it (Simpson's rule on each interval after t = ρ tan φ, 10⁵ steps: fine enough for
+    /// p_B's peak, ρ/b wide in φ). When the way back through y would arrive after the last gate,
+    /// the ray ends earlier, on the ellipsoid of that path length.
+    ///
+    /// (The transport stays unbiased with a wrong ray or density as long as the cone estimate
+    /// and its MIS partner compute them alike: only the variance would show it.)
+    #[test]
+    fn cone_ray_spans_the_layers_and_its_density_is_normalised() {
+        let scene = Scene::from_toml(Path::new("cone.toml"), CLOUD).unwrap();
+        let atm = OpticalAtmosphere::build(&scene).unwrap();
+        let opts = TransportOptions::from_scene(&scene);
+        let plan = Plan::new(&scene, &atm, &opts).unwrap();
+        let s = &plan.setup;
+        let lmin = crate::transport::CONE_MIN_LEG_M;
+        for zenith_deg in [0.0f64, 30.0, 60.0, 85.0] {
+            let th = zenith_deg.to_radians();
+            let omega = DVec3::new(th.sin(), 0.0, th.cos());
+            let e_perp = DVec3::new(th.cos(), 0.0, -th.sin())
+                .cross(omega)
+                .normalize();
+            for (r_foot, rho) in [(550.0, 0.3), (650.0, 0.9), (600.0, 5.0), (400.0, 200.0)] {
+                let r_foot = r_foot / th.cos();
+                let x = s.receiver + omega * r_foot + e_perp * rho;
+                let ray = s.cone_ray(x, (x - s.receiver).length(), omega).unwrap();
+                let what = format!("zenith {zenith_deg}°, ρ {rho} m");
+                assert!((ray.along - r_foot).abs() < 1e-9 * r_foot, "{what}");
+                let parts = allowed(&ray);
+                let z_at = |t: f64| s.receiver.z + (ray.along + t) * omega.z;
+                let (first, last) = (parts[0].0, parts[parts.len() - 1].1);
+                assert!(
+                    (z_at(first) - 500.0).abs() < 1e-9,
+                    "{what}: {}",
+                    z_at(first)
+                );
+                assert!((z_at(last) - 700.0).abs() < 1e-9, "{what}: {}", z_at(last));
+                if rho < lmin {
+                    assert_eq!(parts.len(), 2, "{what}");
+                    for t in [parts[0].1, parts[1].0] {
+                        assert!((ray.leg2(t).sqrt() - lmin).abs() < 1e-9, "{what}");
+                    }
+                } else {
+                    assert_eq!(parts.len(), 1, "{what}");
+                }
+                // ∫ density dt, with t = ρ tan φ taking out the 1/(t² + ρ²) peak.
+                let mut total = 0.0;
+                for (a, b) in parts {
+                    let (pa, pb) = ((a / rho).atan(), (b / rho).atan());
+                    let n = 100_000;
+                    let h = (pb - pa) / n as f64;
+                    // Inside the interval's ends: density() is 0 a rounding outside them.
+                    let f = |phi: f64| {
+                        let t = (rho * phi.tan()).clamp(a, b);
+                        ray.density(t) * rho / phi.cos().powi(2)
+                    };
+                    let mut sum = f(pa) + f(pb);
+                    for i in 1..n {
+                        sum += f(pa + i as f64 * h) * if i % 2 == 1 { 4.0 } else { 2.0 };
+                    }
+                    total += sum * h / 3.0;
+                }
+                assert!((total - 1.0).abs() < 1e-9, "{what}: ∫ density = {total}");
+            }
+            // After a path that leaves a budget to the last gate's end (twice 10 km) of 150 m
+            // more than the way straight back from x: the ray stops where the way back through
+            // y would overrun it, on the ellipsoid |x − y| + r = budget with foci x and the
+            // receiver, inside the cloud.
+            let x = s.receiver + omega * (600.0 / th.cos()) + e_perp * 5.0;
+            let budget = (x - s.receiver).length() + 150.0;
+            let ray = s.cone_ray(x, 2.0 * 10_000.0 - budget, omega).unwrap();
+            let last = allowed(&ray).last().unwrap().1;
+            let y = s.receiver + omega * (ray.along + last);
+            assert!(y.z > 600.0 && y.z < 700.0, "zenith {zenith_deg}°: {}", y.z);
+            let back = (y - x).length() + (y - s.receiver).length();
+            assert!(
+                (back - budget).abs() < 1e-9 * budget,
+                "zenith {zenith_deg}°: {back} against {budget}"
+            );
+        }
+    }
+}
