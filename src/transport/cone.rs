@@ -249,6 +249,37 @@ phase = { kind = "henyey_greenstein", g = 0.8 }
         ray.pieces.iter().copied().filter(|(a, b)| b > a).collect()
     }
 
+    /// The probability with which the cone estimate is made from a collision is one within a
+    /// footprint of the widest field of view it serves (1 mrad: 0.5 mrad half-angle) and falls
+    /// beyond, never above one (the estimate cannot be made more than once, so a rate above one
+    /// would bias it), from 100 m to 100 km along the axis and 0 to 1 km off it.
+    #[test]
+    fn cone_rate_is_one_inside_the_footprint_and_a_probability_beyond() {
+        let scene = Scene::from_toml(Path::new("cone.toml"), CLOUD).unwrap();
+        let atm = OpticalAtmosphere::build(&scene).unwrap();
+        let opts = TransportOptions::from_scene(&scene);
+        let plan = Plan::new(&scene, &atm, &opts).unwrap();
+        let s = &plan.setup;
+        let half_angle = 0.5e-3f64;
+        for along in [100.0, 1e3, 1e4, 1e5] {
+            let footprint = along * half_angle.tan();
+            let mut last = 1.0;
+            for rho in [0.0, 0.01, 0.1, 1.0, 10.0, 100.0, 1000.0] {
+                let x = s.receiver + s.axis * along + s.axis_e1 * rho;
+                let rate = s.cone_rate(x);
+                let what = format!("{along} m along, {rho} m off the axis: rate {rate}");
+                assert!(rate > 0.0 && rate <= 1.0, "{what}");
+                assert!(rate <= last, "{what}, after {last}");
+                if rho <= 0.999 * footprint {
+                    assert_eq!(rate, 1.0, "{what}");
+                } else if rho >= 1.001 * footprint {
+                    assert!(rate < 1.0, "{what}");
+                }
+                last = rate;
+            }
+        }
+    }
+
     /// Rays 0°, 30°, 60° and 85° from the zenith, seen from collisions off the ray (ρ from
     /// 0.3 m, where legs shorter than ℓ = 1 m are cut out, to 200 m). The allowed part of t runs
     /// from the layers' bottom to their top (y = rx + (r∥ + t) ω at 500 and 700 m), less the
