@@ -454,3 +454,49 @@ fn polarised_intensity_through_droplets_is_the_scalar_run_within_its_error() {
     }
     assert!(judged >= 40, "{judged}");
 }
+
+/// A Lambertian surface depolarises completely: seen from 3 km above, through clear air, a
+/// linearly polarised lidar's surface return is as strong cross-polarised as co-polarised
+/// (δ = 1) in every channel, field of view and gate, and their sum is the whole return.
+#[test]
+fn a_lambertian_surface_depolarises_completely() {
+    let text = lidar(
+        "linear",
+        "[1.0, 4.0]",
+        "0.5",
+        r#"
+[[channel]]
+name = "532"
+wavelength_nm = 532.0
+[[channel]]
+name = "1064"
+wavelength_nm = 1064.0
+[gates]
+start_m = 2900.0
+end_m = 3100.0
+width_m = 20.0
+[surface]
+altitude_m = 0.0
+albedo = [0.3, 0.5]
+"#,
+    )
+    .replace(
+        "altitude_m = 0.0\nzenith_angle_deg = 0.0",
+        "altitude_m = 3000.0\nzenith_angle_deg = 180.0",
+    );
+    assert!(text.contains("zenith_angle_deg = 180.0"));
+    let mc = run(&scene_text(&text), 2_000, |_| {});
+    let p = &mc.polarised.as_ref().unwrap().channels;
+    let total = &mc.returns;
+    let mut lit = 0;
+    for i in 0..total.energy_j.len() {
+        let (co, cross) = (p.co.energy_j[i], p.cross.energy_j[i]);
+        assert!(
+            (co - cross).abs() <= 1e-12 * co,
+            "bin {i}: co {co:e}, cross {cross:e}"
+        );
+        assert!((co + cross - total.energy_j[i]).abs() <= 1e-12 * total.energy_j[i]);
+        lit += usize::from(co > 0.0);
+    }
+    assert!(lit >= 4, "{lit} bins with a return");
+}
