@@ -455,9 +455,10 @@ fn polarised_intensity_through_droplets_is_the_scalar_run_within_its_error() {
     assert!(judged >= 40, "{judged}");
 }
 
-/// A Lambertian surface depolarises completely: seen from 3 km above, through clear air, a
-/// linearly polarised lidar's surface return is as strong cross-polarised as co-polarised
-/// (δ = 1) in every channel, field of view and gate, and their sum is the whole return.
+/// A Lambertian surface depolarises completely: seen from 3 km above, with no atmosphere (the
+/// surface alone returns light), a linearly polarised lidar's surface return is as strong
+/// cross-polarised as co-polarised (δ = 1) in every channel, field of view and gate, and their
+/// sum is the whole return.
 #[test]
 fn a_lambertian_surface_depolarises_completely() {
     let text = lidar(
