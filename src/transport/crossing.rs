@@ -141,7 +141,10 @@ impl Setup<'_> {
 
 #[cfg(test)]
 mod tests {
+    use std::f64::consts::FRAC_1_SQRT_2;
+
     use super::*;
+    use crate::transport::testing::with_setup;
 
     fn cone_span(u: DVec3, omega: DVec3, axis: DVec3, t2: f64, s_max: f64) -> Span {
         Line::new(u, omega, axis, s_max).span(t2)
@@ -219,6 +222,178 @@ mod tests {
         assert!(
             b == 1e4 && (a - enter).abs() < 1e-6 * enter,
             "({a}, {b}), enter {enter}"
+        );
+    }
+
+    /// Rays parallel to a generator of a 45° cone (tan² α = 1, so a = 0 exactly and the
+    /// quadratic is linear), by plane geometry: in the plane y = 0 the cone is |x| ≤ z.
+    #[test]
+    fn rays_parallel_to_a_generator_of_a_right_angled_cone() {
+        let (h, s_max) = (FRAC_1_SQRT_2, 100.0);
+        let up = DVec3::new(h, 0.0, h);
+        let close = |got: Span, want: Span, what: &str| {
+            let ok = |g: f64, w: f64| (g - w).abs() <= 1e-12 * w.abs().max(1.0);
+            assert!(
+                ok(got.0, want.0) && ok(got.1, want.1),
+                "{what}: {got:?}, not {want:?}"
+            );
+        };
+        // From (−1, 0, 0), 1 m beside the apex, along the generator x = z: inside from
+        // −1 + s h = −s h, s = 1/(2h), for ever after.
+        let from_beside = cone_span(DVec3::new(-1.0, 0.0, 0.0), up, DVec3::Z, 1.0, s_max);
+        close(from_beside, (0.5 / h, s_max), "beside the apex, going up");
+        // From (1, 0, 10), inside, down and outwards: 1 + s h = 10 − s h, s = 4.5/h.
+        let down = DVec3::new(h, 0.0, -h);
+        let leaving = cone_span(DVec3::new(1.0, 0.0, 10.0), down, DVec3::Z, 1.0, s_max);
+        close(leaving, (0.0, 4.5 / h), "inside, going down and out");
+        // Along the generator itself: on the boundary, which the (closed) cone includes, from
+        // the start up for ever, or down as far as the apex.
+        let on = DVec3::new(1.0, 0.0, 1.0);
+        close(
+            cone_span(on, up, DVec3::Z, 1.0, s_max),
+            (0.0, s_max),
+            "on it, going up",
+        );
+        close(
+            cone_span(on, -up, DVec3::Z, 1.0, s_max),
+            (0.0, 1.0 / h),
+            "on it, going down",
+        );
+    }
+
+    /// A space-borne geometry: a field of view of 2 tan⁻¹ 2⁻¹⁴ (0.12 mrad), a ray 390 km from
+    /// the apex and 30 m off the axis, outside the cone, tilted 10⁻¹⁰ and 10⁻¹² rad from a
+    /// generator in the plane of the axis. Its a is then 10⁻¹⁴–10⁻¹⁶, and the root that does not
+    /// come from the larger |q| would lose about 8 digits to cancellation. The entry point is the
+    /// meeting of two lines in that plane, x₀ + s ω_x = −T (z₀ + s ω_z), computed without
+    /// cancellation: T = 2⁻¹⁴ makes T z₀ and T ω_z exact, and ω_x + T ω_z has no cancellation.
+    #[test]
+    fn entry_keeps_its_digits_for_rays_nearly_along_a_generator() {
+        let t = 2f64.powi(-14);
+        let (x0, z0) = (-30.0, 3.9e5);
+        for tilt in [1e-10, 1e-12] {
+            let theta = t.atan() + tilt;
+            let omega = DVec3::new(theta.sin(), 0.0, theta.cos());
+            let (a, _) = cone_span(DVec3::new(x0, 0.0, z0), omega, DVec3::Z, t * t, 1e6);
+            let want = (-t * z0 - x0) / (omega.x + t * omega.z);
+            assert!(
+                (a - want).abs() <= 1e-12 * want,
+                "tilt {tilt}: enters at {a} m, not {want} m"
+            );
+        }
+    }
+
+    /// A lidar 300 m up under a cloud, fields of view of 1, 5 and 20 mrad: the cone estimate
+    /// serves the two narrow ones there (their footprints on the cloud are optically thin), the
+    /// crossing estimate the 20 mrad annulus, from 2.5 to 10 mrad off the axis.
+    const THREE_FIELDS: &str = r#"
+[lidar]
+altitude_m = 300.0
+zenith_angle_deg = 0.0
+pulse_energy_j = 1.0
+beam_divergence_full_angle_mrad = 0.5
+telescope_diameter_m = 1.0
+optical_efficiency = 1.0
+fov_full_angle_mrad = [5.0, 20.0, 1.0]
+[[channel]]
+name = "a"
+wavelength_nm = 1064.0
+[gates]
+start_m = 100.0
+end_m = 10000.0
+width_m = 100.0
+[[layer]]
+name = "cloud"
+base_m = 500.0
+top_m = 700.0
+extinction_per_km = 10.0
+single_scattering_albedo = 1.0
+phase = { kind = "henyey_greenstein", g = 0.8 }
+"#;
+
+    /// The spans of `crossing_spans` hold exactly the points of the flight whose direction
+    /// from the receiver lies in the served annuli (off the axis by more than `inner` and at
+    /// most `outer`, half-angles in rad), by a march along rays near the axis, from below,
+    /// inside and beyond the cone's apex, in every direction.
+    fn spans_match_a_march(s: &Setup<'_>, inner: f64, outer: f64) {
+        let served = |p: DVec3| {
+            let v = p - s.receiver;
+            let off = v.cross(s.axis).length().atan2(v.dot(s.axis));
+            v.dot(s.axis) > 0.0 && off > inner && off <= outer
+        };
+        let (s_max, n) = (2000.0, 20_000);
+        let ds = s_max / n as f64;
+        let mut met = [0; 2];
+        for i in 0..600 {
+            let f = |k: f64| ((i as f64) * k).fract() * 2.0 - 1.0;
+            let x = s.receiver
+                + s.axis * (f(0.732) * 800.0 + 600.0)
+                + s.axis_e1 * (f(0.618) * 12.0)
+                + s.axis_e2 * (f(0.414) * 12.0);
+            let omega = if i % 3 == 0 {
+                // Within 20 mrad of the axis, up or down: long stretches in both annuli.
+                (s.axis * f(0.5772).signum() + DVec3::new(f(0.271), f(0.577), 0.0) * 0.02)
+                    .normalize()
+            } else {
+                DVec3::new(f(0.271), f(0.577), f(0.173)).normalize()
+            };
+            let spans = s.crossing_spans(x, omega, s_max);
+            assert!(
+                spans
+                    .iter()
+                    .all(|(a, b)| b <= a || (0.0 <= *a && *b <= s_max))
+                    && (spans[1].1 <= spans[1].0 || spans[0].1 <= spans[1].0),
+                "ray {i}: spans {spans:?} outside [0, {s_max}] or out of order"
+            );
+            let near_an_end = |t: f64| {
+                spans
+                    .iter()
+                    .filter(|(a, b)| b > a)
+                    .any(|(a, b)| (t - a).abs() <= 1.01 * ds || (t - b).abs() <= 1.01 * ds)
+            };
+            for j in 0..=n {
+                let t = j as f64 * ds;
+                let want = served(x + omega * t);
+                let got = spans.iter().any(|(a, b)| b > a && *a <= t && t <= *b);
+                assert!(
+                    got == want || near_an_end(t),
+                    "ray {i} at {t} m: served {want}, in the spans {got} ({spans:?})"
+                );
+            }
+            // Rays that meet the annuli, and that cross them twice (through the hole).
+            let long = spans.iter().filter(|(a, b)| b - a > 10.0 * ds).count();
+            met[0] += usize::from(long > 0);
+            met[1] += usize::from(long == 2);
+        }
+        assert!(met[0] > 50, "only {} rays met the annuli", met[0]);
+        if inner > 0.0 {
+            assert!(met[1] > 25, "only {} rays crossed the annuli twice", met[1]);
+        }
+    }
+
+    /// With the cone estimate serving the narrow fields of view, the crossing estimate's spans
+    /// are the 20 mrad cone less the 5 mrad one: none in the hole, two pieces for a ray through
+    /// it. Without the cone estimate they are the whole 20 mrad cone.
+    #[test]
+    fn crossing_spans_are_the_served_annuli() {
+        with_setup(
+            THREE_FIELDS,
+            |_| {},
+            |s, _| {
+                assert_eq!(s.crossing_from, 2, "the cone estimate serves 1 and 5 mrad");
+                spans_match_a_march(s, 2.5e-3, 10e-3);
+            },
+        );
+        with_setup(
+            THREE_FIELDS,
+            |o| o.cone_estimate = false,
+            |s, _| {
+                assert_eq!(
+                    s.crossing_from, 0,
+                    "the crossing estimate serves every annulus"
+                );
+                spans_match_a_march(s, 0.0, 10e-3);
+            },
         );
     }
 }

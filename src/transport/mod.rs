@@ -14,6 +14,8 @@ mod crossing;
 mod photon;
 mod stokes;
 mod tally;
+#[cfg(test)]
+mod testing;
 
 use std::io::IsTerminal;
 use std::time::{Duration, Instant};
