@@ -277,6 +277,18 @@ phase = { kind = "henyey_greenstein", g = 0.8 }
         );
     }
 
+    /// CLOUD's layer from the ground to 10 km at 4 km⁻¹.
+    fn deep_layer() -> String {
+        let text = CLOUD
+            .replace(
+                "base_m = 500.0\ntop_m = 700.0",
+                "base_m = 0.0\ntop_m = 10000.0",
+            )
+            .replace("extinction_per_km = 10.0", "extinction_per_km = 4.0");
+        assert!(text.contains("top_m = 10000.0") && text.contains("extinction_per_km = 4.0"));
+        text
+    }
+
     /// The walk's next-collision density after a scattering at x, p(y) = P(Θ)/4π σ e^{−τ}/|x − y|²
     /// (the phase function mixed with DDIS's receiver-centred one), is a probability density: in
     /// a layer 10 km deep at 4 km⁻¹ (optical depth 20 from x at its middle to either side, so
@@ -286,14 +298,8 @@ phase = { kind = "henyey_greenstein", g = 0.8 }
     /// 32-point Gauss–Legendre in u = 1 − e^{−σl}, where the exact integrand is constant.
     #[test]
     fn walk_density_integrates_to_one_in_an_optically_deep_layer() {
-        let text = CLOUD
-            .replace(
-                "base_m = 500.0\ntop_m = 700.0",
-                "base_m = 0.0\ntop_m = 10000.0",
-            )
-            .replace("extinction_per_km = 10.0", "extinction_per_km = 4.0");
         with_setup(
-            &text,
+            &deep_layer(),
             |_| {},
             |s, atm| {
                 let sigma = 4e-3;
@@ -440,6 +446,39 @@ phase = { kind = "henyey_greenstein", g = 0.8 }
                         "zenith {zenith_deg}°: {back} against {budget}"
                     );
                 }
+            },
+        );
+    }
+
+    /// The receiver-centred part of the walk's density points at the receiver, as DDIS draws
+    /// it (`photon.rs`: towards rx − x). In the deep layer, after a scattering at 5 km with the
+    /// photon going horizontally, the points 100 m straight down (towards the receiver) and up
+    /// are 90° from its direction and equally deep: their densities differ only by the
+    /// receiver-centred part, P(0°) below and P(180°) above. HG, g = 0.8:
+    /// P(μ) = (1 − g²)/(1 + g² − 2gμ)^{3/2}.
+    #[test]
+    fn walk_density_s_receiver_centred_part_points_at_the_receiver() {
+        let hg = |mu: f64| (1.0 - 0.64) / (1.64 - 1.6 * mu).powf(1.5);
+        with_setup(
+            &deep_layer(),
+            |_| {},
+            |s, atm| {
+                let eps = 0.3;
+                let x = DVec3::new(0.0, 0.0, 5000.0);
+                let p = Prev {
+                    pos: x,
+                    dir_in: DVec3::X,
+                    path: 5000.0,
+                    eps,
+                    layer: atm.layer_of(x.z),
+                    cone_rate: 1.0,
+                };
+                let at = |y: DVec3| s.walk_density(&p, y, atm.layer_of(y.z));
+                let (down, up) = (x - DVec3::Z * 100.0, x + DVec3::Z * 100.0);
+                let want = ((1.0 - eps) * hg(0.0) + eps * hg(1.0))
+                    / ((1.0 - eps) * hg(0.0) + eps * hg(-1.0));
+                let got = at(down) / at(up);
+                assert!((got / want - 1.0).abs() < 1e-9, "down/up {got}, not {want}");
             },
         );
     }
