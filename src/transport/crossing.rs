@@ -246,6 +246,10 @@ mod tests {
         let down = DVec3::new(h, 0.0, -h);
         let leaving = cone_span(DVec3::new(1.0, 0.0, 10.0), down, DVec3::Z, 1.0, s_max);
         close(leaving, (0.0, 4.5 / h), "inside, going down and out");
+        // Beside the generator, in the plane that touches the cone along it (a = b = 0, c > 0):
+        // |(1 + s h, 1)|² > (1 + s h)², never inside.
+        let beside = cone_span(DVec3::new(1.0, 1.0, 1.0), up, DVec3::Z, 1.0, s_max);
+        assert!(beside.1 <= beside.0, "beside it: {beside:?}, not empty");
         // Along the generator itself: on the boundary, which the (closed) cone includes, from
         // the start up for ever, or down as far as the apex.
         let on = DVec3::new(1.0, 0.0, 1.0);
