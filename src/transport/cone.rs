@@ -211,34 +211,8 @@ impl Setup<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::transport::testing::with_setup;
-
-    /// A cloud from 500 to 700 m over a ground lidar, gates to 10 km (a budget that cuts no ray
-    /// below).
-    const CLOUD: &str = r#"
-[lidar]
-altitude_m = 0.0
-zenith_angle_deg = 0.0
-pulse_energy_j = 1.0
-beam_divergence_full_angle_mrad = 0.5
-telescope_diameter_m = 1.0
-optical_efficiency = 1.0
-fov_full_angle_mrad = [1.0]
-[[channel]]
-name = "a"
-wavelength_nm = 1064.0
-[gates]
-start_m = 100.0
-end_m = 10000.0
-width_m = 100.0
-[[layer]]
-name = "cloud"
-base_m = 500.0
-top_m = 700.0
-extinction_per_km = 10.0
-single_scattering_albedo = 1.0
-phase = { kind = "henyey_greenstein", g = 0.8 }
-"#;
+    use crate::optics::OpticalAtmosphere;
+    use crate::transport::testing::{CLOUD, edited, with_setup};
 
     /// The allowed part of t as one list of intervals.
     fn allowed(ray: &ConeRay) -> Vec<(f64, f64)> {
@@ -279,14 +253,30 @@ phase = { kind = "henyey_greenstein", g = 0.8 }
 
     /// CLOUD's layer from the ground to 10 km at 4 km⁻¹.
     fn deep_layer() -> String {
-        let text = CLOUD
-            .replace(
-                "base_m = 500.0\ntop_m = 700.0",
-                "base_m = 0.0\ntop_m = 10000.0",
-            )
-            .replace("extinction_per_km = 10.0", "extinction_per_km = 4.0");
-        assert!(text.contains("top_m = 10000.0") && text.contains("extinction_per_km = 4.0"));
-        text
+        edited(
+            CLOUD,
+            &[
+                (
+                    "base_m = 500.0\ntop_m = 700.0",
+                    "base_m = 0.0\ntop_m = 10000.0",
+                ),
+                ("extinction_per_km = 10.0", "extinction_per_km = 4.0"),
+            ],
+        )
+    }
+
+    /// A scattering in the middle of the deep layer, on the axis, the photon leaving along
+    /// `dir_in`, with DDIS's share `eps`.
+    fn at_5_km(dir_in: DVec3, eps: f64, atm: &OpticalAtmosphere) -> Prev {
+        let pos = DVec3::new(0.0, 0.0, 5000.0);
+        Prev {
+            pos,
+            dir_in,
+            path: 5000.0,
+            eps,
+            layer: atm.layer_of(pos.z),
+            cone_rate: 1.0,
+        }
     }
 
     /// The walk's next-collision density after a scattering at x, p(y) = P(Θ)/4π σ e^{−τ}/|x − y|²
@@ -305,15 +295,8 @@ phase = { kind = "henyey_greenstein", g = 0.8 }
                 let sigma = 4e-3;
                 let gl = crate::instrument::line_shape::gauss_legendre(32);
                 for eps in [0.0, 0.3] {
-                    let x = DVec3::new(0.0, 0.0, 5000.0);
-                    let p = Prev {
-                        pos: x,
-                        dir_in: DVec3::Z,
-                        path: 5000.0,
-                        eps,
-                        layer: atm.layer_of(x.z),
-                        cone_rate: 1.0,
-                    };
+                    let p = at_5_km(DVec3::Z, eps, atm);
+                    let x = p.pos;
                     let along = |e: DVec3| -> f64 {
                         // ∫₀^{l_exit} l² p(x + l e) dl, with u = 1 − e^{−σl}: dl = du/(σ(1 − u)).
                         let l_exit = if e.z > 0.0 {
@@ -464,15 +447,8 @@ phase = { kind = "henyey_greenstein", g = 0.8 }
             |_| {},
             |s, atm| {
                 let eps = 0.3;
-                let x = DVec3::new(0.0, 0.0, 5000.0);
-                let p = Prev {
-                    pos: x,
-                    dir_in: DVec3::X,
-                    path: 5000.0,
-                    eps,
-                    layer: atm.layer_of(x.z),
-                    cone_rate: 1.0,
-                };
+                let p = at_5_km(DVec3::X, eps, atm);
+                let x = p.pos;
                 let at = |y: DVec3| s.walk_density(&p, y, atm.layer_of(y.z));
                 let (down, up) = (x - DVec3::Z * 100.0, x + DVec3::Z * 100.0);
                 let want = ((1.0 - eps) * hg(0.0) + eps * hg(1.0))

@@ -144,7 +144,7 @@ mod tests {
     use std::f64::consts::FRAC_1_SQRT_2;
 
     use super::*;
-    use crate::transport::testing::with_setup;
+    use crate::transport::testing::{CLOUD, edited, with_setup};
 
     fn cone_span(u: DVec3, omega: DVec3, axis: DVec3, t2: f64, s_max: f64) -> Span {
         Line::new(u, omega, axis, s_max).span(t2)
@@ -290,30 +290,18 @@ mod tests {
     /// A lidar 300 m up under a cloud, fields of view of 1, 5 and 20 mrad: the cone estimate
     /// serves the two narrow ones there (their footprints on the cloud are optically thin), the
     /// crossing estimate the 20 mrad annulus, from 2.5 to 10 mrad off the axis.
-    const THREE_FIELDS: &str = r#"
-[lidar]
-altitude_m = 300.0
-zenith_angle_deg = 0.0
-pulse_energy_j = 1.0
-beam_divergence_full_angle_mrad = 0.5
-telescope_diameter_m = 1.0
-optical_efficiency = 1.0
-fov_full_angle_mrad = [5.0, 20.0, 1.0]
-[[channel]]
-name = "a"
-wavelength_nm = 1064.0
-[gates]
-start_m = 100.0
-end_m = 10000.0
-width_m = 100.0
-[[layer]]
-name = "cloud"
-base_m = 500.0
-top_m = 700.0
-extinction_per_km = 10.0
-single_scattering_albedo = 1.0
-phase = { kind = "henyey_greenstein", g = 0.8 }
-"#;
+    fn three_fields() -> String {
+        edited(
+            CLOUD,
+            &[
+                ("altitude_m = 0.0", "altitude_m = 300.0"),
+                (
+                    "fov_full_angle_mrad = [1.0]",
+                    "fov_full_angle_mrad = [5.0, 20.0, 1.0]",
+                ),
+            ],
+        )
+    }
 
     /// The spans of `crossing_spans` hold exactly the points of the flight whose direction
     /// from the receiver lies in the served annuli (off the axis by more than `inner` and at
@@ -381,7 +369,7 @@ phase = { kind = "henyey_greenstein", g = 0.8 }
     #[test]
     fn crossing_spans_are_the_served_annuli() {
         with_setup(
-            THREE_FIELDS,
+            &three_fields(),
             |_| {},
             |s, _| {
                 assert_eq!(s.crossing_from, 2, "the cone estimate serves 1 and 5 mrad");
@@ -389,7 +377,7 @@ phase = { kind = "henyey_greenstein", g = 0.8 }
             },
         );
         with_setup(
-            THREE_FIELDS,
+            &three_fields(),
             |o| o.cone_estimate = false,
             |s, _| {
                 assert_eq!(
