@@ -225,30 +225,26 @@ mod tests {
     /// would bias it), from 100 m to 100 km along the axis and 0 to 1 km off it.
     #[test]
     fn cone_rate_is_one_inside_the_footprint_and_a_probability_beyond() {
-        with_setup(
-            CLOUD,
-            |_| {},
-            |s, _| {
-                let half_angle = 0.5e-3f64;
-                for along in [100.0, 1e3, 1e4, 1e5] {
-                    let footprint = along * half_angle.tan();
-                    let mut last = 1.0;
-                    for rho in [0.0, 0.01, 0.1, 1.0, 10.0, 100.0, 1000.0] {
-                        let x = s.receiver + s.axis * along + s.axis_e1 * rho;
-                        let rate = s.cone_rate(x);
-                        let what = format!("{along} m along, {rho} m off the axis: rate {rate}");
-                        assert!(rate > 0.0 && rate <= 1.0, "{what}");
-                        assert!(rate <= last, "{what}, after {last}");
-                        if rho <= 0.999 * footprint {
-                            assert_eq!(rate, 1.0, "{what}");
-                        } else if rho >= 1.001 * footprint {
-                            assert!(rate < 1.0, "{what}");
-                        }
-                        last = rate;
+        with_setup(CLOUD, |s, _| {
+            let half_angle = 0.5e-3f64;
+            for along in [100.0, 1e3, 1e4, 1e5] {
+                let footprint = along * half_angle.tan();
+                let mut last = 1.0;
+                for rho in [0.0, 0.01, 0.1, 1.0, 10.0, 100.0, 1000.0] {
+                    let x = s.receiver + s.axis * along + s.axis_e1 * rho;
+                    let rate = s.cone_rate(x);
+                    let what = format!("{along} m along, {rho} m off the axis: rate {rate}");
+                    assert!(rate > 0.0 && rate <= 1.0, "{what}");
+                    assert!(rate <= last, "{what}, after {last}");
+                    if rho <= 0.999 * footprint {
+                        assert_eq!(rate, 1.0, "{what}");
+                    } else if rho >= 1.001 * footprint {
+                        assert!(rate < 1.0, "{what}");
                     }
+                    last = rate;
                 }
-            },
-        );
+            }
+        });
     }
 
     /// CLOUD's layer from the ground to 10 km at 4 km⁻¹.
@@ -288,63 +284,58 @@ mod tests {
     /// 32-point Gauss–Legendre in u = 1 − e^{−σl}, where the exact integrand is constant.
     #[test]
     fn walk_density_integrates_to_one_in_an_optically_deep_layer() {
-        with_setup(
-            &deep_layer(),
-            |_| {},
-            |s, atm| {
-                let sigma = 4e-3;
-                let gl = crate::instrument::line_shape::gauss_legendre(32);
-                for eps in [0.0, 0.3] {
-                    let p = at_5_km(DVec3::Z, eps, atm);
-                    let x = p.pos;
-                    let along = |e: DVec3| -> f64 {
-                        // ∫₀^{l_exit} l² p(x + l e) dl, with u = 1 − e^{−σl}: dl = du/(σ(1 − u)).
-                        let l_exit = if e.z > 0.0 {
-                            (10000.0 - x.z) / e.z
-                        } else {
-                            -x.z / e.z
-                        };
-                        let u_exit = -(-sigma * l_exit).exp_m1();
-                        gl.iter()
-                            .map(|q| {
-                                let u = 0.5 * u_exit * (1.0 + q.offset_mhz);
-                                let l = -(-u).ln_1p() / sigma;
-                                let y = x + e * l;
-                                let w = 0.5 * u_exit * q.weight;
-                                w * l * l * s.walk_density(&p, y, atm.layer_of(y.z))
-                                    / (sigma * (1.0 - u))
-                            })
-                            .sum()
+        with_setup(&deep_layer(), |s, atm| {
+            let sigma = 4e-3;
+            let gl = crate::instrument::line_shape::gauss_legendre(32);
+            for eps in [0.0, 0.3] {
+                let p = at_5_km(DVec3::Z, eps, atm);
+                let x = p.pos;
+                let along = |e: DVec3| -> f64 {
+                    // ∫₀^{l_exit} l² p(x + l e) dl, with u = 1 − e^{−σl}: dl = du/(σ(1 − u)).
+                    let l_exit = if e.z > 0.0 {
+                        (10000.0 - x.z) / e.z
+                    } else {
+                        -x.z / e.z
                     };
-                    let (n_mu, n_phi) = (4000, 8);
-                    let h = 2.0 / n_mu as f64;
-                    let mut total = 0.0;
-                    for i in 0..=n_mu {
-                        // Not exactly ±1 or 0 (vertical or horizontal): the layer's ends and the poles.
-                        let mu = (-1.0 + i as f64 * h).clamp(-1.0 + 1e-12, 1.0 - 1e-12);
-                        let mu = if mu == 0.0 { 1e-12 } else { mu };
-                        let simpson = if i == 0 || i == n_mu {
-                            1.0
-                        } else if i % 2 == 1 {
-                            4.0
-                        } else {
-                            2.0
-                        };
-                        let st = (1.0 - mu * mu).sqrt();
-                        let ring: f64 = (0..n_phi)
-                            .map(|j| {
-                                let phi =
-                                    2.0 * std::f64::consts::PI * (j as f64 + 0.5) / n_phi as f64;
-                                along(DVec3::new(st * phi.cos(), st * phi.sin(), mu))
-                            })
-                            .sum::<f64>()
-                            * (2.0 * std::f64::consts::PI / n_phi as f64);
-                        total += simpson * h / 3.0 * ring;
-                    }
-                    assert!((total - 1.0).abs() < 1e-6, "ε = {eps}: ∫ p dV = {total}");
+                    let u_exit = -(-sigma * l_exit).exp_m1();
+                    gl.iter()
+                        .map(|q| {
+                            let u = 0.5 * u_exit * (1.0 + q.offset_mhz);
+                            let l = -(-u).ln_1p() / sigma;
+                            let y = x + e * l;
+                            let w = 0.5 * u_exit * q.weight;
+                            w * l * l * s.walk_density(&p, y, atm.layer_of(y.z))
+                                / (sigma * (1.0 - u))
+                        })
+                        .sum()
+                };
+                let (n_mu, n_phi) = (4000, 8);
+                let h = 2.0 / n_mu as f64;
+                let mut total = 0.0;
+                for i in 0..=n_mu {
+                    // Not exactly ±1 or 0 (vertical or horizontal): the layer's ends and the poles.
+                    let mu = (-1.0 + i as f64 * h).clamp(-1.0 + 1e-12, 1.0 - 1e-12);
+                    let mu = if mu == 0.0 { 1e-12 } else { mu };
+                    let simpson = if i == 0 || i == n_mu {
+                        1.0
+                    } else if i % 2 == 1 {
+                        4.0
+                    } else {
+                        2.0
+                    };
+                    let st = (1.0 - mu * mu).sqrt();
+                    let ring: f64 = (0..n_phi)
+                        .map(|j| {
+                            let phi = 2.0 * std::f64::consts::PI * (j as f64 + 0.5) / n_phi as f64;
+                            along(DVec3::new(st * phi.cos(), st * phi.sin(), mu))
+                        })
+                        .sum::<f64>()
+                        * (2.0 * std::f64::consts::PI / n_phi as f64);
+                    total += simpson * h / 3.0 * ring;
                 }
-            },
-        );
+                assert!((total - 1.0).abs() < 1e-6, "ε = {eps}: ∫ p dV = {total}");
+            }
+        });
     }
 
     /// Rays 0°, 30°, 60° and 85° from the zenith, seen from collisions off the ray (ρ from
@@ -359,78 +350,73 @@ mod tests {
     /// and its MIS partner compute them alike: only the variance would show it.)
     #[test]
     fn cone_ray_spans_the_layers_and_its_density_is_normalised() {
-        with_setup(
-            CLOUD,
-            |_| {},
-            |s, _| {
-                let lmin = crate::transport::CONE_MIN_LEG_M;
-                for zenith_deg in [0.0f64, 30.0, 60.0, 85.0] {
-                    let th = zenith_deg.to_radians();
-                    let omega = DVec3::new(th.sin(), 0.0, th.cos());
-                    let e_perp = DVec3::new(th.cos(), 0.0, -th.sin())
-                        .cross(omega)
-                        .normalize();
-                    for (r_foot, rho) in [(550.0, 0.3), (650.0, 0.9), (600.0, 5.0), (400.0, 200.0)]
-                    {
-                        let r_foot = r_foot / th.cos();
-                        let x = s.receiver + omega * r_foot + e_perp * rho;
-                        let ray = s.cone_ray(x, (x - s.receiver).length(), omega).unwrap();
-                        let what = format!("zenith {zenith_deg}°, ρ {rho} m");
-                        assert!((ray.along - r_foot).abs() < 1e-9 * r_foot, "{what}");
-                        let parts = allowed(&ray);
-                        let z_at = |t: f64| s.receiver.z + (ray.along + t) * omega.z;
-                        let (first, last) = (parts[0].0, parts[parts.len() - 1].1);
-                        assert!(
-                            (z_at(first) - 500.0).abs() < 1e-9,
-                            "{what}: {}",
-                            z_at(first)
-                        );
-                        assert!((z_at(last) - 700.0).abs() < 1e-9, "{what}: {}", z_at(last));
-                        if rho < lmin {
-                            assert_eq!(parts.len(), 2, "{what}");
-                            for t in [parts[0].1, parts[1].0] {
-                                assert!((ray.leg2(t).sqrt() - lmin).abs() < 1e-9, "{what}");
-                            }
-                        } else {
-                            assert_eq!(parts.len(), 1, "{what}");
-                        }
-                        // ∫ density dt, with t = ρ tan φ taking out the 1/(t² + ρ²) peak.
-                        let mut total = 0.0;
-                        for (a, b) in parts {
-                            let (pa, pb) = ((a / rho).atan(), (b / rho).atan());
-                            let n = 100_000;
-                            let h = (pb - pa) / n as f64;
-                            // Inside the interval's ends: density() is 0 a rounding outside them.
-                            let f = |phi: f64| {
-                                let t = (rho * phi.tan()).clamp(a, b);
-                                ray.density(t) * rho / phi.cos().powi(2)
-                            };
-                            let mut sum = f(pa) + f(pb);
-                            for i in 1..n {
-                                sum += f(pa + i as f64 * h) * if i % 2 == 1 { 4.0 } else { 2.0 };
-                            }
-                            total += sum * h / 3.0;
-                        }
-                        assert!((total - 1.0).abs() < 1e-9, "{what}: ∫ density = {total}");
-                    }
-                    // After a path that leaves a budget to the last gate's end (twice 10 km) of 150 m
-                    // more than the way straight back from x: the ray stops where the way back through
-                    // y would overrun it, on the ellipsoid |x − y| + r = budget with foci x and the
-                    // receiver, inside the cloud.
-                    let x = s.receiver + omega * (600.0 / th.cos()) + e_perp * 5.0;
-                    let budget = (x - s.receiver).length() + 150.0;
-                    let ray = s.cone_ray(x, 2.0 * 10_000.0 - budget, omega).unwrap();
-                    let last = allowed(&ray).last().unwrap().1;
-                    let y = s.receiver + omega * (ray.along + last);
-                    assert!(y.z > 600.0 && y.z < 700.0, "zenith {zenith_deg}°: {}", y.z);
-                    let back = (y - x).length() + (y - s.receiver).length();
+        with_setup(CLOUD, |s, _| {
+            let lmin = crate::transport::CONE_MIN_LEG_M;
+            for zenith_deg in [0.0f64, 30.0, 60.0, 85.0] {
+                let th = zenith_deg.to_radians();
+                let omega = DVec3::new(th.sin(), 0.0, th.cos());
+                let e_perp = DVec3::new(th.cos(), 0.0, -th.sin())
+                    .cross(omega)
+                    .normalize();
+                for (r_foot, rho) in [(550.0, 0.3), (650.0, 0.9), (600.0, 5.0), (400.0, 200.0)] {
+                    let r_foot = r_foot / th.cos();
+                    let x = s.receiver + omega * r_foot + e_perp * rho;
+                    let ray = s.cone_ray(x, (x - s.receiver).length(), omega).unwrap();
+                    let what = format!("zenith {zenith_deg}°, ρ {rho} m");
+                    assert!((ray.along - r_foot).abs() < 1e-9 * r_foot, "{what}");
+                    let parts = allowed(&ray);
+                    let z_at = |t: f64| s.receiver.z + (ray.along + t) * omega.z;
+                    let (first, last) = (parts[0].0, parts[parts.len() - 1].1);
                     assert!(
-                        (back - budget).abs() < 1e-9 * budget,
-                        "zenith {zenith_deg}°: {back} against {budget}"
+                        (z_at(first) - 500.0).abs() < 1e-9,
+                        "{what}: {}",
+                        z_at(first)
                     );
+                    assert!((z_at(last) - 700.0).abs() < 1e-9, "{what}: {}", z_at(last));
+                    if rho < lmin {
+                        assert_eq!(parts.len(), 2, "{what}");
+                        for t in [parts[0].1, parts[1].0] {
+                            assert!((ray.leg2(t).sqrt() - lmin).abs() < 1e-9, "{what}");
+                        }
+                    } else {
+                        assert_eq!(parts.len(), 1, "{what}");
+                    }
+                    // ∫ density dt, with t = ρ tan φ taking out the 1/(t² + ρ²) peak.
+                    let mut total = 0.0;
+                    for (a, b) in parts {
+                        let (pa, pb) = ((a / rho).atan(), (b / rho).atan());
+                        let n = 100_000;
+                        let h = (pb - pa) / n as f64;
+                        // Inside the interval's ends: density() is 0 a rounding outside them.
+                        let f = |phi: f64| {
+                            let t = (rho * phi.tan()).clamp(a, b);
+                            ray.density(t) * rho / phi.cos().powi(2)
+                        };
+                        let mut sum = f(pa) + f(pb);
+                        for i in 1..n {
+                            sum += f(pa + i as f64 * h) * if i % 2 == 1 { 4.0 } else { 2.0 };
+                        }
+                        total += sum * h / 3.0;
+                    }
+                    assert!((total - 1.0).abs() < 1e-9, "{what}: ∫ density = {total}");
                 }
-            },
-        );
+                // After a path that leaves a budget to the last gate's end (twice 10 km) of 150 m
+                // more than the way straight back from x: the ray stops where the way back through
+                // y would overrun it, on the ellipsoid |x − y| + r = budget with foci x and the
+                // receiver, inside the cloud.
+                let x = s.receiver + omega * (600.0 / th.cos()) + e_perp * 5.0;
+                let budget = (x - s.receiver).length() + 150.0;
+                let ray = s.cone_ray(x, 2.0 * 10_000.0 - budget, omega).unwrap();
+                let last = allowed(&ray).last().unwrap().1;
+                let y = s.receiver + omega * (ray.along + last);
+                assert!(y.z > 600.0 && y.z < 700.0, "zenith {zenith_deg}°: {}", y.z);
+                let back = (y - x).length() + (y - s.receiver).length();
+                assert!(
+                    (back - budget).abs() < 1e-9 * budget,
+                    "zenith {zenith_deg}°: {back} against {budget}"
+                );
+            }
+        });
     }
 
     /// The receiver-centred part of the walk's density points at the receiver, as DDIS draws
@@ -442,20 +428,16 @@ mod tests {
     #[test]
     fn walk_density_s_receiver_centred_part_points_at_the_receiver() {
         let hg = |mu: f64| (1.0 - 0.64) / (1.64 - 1.6 * mu).powf(1.5);
-        with_setup(
-            &deep_layer(),
-            |_| {},
-            |s, atm| {
-                let eps = 0.3;
-                let p = at_5_km(DVec3::X, eps, atm);
-                let x = p.pos;
-                let at = |y: DVec3| s.walk_density(&p, y, atm.layer_of(y.z));
-                let (down, up) = (x - DVec3::Z * 100.0, x + DVec3::Z * 100.0);
-                let want = ((1.0 - eps) * hg(0.0) + eps * hg(1.0))
-                    / ((1.0 - eps) * hg(0.0) + eps * hg(-1.0));
-                let got = at(down) / at(up);
-                assert!((got / want - 1.0).abs() < 1e-9, "down/up {got}, not {want}");
-            },
-        );
+        with_setup(&deep_layer(), |s, atm| {
+            let eps = 0.3;
+            let p = at_5_km(DVec3::X, eps, atm);
+            let x = p.pos;
+            let at = |y: DVec3| s.walk_density(&p, y, atm.layer_of(y.z));
+            let (down, up) = (x - DVec3::Z * 100.0, x + DVec3::Z * 100.0);
+            let want =
+                ((1.0 - eps) * hg(0.0) + eps * hg(1.0)) / ((1.0 - eps) * hg(0.0) + eps * hg(-1.0));
+            let got = at(down) / at(up);
+            assert!((got / want - 1.0).abs() < 1e-9, "down/up {got}, not {want}");
+        });
     }
 }

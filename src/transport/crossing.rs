@@ -144,7 +144,7 @@ mod tests {
     use std::f64::consts::FRAC_1_SQRT_2;
 
     use super::*;
-    use crate::transport::testing::{CLOUD, edited, with_setup};
+    use crate::transport::testing::{CLOUD, edited, with_options, with_setup};
 
     fn cone_span(u: DVec3, omega: DVec3, axis: DVec3, t2: f64, s_max: f64) -> Span {
         Line::new(u, omega, axis, s_max).span(t2)
@@ -368,15 +368,11 @@ mod tests {
     /// it. Without the cone estimate they are the whole 20 mrad cone.
     #[test]
     fn crossing_spans_are_the_served_annuli() {
-        with_setup(
-            &three_fields(),
-            |_| {},
-            |s, _| {
-                assert_eq!(s.crossing_from, 2, "the cone estimate serves 1 and 5 mrad");
-                spans_match_a_march(s, 2.5e-3, 10e-3);
-            },
-        );
-        with_setup(
+        with_setup(&three_fields(), |s, _| {
+            assert_eq!(s.crossing_from, 2, "the cone estimate serves 1 and 5 mrad");
+            spans_match_a_march(s, 2.5e-3, 10e-3);
+        });
+        with_options(
             &three_fields(),
             |o| o.cone_estimate = false,
             |s, _| {

@@ -44,9 +44,13 @@ pub(super) fn edited(text: &str, edits: &[(&str, &str)]) -> String {
     out
 }
 
-/// The transport's set-up for the scene `text`, its options as the scene gives them and then
-/// changed by `options`, handed to `check` with its optics.
-pub(super) fn with_setup(
+/// The transport's set-up for the scene `text`, handed to `check` with its optics.
+pub(super) fn with_setup(text: &str, check: impl FnOnce(&Setup<'_>, &OpticalAtmosphere)) {
+    with_options(text, |_| {}, check);
+}
+
+/// As [`with_setup`], with the scene's transport options changed by `options` first.
+pub(super) fn with_options(
     text: &str,
     options: impl FnOnce(&mut TransportOptions),
     check: impl FnOnce(&Setup<'_>, &OpticalAtmosphere),
