@@ -665,10 +665,7 @@ fn cone_estimate_is_unbiased() {
 /// Plain local estimates (400 000 photons) and every variance reduction on (100 000, seed 3):
 /// multiply scattered returns agree.
 fn cone_agrees_with_plain(scene: &Scene) {
-    let plain = run(scene, 400_000, |o| {
-        plain_local_estimates(o);
-        o.range_stratification = 0.0;
-    });
+    let plain = plain_reference(scene);
     let cone = run(scene, 100_000, |o| o.seed = 3);
     multiple_scattering_agrees(&plain, &cone);
 }
@@ -684,10 +681,7 @@ fn cone_agrees_with_plain(scene: &Scene) {
 fn crossing_estimates_are_unbiased() {
     // 20 mrad: a footprint of optical depth 0.07, beyond the cone estimate's 0.03.
     let scene = scene_text(&HG_CLOUD.replace("[1.0, 5.0]", "[1.0, 20.0]"));
-    let plain = run(&scene, 400_000, |o| {
-        plain_local_estimates(o);
-        o.range_stratification = 0.0;
-    });
+    let plain = plain_reference(&scene);
     let crossing = run(&scene, 100_000, |o| {
         o.cone_estimate = false;
         o.seed = 5
@@ -788,15 +782,21 @@ fn crossing_estimate_is_unbiased_for_channels_that_scatter_alike() {
         ],
     );
     let scene = scene_text(&text);
-    let plain = run(&scene, 400_000, |o| {
-        plain_local_estimates(o);
-        o.range_stratification = 0.0;
-    });
+    let plain = plain_reference(&scene);
     let crossing = run(&scene, 100_000, |o| {
         o.cone_estimate = false;
         o.seed = 5
     });
     multiple_scattering_agrees(&plain, &crossing);
+}
+
+/// The reference the variance reductions are checked against: plain local estimates, without
+/// range stratification, over 400 000 photons.
+fn plain_reference(scene: &Scene) -> McResult {
+    run(scene, 400_000, |o| {
+        plain_local_estimates(o);
+        o.range_stratification = 0.0;
+    })
 }
 
 /// Plain local estimates: no DDIS (and so no alignment splitting or DDIS crossing), no cone or
