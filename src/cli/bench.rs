@@ -52,6 +52,10 @@ pub struct Args {
     /// Alignment splitting's reference phase-function value (0: off; `docs/transport.md`).
     #[arg(long, default_value_t = lidarsim::transport::ALIGNMENT_SPLITTING, allow_negative_numbers = true, value_parser = super::real(Bounds::closed(0.0, 1e6)))]
     pub alignment_splitting: f64,
+    /// Russian roulette's alignment importance: its reference phase-function value (0: roulette
+    /// on the weight alone; `docs/transport.md` step 7).
+    #[arg(long, default_value_t = lidarsim::transport::ROULETTE_ALIGNMENT, allow_negative_numbers = true, value_parser = super::real(Bounds::closed(0.0, 1e6)))]
+    pub roulette_alignment: f64,
     /// Score orders ≥ 2 with the cone estimate (false: ordinary local estimates only).
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     pub cone_estimate: bool,
@@ -266,6 +270,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         o.ddis_epsilon = args.ddis_epsilon;
         o.range_stratification = args.range_stratification;
         o.alignment_splitting = args.alignment_splitting;
+        o.roulette_alignment = args.roulette_alignment;
         o.cone_estimate = args.cone_estimate;
         o.crossing_estimate = args.crossing_estimate;
         o.ddis_crossing = args.ddis_crossing;

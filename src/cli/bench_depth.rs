@@ -96,6 +96,7 @@ pub fn plain(opts: &mut TransportOptions) {
     opts.ddis_epsilon = 0.0;
     opts.range_stratification = 0.0;
     opts.alignment_splitting = 0.0;
+    opts.roulette_alignment = 0.0;
     opts.cone_estimate = false;
     opts.crossing_estimate = false;
     opts.ddis_crossing = false;

@@ -40,12 +40,24 @@ pub const RANGE_STRATIFICATION: f64 = 0.5;
 /// Default reference phase-function value of alignment splitting
 /// ([`TransportOptions::alignment_splitting`]).
 pub const ALIGNMENT_SPLITTING: f64 = 1.0;
+/// Default reference phase-function value of Russian roulette's alignment importance
+/// ([`TransportOptions::roulette_alignment`]).
+pub const ROULETTE_ALIGNMENT: f64 = 10.0;
 /// Most copies alignment splitting makes of a photon at one collision.
 pub(crate) const ALIGNMENT_MAX_COPIES: usize = 64;
 /// DDIS is used where the scattering point is seen from the receiver within the widest field
-/// of view plus this margin [rad]: further out, a photon sent toward the receiver stays outside
-/// the fields of view (the line to the receiver keeps its angle to the axis).
-const DDIS_MARGIN_RAD: f64 = 0.01;
+/// of view plus a margin: the half-width of the layer's forward peak (the angle at which its
+/// phase function falls to half its forward value; C.1 droplets at 1064 nm: 37.5 mrad), at
+/// least this [rad]. A photon scattered there can still reach the fields of view lower down in
+/// one forward scattering, and without DDIS's weight its natural turns into the forward peak
+/// toward the receiver are the spikes DDIS exists to remove; much further out, a photon sent
+/// toward the receiver stays outside the fields of view (the line to the receiver keeps its
+/// angle to the axis). Chosen on C.1 (`validation/ms_efficiency`, 28 Nov): margins of 20–40
+/// mrad gave the 10 mrad field of view's deep gates 1.4× the figure of merit of 10 mrad, 60
+/// mrad no more for 10 % more time.
+const DDIS_MARGIN_MIN_RAD: f64 = 0.01;
+/// Angular step [rad] of the scan for a phase function's forward half-width (then bisected).
+const HALF_WIDTH_STEP_RAD: f64 = 1e-3;
 /// Phase functions whose forward value P(0°) exceeds this get DDIS (Rayleigh, 1.5, does not).
 const DDIS_FORWARD_PEAK: f64 = 5.0;
 /// Optical depth to the receiver (least over the scattering classes) beyond which DDIS is not
@@ -57,9 +69,12 @@ const CONE_MIN_LEG_M: f64 = 1.0;
 /// Cone estimate: only for FOV annuli whose footprint on the forward-peaked layers has a radius
 /// below this scattering optical depth (outer half-angle × range × σ_s). Measured on C.1
 /// (`lidarsim bench --depth`): there the cone estimate multiplies the figure of merit of the
-/// 0.5–2 mrad fields of view (radius 0.005–0.02) by up to 100 and lowers it for 5 and 10 mrad
-/// (0.05, 0.1), where enough collisions land inside the field of view anyway.
-const CONE_MAX_FOOTPRINT_TAU: f64 = 0.03;
+/// 0.5–2 mrad fields of view (radius 0.005–0.022) by up to 100 and lowers it for 5 and 10 mrad
+/// (0.056, 0.11), where enough collisions land inside the field of view anyway; at 2 mrad the
+/// crossing estimate does as well, and the cone estimate, made within one footprint of the
+/// widest annulus it serves, then costs less (28 Nov: 0.03 → 0.02, 7 % less time, the 0.5–1
+/// mrad figures of merit unchanged within their scatter).
+const CONE_MAX_FOOTPRINT_TAU: f64 = 0.02;
 /// Cone estimate: made at every collision within this many footprints (of the widest annulus it
 /// serves) of the axis, and with probability falling as 1/ρ beyond.
 const CONE_RATE_FOOTPRINTS: f64 = 1.0;
@@ -133,6 +148,11 @@ pub struct TransportOptions {
     /// split before it scatters into n = ⌈w·P(Θ_rx)/value⌉ copies (at most 64), each drawing
     /// its own new direction (0 turns it off; unbiased either way).
     pub alignment_splitting: f64,
+    /// Russian roulette's alignment importance: where DDIS applies, a photon travelling toward
+    /// the receiver with P(Θ_rx) (per 4π sr) above this value is played at the weight
+    /// w·P(Θ_rx)/value instead of w, so that photons heading for the fields of view are spared
+    /// (0 plays every photon at its weight; unbiased either way; `docs/transport.md` step 7).
+    pub roulette_alignment: f64,
     /// Score orders ≥ 2 in optically narrow fields of view also by the cone estimate (a last
     /// scattering drawn inside the field of view, `docs/transport.md` step 6a), not only when
     /// collisions happen to land there.
@@ -168,6 +188,7 @@ impl TransportOptions {
             ddis_epsilon: DDIS_EPSILON,
             range_stratification: RANGE_STRATIFICATION,
             alignment_splitting: ALIGNMENT_SPLITTING,
+            roulette_alignment: ROULETTE_ALIGNMENT,
             cone_estimate: true,
             crossing_estimate: true,
             ddis_crossing: true,
@@ -353,14 +374,16 @@ pub(crate) struct Setup<'a> {
     /// (grey scattering: on/off lines); with more, each collision and each scattering angle is
     /// drawn from the mixture of the classes' densities (`photon` module docs).
     classes: Vec<ScatterClass>,
-    /// Detector-directed importance sampling: probability ε, the cone around the receiver axis
-    /// where it is used (cosine of its half-angle), and the layers whose phase function has a
-    /// forward peak worth it.
+    /// Detector-directed importance sampling: probability ε, the layers whose phase function
+    /// has a forward peak worth it, and per layer the cone around the receiver axis where it is
+    /// used there (cosine of its half-angle; [`DDIS_MARGIN_MIN_RAD`]).
     ddis_epsilon: f64,
-    ddis_cos: f64,
     forward_peaked: Vec<bool>,
+    ddis_cos: Vec<f64>,
     /// Alignment splitting's reference phase-function value (0: off).
     align_split: f64,
+    /// Russian roulette's alignment importance: its reference phase-function value (0: off).
+    roulette_align: f64,
     /// Probability β of drawing the first collision uniformly in range over the gates.
     stratify: f64,
     /// Cone estimate on (for some annulus), the annuli it serves, and the solid angle of each
@@ -463,6 +486,28 @@ const CLASS_TAU_TOLERANCE: f64 = 0.5;
 /// may differ by any factor (few collisions happen there).
 const CLASS_LAYER_TAU: f64 = 0.1;
 
+/// The half-width of a phase function's forward peak: the scattering angle [rad] at which it
+/// first falls to half its forward value P(0°), π if it never does. A scan in steps of
+/// [`HALF_WIDTH_STEP_RAD`] finds the first step below half, bisection the angle within it.
+fn forward_half_width(phase: impl Fn(f64) -> f64) -> f64 {
+    use std::f64::consts::PI;
+    let half = 0.5 * phase(1.0);
+    let below = |theta: f64| phase(theta.cos()) <= half;
+    let steps = (PI / HALF_WIDTH_STEP_RAD).ceil() as usize;
+    let Some(i) = (1..=steps).find(|&i| below((i as f64 * HALF_WIDTH_STEP_RAD).min(PI))) else {
+        return PI;
+    };
+    let (mut lo, mut hi) = (
+        (i - 1) as f64 * HALF_WIDTH_STEP_RAD,
+        (i as f64 * HALF_WIDTH_STEP_RAD).min(PI),
+    );
+    for _ in 0..30 {
+        let mid = 0.5 * (lo + hi);
+        if below(mid) { hi = mid } else { lo = mid }
+    }
+    hi
+}
+
 /// Two phase functions within a factor 2 of each other at every scattering angle (361 angles,
 /// uniform in Θ).
 fn similar_phase(
@@ -499,6 +544,24 @@ impl Setup<'_> {
             .map(|c| c.sigma_s_per_m[k] * self.atm.phases[c.phase[k] as usize].eval(mu))
             .sum::<f64>()
             / total
+    }
+
+    /// The phase function at μ of the scatterers of `layer` in the density the scattering angle
+    /// is drawn from: one scattering class, its own; several, the mean of those that scatter
+    /// there (0 where none does).
+    #[inline]
+    fn mean_phase(&self, layer: usize, mu: f64) -> f64 {
+        if self.classes.len() == 1 {
+            return self.mixture_phase(layer, 0, mu);
+        }
+        let (sum, n) = self
+            .classes
+            .iter()
+            .filter(|c| c.sigma[layer] > 0.0)
+            .fold((0.0, 0usize), |(sum, n), c| {
+                (sum + self.mixture_phase(layer, c.channel, mu), n + 1)
+            });
+        if n > 0 { sum / n as f64 } else { 0.0 }
     }
 
     /// Scattering matrix of the scatterer mixture of `layer` for channel k at μ (weighted as
@@ -666,6 +729,21 @@ impl<'a> Plan<'a> {
             .and_then(|_| check_count(opts.threads as u64, 0, MAX_THREADS))
             .and_then(|_| check_count(opts.max_order.into(), 1, 1000))
             .map_err(TransportError::Options)?;
+        // The variance reductions' settings (the command line checks its own; these are for
+        // options built in code): probabilities below 1, reference values finite and ≥ 0.
+        for (name, value, below_one) in [
+            ("ddis_epsilon", opts.ddis_epsilon, true),
+            ("range_stratification", opts.range_stratification, true),
+            ("alignment_splitting", opts.alignment_splitting, false),
+            ("roulette_alignment", opts.roulette_alignment, false),
+        ] {
+            if !(value >= 0.0 && value.is_finite() && (!below_one || value < 1.0)) {
+                return Err(TransportError::Options(format!(
+                    "{name} = {value}: must be finite and at least 0{}",
+                    if below_one { ", and below 1" } else { "" }
+                )));
+            }
+        }
         // A polarised run folds co, cross and total of every series.
         let n_pol_series = if scene.lidar.polarisation == Polarisation::None {
             1
@@ -769,11 +847,10 @@ impl<'a> Plan<'a> {
                 .map(|k| ScatterClass::of_channel(atm, k))
                 .collect(),
             ddis_epsilon: opts.ddis_epsilon,
-            ddis_cos: (0.5e-3 * widest_fov_mrad + DDIS_MARGIN_RAD)
-                .min(std::f64::consts::PI)
-                .cos(),
             forward_peaked: vec![false; n_layers],
+            ddis_cos: vec![1.0; n_layers],
             align_split: opts.alignment_splitting,
+            roulette_align: opts.roulette_alignment,
             stratify: opts.range_stratification,
             cone: false,
             cone_annuli: Vec::new(),
@@ -798,6 +875,22 @@ impl<'a> Plan<'a> {
                         .classes
                         .iter()
                         .any(|c| setup.mixture_phase(l, c.channel, 1.0) > DDIS_FORWARD_PEAK)
+            })
+            .collect();
+        setup.ddis_cos = (0..n_layers)
+            .map(|l| {
+                let margin = if setup.forward_peaked[l] {
+                    setup
+                        .classes
+                        .iter()
+                        .map(|c| forward_half_width(|mu| setup.mixture_phase(l, c.channel, mu)))
+                        .fold(DDIS_MARGIN_MIN_RAD, f64::max)
+                } else {
+                    DDIS_MARGIN_MIN_RAD
+                };
+                (0.5e-3 * widest_fov_mrad + margin)
+                    .min(std::f64::consts::PI)
+                    .cos()
             })
             .collect();
         setup.annulus_sr = (0..setup.fov_cos.len())
@@ -1126,4 +1219,29 @@ pub fn run_plan(plan: &Plan) -> Result<McResult, TransportError> {
     }
     bar.finish_and_clear();
     fold.finish(started.elapsed().as_secs_f64(), threads)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::particles::phase::{HenyeyGreenstein, PhaseFunction};
+
+    /// The forward half-width of Henyey-Greenstein phase functions against the closed form:
+    /// P(Θ)/P(0) = [(1 − g)²/(1 + g² − 2g cos Θ)]^{3/2} = ½ at
+    /// cos Θ = (1 + g² − 2^{2/3}(1 − g)²)/(2g); isotropic scattering never falls to half.
+    #[test]
+    fn forward_half_width_of_henyey_greenstein() {
+        for g in [0.3, 0.5, 0.85, 0.95, 0.999] {
+            let hg = PhaseFunction::HenyeyGreenstein(HenyeyGreenstein::new(g).unwrap());
+            let exact =
+                ((1.0 + g * g - 2f64.powf(2.0 / 3.0) * (1.0 - g) * (1.0 - g)) / (2.0 * g)).acos();
+            let found = forward_half_width(|mu| hg.eval(mu));
+            assert!(
+                (found - exact).abs() < 1e-9 * exact.max(1.0) + 1e-12,
+                "g {g}: {found} against {exact}"
+            );
+        }
+        let flat = forward_half_width(|_| 1.0);
+        assert_eq!(flat, std::f64::consts::PI);
+    }
 }

@@ -33,7 +33,9 @@
 //!   scattering, the local estimate of the collision that ends it, in expectation over where
 //!   along the flight it falls inside them; and at every DDIS scattering the same along one more
 //!   direction drawn about the receiver's (step 6c), the two combined by the balance heuristic.
-//! * Russian roulette below a weight of 1e-2 (survivors continue at 5e-2).
+//! * Russian roulette below a weight of 1e-2 (survivors continue at 5e-2), on the weight times
+//!   the photon's alignment importance max(1, P(Θ_rx)/10) where DDIS applies: photons heading
+//!   for the receiver, which DDIS gives small weights, are spared (`docs/transport.md` step 7).
 
 use std::f64::consts::PI;
 
@@ -389,7 +391,7 @@ impl<'a> Tracer<'a> {
                         self.e1 = dir.any_orthonormal_vector();
                         self.pol.iter_mut().for_each(|p| *p = [0.0; 3]);
                     }
-                    if !self.roulette(rng) {
+                    if !self.roulette(1.0, rng) {
                         return;
                     }
                     continue;
@@ -554,7 +556,8 @@ impl<'a> Tracer<'a> {
             let d_here = to_rx.length();
             carried = Some((to_rx, d_here));
             // Seen from the receiver within the DDIS cone: −(rx − x)·axis ≥ cos α · d.
-            let (omega_rx, d_rx) = if ddis_layer && -to_rx.dot(s.axis) >= s.ddis_cos * d_here {
+            let (omega_rx, d_rx) = if ddis_layer && -to_rx.dot(s.axis) >= s.ddis_cos[layer] * d_here
+            {
                 (to_rx * (1.0 / d_here), d_here)
             } else {
                 (DVec3::ZERO, 0.0)
@@ -595,7 +598,22 @@ impl<'a> Tracer<'a> {
                 self.score_cone(&here, order, rng);
             }
 
-            if !self.roulette(rng) {
+            // The phase function toward the receiver for the direction the photon arrives with,
+            // P(Θ_rx): where DDIS applies, the chance that the scattering here sends it into the
+            // fields of view is in proportion to it. Russian roulette weighs the photon by it
+            // (a photon heading for the receiver is worth P(Θ_rx)/ROULETTE_ALIGNMENT others),
+            // and alignment splitting splits by it.
+            let p_align = if ddis && (s.roulette_align > 0.0 || s.align_split > 0.0) {
+                s.mean_phase(layer, dir.dot(omega_rx))
+            } else {
+                0.0
+            };
+            let importance = if s.roulette_align > 0.0 {
+                (p_align / s.roulette_align).max(1.0)
+            } else {
+                1.0
+            };
+            if !self.roulette(importance, rng) {
                 return;
             }
 
@@ -621,16 +639,7 @@ impl<'a> Tracer<'a> {
                 self.stats.zero_weight += 1;
                 return;
             }
-            let mean_phase = |mu: f64| -> f64 {
-                if ncls == 1 {
-                    return s.mixture_phase(layer, 0, mu);
-                }
-                (0..ncls)
-                    .filter(|&c| s.classes[c].sigma[layer] > 0.0)
-                    .map(|c| s.mixture_phase(layer, s.classes[c].channel, mu))
-                    .sum::<f64>()
-                    / n_here as f64
-            };
+            let mean_phase = |mu: f64| s.mean_phase(layer, mu);
             // Alignment splitting: the photon's direction makes the receiver's direction
             // likely for the next one in proportion to P(Θ_rx), and a photon that turns into
             // the forward peak toward the receiver with a weight near 1 is the rare event
@@ -638,7 +647,7 @@ impl<'a> Tracer<'a> {
             // Such a photon is split *before* it scatters, so that the copies draw their
             // directions independently; after the scattering they would share one.
             let n_split = if ddis && s.align_split > 0.0 {
-                let importance = self.w_max() * mean_phase(dir.dot(omega_rx)) / s.align_split;
+                let importance = self.w_max() * p_align / s.align_split;
                 self.copies(importance, 2.0, super::ALIGNMENT_MAX_COPIES)
             } else {
                 1
@@ -891,10 +900,12 @@ impl<'a> Tracer<'a> {
         (ts_new, ta_new, dts, dta)
     }
 
-    /// Russian roulette on the largest channel weight; false if the photon dies.
+    /// Russian roulette on the largest channel weight times the photon's `importance` (≥ 1;
+    /// step 7): below [`ROULETTE_BELOW`] it survives with probability w·I/[`ROULETTE_SURVIVOR`]
+    /// and its weights are divided by that; unbiased for any importance. False if it dies.
     #[inline]
-    fn roulette(&mut self, rng: &mut Rng) -> bool {
-        let w_max = self.w.iter().fold(0.0f64, |m, w| m.max(*w));
+    fn roulette(&mut self, importance: f64, rng: &mut Rng) -> bool {
+        let w_max = self.w.iter().fold(0.0f64, |m, w| m.max(*w)) * importance;
         if w_max >= ROULETTE_BELOW {
             return true;
         }
