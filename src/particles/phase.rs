@@ -242,21 +242,47 @@ impl RayleighPhase {
     }
 }
 
-/// Number of cells of the sampling guide table (in u) and of the evaluation guide table (per
-/// hemisphere, in sin(Θ/2) or cos(Θ/2)).
+/// Number of cells of the sampling guide table (in u).
 const SAMPLE_GUIDE_CELLS: usize = 8192;
 const _: () = assert!(SAMPLE_GUIDE_CELLS.is_power_of_two());
-const EVAL_GUIDE_CELLS: usize = 4096;
+/// The evaluation guide's cells (per hemisphere) in t = 1 − |μ|: 2^EVAL_GUIDE_BITS per binade
+/// from 2^−EVAL_GUIDE_BINADES to 1, one cell below (t < 2^−40: Θ < 1.4e-6 rad from a pole) and
+/// one above.
+const EVAL_GUIDE_BITS: u32 = 7;
+const EVAL_GUIDE_BINADES: u64 = 40;
+const EVAL_GUIDE_CELLS: usize = ((EVAL_GUIDE_BINADES as usize) << EVAL_GUIDE_BITS) + 2;
+
+/// The evaluation guide's cell of t = 1 − |μ| ∈ [0, 1], read off the bits of the double: its
+/// exponent and top EVAL_GUIDE_BITS mantissa bits, so cells are equal in ln t (relative width
+/// 2^−7 of t, 2^−8 of the angle near a pole, where t ≈ Θ²/2; at most 0.26° wide, between 60°
+/// and 90° from the pole) without a square root.
+#[inline]
+fn eval_guide_cell(t: f64) -> usize {
+    let below = ((1023 - EVAL_GUIDE_BINADES) << EVAL_GUIDE_BITS) - 1;
+    let key = t.to_bits() >> (52 - EVAL_GUIDE_BITS);
+    (key.saturating_sub(below) as usize).min(EVAL_GUIDE_CELLS - 1)
+}
+
+/// The least t of the evaluation guide's cell c (0 for cell 0).
+fn eval_guide_cell_start(c: usize) -> f64 {
+    if c == 0 {
+        return 0.0;
+    }
+    let below = ((1023 - EVAL_GUIDE_BINADES) << EVAL_GUIDE_BITS) - 1;
+    f64::from_bits((c as u64 + below) << (52 - EVAL_GUIDE_BITS))
+}
 
 /// Segment lookup on nodes μ_i (strictly increasing from −1 to 1) dense at both poles: cells
-/// equal in s = sin(Θ/2) for μ ≥ 0 and in c = cos(Θ/2) for μ < 0, both nearly linear in
-/// angle at their pole, each holding the segment at its start; then a short walk. O(1) on
-/// average, for tables resolved finely at the forward peak and in the glory alike.
+/// equal in ln(1 − μ) for μ ≥ 0 and in ln(1 + μ) for μ < 0, found from the bits of the double
+/// ([`eval_guide_cell`]), each holding the segment at its edge farthest from the pole; then a
+/// short walk toward the pole. O(1) on average, for tables resolved finely at the forward peak
+/// and in the glory alike. (Cells equal in sin(Θ/2), as before 28 Nov 2026, cost a square root
+/// per evaluation.)
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) struct SegmentGuide {
-    /// Segment index for cells in s = sqrt((1−μ)/2) ∈ [0, √½] (μ ≥ 0).
+    /// Segment index per cell of t = 1 − μ (μ ≥ 0).
     fwd: Vec<u32>,
-    /// Segment index for cells in c = sqrt((1+μ)/2) ∈ [0, √½] (μ < 0).
+    /// Segment index per cell of t = 1 + μ (μ < 0).
     bwd: Vec<u32>,
 }
 
@@ -264,42 +290,29 @@ impl SegmentGuide {
     /// For the nodes `mu` (at least two).
     pub(crate) fn new(mu: &[f64]) -> Self {
         let n = mu.len();
-        // For each cell, the segment holding the cell's smallest |Θ| edge toward the pole, i.e.
-        // the segment containing μ at the cell start (moving away from the pole μ decreases in
-        // the forward table and increases in the backward one).
         let segment_of = |m: f64| -> usize {
             // Largest i with mu[i] <= m, capped to the last segment.
             let i = mu.partition_point(|&x| x <= m);
             i.saturating_sub(1).min(n - 2)
         };
-        let half = std::f64::consts::FRAC_1_SQRT_2;
-        let fwd = (0..=EVAL_GUIDE_CELLS)
-            .map(|c| {
-                // s at the cell's far edge from the pole: μ = 1 − 2 s².
-                let s = half * (c + 1).min(EVAL_GUIDE_CELLS) as f64 / EVAL_GUIDE_CELLS as f64;
-                segment_of(1.0 - 2.0 * s * s) as u32
-            })
+        // Each cell's least μ: forward, at its largest t (the next cell's start); backward, at
+        // its least t.
+        let fwd = (0..EVAL_GUIDE_CELLS)
+            .map(|c| segment_of(1.0 - eval_guide_cell_start(c + 1)) as u32)
             .collect();
-        let bwd = (0..=EVAL_GUIDE_CELLS)
-            .map(|c| {
-                let cc = half * c as f64 / EVAL_GUIDE_CELLS as f64;
-                segment_of(2.0 * cc * cc - 1.0) as u32
-            })
+        let bwd = (0..EVAL_GUIDE_CELLS)
+            .map(|c| segment_of(eval_guide_cell_start(c) - 1.0) as u32)
             .collect();
         SegmentGuide { fwd, bwd }
     }
 
-    /// The guide's first guess for μ: the segment at the edge of μ's cell nearest the pole.
+    /// The guide's first guess for μ: the segment holding the least μ of μ's cell.
     #[inline]
     fn start(&self, mu: f64) -> usize {
-        let half = std::f64::consts::FRAC_1_SQRT_2;
-        let cells = EVAL_GUIDE_CELLS as f64;
         if mu >= 0.0 {
-            let s = (0.5 * (1.0 - mu)).max(0.0).sqrt();
-            self.fwd[((s / half * cells) as usize).min(EVAL_GUIDE_CELLS)] as usize
+            self.fwd[eval_guide_cell(1.0 - mu)] as usize
         } else {
-            let c = (0.5 * (1.0 + mu)).max(0.0).sqrt();
-            self.bwd[((c / half * cells) as usize).min(EVAL_GUIDE_CELLS)] as usize
+            self.bwd[eval_guide_cell(1.0 + mu)] as usize
         }
     }
 
@@ -308,7 +321,7 @@ impl SegmentGuide {
     pub(crate) fn segment(&self, mu_nodes: &[f64], mu: f64) -> usize {
         let last = mu_nodes.len() - 2;
         let mut i = self.start(mu);
-        // Rounding in s can start one segment high; step back, then walk up.
+        // Rounding in t can start one segment high; step back, then walk up.
         while i > 0 && mu_nodes[i] > mu {
             i -= 1;
         }
@@ -326,9 +339,9 @@ impl SegmentGuide {
 /// Two guide tables make both O(1) on average:
 /// * sampling: cells equal in probability map u to the first segment that can hold it, so the
 ///   forward peak, which holds most of the probability, is spread over many cells;
-/// * evaluation: cells equal in s = sin(Θ/2) for the forward hemisphere and in c = cos(Θ/2) for
-///   the backward one, both nearly linear in angle at their pole, so the densely tabulated
-///   forward peak and the backscatter (glory) region are resolved as finely as the table itself.
+/// * evaluation: cells equal in ln(1 − μ) for the forward hemisphere and in ln(1 + μ) for the
+///   backward one, narrowest at their pole, so the densely tabulated forward peak and the
+///   backscatter (glory) region are resolved as finely as the table itself.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TabulatedPhase {
     /// Nodes μ_i, strictly increasing from −1 to 1.
@@ -699,10 +712,11 @@ mod tests {
 
     #[test]
     fn evaluation_guide_starts_within_a_few_segments_of_the_answer() {
-        // What makes `eval` O(1): 4096 cells in s = sin(Θ/2) up to √½ (and likewise from the
-        // back) are at most 2·(√½/4096)/cos 45° = 0.028° wide, and the C.1 table's nodes are
-        // at least 0.01° apart, so a cell holds at most 3 nodes: the guess is at most 3
-        // segments below the answer, or 1 above it by rounding.
+        // What makes `eval` O(1): 128 cells per binade of t = 1 − |μ| are at most 2^−8 of the
+        // angle wide near a pole (t ≈ Θ²/2) and 0.26° between 60° and 90° from it
+        // (dΘ = dt/sin Θ, dt = 1/256), and the C.1 table's nodes are 0.01° apart up to 1°
+        // (where a cell is 0.004° wide) and 0.25° apart beyond 60°, so a cell holds at most 3
+        // nodes: the guess is at most 3 segments below the answer, or 1 above it by rounding.
         let t = crate::particles::builtin_table("bissonnette_c1_1064nm").unwrap();
         let tab = TabulatedPhase::from_table(&t).unwrap();
         let n = 200_000;
