@@ -645,17 +645,43 @@ impl Setup<'_> {
     /// Altitude (and its layer) at which a photon leaving a point of cumulative class-`c`
     /// scattering optical depth `t0` with direction cosine μ ≠ 0 has accumulated τ*.
     #[inline]
-    fn altitude_at_tau(&self, c: usize, t0: f64, mu: f64, tau_star: f64) -> (f64, usize) {
+    ///
+    /// `hint` is the layer the flight starts in: the collision is usually in it (always, in a
+    /// single cloud layer), and checking it first spares the search.
+    fn altitude_at_tau(
+        &self,
+        c: usize,
+        t0: f64,
+        mu: f64,
+        tau_star: f64,
+        hint: usize,
+    ) -> (f64, usize) {
         let cls = &self.classes[c];
         let target = t0 + tau_star * mu;
         let n = cls.sigma.len();
-        let l = if mu > 0.0 {
-            cls.cum.partition_point(|c| *c <= target)
+        // The layer: the last edge at or below the target going up (strictly below it going
+        // down), capped to the last layer; edges below the first count as the first.
+        let starts_below = |l: usize| {
+            if mu > 0.0 {
+                cls.cum[l] <= target
+            } else {
+                cls.cum[l] < target
+            }
+        };
+        let l = if hint < n
+            && (hint == 0 || starts_below(hint))
+            && (hint == n - 1 || !starts_below(hint + 1))
+        {
+            hint
         } else {
-            cls.cum.partition_point(|c| *c < target)
-        }
-        .saturating_sub(1)
-        .min(n - 1);
+            if mu > 0.0 {
+                cls.cum.partition_point(|c| *c <= target)
+            } else {
+                cls.cum.partition_point(|c| *c < target)
+            }
+            .saturating_sub(1)
+            .min(n - 1)
+        };
         let e = &self.atm.edges_m;
         let z = if cls.sigma[l] > 0.0 {
             e[l] + (target - cls.cum[l]) * cls.inv_sigma[l]

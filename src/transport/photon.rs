@@ -270,6 +270,9 @@ impl<'a> Tracer<'a> {
         let nch = self.w.len();
         self.set_altitude(pos.z);
         let mut carried: Option<(DVec3, f64)> = None;
+        // The layer the photon is in (where the next flight starts): the first guess of the
+        // searches for its collision's layer.
+        let mut at_layer = if s.has_layers { atm.layer_of(pos.z) } else { 0 };
 
         loop {
             // Range check: even a straight return from here arrives after the last gate.
@@ -309,7 +312,17 @@ impl<'a> Tracer<'a> {
                 && s.crossing_from < self.shape.n_fov;
             if crossing {
                 let scale = self.cross_mis;
-                self.score_crossing(pos, dir, inv_mu, path, order + 1, s_end, scale, rng);
+                self.score_crossing(
+                    pos,
+                    dir,
+                    inv_mu,
+                    path,
+                    order + 1,
+                    s_end,
+                    scale,
+                    at_layer,
+                    rng,
+                );
             }
 
             // Scattering optical depth of the flight for each class (class 0: channel 0's).
@@ -379,6 +392,7 @@ impl<'a> Tracer<'a> {
                     }
                     pos = hit;
                     pos.z = s.bottom_m;
+                    at_layer = 0;
                     path += s_end;
                     order += 1;
                     self.stats.surface_reflections += 1;
@@ -464,7 +478,7 @@ impl<'a> Tracer<'a> {
                     (tau_star / s.classes[c].sigma[layer0], layer0, tau_star)
                 } else {
                     let t0 = self.ts[s.classes[c].channel];
-                    let (z, l) = s.altitude_at_tau(c, t0, mu, tau_star);
+                    let (z, l) = s.altitude_at_tau(c, t0, mu, tau_star, at_layer);
                     (((z - pos.z).abs() * inv_mu).min(s_end), l, tau_star)
                 }
             };
@@ -480,6 +494,7 @@ impl<'a> Tracer<'a> {
             pos += dir * s_coll;
             path += s_coll;
             order += 1;
+            at_layer = layer;
             self.stats.collisions += 1;
 
             if ncls == 1 {
@@ -1034,6 +1049,7 @@ impl<'a> Tracer<'a> {
         order: u32,
         s_end: f64,
         scale: f64,
+        at_layer: usize,
         rng: &mut Rng,
     ) {
         let s = self.s;
@@ -1062,7 +1078,7 @@ impl<'a> Tracer<'a> {
         let (ta, p_span, _) = parts[i];
         let (a, b) = spans[i];
         let tau_star = ta - (1.0 - rng.random::<f64>() * p_span).ln();
-        let (z, layer) = s.altitude_at_tau(0, t0, mu, tau_star);
+        let (z, layer) = s.altitude_at_tau(0, t0, mu, tau_star, at_layer);
         let s_y = ((z - pos.z).abs() * inv_mu).clamp(a, b);
         let y = pos + dir * s_y;
         // The receiver as seen from y.
@@ -1204,6 +1220,7 @@ impl<'a> Tracer<'a> {
             order + 1,
             s_end,
             1.0,
+            layer,
             rng,
         );
         std::mem::swap(&mut self.w, &mut self.virt);
