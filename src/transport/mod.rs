@@ -56,6 +56,8 @@ pub(crate) const ALIGNMENT_MAX_COPIES: usize = 64;
 /// mrad gave the 10 mrad field of view's deep gates 1.4× the figure of merit of 10 mrad, 60
 /// mrad no more for 10 % more time.
 const DDIS_MARGIN_MIN_RAD: f64 = 0.01;
+/// Steps in μ of the scan for a phase function's largest backward value ([`backward_max`]).
+const BACKWARD_MAX_STEPS: usize = 20_000;
 /// Angular step [rad] of the scan for a phase function's forward half-width (then bisected).
 const HALF_WIDTH_STEP_RAD: f64 = 1e-3;
 /// Phase functions whose forward value P(0°) exceeds this get DDIS (Rayleigh, 1.5, does not).
@@ -380,6 +382,10 @@ pub(crate) struct Setup<'a> {
     ddis_epsilon: f64,
     forward_peaked: Vec<bool>,
     ddis_cos: Vec<f64>,
+    /// Per layer, the largest value of the phase function DDIS samples from (`mean_phase`) over
+    /// the backward hemisphere, μ ≤ 0: a bound on P(Θ_rx) for a photon travelling away from
+    /// the receiver, which spares evaluating it where it cannot matter (`photon`).
+    backward_max: Vec<f64>,
     /// Alignment splitting's reference phase-function value (0: off).
     align_split: f64,
     /// Russian roulette's alignment importance: its reference phase-function value (0: off).
@@ -506,6 +512,21 @@ fn forward_half_width(phase: impl Fn(f64) -> f64) -> f64 {
         if below(mid) { hi = mid } else { lo = mid }
     }
     hi
+}
+
+/// The largest value of a phase function over the backward hemisphere, μ ∈ [−1, 0]: its
+/// greatest value on a grid of [`BACKWARD_MAX_STEPS`] steps in μ, raised by the largest change
+/// between neighbouring grid points (so that a peak between them is still bounded), and
+/// never below the value at μ = 0 or −1.
+fn backward_max(phase: impl Fn(f64) -> f64) -> f64 {
+    let values: Vec<f64> = (0..=BACKWARD_MAX_STEPS)
+        .map(|i| phase(-(i as f64) / BACKWARD_MAX_STEPS as f64))
+        .collect();
+    let top = values.iter().fold(0.0f64, |m, v| m.max(*v));
+    let jump = values
+        .windows(2)
+        .fold(0.0f64, |m, w| m.max((w[1] - w[0]).abs()));
+    top + jump
 }
 
 /// Two phase functions within a factor 2 of each other at every scattering angle (361 angles,
@@ -875,6 +896,7 @@ impl<'a> Plan<'a> {
             ddis_epsilon: opts.ddis_epsilon,
             forward_peaked: vec![false; n_layers],
             ddis_cos: vec![1.0; n_layers],
+            backward_max: vec![f64::INFINITY; n_layers],
             align_split: opts.alignment_splitting,
             roulette_align: opts.roulette_alignment,
             stratify: opts.range_stratification,
@@ -902,6 +924,9 @@ impl<'a> Plan<'a> {
                         .iter()
                         .any(|c| setup.mixture_phase(l, c.channel, 1.0) > DDIS_FORWARD_PEAK)
             })
+            .collect();
+        setup.backward_max = (0..n_layers)
+            .map(|l| backward_max(|mu| setup.mean_phase(l, mu)))
             .collect();
         setup.ddis_cos = (0..n_layers)
             .map(|l| {

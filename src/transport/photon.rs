@@ -618,8 +618,21 @@ impl<'a> Tracer<'a> {
             // fields of view is in proportion to it. Russian roulette weighs the photon by it
             // (a photon heading for the receiver is worth P(Θ_rx)/ROULETTE_ALIGNMENT others),
             // and alignment splitting splits by it.
-            let p_align = if ddis && (s.roulette_align > 0.0 || s.align_split > 0.0) {
-                s.mean_phase(layer, dir.dot(omega_rx))
+            let mu_rx = dir.dot(omega_rx);
+            // A photon travelling away from the receiver (μ ≤ 0) has P(Θ_rx) at most the
+            // backward hemisphere's largest value; where that can neither raise its roulette
+            // importance above 1 nor split it, the value is not needed (the same outcome; a
+            // bound too low would change only which photons are spared or split, unbiased
+            // either way).
+            let needed = ddis
+                && (s.roulette_align > 0.0 || s.align_split > 0.0)
+                && (mu_rx > 0.0 || {
+                    let bound = s.backward_max[layer];
+                    (s.roulette_align > 0.0 && bound > s.roulette_align)
+                        || (s.align_split > 0.0 && self.w_max() * bound > 2.0 * s.align_split)
+                });
+            let p_align = if needed {
+                s.mean_phase(layer, mu_rx)
             } else {
                 0.0
             };
