@@ -46,8 +46,9 @@ pub const ROULETTE_ALIGNMENT: f64 = 10.0;
 /// Most copies alignment splitting makes of a photon at one collision.
 pub(crate) const ALIGNMENT_MAX_COPIES: usize = 64;
 /// DDIS is used where the scattering point is seen from the receiver within the widest field
-/// of view plus a margin: the half-width of the layer's forward peak (the angle at which its
-/// phase function falls to half its forward value; C.1 droplets at 1064 nm: 37.5 mrad), at
+/// of view plus a margin: the widest forward-peak half-width of the layer's forward-peaked
+/// scatterers (the angle at which a phase function falls to half its forward value; C.1
+/// droplets at 1064 nm: 37.5 mrad), at
 /// least this [rad]. A photon scattered there can still reach the fields of view lower down in
 /// one forward scattering, and without DDIS's weight its natural turns into the forward peak
 /// toward the receiver are the spikes DDIS exists to remove; much further out, a photon sent
@@ -925,16 +926,53 @@ impl<'a> Plan<'a> {
                         .any(|c| setup.mixture_phase(l, c.channel, 1.0) > DDIS_FORWARD_PEAK)
             })
             .collect();
-        setup.backward_max = (0..n_layers)
-            .map(|l| backward_max(|mu| setup.mean_phase(l, mu)))
+        // Per phase function (once: a profile of thousands of thin layers shares a few), its
+        // forward half-width and its backward bound; then per layer from its scatterers.
+        let half_width: Vec<f64> = atm
+            .phases
+            .iter()
+            .map(|p| forward_half_width(|mu| p.eval(mu)))
             .collect();
+        let back_bound: Vec<f64> = atm
+            .phases
+            .iter()
+            .map(|p| backward_max(|mu| p.eval(mu)))
+            .collect();
+        // A layer's backward bound: per class, its scatterers' bounds weighted by their shares
+        // of the class's scattering (a bound on the mixture, whose largest value cannot exceed
+        // that sum); the largest over the classes bounds their mean, `mean_phase`.
+        setup.backward_max = (0..n_layers)
+            .map(|l| {
+                setup
+                    .classes
+                    .iter()
+                    .filter(|c| c.sigma[l] > 0.0)
+                    .map(|c| {
+                        let k = c.channel;
+                        atm.components[l]
+                            .iter()
+                            .map(|comp| comp.sigma_s_per_m[k] * back_bound[comp.phase[k] as usize])
+                            .sum::<f64>()
+                            * c.inv_sigma[l]
+                    })
+                    .fold(0.0f64, f64::max)
+            })
+            .collect();
+        // DDIS's margin in a layer: the widest forward half-width among its forward-peaked
+        // scatterers (a droplet's, not the air's around it), at least DDIS_MARGIN_MIN_RAD.
         setup.ddis_cos = (0..n_layers)
             .map(|l| {
                 let margin = if setup.forward_peaked[l] {
                     setup
                         .classes
                         .iter()
-                        .map(|c| forward_half_width(|mu| setup.mixture_phase(l, c.channel, mu)))
+                        .flat_map(|c| {
+                            atm.components[l]
+                                .iter()
+                                .map(move |comp| comp.phase[c.channel])
+                        })
+                        .filter(|&i| atm.phases[i as usize].eval(1.0) > DDIS_FORWARD_PEAK)
+                        .map(|i| half_width[i as usize])
                         .fold(DDIS_MARGIN_MIN_RAD, f64::max)
                 } else {
                     DDIS_MARGIN_MIN_RAD
