@@ -666,10 +666,10 @@ impl Setup<'_> {
 
     /// Altitude (and its layer) at which a photon leaving a point of cumulative class-`c`
     /// scattering optical depth `t0` with direction cosine μ ≠ 0 has accumulated τ*.
-    #[inline]
     ///
     /// `hint` is the layer the flight starts in: the collision is usually in it (always, in a
     /// single cloud layer), and checking it first spares the search.
+    #[inline]
     fn altitude_at_tau(
         &self,
         c: usize,
