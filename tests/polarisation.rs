@@ -506,3 +506,82 @@ albedo = [0.3, 0.5]
     }
     assert!(lit >= 4, "{lit} bins with a return");
 }
+
+/// Channel combinations of a polarised run (laser line-shape samples are combined so): an
+/// identity combination is its channel, co- and cross-polarised returns and their covariance
+/// included, and an on − off combination folded batch by batch has the variance its parts and
+/// their co-moment give, var(a − b) = var a + var b − 2 cov(a, b). Two channels, so that the
+/// second channel's and the second combination's places in the accumulator are exercised
+/// (with one, an index k and −k coincide).
+#[test]
+fn polarised_combinations_carry_their_channels_returns_and_covariances() {
+    use lidarsim::returns::Combination;
+    let two = SPHERES.replace(
+        "[[channel]]\nname = \"532\"\nwavelength_nm = 532.0",
+        "[[channel]]\nname = \"532\"\nwavelength_nm = 532.0\n[[channel]]\nname = \"1064\"\nwavelength_nm = 1064.0",
+    );
+    let text = scene_text(&lidar("linear", "[1.0, 10.0]", "0.0", &two).replace(
+        "extinction_per_km = 10.0",
+        "number_density_per_cm3 = 1000.0",
+    ));
+    let combination = |name: &str, terms: Vec<(usize, f64)>| Combination {
+        name: name.into(),
+        terms,
+    };
+    let mc = run(&text, 20_000, |o| {
+        o.combinations = vec![
+            combination("on", vec![(0, 1.0)]),
+            combination("off", vec![(1, 1.0)]),
+            combination("diff", vec![(0, 1.0), (1, -1.0)]),
+        ];
+        o.combination_pairs = vec![(0, 1), (0, 2)];
+    });
+    let close = |a: f64, b: f64| (a - b).abs() <= 1e-12 * a.abs().max(b.abs());
+    let pol = mc.polarised.as_ref().expect("polarised run");
+    let (ch, cb) = (&pol.channels, pol.combined.as_ref().expect("combinations"));
+    let totals = mc.combined.as_ref().expect("combinations");
+    let bins = ch.co.bins_per_channel();
+    let mut covariances = 0;
+    for k in 0..2 {
+        for i in 0..bins {
+            let j = k * bins + i;
+            for (a, b) in [(&ch.co, &cb.co), (&ch.cross, &cb.cross)] {
+                assert!(close(a.energy_j[j], b.energy_j[j]), "channel {k} bin {i}");
+                assert!(close(a.stderr_j[j], b.stderr_j[j]), "channel {k} bin {i}");
+            }
+            assert!(
+                close(mc.returns.energy_j[j], totals.energy_j[j])
+                    && close(mc.returns.stderr_j[j], totals.stderr_j[j]),
+                "channel {k} bin {i}: total"
+            );
+            assert!(
+                close(ch.cov_j2[j], cb.cov_j2[j]),
+                "channel {k} bin {i}: cov(co, cross) {:e} against the combination's {:e}",
+                ch.cov_j2[j],
+                cb.cov_j2[j]
+            );
+            covariances += usize::from(ch.cov_j2[j] != 0.0);
+        }
+    }
+    let mut judged = 0;
+    for f in 0..totals.fov_full_angle_mrad.len() {
+        for g in 0..totals.range_m.len() {
+            for o in 0..totals.orders.len() {
+                let var_on = totals.covariance_j2(0, 0, f, g, o).unwrap();
+                let var_off = totals.covariance_j2(1, 1, f, g, o).unwrap();
+                let cov = totals.covariance_j2(0, 1, f, g, o).unwrap();
+                let se = totals.stderr_j[totals.index(2, f, g, o)];
+                if se > 0.0 && cov != 0.0 {
+                    judged += 1;
+                    let from_parts = var_on + var_off - 2.0 * cov;
+                    assert!(
+                        (from_parts / (se * se) - 1.0).abs() < 1e-6,
+                        "fov {f} gate {g} order {o}: {from_parts:e} against {:e}",
+                        se * se
+                    );
+                }
+            }
+        }
+    }
+    assert!(covariances >= 20 && judged >= 20, "{covariances} {judged}");
+}

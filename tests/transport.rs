@@ -358,6 +358,34 @@ pub(crate) fn assert_histories_end_once(what: &str, s: &RunStats) {
          escaped, {} by roulette, {} with zero weight)",
         s.photons, s.splits, s.cut, s.escaped, s.roulette_kills, s.zero_weight
     );
+    // A collision makes at most one local estimate, and so does a flight that meets the
+    // surface, which then reflects or collides before it.
+    let most = 2 * s.collisions + s.surface_reflections;
+    assert!(
+        s.local_estimates <= most,
+        "{what}: {} local estimates from {} collisions and {} reflections",
+        s.local_estimates,
+        s.collisions,
+        s.surface_reflections
+    );
+}
+
+/// A photon whose flight meets no scatterer before the last gate escapes: under a slab whose
+/// base is above the last gate every history ends so on its first flight, with no collision
+/// and no return (exact counts, whatever the variance reductions).
+#[test]
+fn histories_that_meet_no_scatterer_escape() {
+    let scene = scene_text(
+        &SLAB
+            .replace("SSA", "1.0")
+            .replace("end_m = 10000001.0", "end_m = 901.0")
+            .replace("width_m = 10000000.0", "width_m = 100.0"),
+    );
+    let mc = run(&scene, 5_000, |_| {});
+    let s = &mc.stats;
+    assert_histories_end_once("under the slab", s);
+    assert_eq!((s.photons, s.escaped, s.collisions), (5_000, 5_000, 0));
+    assert!(mc.returns.energy_j.iter().all(|e| *e == 0.0));
 }
 
 /// The same slab seen from above, over a Lambertian surface of albedo 0.3: energy is conserved
