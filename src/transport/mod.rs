@@ -1315,6 +1315,105 @@ mod tests {
     use super::*;
     use crate::particles::phase::{HenyeyGreenstein, PhaseFunction};
 
+    /// Layers `(base_m, top_m)` of two channels at 1064 nm with extinctions `[a, b]` km⁻¹ and
+    /// HG asymmetries `[g_a, g_b]`, no air.
+    fn two_channel_atmosphere(
+        layers: &[(f64, f64)],
+        ext: [f64; 2],
+        g: [f64; 2],
+    ) -> OpticalAtmosphere {
+        let mut text = String::from(
+            "[lidar]\naltitude_m = 0.0\nzenith_angle_deg = 0.0\npulse_energy_j = 1.0\n\
+             beam_divergence_full_angle_mrad = 0.0\ntelescope_diameter_m = 1.0\n\
+             optical_efficiency = 1.0\nfov_full_angle_mrad = 1.0\n\
+             [[channel]]\nname = \"a\"\nwavelength_nm = 1064.0\n\
+             [[channel]]\nname = \"b\"\nwavelength_nm = 1064.0\n\
+             [gates]\nstart_m = 100.0\nend_m = 5000.0\nwidth_m = 100.0\n",
+        );
+        for (i, (base, top)) in layers.iter().enumerate() {
+            text += &format!(
+                "[[layer]]\nname = \"l{i}\"\nbase_m = {base}\ntop_m = {top}\n\
+                 extinction_per_km = [{}, {}]\nsingle_scattering_albedo = 1.0\n\
+                 phase = [{{ kind = \"henyey_greenstein\", g = {} }}, \
+                 {{ kind = \"henyey_greenstein\", g = {} }}]\n",
+                ext[0], ext[1], g[0], g[1]
+            );
+        }
+        let scene = crate::scene::Scene::from_toml(std::path::Path::new("classes.toml"), &text)
+            .expect("scene");
+        OpticalAtmosphere::build(&scene).expect("optics")
+    }
+
+    /// Scattering classes by their documented rule (`scatter_classes`): two channels share one
+    /// where the columns' scattering optical depths differ by at most 0.5 and, in every layer
+    /// of optical depth above 0.1, every scatterer's coefficients are within a factor 2 and its
+    /// phase functions within a factor 2 at every angle.
+    #[test]
+    fn scatter_classes_follow_their_rule() {
+        let cloud = [(1000.0, 1300.0)];
+        let three = [(1000.0, 1300.0), (1300.0, 1600.0), (1600.0, 1900.0)];
+        let cases: [(&str, &[(f64, f64)], [f64; 2], [f64; 2], Vec<usize>); 7] = [
+            // τ 0.3 and 0.45: within a factor 2, alike.
+            ("factor 1.5", &cloud, [1.0, 1.5], [0.5, 0.5], vec![0]),
+            // τ 0.12 and 0.39: the columns are close, the coefficients not.
+            ("factor 3.25", &cloud, [0.4, 1.3], [0.5, 0.5], vec![0, 1]),
+            (
+                "factor 3.25, the other way",
+                &cloud,
+                [1.3, 0.4],
+                [0.5, 0.5],
+                vec![0, 1],
+            ),
+            // τ 0.03 and 0.09: too thin for the coefficients to matter.
+            ("thin, factor 3", &cloud, [0.1, 0.3], [0.5, 0.5], vec![0]),
+            // P(0°) 6 against 190.
+            ("g 0.5 and 0.9", &cloud, [1.0, 1.0], [0.5, 0.9], vec![0, 1]),
+            // Columns 4.5 and 4.95 through three layers: each layer alike, the columns close.
+            (
+                "three layers, close",
+                &three,
+                [5.0, 5.5],
+                [0.5, 0.5],
+                vec![0],
+            ),
+            // Columns 4.5 and 5.13: each layer alike (factor 1.14), the columns 0.63 apart.
+            (
+                "three layers, apart",
+                &three,
+                [5.0, 5.7],
+                [0.5, 0.5],
+                vec![0, 1],
+            ),
+        ];
+        for (what, layers, ext, g, expect) in cases {
+            let atm = two_channel_atmosphere(layers, ext, g);
+            assert!(!atm.grey_scattering, "{what}");
+            assert_eq!(scatter_classes(&atm), expect, "{what}");
+        }
+    }
+
+    /// Phase functions alike within a factor 2 at every angle: a table equal to isotropic
+    /// scattering within 2× at 0° and 180° but 4× it at 90° is not alike (the scan must reach
+    /// the angles between the poles); HG g = 0.5 and 0.55 are (their ratio stays in 0.72–1.32).
+    #[test]
+    fn similar_phase_looks_at_every_angle() {
+        use crate::particles::phase::TabulatedPhase;
+        let iso = PhaseFunction::Isotropic;
+        let bump = PhaseFunction::Tabulated(Box::new(
+            TabulatedPhase::from_angles(
+                &[0.0, 80.0, 90.0, 100.0, 180.0],
+                &[1.0, 1.0, 6.0, 1.0, 1.0],
+            )
+            .unwrap(),
+        ));
+        assert!(bump.eval(1.0) > 0.5 && bump.eval(-1.0) > 0.5 && bump.eval(0.0) > 2.0);
+        assert!(!similar_phase(&iso, &bump));
+        assert!(similar_phase(&iso, &iso));
+        let hg = |g| PhaseFunction::HenyeyGreenstein(HenyeyGreenstein::new(g).unwrap());
+        assert!(similar_phase(&hg(0.5), &hg(0.55)));
+        assert!(!similar_phase(&hg(0.5), &hg(0.9)));
+    }
+
     /// The forward half-width of Henyey-Greenstein phase functions against the closed form:
     /// P(Θ)/P(0) = [(1 − g)²/(1 + g² − 2g cos Θ)]^{3/2} = ½ at
     /// cos Θ = (1 + g² − 2^{2/3}(1 − g)²)/(2g); isotropic scattering never falls to half.
