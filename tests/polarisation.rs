@@ -585,3 +585,31 @@ fn polarised_combinations_carry_their_channels_returns_and_covariances() {
     }
     assert!(covariances >= 20 && judged >= 20, "{covariances} {judged}");
 }
+
+/// Single scattering of a polarised run where air and cloud share layers (two scatterers in a
+/// layer: the scattering matrix is their mixture, weighted by their shares of the layer's
+/// scattering): co + cross of order 1 equals the lidar equation, in every gate of the air and
+/// the cloud resolved to 10 % (within the shared tolerance of `check_order1`).
+#[test]
+fn polarised_single_scattering_through_air_and_cloud_is_the_lidar_equation() {
+    let cloud = r#"
+[[layer]]
+name = "cloud"
+base_m = 1500.0
+top_m = 1700.0
+extinction_per_km = 2.0
+single_scattering_albedo = 1.0
+phase = { kind = "henyey_greenstein", g = 0.7 }
+"#;
+    let scene = scene_text(&air("linear", "[1.0, 20.0]", "0.0", cloud));
+    let mc = run(&scene, 40_000, |_| {});
+    let (judged, with_signal) = crate::transport::check_order1(
+        "air and cloud, linear",
+        &mc.returns,
+        &crate::transport::analytic(&scene),
+    );
+    assert!(
+        judged >= 16 && with_signal >= 20,
+        "{judged} of {with_signal}"
+    );
+}

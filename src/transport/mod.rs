@@ -1352,7 +1352,9 @@ mod tests {
     fn scatter_classes_follow_their_rule() {
         let cloud = [(1000.0, 1300.0)];
         let three = [(1000.0, 1300.0), (1300.0, 1600.0), (1600.0, 1900.0)];
-        let cases: [(&str, &[(f64, f64)], [f64; 2], [f64; 2], Vec<usize>); 7] = [
+        // What, layers, extinctions [km⁻¹], asymmetries, the classes expected.
+        type Case<'a> = (&'a str, &'a [(f64, f64)], [f64; 2], [f64; 2], Vec<usize>);
+        let cases: [Case; 7] = [
             // τ 0.3 and 0.45: within a factor 2, alike.
             ("factor 1.5", &cloud, [1.0, 1.5], [0.5, 0.5], vec![0]),
             // τ 0.12 and 0.39: the columns are close, the coefficients not.
