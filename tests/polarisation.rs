@@ -613,3 +613,27 @@ phase = { kind = "henyey_greenstein", g = 0.7 }
         "{judged} of {with_signal}"
     );
 }
+
+/// (d) again where two kinds of scatterer share layers: non-depolarising dipoles through 3 km
+/// and a layer of spheres inside them, whose scattering matrix is then the two's mixture
+/// weighted by their shares of the scattering. Both kinds have Jones matrices symmetric in
+/// backscattering, so their mixture obeys δ_C = 2δ_L/(1 − δ_L) too (Mishchenko & Hovenier
+/// 1995), in orders 2 and 3+ and the total.
+#[test]
+fn dipoles_mixed_with_spheres_obey_mishchenko_hovenier() {
+    let spheres = r#"
+[[layer]]
+name = "spheres"
+base_m = 1000.0
+top_m = 1200.0
+extinction_per_km = 2.0
+particles = { distribution = "lognormal", median_radius_um = 0.3, sigma_g = 1.5, refractive_index = "1.45+0.0i" }
+"#;
+    let body = format!("{DIPOLES}{spheres}");
+    let scene = |pol: &str| scene_text(&lidar_355(pol, "20.0", "20.0", &body));
+    let lin = run(&scene("linear"), 100_000, |_| {});
+    let circ = run(&scene("circular"), 100_000, |o| o.seed = 2);
+    let orders = [Order::Exactly(2), Order::AtLeast(3), Order::Total];
+    let judged = assert_mishchenko_hovenier(&lin, &circ, &orders);
+    assert!(judged >= 15, "{judged}");
+}

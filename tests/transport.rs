@@ -469,6 +469,10 @@ fn batches_traced_apart_and_folded_in_order_equal_the_run() {
     assert_eq!(parts.flux_stderr, whole.flux_stderr);
     assert_eq!(parts.stats, whole.stats);
     assert!(plan.fold().finish(0.0, 1).is_err(), "no batch folded");
+    // A batch of another shape (its bins cut short, its flux tally right) is refused.
+    let mut short = plan.trace_batch(0);
+    short.bins.pop();
+    assert!(plan.fold().add(short).is_err(), "a batch of another shape");
 }
 
 /// A cloud 300 m thick whose extinction differs 2500-fold between two channels: optical depth
