@@ -1316,12 +1316,12 @@ mod tests {
     use crate::particles::phase::{HenyeyGreenstein, PhaseFunction};
 
     /// Layers `(base_m, top_m)` of two channels at 1064 nm with extinctions `[a, b]` km⁻¹ and
-    /// HG asymmetries `[g_a, g_b]`, no air.
+    /// HG asymmetries `[g_a, g_b]`, no air: the scene and its optics.
     fn two_channel_atmosphere(
         layers: &[(f64, f64)],
         ext: [f64; 2],
         g: [f64; 2],
-    ) -> OpticalAtmosphere {
+    ) -> (crate::scene::Scene, OpticalAtmosphere) {
         let mut text = String::from(
             "[lidar]\naltitude_m = 0.0\nzenith_angle_deg = 0.0\npulse_energy_j = 1.0\n\
              beam_divergence_full_angle_mrad = 0.0\ntelescope_diameter_m = 1.0\n\
@@ -1341,7 +1341,48 @@ mod tests {
         }
         let scene = crate::scene::Scene::from_toml(std::path::Path::new("classes.toml"), &text)
             .expect("scene");
-        OpticalAtmosphere::build(&scene).expect("optics")
+        let atm = OpticalAtmosphere::build(&scene).expect("optics");
+        (scene, atm)
+    }
+
+    /// Where a collision lands (`Setup::altitude_at_tau`), by its documented rule at the ties:
+    /// a target optical depth exactly on a layer edge is in the layer above going up (the last
+    /// edge at or below it) and in the layer below going down (the last edge strictly below);
+    /// at the column's very top it is in the top layer (capped), whatever layer the flight
+    /// starts in (`hint`, checked first). Three layers of optical depth 0.5 (cumulative 0,
+    /// 0.5, 1, 1.5), so every target is exact.
+    #[test]
+    fn collisions_on_layer_edges_land_by_the_documented_rule() {
+        let three = [(1000.0, 2000.0), (2000.0, 3000.0), (3000.0, 4000.0)];
+        let (scene, atm) = two_channel_atmosphere(&three, [0.5, 0.5], [0.5, 0.5]);
+        let opts = TransportOptions::from_scene(&scene);
+        let plan = Plan::new(&scene, &atm, &opts).expect("plan");
+        let s = &plan.setup;
+        let cum = s.classes[0].cum.clone();
+        let e = atm.edges_m.clone();
+        let n = cum.len() - 1;
+        assert_eq!(n, 3);
+        for hint in [0, 1, 2, n] {
+            // Up from the bottom to edge 2: layer 2, at its base.
+            assert_eq!(
+                s.altitude_at_tau(0, cum[0], 1.0, cum[2], hint),
+                (e[2], 2),
+                "{hint}"
+            );
+            // Down from the top to edge 2: layer 1, at its top.
+            let tau = cum[n] - cum[2];
+            assert_eq!(
+                s.altitude_at_tau(0, cum[n], -1.0, tau, hint),
+                (e[2], 1),
+                "{hint}"
+            );
+            // Up to the very top: the top layer.
+            assert_eq!(
+                s.altitude_at_tau(0, cum[0], 1.0, cum[n], hint),
+                (e[n], n - 1),
+                "{hint}"
+            );
+        }
     }
 
     /// Scattering classes by their documented rule (`scatter_classes`): two channels share one
@@ -1388,7 +1429,7 @@ mod tests {
             ),
         ];
         for (what, layers, ext, g, expect) in cases {
-            let atm = two_channel_atmosphere(layers, ext, g);
+            let (_, atm) = two_channel_atmosphere(layers, ext, g);
             assert!(!atm.grey_scattering, "{what}");
             assert_eq!(scatter_classes(&atm), expect, "{what}");
         }
