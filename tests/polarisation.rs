@@ -172,6 +172,17 @@ fn assert_mishchenko_hovenier(lin: &McResult, circ: &McResult, orders: &[Order])
     judged
 }
 
+/// An HG cloud (g = 0.8) 1500–1700 m, optical depth 1, for [`air`].
+const HG_CLOUD: &str = r#"
+[[layer]]
+name = "cloud"
+base_m = 1500.0
+top_m = 1700.0
+extinction_per_km = 5.0
+single_scattering_albedo = 0.99
+phase = { kind = "henyey_greenstein", g = 0.8 }
+"#;
+
 /// (e) A polarised run's intensity is the scalar run's where polarisation cannot change it:
 /// through Henyey-Greenstein scatterers, which stand in as non-depolarising matrices, co +
 /// cross of a linearly polarised run equals the unpolarised run's total of the same seed in
@@ -184,17 +195,8 @@ fn assert_mishchenko_hovenier(lin: &McResult, circ: &McResult, orders: &[Order])
 /// the air in these scenes by +15 to +20 % (`docs/transport.md`, "Polarisation").
 #[test]
 fn polarised_intensity_equals_the_scalar_run_through_non_depolarising_scatterers() {
-    let cloud = r#"
-[[layer]]
-name = "cloud"
-base_m = 1500.0
-top_m = 1700.0
-extinction_per_km = 5.0
-single_scattering_albedo = 0.99
-phase = { kind = "henyey_greenstein", g = 0.8 }
-"#;
     let no_air = |pol: &str| {
-        air(pol, "[1.0, 20.0]", "0.5", cloud).replace(
+        air(pol, "[1.0, 20.0]", "0.5", HG_CLOUD).replace(
             "layer_thickness_m = 100.0",
             "layer_thickness_m = 100.0\nrayleigh = false",
         )
@@ -592,16 +594,7 @@ fn polarised_combinations_carry_their_channels_returns_and_covariances() {
 /// the cloud resolved to 10 % (within the shared tolerance of `check_order1`).
 #[test]
 fn polarised_single_scattering_through_air_and_cloud_is_the_lidar_equation() {
-    let cloud = r#"
-[[layer]]
-name = "cloud"
-base_m = 1500.0
-top_m = 1700.0
-extinction_per_km = 2.0
-single_scattering_albedo = 1.0
-phase = { kind = "henyey_greenstein", g = 0.7 }
-"#;
-    let scene = scene_text(&air("linear", "[1.0, 20.0]", "0.0", cloud));
+    let scene = scene_text(&air("linear", "[1.0, 20.0]", "0.0", HG_CLOUD));
     let mc = run(&scene, 40_000, |_| {});
     let (judged, with_signal) = crate::transport::check_order1(
         "air and cloud, linear",
