@@ -48,12 +48,11 @@ pub(crate) const ALIGNMENT_MAX_COPIES: usize = 64;
 /// DDIS is used where the scattering point is seen from the receiver within the widest field
 /// of view plus a margin: the widest forward-peak half-width of the layer's forward-peaked
 /// scatterers (the angle at which a phase function falls to half its forward value; C.1
-/// droplets at 1064 nm: 37.5 mrad), at
-/// least this [rad]. A photon scattered there can still reach the fields of view lower down in
-/// one forward scattering, and without DDIS's weight its natural turns into the forward peak
-/// toward the receiver are the spikes DDIS exists to remove; much further out, a photon sent
-/// toward the receiver stays outside the fields of view (the line to the receiver keeps its
-/// angle to the axis). Chosen on C.1 (`validation/ms_efficiency`, 28 Nov): margins of 20–40
+/// droplets at 1064 nm: 37.5 mrad), at least this [rad]. A photon scattered there can still
+/// reach the fields of view lower down in one forward scattering, and without DDIS's weight
+/// its natural turns into the forward peak toward the receiver are the spikes DDIS exists to
+/// remove; much further out, a photon sent toward the receiver stays outside the fields of
+/// view (the line to the receiver keeps its angle to the axis). Chosen on C.1 (`validation/ms_efficiency`, 28 Nov): margins of 20–40
 /// mrad gave the 10 mrad field of view's deep gates 1.4× the figure of merit of 10 mrad, 60
 /// mrad no more for 10 % more time.
 const DDIS_MARGIN_MIN_RAD: f64 = 0.01;
