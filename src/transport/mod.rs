@@ -52,9 +52,9 @@ pub(crate) const ALIGNMENT_MAX_COPIES: usize = 64;
 /// reach the fields of view lower down in one forward scattering, and without DDIS's weight
 /// its natural turns into the forward peak toward the receiver are the spikes DDIS exists to
 /// remove; much further out, a photon sent toward the receiver stays outside the fields of
-/// view (the line to the receiver keeps its angle to the axis). Chosen on C.1 (`validation/ms_efficiency`, 28 Nov): margins of 20–40
-/// mrad gave the 10 mrad field of view's deep gates 1.4× the figure of merit of 10 mrad, 60
-/// mrad no more for 10 % more time.
+/// view (the line to the receiver keeps its angle to the axis). Chosen on C.1
+/// (`validation/ms_efficiency`, 28 Nov): margins of 20–40 mrad gave the 10 mrad field of
+/// view's deep gates 1.4× the figure of merit of 10 mrad, 60 mrad no more for 10 % more time.
 const DDIS_MARGIN_MIN_RAD: f64 = 0.01;
 /// Steps in μ of the scan for a phase function's largest backward value ([`backward_max`]).
 const BACKWARD_MAX_STEPS: usize = 20_000;
@@ -682,26 +682,23 @@ impl Setup<'_> {
         let n = cls.sigma.len();
         // The layer: the last edge at or below the target going up (strictly below it going
         // down), capped to the last layer; edges below the first count as the first.
-        let starts_below = |l: usize| {
+        let below = |cum: f64| {
             if mu > 0.0 {
-                cls.cum[l] <= target
+                cum <= target
             } else {
-                cls.cum[l] < target
+                cum < target
             }
         };
         let l = if hint < n
-            && (hint == 0 || starts_below(hint))
-            && (hint == n - 1 || !starts_below(hint + 1))
+            && (hint == 0 || below(cls.cum[hint]))
+            && (hint == n - 1 || !below(cls.cum[hint + 1]))
         {
             hint
         } else {
-            if mu > 0.0 {
-                cls.cum.partition_point(|c| *c <= target)
-            } else {
-                cls.cum.partition_point(|c| *c < target)
-            }
-            .saturating_sub(1)
-            .min(n - 1)
+            cls.cum
+                .partition_point(|c| below(*c))
+                .saturating_sub(1)
+                .min(n - 1)
         };
         let e = &self.atm.edges_m;
         let z = if cls.sigma[l] > 0.0 {
@@ -1313,21 +1310,18 @@ pub fn run_plan(plan: &Plan) -> Result<McResult, TransportError> {
 mod tests {
     use super::*;
     use crate::particles::phase::{HenyeyGreenstein, PhaseFunction};
+    use crate::transport::testing::{CLOUD, edited, with_setup};
 
-    /// Layers `(base_m, top_m)` of two channels at 1064 nm with extinctions `[a, b]` km⁻¹ and
-    /// HG asymmetries `[g_a, g_b]`, no air: the scene and its optics.
-    fn two_channel_atmosphere(
-        layers: &[(f64, f64)],
-        ext: [f64; 2],
-        g: [f64; 2],
-    ) -> (crate::scene::Scene, OpticalAtmosphere) {
-        let mut text = String::from(
-            "[lidar]\naltitude_m = 0.0\nzenith_angle_deg = 0.0\npulse_energy_j = 1.0\n\
-             beam_divergence_full_angle_mrad = 0.0\ntelescope_diameter_m = 1.0\n\
-             optical_efficiency = 1.0\nfov_full_angle_mrad = 1.0\n\
-             [[channel]]\nname = \"a\"\nwavelength_nm = 1064.0\n\
-             [[channel]]\nname = \"b\"\nwavelength_nm = 1064.0\n\
-             [gates]\nstart_m = 100.0\nend_m = 5000.0\nwidth_m = 100.0\n",
+    /// [`CLOUD`]'s lidar with a second channel "b" at 1064 nm, over layers `(base_m, top_m)`
+    /// of extinctions `[a, b]` km⁻¹ and HG asymmetries `[g_a, g_b]` in the two channels, no air.
+    fn two_channel_scene(layers: &[(f64, f64)], ext: [f64; 2], g: [f64; 2]) -> String {
+        let head = CLOUD.split("[[layer]]").next().unwrap_or_default();
+        let mut text = edited(
+            head,
+            &[(
+                "wavelength_nm = 1064.0\n",
+                "wavelength_nm = 1064.0\n[[channel]]\nname = \"b\"\nwavelength_nm = 1064.0\n",
+            )],
         );
         for (i, (base, top)) in layers.iter().enumerate() {
             text += &format!(
@@ -1338,10 +1332,7 @@ mod tests {
                 ext[0], ext[1], g[0], g[1]
             );
         }
-        let scene = crate::scene::Scene::from_toml(std::path::Path::new("classes.toml"), &text)
-            .expect("scene");
-        let atm = OpticalAtmosphere::build(&scene).expect("optics");
-        (scene, atm)
+        text
     }
 
     /// Where a collision lands (`Setup::altitude_at_tau`), by its documented rule at the ties:
@@ -1353,35 +1344,36 @@ mod tests {
     #[test]
     fn collisions_on_layer_edges_land_by_the_documented_rule() {
         let three = [(1000.0, 2000.0), (2000.0, 3000.0), (3000.0, 4000.0)];
-        let (scene, atm) = two_channel_atmosphere(&three, [0.5, 0.5], [0.5, 0.5]);
-        let opts = TransportOptions::from_scene(&scene);
-        let plan = Plan::new(&scene, &atm, &opts).expect("plan");
-        let s = &plan.setup;
-        let cum = s.classes[0].cum.clone();
-        let e = atm.edges_m.clone();
-        let n = cum.len() - 1;
-        assert_eq!(n, 3);
-        for hint in [0, 1, 2, n] {
-            // Up from the bottom to edge 2: layer 2, at its base.
-            assert_eq!(
-                s.altitude_at_tau(0, cum[0], 1.0, cum[2], hint),
-                (e[2], 2),
-                "{hint}"
-            );
-            // Down from the top to edge 2: layer 1, at its top.
-            let tau = cum[n] - cum[2];
-            assert_eq!(
-                s.altitude_at_tau(0, cum[n], -1.0, tau, hint),
-                (e[2], 1),
-                "{hint}"
-            );
-            // Up to the very top: the top layer.
-            assert_eq!(
-                s.altitude_at_tau(0, cum[0], 1.0, cum[n], hint),
-                (e[n], n - 1),
-                "{hint}"
-            );
-        }
+        with_setup(
+            &two_channel_scene(&three, [0.5, 0.5], [0.5, 0.5]),
+            |s, atm| {
+                let cum = &s.classes[0].cum;
+                let e = &atm.edges_m;
+                let n = cum.len() - 1;
+                assert_eq!(n, 3);
+                for hint in [0, 1, 2, n] {
+                    // Up from the bottom to edge 2: layer 2, at its base.
+                    assert_eq!(
+                        s.altitude_at_tau(0, cum[0], 1.0, cum[2], hint),
+                        (e[2], 2),
+                        "{hint}"
+                    );
+                    // Down from the top to edge 2: layer 1, at its top.
+                    let tau = cum[n] - cum[2];
+                    assert_eq!(
+                        s.altitude_at_tau(0, cum[n], -1.0, tau, hint),
+                        (e[2], 1),
+                        "{hint}"
+                    );
+                    // Up to the very top: the top layer.
+                    assert_eq!(
+                        s.altitude_at_tau(0, cum[0], 1.0, cum[n], hint),
+                        (e[n], n - 1),
+                        "{hint}"
+                    );
+                }
+            },
+        );
     }
 
     /// Scattering classes by their documented rule (`scatter_classes`): two channels share one
@@ -1428,9 +1420,10 @@ mod tests {
             ),
         ];
         for (what, layers, ext, g, expect) in cases {
-            let (_, atm) = two_channel_atmosphere(layers, ext, g);
-            assert!(!atm.grey_scattering, "{what}");
-            assert_eq!(scatter_classes(&atm), expect, "{what}");
+            with_setup(&two_channel_scene(layers, ext, g), |_, atm| {
+                assert!(!atm.grey_scattering, "{what}");
+                assert_eq!(scatter_classes(atm), expect, "{what}");
+            });
         }
     }
 
