@@ -79,7 +79,7 @@ struct PhotonCopy {
 }
 
 /// Per-batch state: buffers reused by every photon of the batch.
-pub(crate) struct Tracer<'a> {
+pub(crate) struct Tracer<'a, const ONE_CHANNEL: bool> {
     s: &'a Setup<'a>,
     /// Weights per channel.
     w: Vec<f64>,
@@ -127,9 +127,10 @@ pub(crate) enum End {
     Cut,
 }
 
-impl<'a> Tracer<'a> {
+impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
     pub fn new(s: &'a Setup<'a>) -> Self {
         let nch = s.atm.n_channels;
+        debug_assert!(!ONE_CHANNEL || nch == 1);
         Tracer {
             s,
             w: vec![0.0; nch],
@@ -156,10 +157,24 @@ impl<'a> Tracer<'a> {
         }
     }
 
+    /// Channels traced: a compile-time 1 in the one-channel tracer, whose per-channel loops
+    /// then compile to straight-line code (12 % fewer instructions a scattering event on C.1,
+    /// callgrind).
+    #[inline(always)]
+    fn nch(&self) -> usize {
+        if ONE_CHANNEL { 1 } else { self.w.len() }
+    }
+
+    /// Scattering classes (`super::scatter_classes`): one channel has one.
+    #[inline(always)]
+    fn ncls(&self) -> usize {
+        if ONE_CHANNEL { 1 } else { self.s.classes.len() }
+    }
+
     /// Update the cumulative optical depths for altitude z.
     #[inline]
     fn set_altitude(&mut self, z: f64) {
-        for k in 0..self.w.len() {
+        for k in 0..self.nch() {
             let (s, a) = self.s.atm.cumulative_tau(z, k);
             self.ts[k] = s;
             self.ta[k] = a;
@@ -171,7 +186,8 @@ impl<'a> Tracer<'a> {
         self.stats.photons += 1;
         // Emit: from the receiver position into the divergence cone around the axis.
         let dir = self.s.emit_direction(rng.random(), rng.random());
-        self.w.iter_mut().for_each(|w| *w = 1.0);
+        let nch = self.nch();
+        self.w[..nch].fill(1.0);
         self.cross_mis = 1.0;
         if let Some(an) = &self.s.analyser {
             let (e1, p) = stokes::emitted(
@@ -184,7 +200,7 @@ impl<'a> Tracer<'a> {
         }
         self.follow(self.s.receiver, dir, 0.0, 0, None, rng);
         while let Some(copy) = self.split.pop() {
-            self.w.copy_from_slice(&copy.w);
+            self.w[..nch].copy_from_slice(&copy.w);
             self.cross_mis = copy.cross_mis;
             if self.s.analyser.is_some() {
                 self.e1 = copy.e1;
@@ -212,7 +228,7 @@ impl<'a> Tracer<'a> {
             .atm
             .grey_scattering
             .then(|| s.mixture_matrix(layer, 0, mu));
-        for k in 0..self.w.len() {
+        for k in 0..self.nch() {
             let m = grey.unwrap_or_else(|| s.mixture_matrix(layer, k, mu));
             let (r, p) = stokes::reduce(turn.apply(self.pol[k], &m), m.f11);
             self.w[k] *= r;
@@ -235,7 +251,7 @@ impl<'a> Tracer<'a> {
             .atm
             .grey_scattering
             .then(|| s.mixture_matrix(layer, 0, mu));
-        let n = self.w.len();
+        let n = self.nch();
         for k in 0..n {
             if self.le[k] == 0.0 {
                 continue;
@@ -250,7 +266,7 @@ impl<'a> Tracer<'a> {
     /// Largest channel weight.
     #[inline]
     fn w_max(&self) -> f64 {
-        self.w.iter().fold(0.0f64, |m, w| m.max(*w))
+        self.w[..self.nch()].iter().fold(0.0f64, |m, w| m.max(*w))
     }
 
     /// Follow a photon (weights in `self.w`) from `pos` along `dir` after a path `path` and
@@ -267,7 +283,8 @@ impl<'a> Tracer<'a> {
     ) {
         let s = self.s;
         let atm = s.atm;
-        let nch = self.w.len();
+        let nch = self.nch();
+        let ncls = self.ncls();
         self.set_altitude(pos.z);
         let mut carried: Option<(DVec3, f64)> = None;
         // The layer the photon is in (where the next flight starts): the first guess of the
@@ -306,10 +323,8 @@ impl<'a> Tracer<'a> {
             // Crossing estimate: from a scattering, the next collision's local estimate in the
             // fields of view it serves, in expectation over where along this flight the
             // collision falls inside them; the walk's own collision then does not score there.
-            let crossing = prev.is_some()
-                && !horizontal
-                && s.classes.len() == 1
-                && s.crossing_from < self.shape.n_fov;
+            let crossing =
+                prev.is_some() && !horizontal && ncls == 1 && s.crossing_from < self.shape.n_fov;
             if crossing {
                 let scale = self.cross_mis;
                 self.score_crossing(
@@ -332,7 +347,6 @@ impl<'a> Tracer<'a> {
             } else {
                 0
             };
-            let ncls = s.classes.len();
             for c in 0..ncls {
                 self.cls_tau[c] = if horizontal {
                     if inside {
@@ -578,7 +592,7 @@ impl<'a> Tracer<'a> {
                 (DVec3::ZERO, 0.0)
             };
             let ddis = d_rx > 0.0
-                && s.classes.iter().any(|c| {
+                && s.classes[..ncls].iter().any(|c| {
                     let k = c.channel;
                     s.tau_to_receiver(pos.z, omega_rx.z, d_rx, layer, k, self.ts[k] + self.ta[k])
                         < super::DDIS_MAX_TAU
@@ -682,8 +696,8 @@ impl<'a> Tracer<'a> {
             };
             if n_split > 1 {
                 let f = 1.0 / n_split as f64;
-                self.w.iter_mut().for_each(|w| *w *= f);
-                self.pre.copy_from_slice(&self.w);
+                self.w[..nch].iter_mut().for_each(|w| *w *= f);
+                self.pre[..nch].copy_from_slice(&self.w[..nch]);
                 self.stats.splits += (n_split - 1) as u64;
                 if s.analyser.is_some() {
                     self.e1_pre = self.e1;
@@ -699,7 +713,7 @@ impl<'a> Tracer<'a> {
             self.cross_mis = 1.0;
             for j in 0..n_split {
                 if j > 0 {
-                    self.w.copy_from_slice(&self.pre);
+                    self.w[..nch].copy_from_slice(&self.pre[..nch]);
                     if s.analyser.is_some() {
                         self.e1 = self.e1_pre;
                         self.pol.copy_from_slice(&self.pol_pre);
@@ -779,13 +793,14 @@ impl<'a> Tracer<'a> {
     /// error bar, by any practical number of photons.
     #[inline]
     fn split_heavy(&mut self, pos: DVec3, dir: DVec3, path: f64, order: u32, prev: Prev) {
-        let w_max = self.w.iter().fold(0.0f64, |m, w| m.max(*w));
+        let w_max = self.w_max();
         let n = self.copies(w_max, SPLIT_ABOVE, usize::MAX);
         if n == 1 {
             return;
         }
         let f = 1.0 / n as f64;
-        self.w.iter_mut().for_each(|w| *w *= f);
+        let nch = self.nch();
+        self.w[..nch].iter_mut().for_each(|w| *w *= f);
         for _ in 1..n {
             self.push_copy(pos, dir, path, order, prev);
         }
@@ -813,7 +828,7 @@ impl<'a> Tracer<'a> {
             dir,
             path,
             order,
-            w: self.w.clone(),
+            w: self.w[..self.nch()].to_vec(),
             prev,
             cross_mis: self.cross_mis,
             e1: self.e1,
@@ -847,7 +862,7 @@ impl<'a> Tracer<'a> {
     ) -> bool {
         let s = self.s;
         let atm = s.atm;
-        let nch = self.w.len();
+        let nch = self.nch();
         let mut tau_min = f64::INFINITY;
         for (c, cls) in s.classes.iter().enumerate() {
             let tau = if horizontal {
@@ -933,13 +948,14 @@ impl<'a> Tracer<'a> {
     /// and its weights are divided by that; unbiased for any importance. False if it dies.
     #[inline]
     fn roulette(&mut self, importance: f64, rng: &mut Rng) -> bool {
-        let w_max = self.w.iter().fold(0.0f64, |m, w| m.max(*w)) * importance;
+        let w_max = self.w_max() * importance;
         if w_max >= ROULETTE_BELOW {
             return true;
         }
         let p = w_max / ROULETTE_SURVIVOR;
         if rng.random::<f64>() < p {
-            self.w.iter_mut().for_each(|w| *w /= p);
+            let nch = self.nch();
+            self.w[..nch].iter_mut().for_each(|w| *w /= p);
             true
         } else {
             self.stats.roulette_kills += 1;
@@ -1014,7 +1030,7 @@ impl<'a> Tracer<'a> {
             }
         }
         let base = self.shape.base(gate, s.order_bin(order), annulus);
-        let nch = self.w.len();
+        let nch = self.nch();
         if s.analyser.is_some() {
             // The scattering matrix instead of the phase function.
             for k in 0..nch {
@@ -1112,7 +1128,7 @@ impl<'a> Tracer<'a> {
         let mu_s = dir.dot(omega);
         let grey = atm.grey_scattering;
         let polarised = s.analyser.is_some();
-        let nch = self.w.len();
+        let nch = self.nch();
         let i0 = layer * nch;
         // The phase function per channel below, or (polarised) the scattering matrix.
         let p_ref = if grey && !polarised {
@@ -1198,7 +1214,7 @@ impl<'a> Tracer<'a> {
         let p0 = s.mixture_phase(layer, 0, mu_in);
         let q = (1.0 - s.ddis_epsilon) * p0 + s.ddis_epsilon * p_b;
         let norm = 1.0 / (q + p_b);
-        for k in 0..self.w.len() {
+        for k in 0..self.nch() {
             let pk = if atm.grey_scattering {
                 p0
             } else {
@@ -1213,7 +1229,7 @@ impl<'a> Tracer<'a> {
             let grey = atm
                 .grey_scattering
                 .then(|| s.mixture_matrix(layer, 0, mu_in));
-            for k in 0..self.w.len() {
+            for k in 0..self.nch() {
                 let m = grey.unwrap_or_else(|| s.mixture_matrix(layer, k, mu_in));
                 let (r, p) = stokes::reduce(turn.apply(self.pol[k], &m), m.f11);
                 self.virt[k] *= r;
@@ -1257,7 +1273,7 @@ impl<'a> Tracer<'a> {
     fn score_cone(&mut self, p: &Prev, order: u32, rng: &mut Rng) {
         let s = self.s;
         let atm = s.atm;
-        let nch = self.w.len();
+        let nch = self.nch();
         let x = p.pos;
         // Through more than DDIS_MAX_TAU of vertical optical depth to the receiver's altitude
         // (in every channel) both legs together attenuate by more than e⁻³⁰.
@@ -1393,7 +1409,7 @@ impl<'a> Tracer<'a> {
         let geometric = omega.z / PI * cos_axis / d2;
         let base = self.shape.base(gate, s.order_bin(order), annulus);
         let layer = 0;
-        let n = self.w.len();
+        let n = self.nch();
         for k in 0..n {
             let (ts, ta) = s.atm.cumulative_tau(hit.z, k);
             let tau_back = s.tau_to_receiver(hit.z, omega.z, d, layer, k, ts + ta);
@@ -1412,7 +1428,7 @@ impl<'a> Tracer<'a> {
     /// w_k ∫ σ_a e^{−τ_ext(s)} ds, layer by layer.
     fn score_absorption(&mut self, z0: f64, mu: f64, s_end: f64) {
         let atm = self.s.atm;
-        let nch = self.w.len();
+        let nch = self.nch();
         for k in 0..nch {
             self.flux.absorbed[k] += self.w[k] * atm.absorbed_fraction(z0, mu, s_end, k);
         }
