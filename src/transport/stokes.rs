@@ -309,6 +309,58 @@ mod tests {
         );
     }
 
+    /// A beam of zero intensity carries no weight and no polarisation: a zero, finite reduced
+    /// vector, not 0/0. Light polarised along the scattering plane (q = 1 in its frame: e₁ = x
+    /// for z → x), scattered by dipoles at 90°, where F₁₂ = −F₁₁, has I = F₁₁ + F₁₂ q = 0.
+    #[test]
+    fn a_beam_of_zero_intensity_has_no_polarisation() {
+        let m = crate::particles::matrix::ScatteringMatrix::rayleigh(0.0).eval(0.0);
+        let s = Turn::new(DVec3::Z, DVec3::X, DVec3::X).apply([1.0, 0.0, 0.0], &m);
+        assert_eq!(s[0], 0.0);
+        assert_eq!(reduce(s, m.f11), (0.0, [0.0; 3]));
+        assert_eq!(reduce([-1e-300, 0.5, 0.0, 0.0], 1.0), (0.0, [0.0; 3]));
+    }
+
+    /// Emitted light's reference axis is a unit vector across its direction (the frame
+    /// convention), in the plane of the direction and the emitted axis, on the axis's side,
+    /// for a beam far off the pointing as well; along the axis, any axis across it.
+    #[test]
+    fn emitted_reference_axis_is_the_axis_across_the_beam() {
+        let axis = DVec3::X;
+        for dir in [
+            DVec3::Z,
+            DVec3::new(0.6, 0.0, 0.8),
+            DVec3::new(-0.3, 0.5, 0.7).normalize(),
+            DVec3::X,
+        ] {
+            for circular in [false, true] {
+                let (e1, p) = emitted(dir, axis, circular);
+                assert!((e1.length() - 1.0).abs() < 1e-15, "{dir}");
+                assert!(e1.dot(dir).abs() < 1e-15, "{dir}: e1 {e1}");
+                if dir != DVec3::X {
+                    assert!(e1.dot(axis) > 0.0 && e1.cross(axis).dot(dir).abs() < 1e-15);
+                }
+                let expected = if circular {
+                    [0.0, 0.0, 1.0]
+                } else {
+                    [1.0, 0.0, 0.0]
+                };
+                assert_eq!(p, expected);
+            }
+        }
+    }
+
+    /// A linear analyser whose axis lies along the returning beam sees no direction across it:
+    /// co and cross are half the intensity each, whatever the beam's polarisation.
+    #[test]
+    fn a_beam_along_the_analyser_axis_splits_evenly() {
+        let an = Analyser::Linear(DVec3::X);
+        for (omega, e1) in [(DVec3::X, DVec3::Y), (-DVec3::X, DVec3::Z)] {
+            let (co, cross) = an.toward(omega, e1).split([2.0, 1.5, -0.5, 0.3]);
+            assert_eq!((co, cross), (1.0, 1.0), "{omega}");
+        }
+    }
+
     /// Rayleigh scattering at 90° of unpolarised light polarises it fully perpendicular to the
     /// scattering plane: Q/I = −1 in the plane's frame (F₁₂ = −F₁₁ there for ρ = 0).
     #[test]
