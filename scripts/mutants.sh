@@ -6,8 +6,8 @@
 #
 # * The mutants are tested in a git worktree of HEAD (target/mutants/tree), in place, so the
 #   working tree is never touched and every run measures a commit; its builds go to
-#   target/mutants/target, release profile made incremental, without debug info: a mutant
-#   then rebuilds in about 10 s.
+#   target/mutants/target, release profile made incremental, without debug info, LTO or a
+#   single code-generation unit: a mutant then rebuilds in about 10 s.
 # * The whole test suite runs for every mutant, by cargo-nextest, which stops at the first
 #   failing test; a mutant's tests time out after 300 s.
 # * A file with at most N mutants (default 60) gets all of them; a larger one a round-robin
@@ -62,6 +62,9 @@ fi
 
 export CARGO_PROFILE_RELEASE_INCREMENTAL=true
 export CARGO_PROFILE_RELEASE_DEBUG=0
+# The release profile's whole-program optimisation would rebuild everything for every mutant.
+export CARGO_PROFILE_RELEASE_LTO=false
+export CARGO_PROFILE_RELEASE_CODEGEN_UNITS=16
 export CARGO_TARGET_DIR="$root/target/mutants/target"
 # The tests read "tests only" data from ../shared of the checkout; the worktree has none beside it.
 export LIDARSIM_SHARED="${LIDARSIM_SHARED:-$root/../shared}"
