@@ -537,6 +537,22 @@ mod tests {
 
     /// The molecular matrix of Hansen & Travis (1974) is physical for every depolarisation
     /// factor of air and beyond, ρ ∈ [0, 0.1]; at μ = ±1 it lies on (M3)'s boundary.
+    /// F₁₁ must be positive (the documented first check, by both checks): a row with F₁₁ = 0
+    /// exactly, and every other element 0, passes every inequality relative to F₁₁ but is
+    /// refused; so are F₁₁ < 0 and NaN.
+    #[test]
+    fn f11_must_be_positive() {
+        for f11 in [0.0, -0.0, -1e-300, -1.0, f64::NAN] {
+            let m = MatrixElements::non_depolarising(f11);
+            for v in [m.mueller_violation(1e-4), m.linear_mueller_violation(1e-4)] {
+                let v = v.unwrap_or_else(|| panic!("F11 = {f11} accepted"));
+                assert_eq!((v.element, v.inequality), ("F11", "F11 > 0"), "F11 = {f11}");
+            }
+        }
+        let tiny = MatrixElements::non_depolarising(1e-300);
+        assert_eq!(tiny.mueller_violation(1e-4), None);
+    }
+
     #[test]
     fn rayleigh_matrix_satisfies_the_mueller_inequalities() {
         for i in 0..=100 {
