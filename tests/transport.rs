@@ -330,17 +330,22 @@ fn slab_conserves_energy() {
 /// is cut adds up to what was emitted, within K_SIGMA of the parts' errors added in quadrature
 /// (conservative: the parts are anti-correlated).
 pub(crate) fn assert_energy_conserved(what: &str, mc: &McResult) {
+    assert_energy_conserved_in(what, mc, 0);
+}
+
+/// [`assert_energy_conserved`] in channel k.
+pub(crate) fn assert_energy_conserved_in(what: &str, mc: &McResult, k: usize) {
     let (f, e) = (&mc.flux, &mc.flux_stderr);
-    let total = f.up[0] + f.down[0] + f.absorbed[0] + f.cut[0];
+    let total = f.up[k] + f.down[k] + f.absorbed[k] + f.cut[k];
     let se =
-        (e.up[0].powi(2) + e.down[0].powi(2) + e.absorbed[0].powi(2) + e.cut[0].powi(2)).sqrt();
+        (e.up[k].powi(2) + e.down[k].powi(2) + e.absorbed[k].powi(2) + e.cut[k].powi(2)).sqrt();
     assert!(
         (total - 1.0).abs() <= K_SIGMA * se + 1e-9,
-        "{what}: energy {total} ± {se} (up {}, down {}, absorbed {}, cut {})",
-        f.up[0],
-        f.down[0],
-        f.absorbed[0],
-        f.cut[0]
+        "{what}, channel {k}: energy {total} ± {se} (up {}, down {}, absorbed {}, cut {})",
+        f.up[k],
+        f.down[k],
+        f.absorbed[k],
+        f.cut[k]
     );
 }
 
@@ -417,6 +422,76 @@ fn slab_over_a_surface_conserves_energy() {
             f.down[0]
         );
     }
+}
+
+/// The same slab over the ground with a second channel that scatters 100 times less: two
+/// scattering classes, each collision drawn from the mixture of their free-path densities and
+/// the surface branch taken by their mean collision probability (`photon.rs`); energy is
+/// conserved in both channels.
+#[test]
+fn two_scattering_classes_over_a_surface_conserve_energy() {
+    let text = edited(
+        SLAB,
+        &[
+            ("SSA", "0.9"),
+            (
+                "altitude_m = 0.0\nzenith_angle_deg = 0.0",
+                "altitude_m = 3000.0\nzenith_angle_deg = 180.0",
+            ),
+            (
+                "wavelength_nm = 1064.0\n",
+                "wavelength_nm = 1064.0\n[[channel]]\nname = \"b\"\nwavelength_nm = 1064.0\n",
+            ),
+            ("extinction_per_m = 4e-3", "extinction_per_m = [4e-3, 4e-5]"),
+        ],
+    ) + "[surface]\naltitude_m = 0.0\nalbedo = 0.3\n";
+    let scene = scene_text(&text);
+    let mc = run(&scene, 100_000, |o| o.flux_tally = true);
+    for k in 0..2 {
+        assert_energy_conserved_in("two classes over the ground", &mc, k);
+    }
+    assert_histories_end_once("two classes over the ground", &mc.stats);
+    assert!(mc.stats.surface_reflections > 0);
+}
+
+/// A horizontal beam inside the slab (zenith 90°): its first flight stays in the layer to the
+/// last gate, 10⁷ m away, so none of it passes uncollided (e^{−σ s} = 0) and energy is
+/// conserved with nothing cut.
+#[test]
+fn a_horizontal_beam_conserves_energy() {
+    let text = edited(
+        SLAB,
+        &[
+            ("SSA", "0.9"),
+            (
+                "altitude_m = 0.0\nzenith_angle_deg = 0.0",
+                "altitude_m = 1250.0\nzenith_angle_deg = 90.0",
+            ),
+        ],
+    );
+    let mc = run(&scene_text(&text), 20_000, |o| o.flux_tally = true);
+    assert_energy_conserved("a horizontal beam", &mc);
+    assert_histories_end_once("a horizontal beam", &mc.stats);
+    assert!(mc.flux.cut[0] < 1e-6, "cut {}", mc.flux.cut[0]);
+}
+
+/// Over bare ground, with no atmosphere, every photon meets the surface once, reflects and
+/// escapes: exact counts.
+#[test]
+fn over_bare_ground_every_photon_reflects_once_and_escapes() {
+    let text = HARD_TARGET
+        .split("[[layer]]")
+        .next()
+        .unwrap_or_default()
+        .to_string()
+        + "[surface]\naltitude_m = 0.0\nalbedo = 0.25\n";
+    let mc = run(&scene_text(&text), 5_000, |_| {});
+    let s = &mc.stats;
+    assert_histories_end_once("bare ground", s);
+    assert_eq!(
+        (s.photons, s.surface_reflections, s.escaped, s.collisions),
+        (5_000, 5_000, 5_000, 0)
+    );
 }
 
 /// Same scene and seed → the same numbers, bit for bit, at 1 and 2 threads.
