@@ -535,8 +535,6 @@ mod tests {
         }
     }
 
-    /// The molecular matrix of Hansen & Travis (1974) is physical for every depolarisation
-    /// factor of air and beyond, ρ ∈ [0, 0.1]; at μ = ±1 it lies on (M3)'s boundary.
     /// F₁₁ must be positive (the documented first check, by both checks): a row with F₁₁ = 0
     /// exactly, and every other element 0, passes every inequality relative to F₁₁ but is
     /// refused; so are F₁₁ < 0 and NaN.
@@ -553,6 +551,8 @@ mod tests {
         assert_eq!(tiny.mueller_violation(1e-4), None);
     }
 
+    /// The molecular matrix of Hansen & Travis (1974) is physical for every depolarisation
+    /// factor of air and beyond, ρ ∈ [0, 0.1]; at μ = ±1 it lies on (M3)'s boundary.
     #[test]
     fn rayleigh_matrix_satisfies_the_mueller_inequalities() {
         for i in 0..=100 {

@@ -1514,6 +1514,7 @@ mod tests {
             "{bound} against {at_90}"
         );
     }
+
     /// The tracer compiled for one channel is the general one with its per-channel loops
     /// unrolled: on one-channel scenes (a cloud seen from the ground with every estimator on,
     /// the same polarised, and a cloud over a reflecting surface seen from above) both give the
