@@ -393,6 +393,30 @@ fn histories_that_meet_no_scatterer_escape() {
     assert!(mc.returns.energy_j.iter().all(|e| *e == 0.0));
 }
 
+/// A pencil beam's first collision lies on the axis of the field of view and, with gates that
+/// span the whole path, inside a gate: with plain local estimates (no crossing estimate to
+/// take a flight's share first) and without range stratification (which would draw a share of
+/// first collisions uniformly over the 10 000 km gate, mostly outside the slab, where they end
+/// with zero weight), every photon makes at least one local estimate, and no collision more
+/// than one.
+#[test]
+fn every_first_collision_on_the_axis_makes_a_local_estimate() {
+    let scene = scene_text(&SLAB.replace("SSA", "0.9"));
+    let mc = run(&scene, 5_000, |o| {
+        plain_local_estimates(o);
+        o.range_stratification = 0.0;
+    });
+    let s = &mc.stats;
+    assert_histories_end_once("slab", s);
+    assert!(
+        s.photons <= s.local_estimates && s.local_estimates <= s.collisions,
+        "{} photons, {} local estimates, {} collisions",
+        s.photons,
+        s.local_estimates,
+        s.collisions
+    );
+}
+
 /// The same slab seen from above, over a Lambertian surface of albedo 0.3: energy is conserved
 /// too when photons meet the ground, where the collision forced before it leaves the surface
 /// its share of the absorption in expectation (`down` counts what the ground absorbs).
@@ -476,7 +500,8 @@ fn a_horizontal_beam_conserves_energy() {
 }
 
 /// Over bare ground, with no atmosphere, every photon meets the surface once, reflects and
-/// escapes: exact counts.
+/// escapes: exact counts. The beam (0.2 mrad) lies inside the wider field of view (0.4 mrad)
+/// and the ground inside the gates, so every reflection also makes a local estimate.
 #[test]
 fn over_bare_ground_every_photon_reflects_once_and_escapes() {
     let text = HARD_TARGET
@@ -492,6 +517,7 @@ fn over_bare_ground_every_photon_reflects_once_and_escapes() {
         (s.photons, s.surface_reflections, s.escaped, s.collisions),
         (5_000, 5_000, 5_000, 0)
     );
+    assert_eq!(s.local_estimates, 5_000);
 }
 
 /// Same scene and seed → the same numbers, bit for bit, at 1 and 2 threads.
