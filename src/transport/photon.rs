@@ -1472,10 +1472,12 @@ fn pick_component(
     if comps.len() == 1 {
         return 0;
     }
+    // x starts ≥ 0 and only a scatterer with σ_c > 0 can take it below 0, so the one returned
+    // scatters in this channel.
     let mut x = rng.random::<f64>() * sigma;
     for (j, comp) in comps.iter().enumerate() {
         x -= comp.sigma_s_per_m[k];
-        if x < 0.0 && comp.sigma_s_per_m[k] > 0.0 {
+        if x < 0.0 {
             return j;
         }
     }
