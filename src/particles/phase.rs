@@ -672,6 +672,46 @@ mod tests {
     }
 
     #[test]
+    fn tabulated_asymmetry_is_exact_for_a_linear_phase_function() {
+        // P(μ) = 1 + 3gμ is linear, so a table of it on any nodes is the function itself, and
+        // its mean cosine ½∫Pμ dμ is g exactly (to rounding). Uneven nodes, so that every term
+        // of the per-segment integral counts.
+        let g = 0.3;
+        let theta = [0.0, 10.0, 35.0, 60.0, 90.0, 125.0, 150.0, 171.0, 180.0];
+        let p: Vec<f64> = mu_nodes(&theta)
+            .iter()
+            .rev()
+            .map(|mu| 1.0 + 3.0 * g * mu)
+            .collect();
+        let tab = TabulatedPhase::from_angles(&theta, &p).unwrap();
+        assert!((tab.asymmetry() - g).abs() < 1e-15, "{}", tab.asymmetry());
+        for mu in [-1.0, -0.3, 0.0, 0.55, 1.0] {
+            let e = tab.eval(mu);
+            assert!((e - (1.0 + 3.0 * g * mu)).abs() < 1e-15, "μ = {mu}: {e}");
+        }
+    }
+
+    #[test]
+    fn evaluation_guide_cells_start_where_documented() {
+        // 128 cells per binade of t from 2^−40 to 1: cell 1 + 128k + m starts at
+        // t = 2^(k−40)(1 + m/128), exactly; below 2^−40 is cell 0, and t = 1 the last cell.
+        assert_eq!(eval_guide_cell(0.0), 0);
+        assert_eq!(eval_guide_cell_start(0), 0.0);
+        for k in 0..EVAL_GUIDE_BINADES as i32 {
+            for m in 0..128 {
+                let c = 1 + 128 * k as usize + m;
+                let t = 2f64.powi(k - 40) * (1.0 + m as f64 / 128.0);
+                let below_t = f64::from_bits(t.to_bits() - 1);
+                assert_eq!(eval_guide_cell(t), c, "t = {t:e}");
+                assert_eq!(eval_guide_cell(below_t), c - 1, "t = {below_t:e}");
+                assert_eq!(eval_guide_cell_start(c), t, "cell {c}");
+            }
+        }
+        assert_eq!(eval_guide_cell(1.0), EVAL_GUIDE_CELLS - 1);
+        assert_eq!(eval_guide_cell_start(EVAL_GUIDE_CELLS - 1), 1.0);
+    }
+
+    #[test]
     fn dense_evaluator_reproduces_every_node_of_the_c1_table() {
         // The evaluator must resolve the forward peak and the glory at 180° (nodes 0.01° apart)
         // exactly as tabulated: every node, after the normalisation to exactly 4π.
