@@ -14,8 +14,6 @@
 //! | double HG | f HG(g₁) + (1−f) HG(g₂) | pick a lobe, then exact |
 //! | tabulated | linear in μ between nodes | inverse CDF (quadratic in a segment) with a guide table |
 
-use std::f64::consts::PI;
-
 use thiserror::Error;
 
 use super::table::PhaseTable;
@@ -531,12 +529,6 @@ pub(crate) fn mu_nodes(theta_deg: &[f64]) -> Vec<f64> {
             }
         })
         .collect()
-}
-
-/// The ratio P/(4π): density of scattered directions per steradian.
-#[inline]
-pub fn per_steradian(p_4pi: f64) -> f64 {
-    p_4pi * (0.25 / PI)
 }
 
 #[cfg(test)]
