@@ -670,10 +670,9 @@ mod tests {
         // of the per-segment integral counts.
         let g = 0.3;
         let theta = [0.0, 10.0, 35.0, 60.0, 90.0, 125.0, 150.0, 171.0, 180.0];
-        let p: Vec<f64> = mu_nodes(&theta)
+        let p: Vec<f64> = theta
             .iter()
-            .rev()
-            .map(|mu| 1.0 + 3.0 * g * mu)
+            .map(|t: &f64| 1.0 + 3.0 * g * t.to_radians().cos())
             .collect();
         let tab = TabulatedPhase::from_angles(&theta, &p).unwrap();
         assert!((tab.asymmetry() - g).abs() < 1e-15, "{}", tab.asymmetry());
