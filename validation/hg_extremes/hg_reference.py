@@ -31,3 +31,16 @@ for g in GS:
         d = 1 - mu if g > 0 else 1 + mu
         print("    (%r, %r, %s)," % (g, u, repr(float(d))))
 print("];")
+
+# The tails F(mu) and 1 - F(mu) of the CDF in mu, F = (1 - g^2)/(2g) [D^-1/2 - 1/(1+g)],
+# D = 1 + g^2 - 2 g mu, at mu = cos(theta) for angles theta (exact doubles, in radians) near
+# both poles: (g, theta, F, 1 - F) for PhaseFunction::tails (28 Nov 2026).
+THETAS = [1e-9, 1e-6, 1e-3, 1.5707963267948966, 3.141591653589793, 3.1415926525897933]
+print("const HG_TAILS: [(f64, f64, f64, f64); %d] = [" % (len(GS) * len(THETAS)))
+for g in GS:
+    G = mpf(g)
+    for th in THETAS:
+        M = mp.cos(mpf(th))
+        F = (1 - G**2) / (2 * G) * (1 / mp.sqrt(1 + G**2 - 2 * G * M) - 1 / (1 + G))
+        print("    (%r, %r, %s, %s)," % (g, th, repr(float(F)), repr(float(1 - F))))
+print("];")
