@@ -12,6 +12,7 @@
 //! | optical atmosphere | [`optics`] | [`optics::OpticalAtmosphere`], the one input of transport |
 //! | Monte Carlo | [`transport`] | [`returns::Returns`] by channel, FOV, gate and order |
 //! | analytic single scatter | [`lidar_eq`] | [`returns::Returns`], order 1 |
+//! | the aperture seen from close by | [`aperture`] | the factors both estimators share |
 //! | what a scene does not need | [`skip`] | whether the Monte Carlo runs, and why |
 //!
 //! Beside the stages: [`output`] writes a command's files whole or not at all, and [`netcdf`]
@@ -23,6 +24,7 @@
 // would hide that. `!(x > 0.0)` is used on purpose: it is true for NaN as well.
 #![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod aperture;
 pub mod atmosphere;
 pub mod constants;
 #[cfg(feature = "mpi")]

@@ -16,6 +16,7 @@
 //! β and a field of view of half-angle α < β; 1 − exp(−2α²/β²) for a Gaussian beam of 1/e²
 //! half-angle β.
 
+use crate::aperture::{self, Aperture};
 use crate::optics::OpticalAtmosphere;
 use crate::particles::matrix::MatrixElements;
 use crate::returns::{Order, Returns, Source};
@@ -76,20 +77,31 @@ pub fn single_scatter_polarised(
         Polarisation::Circular => true,
     };
     let part = |cross: bool| {
-        move |atm: &OpticalAtmosphere, layer: usize, k: usize| -> f64 {
+        move |atm: &OpticalAtmosphere, layer: usize, k: usize, cap: Option<f64>| -> f64 {
             let total = atm.sigma_s_per_m[layer * atm.n_channels + k];
-            atm.components[layer]
-                .iter()
-                .map(|c| {
-                    let m = backscatter_matrix(atm, c.phase[k] as usize);
-                    let (co, x) = if circular {
-                        (0.5 * (m.f11 - m.f44), 0.5 * (m.f11 + m.f44))
-                    } else {
-                        (0.5 * (m.f11 + 2.0 * m.f12 + m.f22), 0.5 * (m.f11 - m.f22))
-                    };
-                    c.sigma_s_per_m[k] * if cross { x } else { co }
-                })
-                .sum::<f64>()
+            // Close to the receiver: the matrix scaled by the mean of F₁₁ over the aperture's
+            // cap over its value at 180° (`crate::aperture`).
+            let scale = cap.map_or(1.0, |alpha| {
+                let point = backscatter_phase(atm, layer, k, None);
+                if point > 0.0 {
+                    backscatter_phase(atm, layer, k, Some(alpha)) / point
+                } else {
+                    0.0
+                }
+            });
+            scale
+                * atm.components[layer]
+                    .iter()
+                    .map(|c| {
+                        let m = backscatter_matrix(atm, c.phase[k] as usize);
+                        let (co, x) = if circular {
+                            (0.5 * (m.f11 - m.f44), 0.5 * (m.f11 + m.f44))
+                        } else {
+                            (0.5 * (m.f11 + 2.0 * m.f12 + m.f22), 0.5 * (m.f11 - m.f22))
+                        };
+                        c.sigma_s_per_m[k] * if cross { x } else { co }
+                    })
+                    .sum::<f64>()
                 / total
         }
     };
@@ -106,14 +118,25 @@ fn backscatter_matrix(atm: &OpticalAtmosphere, i: usize) -> MatrixElements {
 
 /// Single-scatter returns with the backscatter phase function of a layer and channel given by
 /// `back` (per 4π) and the surface's echo times `surface_share`.
+///
+/// The beam is one ray along the axis, with the overlap of each field of view, unless the
+/// beam's cross-section spans altitudes that matter: where the spread of its rays in altitude
+/// at the last gate, r_end m sin θ (m the half-angle of the part of the beam inside a field of
+/// view, θ the zenith angle), exceeds [`RAY_SPREAD`] of a gate's vertical extent w |cos θ|
+/// (near-horizontal and slant beams with wide divergence; a horizontal beam at ground level,
+/// half of which is below the ground). The return is then the overlap-weighted mean over the
+/// rays of the beam's cross-section, each followed through the layers (and to the surface) on
+/// its own: E = E₀ η A ∫ w_f(ψ) E_ray(θ − ψ) dψ, ψ the ray's angle to the axis in the vertical
+/// plane and w_f the beam's irradiance inside field of view f integrated across that plane
+/// (`beam_rays`). Close to the receiver each ray's scatterers use the aperture's collected
+/// energy instead of the point value, as the Monte Carlo does (`crate::aperture`).
 fn single_scatter_of(
     scene: &Scene,
     atm: &OpticalAtmosphere,
-    back: impl Fn(&OpticalAtmosphere, usize, usize) -> f64,
+    back: impl Fn(&OpticalAtmosphere, usize, usize, Option<f64>) -> f64,
     surface_share: f64,
 ) -> Returns {
     let lidar = &scene.lidar;
-    let nch = scene.channels.len();
     let gates = &scene.gates;
     let range_m: Vec<f64> = (0..gates.count).map(|i| gates.centre_m(i)).collect();
     let mut out = Returns::zeros(
@@ -123,117 +146,276 @@ fn single_scatter_of(
         range_m,
         vec![Order::Exactly(1)],
     );
-    let z0 = lidar.altitude_m;
-    let mu = lidar.axis().z;
-    let horizontal = mu.abs() < 1e-12;
     let e0 = lidar.pulse_energy_j * lidar.optical_efficiency * lidar.telescope_area_m2();
-    let overlaps: Vec<f64> = lidar
-        .fov_full_angle_mrad
-        .iter()
-        .map(|f| overlap(lidar, *f))
-        .collect();
-
-    // The beam ends at the surface when it points down at one.
-    let surface_range = match &scene.surface {
-        Some(s) if mu < -1e-12 => Some((z0 - s.altitude_m) / -mu),
-        _ => None,
-    };
-    let r_max = surface_range.unwrap_or(f64::INFINITY);
-
-    // Ranges where the beam crosses layer edges.
-    let mut crossings: Vec<f64> = if horizontal {
-        Vec::new()
-    } else {
-        atm.edges_m
-            .iter()
-            .map(|e| (e - z0) / mu)
-            .filter(|r| *r > 0.0)
-            .collect()
-    };
-    crossings.sort_by(f64::total_cmp);
-
-    let t_rx: Vec<f64> = (0..nch)
-        .map(|k| {
-            let (s, a) = atm.cumulative_tau(z0, k);
-            s + a
-        })
-        .collect();
-    // One-way extinction optical depth from the lidar to range r along the axis.
-    let tau_at = |r: f64, k: usize| -> f64 {
-        if horizontal {
-            return atm.segment_tau_ext(z0, 0.0, r, k);
-        }
-        let (s, a) = atm.cumulative_tau(z0 + mu * r, k);
-        (s + a - t_rx[k]).abs() / mu.abs()
-    };
-    let inside = |z: f64| atm.n_layers() > 0 && z >= atm.bottom_m() && z <= atm.top_m();
-
-    for g in 0..gates.count {
-        let ra = gates.start_m + g as f64 * gates.width_m;
-        let rb = (ra + gates.width_m).min(r_max);
-        if rb <= ra {
-            continue;
-        }
-        let mut breaks = vec![ra];
-        breaks.extend(crossings.iter().copied().filter(|r| *r > ra && *r < rb));
-        breaks.push(rb);
-        for k in 0..nch {
-            let mut integral = 0.0;
-            for w in breaks.windows(2) {
-                let (a, b) = (w[0], w[1]);
-                let zm = z0 + mu * 0.5 * (a + b);
-                if !inside(zm) {
-                    continue;
-                }
-                let l = atm.layer_of(zm);
-                let i = l * nch + k;
-                let sigma_s = atm.sigma_s_per_m[i];
-                if sigma_s <= 0.0 {
-                    continue;
-                }
-                let beta = sigma_s * back(atm, l, k) / (4.0 * std::f64::consts::PI);
-                let sigma_e = sigma_s + atm.sigma_a_per_m[i];
-                let tau_a = tau_at(a, k);
-                // Sub-intervals: two-way optical depth ≤ 0.25 and width ≤ 5 % of the range.
-                let n = ((2.0 * sigma_e * (b - a) / 0.25).ceil())
-                    .max(((b - a) / (0.05 * a)).ceil())
-                    .clamp(1.0, 1e6) as usize;
-                let h = (b - a) / n as f64;
-                for j in 0..n {
-                    let c = a + (j as f64 + 0.5) * h;
-                    for (x, wgt) in GL_X.iter().zip(GL_W) {
-                        for r in [c - 0.5 * h * x, c + 0.5 * h * x] {
-                            let tau = tau_a + sigma_e * (r - a);
-                            integral += 0.5 * h * wgt * beta * (-2.0 * tau).exp() / (r * r);
-                        }
+    let ap = Aperture::new(lidar.telescope_diameter_m, atm);
+    let ray = |mu: f64| RayReturns::of(scene, atm, &ap, &back, e0, mu);
+    let nch = scene.channels.len();
+    match beam_rays(scene) {
+        None => {
+            // One ray along the axis; the overlap of each field of view.
+            let r = ray(lidar.axis().z);
+            let overlaps: Vec<f64> = lidar
+                .fov_full_angle_mrad
+                .iter()
+                .map(|f| overlap(lidar, *f))
+                .collect();
+            for g in 0..gates.count {
+                for k in 0..nch {
+                    for (f, o) in overlaps.iter().enumerate() {
+                        let idx = out.index(k, f, g, 0);
+                        out.energy_j[idx] += e0 * o * r.volume[g * nch + k];
                     }
                 }
             }
-            for (f, o) in overlaps.iter().enumerate() {
-                let idx = out.index(k, f, g, 0);
-                out.energy_j[idx] += e0 * o * integral;
+            if let Some((g, echo)) = r.surface(surface_share) {
+                for k in 0..nch {
+                    for (f, o) in overlaps.iter().enumerate() {
+                        let idx = out.index(k, f, g, 0);
+                        out.energy_j[idx] += echo[k] * o;
+                    }
+                }
             }
         }
-    }
-
-    // Hard target.
-    if let (Some(rs), Some(surface)) = (surface_range, &scene.surface) {
-        let x = (rs - gates.start_m) / gates.width_m;
-        if x >= 0.0 && (x as usize) < gates.count {
-            let g = x as usize;
-            for k in 0..nch {
-                let t2 = (-2.0 * tau_at(rs, k)).exp();
-                let e = e0 / (rs * rs) * surface.albedo[k] * mu.abs() / std::f64::consts::PI
-                    * t2
-                    * surface_share;
-                for (f, o) in overlaps.iter().enumerate() {
-                    let idx = out.index(k, f, g, 0);
-                    out.energy_j[idx] += e * o;
+        Some(rays) => {
+            for (mu, f, w) in rays {
+                let r = ray(mu);
+                for g in 0..gates.count {
+                    for k in 0..nch {
+                        let idx = out.index(k, f, g, 0);
+                        out.energy_j[idx] += e0 * w * r.volume[g * nch + k];
+                    }
+                }
+                if let Some((g, echo)) = r.surface(surface_share) {
+                    for k in 0..nch {
+                        let idx = out.index(k, f, g, 0);
+                        out.energy_j[idx] += echo[k] * w;
+                    }
                 }
             }
         }
     }
     out
+}
+
+/// Fraction of a gate's vertical extent that the spread of the beam's rays in altitude at the
+/// last gate may reach before the analytic equation follows the rays one by one.
+const RAY_SPREAD: f64 = 1e-3;
+/// Rays per field of view when the beam's cross-section is followed.
+const RAYS_PER_FOV: usize = 96;
+
+/// The rays of the beam's cross-section, `None` where the axis alone is right (see
+/// [`single_scatter_of`]): (vertical direction cosine, field of view, weight) with the weights
+/// of each field of view summing to its overlap.
+///
+/// In the far field the beam's irradiance at angle ψ⃗ from the axis is p(ψ⃗) (uniform inside the
+/// half-angle b, 1/(πb²); Gaussian, 2/(πb²) e^{−2ψ²/b²}), and a field of view of half-angle α
+/// accepts |ψ⃗| ≤ α. Only the component ψ in the vertical plane of the axis changes a ray's
+/// altitude (the other changes its zenith angle at second order), so the cross-section reduces
+/// to w(ψ) = ∫ p dψ⊥ over |ψ⃗| ≤ min(α, support): for the uniform beam 2√(m² − ψ²)/(πb²) with
+/// m = min(α, b); for the Gaussian (2/(πb²)) e^{−2ψ²/b²} · b √(π/2) erf(√2 √(α² − ψ²)/b). Each
+/// is integrated over ψ = m cos t, t ∈ [0, π], by the midpoint rule in t (the square-root edges
+/// become smooth), and scaled so its sum is the exact overlap.
+fn beam_rays(scene: &Scene) -> Option<Vec<(f64, usize, f64)>> {
+    let lidar = &scene.lidar;
+    let b = 0.5e-3 * lidar.beam_divergence_full_angle_mrad;
+    if b <= 0.0 {
+        return None;
+    }
+    let theta = lidar.zenith_angle_deg.to_radians();
+    let half = |fov: f64| {
+        let alpha = 0.5e-3 * fov;
+        match lidar.beam_profile {
+            BeamProfile::Uniform => alpha.min(b),
+            BeamProfile::Gaussian => alpha,
+        }
+    };
+    let m_max = lidar
+        .fov_full_angle_mrad
+        .iter()
+        .map(|f| half(*f))
+        .fold(0.0f64, f64::max);
+    let spread = scene.gates.end_m() * m_max * theta.sin().abs();
+    if !(spread > RAY_SPREAD * scene.gates.width_m * theta.cos().abs()) {
+        return None;
+    }
+    let mut rays = Vec::with_capacity(RAYS_PER_FOV * lidar.fov_full_angle_mrad.len());
+    for (f, fov) in lidar.fov_full_angle_mrad.iter().enumerate() {
+        let alpha = 0.5e-3 * fov;
+        let m = half(*fov);
+        let first = rays.len();
+        let mut sum = 0.0;
+        for j in 0..RAYS_PER_FOV {
+            let t = std::f64::consts::PI * (j as f64 + 0.5) / RAYS_PER_FOV as f64;
+            let psi = m * t.cos();
+            // w(ψ) dψ with dψ = m sin t dt (dt common to all nodes: cancels in the scaling).
+            let w = match lidar.beam_profile {
+                BeamProfile::Uniform => 2.0 * m * t.sin() / (std::f64::consts::PI * b * b),
+                BeamProfile::Gaussian => {
+                    let chord = (alpha * alpha - psi * psi).max(0.0).sqrt();
+                    (-2.0 * psi * psi / (b * b)).exp()
+                        * statrs::function::erf::erf(2f64.sqrt() * chord / b)
+                }
+            } * m
+                * t.sin();
+            sum += w;
+            rays.push(((theta - psi).cos(), f, w));
+        }
+        let o = overlap(lidar, *fov);
+        for r in &mut rays[first..] {
+            r.2 *= if sum > 0.0 { o / sum } else { 0.0 };
+        }
+    }
+    Some(rays)
+}
+
+/// The single-scatter returns of one ray from the lidar with vertical direction cosine μ: the
+/// volume integral of every gate and channel (index g · channels + k; times E₀ η A and the
+/// overlap, an energy), and where the ray meets the surface its echo \[J per unit overlap\].
+struct RayReturns {
+    volume: Vec<f64>,
+    /// The gate of the surface echo and per channel its energy before the share: E₀ η A ρ_k
+    /// |μ|/π · T_k² times 1/R² (or, close by, 1/(R² + a²)).
+    echo: Option<(usize, Vec<f64>)>,
+}
+
+impl RayReturns {
+    fn of(
+        scene: &Scene,
+        atm: &OpticalAtmosphere,
+        ap: &Aperture,
+        back: &impl Fn(&OpticalAtmosphere, usize, usize, Option<f64>) -> f64,
+        e0: f64,
+        mu: f64,
+    ) -> Self {
+        let lidar = &scene.lidar;
+        let nch = scene.channels.len();
+        let gates = &scene.gates;
+        let z0 = lidar.altitude_m;
+        let horizontal = mu.abs() < 1e-12;
+        // The ray ends at the surface when it points down at one.
+        let surface_range = match &scene.surface {
+            Some(s) if mu < -1e-12 => Some((z0 - s.altitude_m) / -mu),
+            _ => None,
+        };
+        let r_max = surface_range.unwrap_or(f64::INFINITY);
+
+        // Ranges where the ray crosses layer edges.
+        let mut crossings: Vec<f64> = if horizontal {
+            Vec::new()
+        } else {
+            atm.edges_m
+                .iter()
+                .map(|e| (e - z0) / mu)
+                .filter(|r| *r > 0.0)
+                .collect()
+        };
+        crossings.sort_by(f64::total_cmp);
+
+        let t_rx: Vec<f64> = (0..nch)
+            .map(|k| {
+                let (s, a) = atm.cumulative_tau(z0, k);
+                s + a
+            })
+            .collect();
+        // One-way extinction optical depth from the lidar to range r along the ray.
+        let tau_at = |r: f64, k: usize| -> f64 {
+            if horizontal {
+                return atm.segment_tau_ext(z0, 0.0, r, k);
+            }
+            let (s, a) = atm.cumulative_tau(z0 + mu * r, k);
+            (s + a - t_rx[k]).abs() / mu.abs()
+        };
+        let inside = |z: f64| atm.n_layers() > 0 && z >= atm.bottom_m() && z <= atm.top_m();
+
+        let mut volume = vec![0.0; gates.count * nch];
+        for g in 0..gates.count {
+            let ra = gates.start_m + g as f64 * gates.width_m;
+            let rb = (ra + gates.width_m).min(r_max);
+            if rb <= ra {
+                continue;
+            }
+            let mut breaks = vec![ra];
+            breaks.extend(crossings.iter().copied().filter(|r| *r > ra && *r < rb));
+            breaks.push(rb);
+            for k in 0..nch {
+                let mut integral = 0.0;
+                for w in breaks.windows(2) {
+                    let (a, b) = (w[0], w[1]);
+                    let zm = z0 + mu * 0.5 * (a + b);
+                    if !inside(zm) {
+                        continue;
+                    }
+                    let l = atm.layer_of(zm);
+                    let i = l * nch + k;
+                    let sigma_s = atm.sigma_s_per_m[i];
+                    if sigma_s <= 0.0 {
+                        continue;
+                    }
+                    let beta = sigma_s * back(atm, l, k, None) / (4.0 * std::f64::consts::PI);
+                    // Close to the receiver (from the piece's start on), per node: the
+                    // aperture's collected energy, σ_s P̄(cap of α(r))/(4π) · Ω(r)/A.
+                    let near = a * a < ap.near_d2[l];
+                    let beta_near = |r: f64| {
+                        sigma_s * back(atm, l, k, Some(ap.half_angle(r)))
+                            / (4.0 * std::f64::consts::PI)
+                            * ap.solid_angle_per_area(r)
+                    };
+                    let sigma_e = sigma_s + atm.sigma_a_per_m[i];
+                    let tau_a = tau_at(a, k);
+                    // Sub-intervals: two-way optical depth ≤ 0.25 and width ≤ 5 % of the range.
+                    let n = ((2.0 * sigma_e * (b - a) / 0.25).ceil())
+                        .max(((b - a) / (0.05 * a)).ceil())
+                        .clamp(1.0, 1e6) as usize;
+                    let h = (b - a) / n as f64;
+                    for j in 0..n {
+                        let c = a + (j as f64 + 0.5) * h;
+                        for (x, wgt) in GL_X.iter().zip(GL_W) {
+                            for r in [c - 0.5 * h * x, c + 0.5 * h * x] {
+                                let tau = tau_a + sigma_e * (r - a);
+                                integral += if near {
+                                    0.5 * h * wgt * beta_near(r) * (-2.0 * tau).exp()
+                                } else {
+                                    0.5 * h * wgt * beta * (-2.0 * tau).exp() / (r * r)
+                                };
+                            }
+                        }
+                    }
+                }
+                volume[g * nch + k] = integral;
+            }
+        }
+
+        // Hard target.
+        let mut echo = None;
+        if let (Some(rs), Some(surface)) = (surface_range, &scene.surface) {
+            let x = (rs - gates.start_m) / gates.width_m;
+            if x >= 0.0 && (x as usize) < gates.count {
+                let near = rs * rs < ap.surface_near_d2;
+                let e: Vec<f64> = (0..nch)
+                    .map(|k| {
+                        let t2 = (-2.0 * tau_at(rs, k)).exp();
+                        if near {
+                            e0 * ap.lambertian_per_area(rs) * surface.albedo[k] * mu.abs()
+                                / std::f64::consts::PI
+                                * t2
+                        } else {
+                            e0 / (rs * rs) * surface.albedo[k] * mu.abs() / std::f64::consts::PI
+                                * t2
+                        }
+                    })
+                    .collect();
+                echo = Some((x as usize, e));
+            }
+        }
+        RayReturns { volume, echo }
+    }
+
+    /// The surface echo's gate and per channel factor, times `share`.
+    fn surface(&self, share: f64) -> Option<(usize, Vec<f64>)> {
+        self.echo
+            .as_ref()
+            .map(|(g, e)| (*g, e.iter().map(|v| v * share).collect()))
+    }
 }
 
 /// Upper bound on the multiple-scattering share of a scene's returns, per field of view and
@@ -362,14 +544,25 @@ pub fn multiple_scattering_bound(
     }
 }
 
-/// P(180°) of the scatterer mixture of a layer for channel k.
-fn backscatter_phase(atm: &OpticalAtmosphere, layer: usize, k: usize) -> f64 {
+/// P(180°) of the scatterer mixture of a layer for channel k; with `cap` = α, its mean over
+/// the cap of half-angle α about 180° (what an aperture of half-angle α collects,
+/// `crate::aperture`).
+fn backscatter_phase(atm: &OpticalAtmosphere, layer: usize, k: usize, cap: Option<f64>) -> f64 {
     let total = atm.sigma_s_per_m[layer * atm.n_channels + k];
-    atm.components[layer]
-        .iter()
-        .map(|c| c.sigma_s_per_m[k] * atm.phases[c.phase[k] as usize].backscatter())
-        .sum::<f64>()
-        / total
+    let comps = atm.components[layer].iter();
+    match cap {
+        None => {
+            comps
+                .map(|c| c.sigma_s_per_m[k] * atm.phases[c.phase[k] as usize].backscatter())
+                .sum::<f64>()
+                / total
+        }
+        Some(alpha) => aperture::mixture_band_mean(
+            comps.map(|c| (c.sigma_s_per_m[k], &*atm.phases[c.phase[k] as usize])),
+            total,
+            (std::f64::consts::PI - alpha, std::f64::consts::PI),
+        ),
+    }
 }
 
 #[cfg(test)]

@@ -8,7 +8,7 @@
 
 use std::time::Instant;
 
-use lidarsim::returns::Returns;
+use lidarsim::returns::{Order, Returns};
 use lidarsim::scene::Scene;
 use lidarsim::transport::McResult;
 
@@ -77,7 +77,30 @@ fn check(name: &str, s: &Scene, photons: u64, flux: bool) -> McResult {
     if flux {
         assert_energy_conserved(name, &mc);
     }
+    assert_received_at_most_emitted(name, s, r);
     mc
+}
+
+/// The energy received over all gates and orders in the widest field of view is at most the
+/// energy emitted times the optical efficiency (within 4 standard errors of the sum): the
+/// receiver is one of the ways energy leaves the scene, however close or peaked the scatterers.
+pub(crate) fn assert_received_at_most_emitted(name: &str, s: &Scene, r: &Returns) {
+    let widest = (0..r.fov_full_angle_mrad.len())
+        .max_by(|a, b| r.fov_full_angle_mrad[*a].total_cmp(&r.fov_full_angle_mrad[*b]))
+        .unwrap();
+    let emitted = s.lidar.pulse_energy_j * s.lidar.optical_efficiency;
+    for k in 0..r.channels.len() {
+        let (mut sum, mut var) = (0.0, 0.0);
+        for g in 0..r.range_m.len() {
+            sum += r.energy(k, widest, g, Order::Total).unwrap();
+            var += r.stderr(k, widest, g, Order::Total).unwrap().powi(2);
+        }
+        assert!(
+            sum - 4.0 * var.sqrt() <= emitted,
+            "{name}, channel {k}: received {sum:e} ± {:e} J of {emitted:e} J emitted",
+            var.sqrt()
+        );
+    }
 }
 
 /// A slab of optical depth 1000 (10 m⁻¹ over 100 m), conservative: no NaN, energy conserved,
@@ -221,4 +244,167 @@ fn absorption_optical_depth_50() {
             r.range_m[g]
         );
     }
+}
+
+/// Henyey-Greenstein and double Henyey-Greenstein layers at |g| up to 1 − 1e-12 (P(0°) or
+/// P(180°) up to 2e24) through whole runs with every variance reduction: every order finite and
+/// non-negative, order 1 equal to the lidar equation, energy conserved, and no more received than
+/// emitted. Before 28 Nov 2026 every order ≥ 2 was NaN (a cosine rounded past ±1 made the
+/// denominator negative), and at g → −1 the lidar equation returned 5e7 J from a 1 J pulse
+/// (P(180°) at one angle, for a peak 1e-8 rad wide inside an aperture of 1.5e-4 rad). The
+/// retro-reflecting layer (g → −1) sends back what it scatters: its reflectance for τ = 3 is
+/// τ/(1 + τ) = 3/4 (a one-dimensional walk), which the received total must match within 5 %.
+#[test]
+fn extreme_asymmetry_through_whole_runs() {
+    let cases = [
+        "{ kind = \"henyey_greenstein\", g = 0.99999999 }",
+        "{ kind = \"henyey_greenstein\", g = -0.99999999 }",
+        "{ kind = \"henyey_greenstein\", g = 0.999999999999 }",
+        "{ kind = \"henyey_greenstein\", g = -0.999999999999 }",
+        "{ kind = \"double_henyey_greenstein\", f = 0.5, g1 = 0.99, g2 = -0.99 }",
+        "{ kind = \"double_henyey_greenstein\", f = 0.9, g1 = 0.8, g2 = -0.9999999999 }",
+    ];
+    for phase in cases {
+        let s = scene(
+            0.0,
+            0.0,
+            (100.0, 3000.0, 50.0),
+            &layer(1000.0, 1300.0, 10.0, 1.0, phase),
+        );
+        let mc = check(phase, &s, 20_000, true);
+        if phase.contains("-0.99999999") && !phase.contains("double") {
+            let widest = 1;
+            let received: f64 = (0..mc.returns.range_m.len())
+                .map(|g| mc.returns.energy(0, widest, g, Order::Total).unwrap())
+                .sum();
+            assert!(
+                (received / 0.75 - 1.0).abs() < 0.05,
+                "{phase}: received {received}, a retro-reflector of τ = 3 returns 3/4"
+            );
+        }
+    }
+}
+
+/// A phase-function table whose backscatter (or forward) peak, 1e12 over 1e-6°, the nodes
+/// resolve but the receiver's aperture cannot: the local estimates and the lidar equation use
+/// the table's mean over the aperture's cone, so the returns are finite, the two agree, and a
+/// 1 J pulse returns less than 1 J (8.9e5 J from the Monte Carlo and 1.1e6 J from the lidar
+/// equation before 28 Nov 2026). The table integrates its peak exactly: the returned single
+/// scattering equals the probability mass of the peak's segment (the table's own nodes, the
+/// cosine of 179.999999° rounded as the double holds it) times ∫ σ e^{−2σz} dz over the layer,
+/// 1e-3 relative.
+#[test]
+fn unresolvable_table_peaks_are_integrated() {
+    let dir = std::env::temp_dir().join(format!("lidarsim-stress-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let header = "# lidarsim phase function table\n# wavelength_nm = none\n# refractive_index = none\n# distribution = none\n# source = crafted: a peak of 1e12 over 1e-6 degrees\ntheta_deg,phase_4pi\n";
+    for (name, rows) in [
+        ("back", "0,1\n90,1\n179.999999,1\n180,1e12\n"),
+        ("forward", "0,1e12\n0.000001,1\n90,1\n180,1\n"),
+    ] {
+        let path = dir.join(format!("{name}.csv"));
+        std::fs::write(&path, format!("{header}{rows}")).unwrap();
+        let phase = format!(
+            "{{ kind = \"table\", file = {:?} }}",
+            path.display().to_string()
+        );
+        let s = scene(
+            0.0,
+            0.0,
+            (100.0, 3000.0, 50.0),
+            &layer(1000.0, 1300.0, 10.0, 1.0, &phase),
+        );
+        let mc = check(name, &s, 20_000, true);
+        if name == "back" {
+            // The table, linear in μ: nodes μ = −1, m1 = cos(179.999999°) (as rounded), 0, 1.
+            let m1 = (179.999999f64).to_radians().cos();
+            let areas = [0.5 * (1e12 + 1.0) * (m1 + 1.0), 0.5 * 2.0 * (0.0 - m1), 1.0];
+            let total: f64 = areas.iter().sum();
+            let peak_probability = areas[0] / total;
+            // Single scattering from the layer: ∫ σ e^{−2σ(z − base)} dz = (1 − e^{−6})/2,
+            // σ = 0.01 /m over 300 m, all of the peak inside every aperture cone (≥ 1.1e-4 rad),
+            // telescope area times … the peak's share of each scattering.
+            let an = analytic(&s);
+            let single: f64 = (0..an.range_m.len())
+                .map(|g| an.energy(0, 0, g, Order::Exactly(1)).unwrap())
+                .sum();
+            let want = peak_probability * 0.5 * (1.0 - (-6.0f64).exp());
+            assert!(
+                (single / want - 1.0).abs() < 1e-3,
+                "{name}: single scattering {single:e}, the peak's share {want:e}"
+            );
+        }
+        drop(mc);
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A downward lidar above a white (albedo 1) or grey ground at heights from 1 mm to 10 m, in
+/// the US standard atmosphere, gates from 0.1 mm: the echo is the energy the aperture collects
+/// from a Lambertian surface, ρ a²/(R² + a²) of the pulse on the axis, never more than ρ, and
+/// the Monte Carlo equals the lidar equation. Before 28 Nov 2026 a lidar 1 mm above an
+/// albedo-1 ground received 2.25e4 J of a 1 J pulse (A/R² with R = 1 mm).
+#[test]
+fn surface_at_any_height_returns_at_most_its_albedo() {
+    for (i, (height, albedo)) in [
+        (1e-3, 1.0),
+        (1e-2, 1.0),
+        (0.1, 0.5),
+        (1.0, 1.0),
+        (10.0, 0.2),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let text = BASE
+            .replace("ALTITUDE", &format!("{height:?}"))
+            .replace("ZENITH", "180.0")
+            .replace("GATE_START", "0.0001")
+            .replace("GATE_END", "20.0001")
+            .replace("GATE_WIDTH", "0.5")
+            .replace(
+                "LAYERS",
+                &format!(
+                    "[atmosphere]\nstandard = \"us_standard\"\nlayer_thickness_m = 100.0\n[surface]\naltitude_m = 0.0\nalbedo = {albedo:?}\n"
+                ),
+            )
+            .replace("seed = 11", &format!("seed = {}", 70 + i));
+        let s = scene_text(&text);
+        let name = format!("{height} m above albedo {albedo}");
+        let mc = check(&name, &s, 20_000, true);
+        // The echo's gate holds the surface's return: a²/(R² + a²) ρ on the axis (the beam's
+        // 0.1 mrad makes cos θ = 1 to 5e-9), times the two-way transmission of the air (3e-5
+        // from 1 over 10 m at 1064 nm), plus the air's own return in the gate (below 2e-6 of
+        // the echo). Far from the aperture (a²/R² below `aperture::POINT_TOLERANCE`, 1e-3) the
+        // point value ρ A/(π R²) stands for it, within that tolerance.
+        let a = 0.15f64;
+        let want = albedo * a * a / (height * height + a * a);
+        let gate = ((height - 0.0001) / 0.5) as usize;
+        let an = analytic(&s);
+        let echo = an.energy(0, 1, gate, Order::Exactly(1)).unwrap();
+        assert!(
+            (echo / want - 1.0).abs() < lidarsim::aperture::POINT_TOLERANCE && echo <= albedo,
+            "{name}: echo {echo:e}, want {want:e}"
+        );
+        let m = mc.returns.energy(0, 1, gate, Order::Exactly(1)).unwrap();
+        assert!(
+            (m / echo - 1.0).abs() < 1e-4,
+            "{name}: MC echo {m:e}, analytic {echo:e}"
+        );
+    }
+}
+
+/// A lidar inside a dense cloud (σ = 20 /km, g = 0.85, ϖ = 1), gates from 0.5 m: scatterers a
+/// few centimetres from the aperture see it under tens of degrees, where the point-receiver
+/// estimate would return A/d² without bound. Finite, conserved, at most the emitted energy, and
+/// the single scattering equal to the lidar equation.
+#[test]
+fn lidar_inside_a_dense_cloud() {
+    let s = scene(
+        500.0,
+        0.0,
+        (0.5, 300.5, 1.0),
+        &layer(0.0, 1000.0, 20.0, 1.0, HG85),
+    );
+    check("inside a cloud", &s, 50_000, true);
 }

@@ -24,6 +24,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 use thiserror::Error;
 
+use crate::aperture::{self, Aperture};
 use crate::optics::OpticalAtmosphere;
 use crate::particles::matrix::{MatrixElements, ScatteringMatrix};
 use crate::returns::{Combination, Returns};
@@ -410,6 +411,9 @@ pub(crate) struct Setup<'a> {
     /// scattering matrix of each of the atmosphere's phase functions (same index).
     analyser: Option<stokes::Analyser>,
     matrices: Vec<ScatteringMatrix>,
+    /// The aperture seen from close by: where, per layer, the local estimates use the energy
+    /// it collects instead of the point-receiver value (`crate::aperture`).
+    aperture: Aperture,
 }
 
 /// The free-path density of one scattering class: its cumulative vertical scattering optical
@@ -565,6 +569,45 @@ impl Setup<'_> {
             .map(|c| c.sigma_s_per_m[k] * self.atm.phases[c.phase[k] as usize].eval(mu))
             .sum::<f64>()
             / total
+    }
+
+    /// The phase function a local estimate toward the receiver uses: its value at μ, or
+    /// close to the receiver its mean over the aperture's band (`crate::aperture`).
+    #[inline]
+    fn receiver_phase(&self, layer: usize, k: usize, mu: f64, band: Option<(f64, f64)>) -> f64 {
+        match band {
+            None => self.mixture_phase(layer, k, mu),
+            Some(b) => self.mixture_band(layer, k, b),
+        }
+    }
+
+    /// Polarised estimates close to the receiver: the factor that turns the scattering
+    /// matrix's F₁₁ at μ into its mean over the aperture's band (the other elements scaled
+    /// alike); 0 where F₁₁(μ) is 0.
+    fn band_over_point(&self, layer: usize, k: usize, mu: f64, band: Option<(f64, f64)>) -> f64 {
+        let Some(b) = band else { return 1.0 };
+        let point = self.mixture_phase(layer, k, mu);
+        if point > 0.0 {
+            self.mixture_band(layer, k, b) / point
+        } else {
+            0.0
+        }
+    }
+
+    /// [`Self::mixture_phase`] averaged over a band of scattering angles (`crate::aperture`).
+    fn mixture_band(&self, layer: usize, k: usize, band: (f64, f64)) -> f64 {
+        let atm = self.atm;
+        let comps = &atm.components[layer];
+        if comps.len() == 1 {
+            return atm.phases[comps[0].phase[k] as usize].band_mean(band.0, band.1);
+        }
+        aperture::mixture_band_mean(
+            comps
+                .iter()
+                .map(|c| (c.sigma_s_per_m[k], &*atm.phases[c.phase[k] as usize])),
+            atm.sigma_s_per_m[layer * atm.n_channels + k],
+            band,
+        )
     }
 
     /// The phase function at μ of the scatterers of `layer` in the density the scattering angle
@@ -910,6 +953,7 @@ impl<'a> Plan<'a> {
                 Polarisation::Circular => Some(stokes::Analyser::Circular),
             },
             matrices: atm.matrices.iter().map(|m| (**m).clone()).collect(),
+            aperture: Aperture::new(lidar.telescope_diameter_m, atm),
         };
         // Which layers get DDIS: a forward-peaked scatterer mixture (in any class).
         let mut setup = setup;

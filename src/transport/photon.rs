@@ -46,6 +46,7 @@ use super::cone::Prev;
 use super::stokes::{self, Reduced, Turn};
 use super::tally::{Flux, TallyShape};
 use super::{RunStats, Setup};
+use crate::aperture;
 use crate::rng::Rng;
 use crate::scene::BeamProfile;
 
@@ -1013,14 +1014,22 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
         };
         self.stats.local_estimates += 1;
         let mu_s = dir.dot(omega);
+        // Close to the receiver, the energy the aperture collects instead of the point value
+        // (`crate::aperture`): the phase function's mean over the band it spans, and its solid
+        // angle.
+        let band = (d2 < s.aperture.near_d2[layer])
+            .then(|| aperture::band(dir, omega, s.aperture.half_angle(d)));
         // Grey scattering: one phase function for every channel (polarised: a matrix, below).
         let grey = s.atm.grey_scattering;
         let p_ref = if grey && s.analyser.is_none() {
-            s.mixture_phase(layer, 0, mu_s)
+            s.receiver_phase(layer, 0, mu_s, band)
         } else {
             1.0
         };
-        let mut geometric = p_ref * (0.25 / PI) * cos_axis / d2;
+        let mut geometric = match band {
+            None => p_ref * (0.25 / PI) * cos_axis / d2,
+            Some(_) => p_ref * (0.25 / PI) * cos_axis * s.aperture.solid_angle_per_area(d),
+        };
         // Against the cone estimate from the previous collision (balance heuristic).
         if let Some(p) = mis {
             let p_cone = s.cone_density(p, x, annulus);
@@ -1036,6 +1045,9 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
             for k in 0..nch {
                 let tau = s.tau_to_receiver(x.z, omega.z, d, layer, k, self.ts[k] + self.ta[k]);
                 self.le[k] = self.w[k] * geometric * (-tau).exp();
+                if band.is_some() {
+                    self.le[k] *= s.band_over_point(layer, k, mu_s, band);
+                }
             }
             self.score_polarised(layer, dir, omega, base);
             return;
@@ -1047,7 +1059,7 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
             let tau = s.tau_to_receiver(x.z, omega.z, d, layer, k, self.ts[k] + self.ta[k]);
             let mut e = self.w[k] * geometric * (-tau).exp();
             if !grey {
-                e *= s.mixture_phase(layer, k, mu_s);
+                e *= s.receiver_phase(layer, k, mu_s, band);
             }
             self.bins[base + k] += e;
         }
@@ -1130,13 +1142,21 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
         let polarised = s.analyser.is_some();
         let nch = self.nch();
         let i0 = layer * nch;
+        // Close to the receiver, the aperture's band and solid angle (`crate::aperture`).
+        let band = (d * d < s.aperture.near_d2[layer])
+            .then(|| aperture::band(dir, omega, s.aperture.half_angle(d)));
         // The phase function per channel below, or (polarised) the scattering matrix.
         let p_ref = if grey && !polarised {
-            s.mixture_phase(layer, 0, mu_s)
+            s.receiver_phase(layer, 0, mu_s, band)
         } else {
             1.0
         };
-        let geometric = scale * total * p_ref * (0.25 / PI) * cos_axis / (d * d);
+        let geometric = match band {
+            None => scale * total * p_ref * (0.25 / PI) * cos_axis / (d * d),
+            Some(_) => {
+                scale * total * p_ref * (0.25 / PI) * cos_axis * s.aperture.solid_angle_per_area(d)
+            }
+        };
         let base = self.shape.base(gate, s.order_bin(order), annulus);
         for k in 0..nch {
             if self.w[k] == 0.0 {
@@ -1151,13 +1171,16 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
                 f *= if polarised {
                     ratio * (-(dts - tau_star)).exp()
                 } else {
-                    ratio * (-(dts - tau_star)).exp() * s.mixture_phase(layer, k, mu_s)
+                    ratio * (-(dts - tau_star)).exp() * s.receiver_phase(layer, k, mu_s, band)
                 };
             }
             let tau = s.tau_to_receiver(y.z, omega.z, d, layer, k, ts_y + ta_y);
             let e = self.w[k] * f * geometric * (-tau).exp();
             if polarised {
                 self.le[k] = e;
+                if band.is_some() {
+                    self.le[k] *= s.band_over_point(layer, k, mu_s, band);
+                }
             } else {
                 self.bins[base + k] += e;
             }
@@ -1322,8 +1345,18 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
         }
         let p_cone = p.cone_rate * ray.density(t) / (d_omega * r * r * n_cone as f64);
         let p_walk = s.walk_density(p, y, layer_y);
+        // Close to the receiver, the last leg's aperture band and solid angle
+        // (`crate::aperture`) instead of the point value.
+        let band = (r * r < s.aperture.near_d2[layer_y])
+            .then(|| aperture::band(e_xy, -omega, s.aperture.half_angle(r)));
         // f_k/(p_cone + p_walk), the geometric part of f_k: cos θ/(l² r²) and the 1/4π².
-        let factor = ct / (l2 * r * r) * (0.25 / PI) * (0.25 / PI) / (p_cone + p_walk);
+        let factor = match band {
+            None => ct / (l2 * r * r) * (0.25 / PI) * (0.25 / PI) / (p_cone + p_walk),
+            Some(_) => {
+                ct * s.aperture.solid_angle_per_area(r) / l2 * (0.25 / PI) * (0.25 / PI)
+                    / (p_cone + p_walk)
+            }
+        };
         if !(factor.is_finite() && factor > 0.0) {
             return;
         }
@@ -1332,7 +1365,7 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
         let (px0, py0) = if grey {
             (
                 s.mixture_phase(p.layer, 0, mu_x),
-                s.mixture_phase(layer_y, 0, mu_y),
+                s.receiver_phase(layer_y, 0, mu_y, band),
             )
         } else {
             (1.0, 1.0)
@@ -1364,7 +1397,10 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
             let tau_back = s.tau_to_receiver(y.z, -omega.z, r, layer_y, k, tsy + tay);
             if let Some((t1, t2, analysis)) = &polarised {
                 // The phase functions' product becomes I after x times co (cross) after y.
-                let e = self.w[k] * sigma_y * factor * (-(tau_xy + tau_back)).exp();
+                let mut e = self.w[k] * sigma_y * factor * (-(tau_xy + tau_back)).exp();
+                if band.is_some() {
+                    e *= s.band_over_point(layer_y, k, mu_y, band);
+                }
                 let s1 = t1.apply(self.pol[k], &s.mixture_matrix(p.layer, k, mu_x));
                 let (i1, p1) = stokes::reduce(s1, 1.0);
                 let s2 = t2.apply(p1, &s.mixture_matrix(layer_y, k, mu_y));
@@ -1378,7 +1414,7 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
             } else {
                 (
                     s.mixture_phase(p.layer, k, mu_x),
-                    s.mixture_phase(layer_y, k, mu_y),
+                    s.receiver_phase(layer_y, k, mu_y, band),
                 )
             };
             self.bins[base + k] +=
@@ -1406,7 +1442,13 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
             return;
         };
         self.stats.local_estimates += 1;
-        let geometric = omega.z / PI * cos_axis / d2;
+        // Close by, the cosine-weighted solid angle of the aperture: a surface never returns
+        // more than its albedo times what reaches it (`crate::aperture`).
+        let geometric = if d2 < s.aperture.surface_near_d2 {
+            omega.z / PI * cos_axis * s.aperture.lambertian_per_area(d)
+        } else {
+            omega.z / PI * cos_axis / d2
+        };
         let base = self.shape.base(gate, s.order_bin(order), annulus);
         let layer = 0;
         let n = self.nch();
