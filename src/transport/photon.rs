@@ -58,6 +58,22 @@ const MIN_COLLISION_PROBABILITY: f64 = 0.5;
 /// Direction cosines below this are treated as horizontal (the flight stays in its layer).
 const HORIZONTAL: f64 = 1e-12;
 
+/// Alignment splitting and the roulette's alignment importance weigh a photon by the phase
+/// function toward the receiver, P(Θ_rx), because a photon turned into a forward peak toward the
+/// receiver is rare and its next local estimate a spike. Two bounds keep their work bounded:
+/// * P(Θ_rx) counts at most `ALIGNMENT_MAX`. Splitting until w·P(Θ_rx) ≤ 2 makes about
+///   w·P/2 copies of a photon in all; the cap is above C.1's forward peak (760 at 1064 nm: its
+///   runs are unchanged) and keeps one of g = 0.99999999 (2e16) from splitting without end.
+/// * Neither is used in a layer whose phase function has a backward peak, above
+///   `ALIGNMENT_BACKWARD_MAX` anywhere in the backward hemisphere (C.1's droplets stay below
+///   1). There a photon heading away is sent back toward the receiver as often as it
+///   backscatters, and one sent back along the line of sight is aligned with the forward peak:
+///   alignment is common, not rare. A double Henyey-Greenstein of g = 0.99 and −0.99 made
+///   every such photon hundreds of copies (2700 scatterings per photon instead of 8.5, for no
+///   smaller error; `tests/stress.rs`).
+const ALIGNMENT_MAX: f64 = 1e3;
+const ALIGNMENT_BACKWARD_MAX: f64 = 10.0;
+
 /// Weight above which a photon is split ([`Tracer::split_heavy`]).
 const SPLIT_ABOVE: f64 = 8.0;
 /// Most copies waiting at once (a bound on memory; beyond it no more splitting, still unbiased).
@@ -639,15 +655,17 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
             // importance above 1 nor split it, the value is not needed (the same outcome; a
             // bound too low would change only which photons are spared or split, unbiased
             // either way).
+            // Only in layers without a backward peak (`ALIGNMENT_BACKWARD_MAX`).
             let needed = ddis
                 && (s.roulette_align > 0.0 || s.align_split > 0.0)
+                && s.backward_max[layer] <= ALIGNMENT_BACKWARD_MAX
                 && (mu_rx > 0.0 || {
                     let bound = s.backward_max[layer];
                     (s.roulette_align > 0.0 && bound > s.roulette_align)
                         || (s.align_split > 0.0 && self.w_max() * bound > 2.0 * s.align_split)
                 });
             let p_align = if needed {
-                s.mean_phase(layer, mu_rx)
+                s.mean_phase(layer, mu_rx).min(ALIGNMENT_MAX)
             } else {
                 0.0
             };
