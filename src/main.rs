@@ -39,7 +39,7 @@ enum Command {
 }
 
 fn main() -> ExitCode {
-    let cli = match Cli::try_parse() {
+    let cli = match Cli::try_parse_from(join_negative_values(std::env::args_os())) {
         Ok(cli) => cli,
         Err(e) => match invalid_value(&e) {
             Some(m) => {
@@ -73,6 +73,51 @@ fn main() -> ExitCode {
             ExitCode::from(2)
         }
     }
+}
+
+/// The command line with every negative number given as an option's value joined to its
+/// option (`--offsets-ghz -1,1` → `--offsets-ghz=-1,1`), so that it reaches the option's own
+/// parser and range check in any notation. clap takes `-1.5` and `-1e3` as values (where an
+/// option allows negative numbers) but `-1e-3`, `-.5`, `-inf` and `-1,1` as unknown flags, and
+/// its message then names neither the option nor the value (README: "negative numbers are
+/// read as values"). A token is joined when it begins with `-`, every comma-separated piece of
+/// it parses as a number (`inf` and `nan` included, which the parsers then refuse by name), and
+/// the token before it is a long option without `=`; lidarsim has no flag or positional
+/// argument that looks like a negative number, so nothing else changes.
+fn join_negative_values(
+    args: impl IntoIterator<Item = std::ffi::OsString>,
+) -> Vec<std::ffi::OsString> {
+    let negative_number = |t: &str| {
+        t.starts_with('-')
+            && t.len() > 1
+            && !t.starts_with("--")
+            && t.split(',')
+                .all(|piece| piece.trim().parse::<f64>().is_ok())
+    };
+    let mut out: Vec<std::ffi::OsString> = Vec::new();
+    let mut options_ended = false;
+    for arg in args {
+        let joined = match (out.last().and_then(|p| p.to_str()), arg.to_str()) {
+            (Some(prev), Some(t))
+                if !options_ended
+                    && prev.starts_with("--")
+                    && prev.len() > 2
+                    && !prev.contains('=')
+                    && negative_number(t) =>
+            {
+                Some(format!("{prev}={t}"))
+            }
+            _ => None,
+        };
+        match joined {
+            Some(j) => *out.last_mut().expect("a previous token") = j.into(),
+            None => {
+                options_ended |= arg == "--";
+                out.push(arg);
+            }
+        }
+    }
+    out
 }
 
 /// An option's value refused by its range check, as one line like every other input error
@@ -116,6 +161,63 @@ mod tests {
         assert_eq!(message(&e), "cannot write x: disk full");
         let e = anyhow::Error::new(std::io::Error::other("disk full")).context("cannot write x");
         assert_eq!(message(&e), "cannot write x: disk full");
+    }
+
+    /// Negative numbers in every notation reach their option; nothing else is joined.
+    #[test]
+    fn negative_values_are_joined_to_their_option() {
+        let join = |args: &[&str]| -> Vec<String> {
+            join_negative_values(args.iter().map(std::ffi::OsString::from))
+                .into_iter()
+                .map(|a| a.into_string().unwrap())
+                .collect()
+        };
+        assert_eq!(
+            join(&[
+                "lidarsim",
+                "select-lines",
+                "--offsets-ghz",
+                "-1,1",
+                "--out",
+                "d"
+            ]),
+            [
+                "lidarsim",
+                "select-lines",
+                "--offsets-ghz=-1,1",
+                "--out",
+                "d"
+            ]
+        );
+        for v in [
+            "-1e-2",
+            "-.5",
+            "-inf",
+            "-NaN",
+            "-3",
+            "-1.5e3",
+            "-3,-2.5,2.5",
+        ] {
+            assert_eq!(
+                join(&["l", "dial", "--x", v]),
+                ["l", "dial", &format!("--x={v}")]
+            );
+        }
+        // Not values: a flag, a word, an option with its value attached, after `--`.
+        for args in [
+            &["l", "run", "--no-plots", "--out", "d"][..],
+            &["l", "run", "--out", "-d"],
+            &["l", "run", "--seed=1", "-5"],
+            &["l", "run", "--", "--x", "-5"],
+            &["l", "run", "-h"],
+        ] {
+            assert_eq!(join(args), args);
+        }
+        // And the joined value is parsed by the option: a range error names it.
+        let e = Cli::try_parse_from(join(&["lidarsim", "run", "--threads", "-1e-3"]))
+            .err()
+            .expect("refused");
+        assert!(invalid_value(&e).unwrap().starts_with("--threads"), "{e}");
     }
 
     #[test]
