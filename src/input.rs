@@ -234,6 +234,8 @@ pub struct CsvTable {
     rows: Vec<(usize, Vec<String>)>,
     /// The comment lines (without the leading `#`), in order, for headers carrying metadata.
     pub comments: Vec<String>,
+    /// The 1-based line number of each comment line.
+    comment_lines: Vec<usize>,
 }
 
 impl CsvTable {
@@ -243,6 +245,7 @@ impl CsvTable {
         let mut header: Option<(usize, Vec<String>)> = None;
         let mut rows = Vec::new();
         let mut comments = Vec::new();
+        let mut comment_lines = Vec::new();
         for (i, raw) in strip_bom(text).lines().enumerate() {
             let line_no = i + 1;
             let line = raw.trim();
@@ -251,6 +254,7 @@ impl CsvTable {
             }
             if let Some(c) = line.strip_prefix('#') {
                 comments.push(c.trim().to_string());
+                comment_lines.push(line_no);
                 continue;
             }
             let fields: Vec<String> = line.split(',').map(|s| s.trim().to_string()).collect();
@@ -277,7 +281,13 @@ impl CsvTable {
             header_line,
             rows,
             comments,
+            comment_lines,
         })
+    }
+
+    /// The 1-based line number of comment `i` (an index into [`Self::comments`]).
+    pub fn comment_line(&self, i: usize) -> usize {
+        self.comment_lines[i]
     }
 
     /// Read and parse a file.

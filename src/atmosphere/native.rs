@@ -344,16 +344,17 @@ pub fn read_ecmwf52(levels_path: &Path, meta_path: &Path) -> Result<ProfileSet, 
 /// (`# present-day global means (expt 0): CO2=397.547 ppm; CH4=1831.47 ppb; ...`): (gas, mole
 /// fraction per dry air).
 pub fn rfmip_global_means(meta: &CsvTable) -> Result<Vec<(String, f64)>, InputError> {
-    let line = meta
+    let index = meta
         .comments
         .iter()
-        .find(|c| c.contains("global means"))
+        .position(|c| c.contains("global means"))
         .ok_or_else(|| {
             InputError::file(
                 meta.path(),
                 "no `global means` comment line with the gas amounts",
             )
         })?;
+    let (line, line_no) = (&meta.comments[index], meta.comment_line(index));
     let body = line.split_once(':').map(|(_, b)| b).unwrap_or("");
     let mut out = Vec::new();
     for item in body.split(';') {
@@ -363,7 +364,12 @@ pub fn rfmip_global_means(meta: &CsvTable) -> Result<Vec<(String, f64)>, InputEr
         };
         let mut words = rest.split_whitespace();
         let value: f64 = words.next().and_then(|v| v.parse().ok()).ok_or_else(|| {
-            InputError::at(meta.path(), 1, gas.trim(), format!("cannot read `{item}`"))
+            InputError::at(
+                meta.path(),
+                line_no,
+                gas.trim(),
+                format!("cannot read `{item}`"),
+            )
         })?;
         let scale = match words.next() {
             Some("ppm") => 1e-6,
@@ -372,15 +378,26 @@ pub fn rfmip_global_means(meta: &CsvTable) -> Result<Vec<(String, f64)>, InputEr
             Some(u) => {
                 return Err(InputError::at(
                     meta.path(),
-                    1,
+                    line_no,
                     gas.trim(),
                     format!("unknown unit `{u}`"),
                 ));
             }
         };
         let gas = gas.trim();
+        // A mole fraction, checked here where it is read: later checks of the levels would
+        // blame the levels file for it.
+        let fraction = value * scale;
+        if !(fraction.is_finite() && (0.0..=1.0).contains(&fraction)) {
+            return Err(InputError::at(
+                meta.path(),
+                line_no,
+                gas,
+                format!("`{item}` is a mole fraction of {fraction:e}, not in [0, 1]"),
+            ));
+        }
         if gas != "N2" {
-            out.push((gas.to_string(), value * scale));
+            out.push((gas.to_string(), fraction));
         }
     }
     Ok(out)
@@ -540,6 +557,24 @@ fn time_from_days_2014(days: f64) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The meta header's global means are mole fractions in [0, 1], refused where they are
+    /// read: at the meta file, the comment's line and the gas (fuzz finding F7: `O2=2.09e29`
+    /// was blamed on the levels file).
+    #[test]
+    fn global_means_are_checked_where_they_are_read() {
+        let header = "# RFMIP-IRF test\n# present-day global means (expt 0): CO2=397.547 ppm; \
+                      CH4=1831.47 ppb; O2=GAS; N2=0.781\nsite,lat_deg\n0,1.0\n";
+        let ok = CsvTable::parse("meta.csv", &header.replace("GAS", "0.209")).unwrap();
+        let means = rfmip_global_means(&ok).unwrap();
+        let co2 = means.iter().find(|(g, _)| g == "CO2").unwrap().1;
+        assert!((co2 - 397.547e-6).abs() < 1e-15, "{co2}");
+        for bad in ["2.09e29", "-0.1", "inf", "NaN"] {
+            let t = CsvTable::parse("meta.csv", &header.replace("GAS", bad)).unwrap();
+            let e = rfmip_global_means(&t).unwrap_err().to_string();
+            assert!(e.starts_with("meta.csv:2: `O2`"), "{bad}: {e}");
+        }
+    }
 
     #[test]
     fn days_since_2014() {
