@@ -36,6 +36,9 @@ mod particles;
 mod polarisation;
 /// Instrument and retrieval: line shapes, noise, retrievals against the truth.
 mod retrieval;
+/// Every file lidarsim writes read back (issue 37, item 6): quoted CSV text, profile sets,
+/// covariances, shards, Mie tables in scenes, gas optical-depth tables.
+mod roundtrip;
 /// Scenes: parsing, validation and their documented errors.
 mod scene;
 /// Line selection for CO2 IPDA: sensitivities against hand-made finite differences, the CLI.
