@@ -1299,6 +1299,7 @@ impl Fixtures {
                     .map(|l| format!("{l}\n"))
                     .collect();
                 std::fs::write(dir.join(format!("{name}.txt")), thin).unwrap();
+                let _ = std::fs::remove_file(dir.join(format!("{name}_full.txt")));
             }
             ok(&[
                 "bench",
