@@ -19,10 +19,10 @@ use std::path::{Path, PathBuf};
 use crate::util::project_root;
 
 /// The seed of every fuzz test unless `LIDARSIM_FUZZ_SEED` is set.
-const SEED: u64 = 0x11_0004;
+pub(crate) const SEED: u64 = 0x11_0004;
 
 /// `LIDARSIM_FUZZ_SEED`, or [`SEED`].
-fn seed() -> u64 {
+pub(crate) fn seed() -> u64 {
     std::env::var("LIDARSIM_FUZZ_SEED")
         .ok()
         .and_then(|s| s.trim().parse().ok())
@@ -30,7 +30,7 @@ fn seed() -> u64 {
 }
 
 /// `n` times `LIDARSIM_FUZZ_SCALE` (default 1).
-fn cases(n: u32) -> u32 {
+pub(crate) fn cases(n: u32) -> u32 {
     let scale: u32 = std::env::var("LIDARSIM_FUZZ_SCALE")
         .ok()
         .and_then(|s| s.trim().parse().ok())
@@ -40,7 +40,7 @@ fn cases(n: u32) -> u32 {
 
 /// The text formats the mutator knows: where numbers and keys are.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Format {
+pub(crate) enum Format {
     /// A scene: `key = value` lines, `[section]` headers, `#` comments, quoted strings.
     Toml,
     /// A comma-separated table with a header and `#` comments (`# key = value` metadata).
@@ -51,21 +51,21 @@ enum Format {
 
 /// One mutation; `a` and `b` choose where and how (any values are valid).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-struct Mutation {
+pub(crate) struct Mutation {
     /// Which kind (taken modulo [`KINDS`]).
-    kind: u8,
+    pub(crate) kind: u8,
     /// Usually where.
-    a: u64,
+    pub(crate) a: u64,
     /// Usually what.
-    b: u64,
+    pub(crate) b: u64,
 }
 
 /// Number of mutation kinds.
-const KINDS: u8 = 12;
+pub(crate) const KINDS: u8 = 12;
 
 /// Values put in place of a number: non-finite, extreme, signed zeros, integers beyond i64 and
 /// u64, and a few things that are not numbers at all.
-const SPECIALS: [&str; 36] = [
+pub(crate) const SPECIALS: [&str; 36] = [
     "nan",
     "NaN",
     "inf",
@@ -645,7 +645,7 @@ fn map_csv_rows(text: &[u8], f: impl Fn(&mut Vec<Vec<u8>>)) -> Vec<u8> {
 }
 
 /// Apply mutations in order.
-fn mutate(text: &[u8], format: Format, ms: &[Mutation]) -> Vec<u8> {
+pub(crate) fn mutate(text: &[u8], format: Format, ms: &[Mutation]) -> Vec<u8> {
     ms.iter()
         .fold(text.to_vec(), |t, &m| mutate_once(&t, format, m))
 }
@@ -654,7 +654,7 @@ fn mutate(text: &[u8], format: Format, ms: &[Mutation]) -> Vec<u8> {
 // Valid inputs the readers' mutations start from.
 
 /// A profile set: two profiles, levels bottom-up and top-down, every optional column.
-const PROFILES_A: &str = "# lidarsim profile set\n\
+pub(crate) const PROFILES_A: &str = "# lidarsim profile set\n\
 profile,latitude_deg,longitude_deg,time_utc,weight,level,altitude_m,pressure_hPa,temperature_K,H2O_ppmv,CO2_ppmv\n\
 a,15,0,2007-02-20T12:00Z,0.5,1,0,1013,299.7,25900,420.1\n\
 a,15,0,2007-02-20T12:00Z,0.5,2,1000,898,293.2,18000,420.0\n\
@@ -665,7 +665,7 @@ b,-60,170,2007-02-21,1.5,2,8000,350,230.0,100,419.0\n\
 b,-60,170,2007-02-21,1.5,3,500,950,260.0,2000,421.0\n";
 
 /// A profile set with hydrostatic altitudes, Pa, specific humidity and per-dry-air CO2.
-const PROFILES_B: &str = "profile,latitude_deg,longitude_deg,surface_altitude_m,pressure_Pa,temperature_K,q_kgkg,CO2_ppmv_dry,CH4_ppbv\n\
+pub(crate) const PROFILES_B: &str = "profile,latitude_deg,longitude_deg,surface_altitude_m,pressure_Pa,temperature_K,q_kgkg,CO2_ppmv_dry,CH4_ppbv\n\
 s1,45,7,120,100000,290,0.01,400,1900\n\
 s1,45,7,120,85000,282,0.006,400,1890\n\
 s1,45,7,120,50000,250,0.001,400,1850\n\
@@ -673,26 +673,26 @@ s2,46,8,0,101000,288,0.008,401,1910\n\
 s2,46,8,0,20000,220,0.00001,401,1700\n";
 
 /// HITRAN2016 records of CO2 626 and H2O 161.
-const PAR: &str = " 21 6359.967244 1.779E-23 7.543e-03.07470.102  106.12970.67-.005510       3 0 0 12       0 0 0 01                    R 16e     4788762029 6 5 6 8    35.0   33.0
+pub(crate) const PAR: &str = " 21 6359.967244 1.779E-23 7.543e-03.07470.102  106.12970.67-.005510       3 0 0 12       0 0 0 01                    R 16e     4788762029 6 5 6 8    35.0   33.0
  21 6027.480381 1.338E-29 3.505e-06.06730.074 1664.19460.73-.007616       2 3 3 13       0 1 1 01                    P 50f     3677642029 5 4 5 7    99.0  101.0
  21 6027.563121 5.844E-29 1.372e-03.06880.087 2514.73730.76-.007350       4 1 1 14       1 1 1 01                    R 33e     3677642029 5 4 5 7    69.0   67.0
  11 6074.315120 3.367E-26 3.035E-04.06900.311  709.60820.61-.006881          0 1 1          0 0 0  8  6  3        7  2  6      574423303330572210    17.0   15.0
 ";
 
 /// A CSV line list as HITRANonline writes it (Voigt parameters only).
-const LINES_VOIGT: &str = "molec_id,local_iso_id,nu,sw,elower,gamma_air,gamma_self,n_air,delta_air\n\
+pub(crate) const LINES_VOIGT: &str = "molec_id,local_iso_id,nu,sw,elower,gamma_air,gamma_self,n_air,delta_air\n\
 2,1,6359.967244,1.779e-23,106.1297,0.0747,0.102,0.67,-0.00551\n\
 2,1,6360.0,1.0e-25,500.0,0.07,0.09,0.7,-0.006\n\
 1,1,6074.315120,3.367e-26,709.6082,0.069,0.311,0.61,-0.006881\n";
 
 /// A CSV line list with beyond-Voigt columns (as the NIST 30012 list of usnistgov/MATS), with
 /// its repeated `elower` column.
-const LINES_HT: &str = "trans_id,molec_id,local_iso_id,nu,sw,a,elower,gp,gpp,elower,global_upper_quanta,global_lower_quanta,local_upper_quanta,local_lower_quanta,gamma0_air,n_gamma0_air,delta0_air,n_delta0_air,SD_gamma_air,n_gamma2_air,SD_delta_air,n_delta2_air,nuVC_air,n_nuVC_air,eta_air,y_air,n_y_air,gamma0_self,n_gamma0_self,delta0_self,n_delta0_self,SD_gamma_self,n_gamma2_self,SD_delta_self,n_delta2_self,nuVC_self,n_nuVC_self,eta_self,y_self,n_y_self\n\
+pub(crate) const LINES_HT: &str = "trans_id,molec_id,local_iso_id,nu,sw,a,elower,gp,gpp,elower,global_upper_quanta,global_lower_quanta,local_upper_quanta,local_lower_quanta,gamma0_air,n_gamma0_air,delta0_air,n_delta0_air,SD_gamma_air,n_gamma2_air,SD_delta_air,n_delta2_air,nuVC_air,n_nuVC_air,eta_air,y_air,n_y_air,gamma0_self,n_gamma0_self,delta0_self,n_delta0_self,SD_gamma_self,n_gamma2_self,SD_delta_self,n_delta2_self,nuVC_self,n_nuVC_self,eta_self,y_self,n_y_self\n\
 6795046,2,1,6317.158845,5.8000E-24,0.007312,464.1717,67,69,464.1717,       3 0 0 12,       0 0 0 01,               ,     P 34e     ,0.068857763,0.75,-0.006996265,0,0.078309491,0.75,0,0,0.002670806,1,0,0,0,0.086,0.75,0,0,0,0.75,0,0,0,1,0,0,0\n\
 6795159,2,1,6319.19565,7.0800E-24,0.007364,411.9225,63,65,411.9225,       3 0 0 12,       0 0 0 01,               ,     P 32e     ,0.069407106,0.72,-0.006590684,0,0.088385581,0.72,0,0,0.000684057,1,0,0,0,0.088,0.72,0,0,0,0.72,0,0,0,1,0,0,0\n";
 
 /// A small phase table (isotropic, three nodes).
-const PHASE_SMALL: &str = "# lidarsim phase function table\n\
+pub(crate) const PHASE_SMALL: &str = "# lidarsim phase function table\n\
 # wavelength_nm = 532\n\
 # refractive_index = none\n\
 # distribution = none\n\
@@ -708,7 +708,7 @@ fn phase_shipped() -> String {
 }
 
 /// The shipped scenes: (path, text).
-fn shipped_scenes() -> Vec<(PathBuf, String)> {
+pub(crate) fn shipped_scenes() -> Vec<(PathBuf, String)> {
     let mut out: Vec<(PathBuf, String)> = std::fs::read_dir(project_root().join("scenes"))
         .expect("scenes/")
         .map(|e| e.expect("scenes/ entry").path())
@@ -1122,9 +1122,9 @@ mod scenes {
     //! --photons 2000 --no-plots`, a few hundred cases on two threads.
 
     use super::*;
-    use crate::util::lidarsim_bin;
+    use crate::util::lidarsim_bounded;
     use rand::{RngExt, SeedableRng};
-    use std::process::{Command, ExitStatus, Stdio};
+    use std::ffi::OsString;
     use std::sync::atomic::{AtomicUsize, Ordering};
     use std::time::{Duration, Instant};
 
@@ -1134,9 +1134,6 @@ mod scenes {
     const PHOTONS: &str = "2000";
     /// A case that takes longer has hung (the unmutated scenes take at most 0.3 s).
     const TIME_LIMIT: Duration = Duration::from_secs(20);
-    /// Address space of a run: a scene that makes lidarsim allocate more is a failure (a
-    /// problem size the validation should have refused), and the machine stays usable.
-    const MEMORY_LIMIT_KIB: u64 = 4 << 20;
 
     /// Columns of the CSV outputs that hold text; every other field must be a finite number.
     const TEXT_COLUMNS: [&str; 8] = [
@@ -1253,43 +1250,17 @@ mod scenes {
         let work = root.path().join("work");
         std::fs::create_dir(&work).map_err(|e| e.to_string())?;
         let out_dir = work.join("out");
-        let log = |name: &str| std::fs::File::create(root.path().join(name)).map(Stdio::from);
-        let mut cmd = if cfg!(unix) && Path::new("/bin/sh").exists() {
-            let mut c = Command::new("/bin/sh");
-            c.arg("-c")
-                .arg(format!(
-                    "ulimit -v {MEMORY_LIMIT_KIB} && exec \"$0\" \"$@\""
-                ))
-                .arg(lidarsim_bin());
-            c
-        } else {
-            Command::new(lidarsim_bin())
-        };
-        cmd.arg("run")
-            .arg(&scene)
-            .arg("--out")
-            .arg(&out_dir)
-            .args(["--photons", PHOTONS, "--no-plots"])
-            .stdin(Stdio::null())
-            .stdout(log("stdout").map_err(|e| e.to_string())?)
-            .stderr(log("stderr").map_err(|e| e.to_string())?);
-        let started = Instant::now();
-        let mut child = cmd
-            .spawn()
-            .map_err(|e| format!("cannot start lidarsim: {e}"))?;
-        let status: ExitStatus = loop {
-            if let Some(s) = child.try_wait().map_err(|e| e.to_string())? {
-                break s;
-            }
-            if started.elapsed() > TIME_LIMIT {
-                let _ = child.kill();
-                let _ = child.wait();
-                return Err(format!("no end after {TIME_LIMIT:?} (killed)"));
-            }
-            std::thread::sleep(Duration::from_millis(5));
-        };
-        let took = started.elapsed();
-        let stderr = std::fs::read_to_string(root.path().join("stderr")).unwrap_or_default();
+        let args: Vec<OsString> = vec![
+            "run".into(),
+            scene.into(),
+            "--out".into(),
+            out_dir.clone().into(),
+            "--photons".into(),
+            PHOTONS.into(),
+            "--no-plots".into(),
+        ];
+        let ran = lidarsim_bounded(&args, root.path(), root.path(), TIME_LIMIT)?;
+        let (took, stderr) = (ran.took, ran.stderr);
         let short = |s: &str| s.chars().take(600).collect::<String>();
         if stderr.contains("panicked") {
             return Err(format!("panicked: {}", short(&stderr)));
@@ -1303,7 +1274,7 @@ mod scenes {
                 })
                 .unwrap_or_default()
         };
-        match status.code() {
+        match ran.code {
             Some(0) => {
                 let mut left = leftovers(&work);
                 left.retain(|n| n != "out");
@@ -1349,7 +1320,8 @@ mod scenes {
                 Ok((Outcome::Refused, took))
             }
             code => Err(format!(
-                "exit status {status} (code {code:?}), expected 0 or 2: {}",
+                "exit status {} (code {code:?}), expected 0 or 2: {}",
+                ran.status,
                 short(&stderr)
             )),
         }

@@ -19,6 +19,9 @@ mod edges;
 /// Fuzzing: property tests over the readers, a mutation fuzz of the shipped scenes through the
 /// binary (issue 11, item 4).
 mod fuzz;
+/// Every subcommand but `run` fuzzed through the binary: option values and input files
+/// mutated, shard files damaged (issue 37, item 6).
+mod fuzz_cli;
 /// Scattering matrices (issue 16): Mie matrices against reference amplitudes and BH's output,
 /// the dipole limit, the Mueller inequalities, C.1 near backscatter, scalar tables unchanged.
 mod matrices;
@@ -33,6 +36,9 @@ mod particles;
 mod polarisation;
 /// Instrument and retrieval: line shapes, noise, retrievals against the truth.
 mod retrieval;
+/// Every file lidarsim writes read back (issue 37, item 6): quoted CSV text, profile sets,
+/// covariances, shards, Mie tables in scenes, gas optical-depth tables.
+mod roundtrip;
 /// Scenes: parsing, validation and their documented errors.
 mod scene;
 /// Line selection for CO2 IPDA: sensitivities against hand-made finite differences, the CLI.

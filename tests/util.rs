@@ -69,3 +69,301 @@ where
     );
     String::from_utf8_lossy(&out.stdout).into_owned()
 }
+
+// ---------------------------------------------------------------------------------------------
+// Bounded runs of the binary and checks of what it wrote (the fuzz tests, tests/roundtrip.rs).
+
+use std::ffi::OsString;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// Address space of a bounded run: a case that makes lidarsim allocate more is a failure (a
+/// problem size the validation should have refused), and the machine stays usable.
+pub const MEMORY_LIMIT_KIB: u64 = 4 << 20;
+
+/// How a bounded run of the binary ended.
+pub struct Bounded {
+    /// The exit code (`None`: ended by a signal).
+    pub code: Option<i32>,
+    /// The exit status as text, for messages.
+    pub status: String,
+    /// What it printed.
+    pub stdout: String,
+    /// What it printed on stderr.
+    pub stderr: String,
+    /// Its wall time.
+    pub took: Duration,
+}
+
+/// Run `lidarsim args` in `cwd` with its address space limited to [`MEMORY_LIMIT_KIB`] (by the
+/// shell's `ulimit -v`, where there is a `/bin/sh`) and stdin closed, its stdout and stderr
+/// written to `logs/stdout` and `logs/stderr`; killed after `limit`, which is an `Err`.
+pub fn lidarsim_bounded(
+    args: &[OsString],
+    cwd: &Path,
+    logs: &Path,
+    limit: Duration,
+) -> Result<Bounded, String> {
+    let log = |name: &str| std::fs::File::create(logs.join(name)).map(Stdio::from);
+    let mut cmd = if cfg!(unix) && Path::new("/bin/sh").exists() {
+        let mut c = Command::new("/bin/sh");
+        c.arg("-c")
+            .arg(format!(
+                "ulimit -v {MEMORY_LIMIT_KIB} && exec \"$0\" \"$@\""
+            ))
+            .arg(lidarsim_bin());
+        c
+    } else {
+        Command::new(lidarsim_bin())
+    };
+    cmd.args(args)
+        .current_dir(cwd)
+        .stdin(Stdio::null())
+        .stdout(log("stdout").map_err(|e| e.to_string())?)
+        .stderr(log("stderr").map_err(|e| e.to_string())?);
+    let started = Instant::now();
+    let mut child = cmd
+        .spawn()
+        .map_err(|e| format!("cannot start lidarsim: {e}"))?;
+    let status = loop {
+        if let Some(s) = child.try_wait().map_err(|e| e.to_string())? {
+            break s;
+        }
+        if started.elapsed() > limit {
+            let _ = child.kill();
+            let _ = child.wait();
+            return Err(format!("no end after {limit:?} (killed)"));
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    };
+    let took = started.elapsed();
+    let read = |name: &str| {
+        std::fs::read(logs.join(name))
+            .map(|b| String::from_utf8_lossy(&b).into_owned())
+            .unwrap_or_default()
+    };
+    Ok(Bounded {
+        code: status.code(),
+        status: status.to_string(),
+        stdout: read("stdout"),
+        stderr: read("stderr"),
+        took,
+    })
+}
+
+/// Every file and directory under `dir` (recursively), as paths relative to it, sorted.
+pub fn tree(dir: &Path) -> Vec<PathBuf> {
+    fn walk(base: &Path, at: &Path, out: &mut Vec<PathBuf>) {
+        let Ok(rd) = std::fs::read_dir(at) else {
+            return;
+        };
+        for e in rd.flatten() {
+            let p = e.path();
+            out.push(p.strip_prefix(base).unwrap_or(&p).to_path_buf());
+            if p.is_dir() {
+                walk(base, &p, out);
+            }
+        }
+    }
+    let mut out = Vec::new();
+    walk(dir, dir, &mut out);
+    out.sort();
+    out
+}
+
+/// Columns of lidarsim's CSV outputs that hold text (names, labels, reasons): any other
+/// field must be empty (a value that cannot be computed, as the contracts say) or a number.
+pub const TEXT_COLUMNS: [&str; 22] = [
+    "source",
+    "channel",
+    "order",
+    "method",
+    "channel_pair",
+    "quantity",
+    "unit",
+    "polarisation",
+    "profile",
+    "profile_id",
+    "id",
+    "class",
+    "pair",
+    "atmosphere",
+    "line",
+    "reason",
+    "time_utc",
+    "basis",
+    "element",
+    "component",
+    "name",
+    "kind",
+];
+
+/// Columns that are energies, counts, standard deviations, cross-sections or optical depths:
+/// never negative.
+pub const NON_NEGATIVE_COLUMNS: [&str; 15] = [
+    "energy_j",
+    "stderr_j",
+    "signal_photoelectrons",
+    "background_photoelectrons",
+    "dark_electrons",
+    "noise_std_photoelectrons",
+    "mc_stderr",
+    "random_error_per_shot_pair",
+    "random_error_averaged",
+    "simulated_error_per_shot_pair",
+    "simulated_error_averaged",
+    "tau_vertical",
+    "tau_slant",
+    "sd_ppm",
+    "random_error_rms_ppm",
+];
+
+/// A number field's text that is not finite as lidarsim (Rust) or another program prints it.
+pub fn non_finite_text(field: &str) -> bool {
+    let f = field.trim().to_ascii_lowercase();
+    let f = f.trim_start_matches(['+', '-']);
+    f == "nan" || f == "inf" || f == "infinity" || f.parse::<f64>().is_ok_and(|v| !v.is_finite())
+}
+
+/// A CSV text as lidarsim writes it (`#` comment lines, a header, RFC 4180 quoting) parses,
+/// and every field that is not text is empty or a finite number, non-negative in the columns
+/// of [`NON_NEGATIVE_COLUMNS`] and in cross-section columns (`sigma_*`). Returns the rows.
+pub fn check_csv_text(name: &str, text: &str) -> Result<usize, String> {
+    let mut r = csv::ReaderBuilder::new()
+        .comment(Some(b'#'))
+        .flexible(false)
+        .from_reader(text.as_bytes());
+    let header: Vec<String> = r
+        .headers()
+        .map_err(|e| format!("{name}: {e}"))?
+        .iter()
+        .map(str::to_string)
+        .collect();
+    let mut rows = 0;
+    for (n, rec) in r.records().enumerate() {
+        let rec = rec.map_err(|e| format!("{name} record {}: {e}", n + 1))?;
+        rows += 1;
+        for (col, field) in header.iter().zip(rec.iter()) {
+            if TEXT_COLUMNS.contains(&col.as_str()) || field.is_empty() {
+                continue;
+            }
+            if non_finite_text(field) {
+                return Err(format!("{name} record {}: `{col}` = {field}", n + 1));
+            }
+            let non_negative = NON_NEGATIVE_COLUMNS.contains(&col.as_str())
+                || (col.starts_with("sigma_") && col.ends_with("_cm2"));
+            if non_negative
+                && let Ok(v) = field.trim().parse::<f64>()
+                && v < 0.0
+            {
+                return Err(format!(
+                    "{name} record {}: `{col}` = {field} is negative",
+                    n + 1
+                ));
+            }
+        }
+    }
+    Ok(rows)
+}
+
+/// A JSON text parses and holds no `null` (serde_json writes NaN and ±inf as null), but where
+/// a contract says a value may be missing: `run`'s summary.json leaves the Monte Carlo
+/// retrieval entries that retrieval.csv leaves empty as null (README, retrieval.csv).
+pub fn check_json_text(name: &str, text: &str) -> Result<(), String> {
+    check_json_text_allowing(name, text, &[])
+}
+
+/// [`check_json_text`], with `null` allowed at the paths `allowed` (`.key.key`), where it
+/// means "not written" rather than a number.
+pub fn check_json_text_allowing(name: &str, text: &str, allowed: &[&str]) -> Result<(), String> {
+    fn find_null(v: &serde_json::Value, at: &str, allowed: &[&str]) -> Option<String> {
+        match v {
+            serde_json::Value::Null if allowed.contains(&at) => None,
+            serde_json::Value::Null => Some(at.to_string()),
+            serde_json::Value::Object(o)
+                if at.starts_with(".retrieval.") && o.get("source") == Some(&"mc".into()) =>
+            {
+                None
+            }
+            serde_json::Value::Array(a) => a
+                .iter()
+                .enumerate()
+                .find_map(|(i, x)| find_null(x, &format!("{at}[{i}]"), allowed)),
+            serde_json::Value::Object(o) => o
+                .iter()
+                .find_map(|(k, x)| find_null(x, &format!("{at}.{k}"), allowed)),
+            _ => None,
+        }
+    }
+    let v: serde_json::Value = serde_json::from_str(text).map_err(|e| format!("{name}: {e}"))?;
+    match find_null(&v, "", allowed) {
+        Some(at) => Err(format!("{name}: `{at}` is null (a NaN or an infinity)")),
+        None => Ok(()),
+    }
+}
+
+/// Every floating-point value of every variable of a NetCDF file is finite (a missing value
+/// is the `_FillValue`, 9.969e36).
+pub fn check_netcdf(path: &Path) -> Result<(), String> {
+    let name = path.display();
+    let mut r = netcdf3::FileReader::open(path).map_err(|e| format!("{name}: {e:?}"))?;
+    let vars = r.read_all_vars().map_err(|e| format!("{name}: {e:?}"))?;
+    let mut names: Vec<&String> = vars.keys().collect();
+    names.sort();
+    for v in names {
+        let bad = match &vars[v] {
+            netcdf3::DataVector::F64(x) => x.iter().position(|x| !x.is_finite()),
+            netcdf3::DataVector::F32(x) => x.iter().position(|x| !x.is_finite()),
+            _ => None,
+        };
+        if let Some(i) = bad {
+            return Err(format!("{name}: variable `{v}`[{i}] is not finite"));
+        }
+    }
+    Ok(())
+}
+
+/// Every file under `dir`: no staging directory or temporary file left; each CSV, JSON and
+/// NetCDF file checked as above. Returns the files checked.
+pub fn check_written(dir: &Path) -> Result<Vec<PathBuf>, String> {
+    let mut checked = Vec::new();
+    for rel in tree(dir) {
+        let p = dir.join(&rel);
+        let file = rel
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        if file.starts_with(".lidarsim-staging") || file.ends_with(".tmp") {
+            return Err(format!(
+                "left a staging or temporary entry `{}`",
+                rel.display()
+            ));
+        }
+        if !p.is_file() {
+            continue;
+        }
+        let shown = rel.display().to_string();
+        let text = || {
+            std::fs::read(&p)
+                .map(|b| String::from_utf8_lossy(&b).into_owned())
+                .map_err(|e| format!("{shown}: {e}"))
+        };
+        if file.ends_with(".csv") {
+            check_csv_text(&shown, &text()?)?;
+        } else if file.ends_with(".json") {
+            check_json_text(&shown, &text()?)?;
+        } else if file.ends_with(".nc") {
+            check_netcdf(&p)?;
+        }
+        checked.push(rel);
+    }
+    Ok(checked)
+}
+
+/// The first word of `text` that is a non-finite number as printed (`NaN`, `inf`, `-inf`):
+/// a summary on stdout shows what the files hold.
+pub fn non_finite_word(text: &str) -> Option<String> {
+    text.split(|c: char| c.is_whitespace() || ",;:()[]{}|=\"'".contains(c))
+        .find(|w| !w.is_empty() && non_finite_text(w))
+        .map(str::to_string)
+}

@@ -119,7 +119,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .flatten()
         .collect();
     output::check_paths(&outputs)?;
-    let grid = WavenumberGrid::new(args.start_cm1, args.end_cm1, args.step_cm1)?;
+    let grid =
+        WavenumberGrid::new(args.start_cm1, args.end_cm1, args.step_cm1).with_context(|| {
+            format!(
+                "--start-cm1 {}, --end-cm1 {}, --step-cm1 {}",
+                args.start_cm1, args.end_cm1, args.step_cm1
+            )
+        })?;
     check_product(
         "the output",
         &[("wavenumbers", grid.len as u64)],
@@ -276,9 +282,16 @@ fn run_layers(
         zenith_angle_deg: zenith,
         surface_altitude_m: args.layer.surface_altitude_m,
     };
-    let mu = los.mu()?;
+    // The library names the path's fields; the user gave options.
+    let path = || {
+        format!(
+            "--sensor-altitude-m {sensor}, --zenith-deg {zenith}, --surface-altitude-m {}",
+            args.layer.surface_altitude_m
+        )
+    };
+    let mu = los.mu().with_context(path)?;
     // The layers and the table rows they make, before any is computed.
-    let (lo, hi) = los.vertical_extent(&prof)?;
+    let (lo, hi) = los.vertical_extent(&prof).with_context(path)?;
     let layers = ((hi - lo) / args.layer.layer_m).ceil().max(1.0) as u64;
     check_product("--layer-m", &[("layers", layers)], MAX_PATH_LAYERS)
         .and_then(|_| {
@@ -289,7 +302,9 @@ fn run_layers(
             )
         })
         .map_err(anyhow::Error::msg)?;
-    let edges = los.layer_edges(&prof, args.layer.layer_m)?;
+    let edges = los
+        .layer_edges(&prof, args.layer.layer_m)
+        .with_context(|| format!("--layer-m {}", args.layer.layer_m))?;
     let table = GasOpticalDepthTable::compute(&prof, lines, &edges, grid, opts)?;
     let mut files = OutputSet::new();
     if let Some(path) = &args.layer.save_table {
