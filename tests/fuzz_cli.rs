@@ -1079,15 +1079,6 @@ const KNOWN: &[Known] = &[
         always: false,
     },
     Known {
-        command: "profiles",
-        id: "F7",
-        what: "rfmip meta-file errors blamed on the levels file or on no file",
-        matches: |why, changes| {
-            why.contains("names none of [\"meta.csv\"]") && changes.starts_with("file meta.csv")
-        },
-        always: false,
-    },
-    Known {
         command: "bench",
         id: "F4",
         what: "inf and NaN in bench --depth files; the --plain reader",
@@ -2491,7 +2482,6 @@ mod findings {
     }
 
     #[test]
-    #[ignore = "issue 37: F7 profiles convert blames rfmip meta-file errors on the levels file"]
     fn f7_rfmip_meta_errors_name_the_meta_file() {
         let dir = tempfile::tempdir().unwrap();
         let Some(ok) = rfmip(dir.path(), str::to_string) else {
@@ -2774,7 +2764,6 @@ mod findings {
     /// a list `-1,1`) reaches the option's parser: it is taken or refused naming the option, never
     /// "unexpected argument" (README: "negative numbers are read as values").
     #[test]
-    #[ignore = "issue 37: F5 clap takes -1e-3, -inf and -1,1 for flags (allow_negative_numbers)"]
     fn negative_values_in_any_notation_reach_the_option() {
         let study = project_root().join("scenes/study_co2_ipda.toml");
         let study = study.to_string_lossy();

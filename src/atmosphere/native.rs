@@ -429,10 +429,19 @@ pub fn read_rfmip(layers_path: &Path, meta_path: &Path) -> Result<ProfileSet, In
                 .join(", ")
         )],
     };
+    let mut seen = std::collections::HashMap::new();
     for (line, f) in m.rows() {
         let id: i64 = f[m.column("site")?]
             .parse()
             .map_err(|_| InputError::at(meta_path, line, "site", "not an integer"))?;
+        if let Some(first) = seen.insert(id, line) {
+            return Err(InputError::at(
+                meta_path,
+                line,
+                "site",
+                format!("site {id} is given twice (first at line {first})"),
+            ));
+        }
         let day = num(&m, line, f, "day_of_2014")?;
         let meta = ProfileMeta {
             id: id.to_string(),
