@@ -229,7 +229,19 @@ impl OpticalAtmosphere {
         atm.accumulate();
         if let (Some(gas), Some(a)) = (&scene.gas, &scene.atmosphere) {
             let (tau, note, source) = gas_layer_tau(scene, a, gas, &atm.edges_m)?;
-            atm.add_absorption_tau(&tau)?;
+            // Name the source of a bad optical depth (the spectroscopy stage refuses negative
+            // ones itself, naming the line; this is the last guard).
+            atm.add_absorption_tau(&tau).map_err(|e| match e {
+                OpticsError::Absorption(m) => OpticsError::Absorption(format!(
+                    "gas absorption of {}{}: {m}",
+                    gas.lines.source,
+                    gas.table
+                        .as_ref()
+                        .map(|t| format!(" (table {})", t.path.display()))
+                        .unwrap_or_default()
+                )),
+                other => other,
+            })?;
             atm.gas_note = Some(note);
             atm.gas_source = Some(source);
         }
@@ -252,7 +264,11 @@ impl OpticalAtmosphere {
             for k in 0..self.n_channels {
                 let t = tau[l * self.n_channels + k];
                 if !(t >= 0.0 && t.is_finite()) {
-                    return Err(OpticsError::Absorption(format!("layer {l}: τ = {t}")));
+                    return Err(OpticsError::Absorption(format!(
+                        "layer {l} ({}–{} m), channel {k}: optical depth τ = {t} is negative or not finite",
+                        self.edges_m[l],
+                        self.edges_m[l + 1]
+                    )));
                 }
                 self.sigma_a_per_m[l * self.n_channels + k] += t / dz;
             }

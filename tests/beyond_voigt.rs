@@ -660,3 +660,471 @@ fn multigrid_evaluates_beyond_voigt_profiles() {
         assert!(err <= 5e-7, "{p_atm} atm: {err:e} of the peak");
     }
 }
+
+// ---------------------------------------------------------------------------------------------
+// Physical ranges of the line parameters (issue 37, item 3)
+// ---------------------------------------------------------------------------------------------
+
+/// The Hartmann-Tran profile (and its limits) as the speed average that defines it, written
+/// here without the complex probability function (Tran, Ngo & Hartmann 2013, JQSRT 129, 199,
+/// Eqs. 2–4; Ngo et al. 2013, JQSRT 129, 89, Eqs. 9–12): with L(v) = 1/(C̃(v) − i(ν − ν₀ − k·v)),
+/// C(v) = C₀ + C₂ (x² − 3/2) at x = v/v_p and C̃ = (1 − η) C + ν_VC,
+///
+/// I(ν) = (1/π) ⟨L⟩ / (1 − ⟨(ν_VC − η C(v)) L⟩),
+///
+/// the average over directions in closed form, (−i/(2ax)) [ln(C̃ − iΔ + iax) − ln(C̃ − iΔ − iax)]
+/// with a = γ_D/√ln2, and over the Maxwell speeds (4/√π) x² e^{−x²} by adaptive Simpson on
+/// [0, 7] (the integrand has kinks where a x = |Δ| when C̃ is small: fixed rules miss them).
+fn speed_average(p: &HtParameters, nu: f64) -> num_complex::Complex64 {
+    use num_complex::Complex64;
+    type Pair = [Complex64; 2];
+    let a = p.gamma_d / std::f64::consts::LN_2.sqrt();
+    let c0 = Complex64::new(p.gamma0, p.delta0);
+    let c2 = Complex64::new(p.gamma2, p.delta2);
+    let i = Complex64::new(0.0, 1.0);
+    let f = |x: f64| -> Pair {
+        let c = c0 + c2 * (x * x - 1.5);
+        let w = (1.0 - p.eta) * c + p.nu_vc - i * (nu - p.nu0);
+        let l = if x == 0.0 {
+            1.0 / w
+        } else {
+            -i * ((w + i * a * x).ln() - (w - i * a * x).ln()) / (2.0 * a * x)
+        };
+        let maxwell = 4.0 / std::f64::consts::PI.sqrt() * x * x * (-x * x).exp();
+        [l * maxwell, (p.nu_vc - p.eta * c) * l * maxwell]
+    };
+    let add = |u: Pair, v: Pair| [u[0] + v[0], u[1] + v[1]];
+    let scale = |u: Pair, s: f64| [u[0] * s, u[1] * s];
+    #[allow(clippy::too_many_arguments)]
+    fn simpson(
+        f: &dyn Fn(f64) -> Pair,
+        (a, b): (f64, f64),
+        (fa, fm, fb): (Pair, Pair, Pair),
+        whole: Pair,
+        tol: f64,
+        depth: u32,
+    ) -> Pair {
+        let m = 0.5 * (a + b);
+        let (flm, frm) = (f(0.5 * (a + m)), f(0.5 * (m + b)));
+        let h = (b - a) / 12.0;
+        let part = |x: Pair, y: Pair, z: Pair, k: usize| h * (x[k] + 4.0 * y[k] + z[k]);
+        let left = [part(fa, flm, fm, 0), part(fa, flm, fm, 1)];
+        let right = [part(fm, frm, fb, 0), part(fm, frm, fb, 1)];
+        let d = [left[0] + right[0] - whole[0], left[1] + right[1] - whole[1]];
+        if depth == 0 || d[0].norm() + d[1].norm() <= 15.0 * tol {
+            return [
+                left[0] + right[0] + d[0] / 15.0,
+                left[1] + right[1] + d[1] / 15.0,
+            ];
+        }
+        let l = simpson(f, (a, m), (fa, flm, fm), left, 0.5 * tol, depth - 1);
+        let r = simpson(f, (m, b), (fm, frm, fb), right, 0.5 * tol, depth - 1);
+        [l[0] + r[0], l[1] + r[1]]
+    }
+    let mut total = [Complex64::new(0.0, 0.0); 2];
+    for k in 0..70 {
+        let (x0, x1) = (0.1 * k as f64, 0.1 * (k + 1) as f64);
+        let (f0, fm, f1) = (f(x0), f(0.5 * (x0 + x1)), f(x1));
+        let whole = scale(add(add(f0, scale(fm, 4.0)), f1), (x1 - x0) / 6.0);
+        total = add(total, simpson(&f, (x0, x1), (f0, fm, f1), whole, 1e-13, 40));
+    }
+    total[0] / (1.0 - total[1]) / std::f64::consts::PI
+}
+
+/// A speed-dependent width outside Γ₂/Γ₀ ∈ [0, 2/3] makes Γ(v) = Γ₀ + Γ₂ (v²/v_p² − 3/2)
+/// negative at some speed (below 0 the fast molecules, above 2/3 the slowest): such a line is
+/// refused at its file, line and column with the bound, by the reader, by `lbl` (exit 2,
+/// nothing written; before: cross-sections of ±7e32 cm² and exit 0) and by a scene.
+#[test]
+fn unphysical_speed_dependence_is_refused_at_its_line_and_column() {
+    let good = "2,1,6359.967248,1.76E-23,106.1297,0.0739,0.67,-0.0054,0.08,0.005,0,0,0.67";
+    let bad = "2,1,6361.250350,1.74E-23,122.0,0.0735,0.69,-0.0056,-0.001,0.005,0,0,0.69";
+    let err = |text: String| {
+        LineList::parse_csv("sd.csv", &text, &LineFilter::default())
+            .unwrap_err()
+            .to_string()
+    };
+    let e = err(format!("{CSV_HEAD}\n{good}\n{bad}\n"));
+    for part in [
+        "sd.csv:3",
+        "`SD_gamma_air`",
+        "-0.001",
+        "[0, 2/3]",
+        "fastest",
+    ] {
+        assert!(e.contains(part), "{part}: {e}");
+    }
+    // Above 2/3, and in a `_self` column.
+    let e = err(format!(
+        "{CSV_HEAD}\n{}\n",
+        good.replace(",0.08,", ",0.67,")
+    ));
+    assert!(e.contains("sd.csv:2") && e.contains("slowest"), "{e}");
+    let e = err(format!("{CSV_HEAD},SD_gamma_self\n{good},0.7\n",));
+    assert!(
+        e.contains("`SD_gamma_self`") && e.contains("[0, 2/3]"),
+        "{e}"
+    );
+    // The edges themselves are accepted.
+    for sd in ["0", "0.6666666666666666"] {
+        let text = format!(
+            "{CSV_HEAD}\n{}\n",
+            good.replace(",0.08,", &format!(",{sd},"))
+        );
+        assert!(LineList::parse_csv("sd.csv", &text, &LineFilter::default()).is_ok());
+    }
+
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("sd.csv");
+    std::fs::write(&file, format!("{CSV_HEAD}\n{good}\n{bad}\n")).unwrap();
+    let out = dir.path().join("x.csv");
+    let run = lidarsim([
+        "lbl".as_ref(),
+        "--lines".as_ref(),
+        file.as_os_str(),
+        "--line-shape".as_ref(),
+        "sdvoigt".as_ref(),
+        "--pressure-atm".as_ref(),
+        "1".as_ref(),
+        "--temperature-k".as_ref(),
+        "296".as_ref(),
+        "--start-cm1".as_ref(),
+        "6355".as_ref(),
+        "--end-cm1".as_ref(),
+        "6365".as_ref(),
+        "--step-cm1".as_ref(),
+        "0.001".as_ref(),
+        "--out".as_ref(),
+        out.as_os_str(),
+    ]);
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert_eq!(run.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("sd.csv:3: `SD_gamma_air`") && stderr.contains("[0, 2/3]"),
+        "{stderr}"
+    );
+    assert!(!out.exists());
+
+    let scene = format!(
+        "{}\n[gas_absorption]\nlines = {:?}\nline_shape = \"sdvoigt\"\n",
+        small_scene(6357.0),
+        file.display().to_string()
+    );
+    let e = lidarsim::scene::Scene::from_toml(&dir.path().join("s.toml"), &scene)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("gas_absorption.lines")
+            && e.contains("sd.csv:3: `SD_gamma_air`")
+            && e.contains("[0, 2/3]"),
+        "{e}"
+    );
+}
+
+/// A nadir lidar at 3 km over a surface, one channel, US standard atmosphere with 500 m
+/// layers: a scene to put a line list into (append its `[gas_absorption]`).
+fn small_scene(wavenumber_cm1: f64) -> String {
+    format!(
+        r#"[lidar]
+altitude_m = 3000.0
+zenith_angle_deg = 180.0
+pulse_energy_j = 0.01
+beam_divergence_full_angle_mrad = 0.1
+telescope_diameter_m = 0.3
+optical_efficiency = 0.5
+fov_full_angle_mrad = 1.0
+[[channel]]
+name = "c"
+wavenumber_cm1 = {wavenumber_cm1}
+[gates]
+start_m = 2900.0
+end_m = 3050.0
+width_m = 50.0
+[atmosphere]
+standard = "us_standard"
+co2_ppm = 420.0
+layer_thickness_m = 500.0
+top_m = 3000.0
+rayleigh = false
+[surface]
+altitude_m = 0.0
+albedo = 0.3
+"#
+    )
+}
+
+/// Γ₂/Γ₀ ≤ 2/3 at 296 K can be broken at another temperature by exponents of Γ₂ and Γ₀ that
+/// differ: SD = 0.6 with n_γ2 = 1.5 and n_γ0 = 0.7 gives Γ₂/Γ₀ = 0.6 (296/T)^0.8, which is
+/// 0.627 at 280 K (computed) but 0.687 at 250 K and 0.823 at 200 K (refused, naming the line
+/// and the column).
+#[test]
+fn temperature_exponents_that_break_the_bound_are_refused_at_the_state() {
+    let text = format!(
+        "{CSV_HEAD},n_gamma2_air\n2,1,6359.967248,1.76E-23,106.1297,0.0739,0.7,-0.0054,0.6,0,0,0,0.7,1.5\n"
+    );
+    let lines = LineList::parse_csv("t.csv", &text, &LineFilter::default()).unwrap();
+    let opts = LblOptions {
+        line_shape: LineShapeModel::SdVoigt,
+        ..Default::default()
+    };
+    let at = |t: f64| {
+        let state = GasState {
+            pressure_pa: 50_000.0,
+            temperature_k: t,
+            self_vmr: 0.0,
+        };
+        cross_section_at(&lines, 2, &state, &[6359.9, 6360.0], &opts)
+    };
+    assert!(at(296.0).is_ok() && at(280.0).is_ok());
+    for t in [250.0, 200.0] {
+        let e = at(t).unwrap_err().to_string();
+        assert!(
+            e.contains("t.csv:2: `SD_gamma_air`") && e.contains("above 2/3"),
+            "{t} K: {e}"
+        );
+    }
+}
+
+/// At the edges of the accepted ranges (Γ₂/Γ₀ = 0 and 2/3, η up to 0.99, ν_VC up to 10 Γ₀,
+/// Δ₂/Δ₀ = ±10) the cross-section of a line stays finite and non-negative and is the speed
+/// average that defines the profile ([`speed_average`], no Faddeeva function): its shape within
+/// 1e-9 of the peak for the exact evaluation and 3e-6 for the fast one (multigrid, the far-wing
+/// form; measured 1.9e-6, at ν_VC = 10 Γ₀; the budget of the line-by-line sum is 1e-5), over the
+/// ±25 cm⁻¹ window at 1 and 0.02 atm. Before the far-wing form took a Δ⁻³ term in its real part
+/// and the multigrid a margin for the speed classes' shifts ((`xsec::SPEED_SPREAD`)), Γ₂/Γ₀ = 2/3 with
+/// Δ₂/Δ₀ = 10 erred by 10 % of the peak. And as Γ₂ → 0 the speed-dependent Voigt is the
+/// Voigt (the exact Voigt profile at Γ₂/Γ₀ = 1e-9 to 1e-8 of its peak).
+#[test]
+fn line_shapes_at_the_edges_of_the_ranges_are_the_speed_average() {
+    use lidarsim::spectroscopy::voigt::voigt_profile_exact;
+    use lidarsim::spectroscopy::{VoigtMethod, WavenumberGrid, cross_section};
+    let nu0 = 6359.967248;
+    // (SD_gamma, SD_delta, nuVC [cm-1/atm], eta, shape)
+    let cases = [
+        (2.0 / 3.0, 0.0, 0.0, 0.0, LineShapeModel::SdVoigt),
+        (2.0 / 3.0, 10.0, 0.0, 0.0, LineShapeModel::SdVoigt),
+        (0.0, -10.0, 0.0, 0.0, LineShapeModel::SdVoigt),
+        (2.0 / 3.0, 0.0, 0.0, 0.99, LineShapeModel::HartmannTran),
+        (0.3, 0.3, 0.0, 0.99, LineShapeModel::HartmannTran),
+        (2.0 / 3.0, 0.0, 0.739, 0.5, LineShapeModel::HartmannTran),
+        (0.0, 0.0, 0.739, 0.0, LineShapeModel::HartmannTran),
+    ];
+    let head = "molec_id,local_iso_id,nu,sw,elower,gamma0_air,n_gamma0_air,delta0_air,SD_gamma_air,SD_delta_air,nuVC_air,eta_air";
+    // Γ₀ = 0.0739 p, Δ₀ = −0.0054 p at 296 K without self broadening; CO2 626 γ_D (CODATA).
+    let mass_kg: f64 = 43.98983 * 1.660_539_066_60e-27;
+    let gamma_d = nu0 * (2.0 * 1.380_649e-23 * 296.0 * std::f64::consts::LN_2 / mass_kg).sqrt()
+        / 299_792_458.0;
+    // Inside the 25 cm⁻¹ window (open at its lower end).
+    let nus: Vec<f64> = (-80..=80)
+        .map(|k| nu0 + 24.9 * (k as f64 / 80.0).powi(3))
+        .collect();
+    let mut worst_fast = 0.0f64;
+    for (sd, sdd, vc, eta, shape) in cases {
+        let text = format!(
+            "{head}\n2,1,{nu0},1.76E-23,106.1297,0.0739,0.7,-0.0054,{sd},{sdd},{vc},{eta}\n"
+        );
+        let lines = LineList::parse_csv("edge.csv", &text, &LineFilter::default()).unwrap();
+        for p_atm in [1.0, 0.02] {
+            let hart = shape == LineShapeModel::HartmannTran;
+            let p = HtParameters {
+                nu0,
+                gamma_d,
+                gamma0: 0.0739 * p_atm,
+                gamma2: sd * 0.0739 * p_atm,
+                delta0: -0.0054 * p_atm,
+                delta2: sdd * -0.0054 * p_atm,
+                nu_vc: if hart { vc * p_atm } else { 0.0 },
+                eta: if hart { eta } else { 0.0 },
+            };
+            let want: Vec<f64> = nus.iter().map(|&nu| speed_average(&p, nu).re).collect();
+            let state = GasState {
+                pressure_pa: p_atm * 101_325.0,
+                temperature_k: 296.0,
+                self_vmr: 0.0,
+            };
+            let exact = LblOptions {
+                line_shape: shape,
+                voigt: VoigtMethod::Exact,
+                ..Default::default()
+            };
+            let sigma = cross_section_at(&lines, 2, &state, &nus, &exact).unwrap();
+            assert!(sigma.iter().all(|s| s.is_finite() && *s >= 0.0));
+            let err = shape_error(&sigma, &want);
+            assert!(
+                err < 1e-9,
+                "SD {sd}, SD_delta {sdd}, ν_VC {vc}, η {eta}, {p_atm} atm: exact shape {err:e}"
+            );
+            // The fast path on a grid, through the multigrid and the far-wing form.
+            let grid = WavenumberGrid::new(nu0 - 24.9, nu0 + 24.9, 0.001).unwrap();
+            let fast = LblOptions {
+                line_shape: shape,
+                ..Default::default()
+            };
+            let s_fast = cross_section(&lines, 2, &state, &grid, &fast).unwrap();
+            assert!(s_fast.iter().all(|s| s.is_finite() && *s >= 0.0));
+            let on_grid: Vec<f64> = grid.wavenumbers();
+            let step = 2000; // every 2 cm⁻¹ and the centre region below
+            let idx: Vec<usize> = (0..grid.len)
+                .filter(|i| i % step == 0 || (on_grid[*i] - nu0).abs() < 0.2)
+                .collect();
+            let got: Vec<f64> = idx.iter().map(|&i| s_fast[i]).collect();
+            let want: Vec<f64> = idx
+                .iter()
+                .map(|&i| speed_average(&p, on_grid[i]).re)
+                .collect();
+            let err = shape_error(&got, &want);
+            worst_fast = worst_fast.max(err);
+            assert!(
+                err < 3e-6,
+                "SD {sd}, SD_delta {sdd}, ν_VC {vc}, η {eta}, {p_atm} atm: fast shape {err:e}"
+            );
+        }
+    }
+    println!("edges of the ranges: the fast path within {worst_fast:.1e} of the peak");
+    // SD → 0: the Voigt of the same Γ₀, to the size of the speed dependence.
+    for ratio in [1e-8, 1e-9] {
+        let p = HtParameters {
+            nu0,
+            gamma_d,
+            gamma0: 0.0739,
+            gamma2: ratio * 0.0739,
+            delta0: -0.0054,
+            delta2: 0.0,
+            nu_vc: 0.0,
+            eta: 0.0,
+        };
+        let peak = voigt_profile_exact(0.0, gamma_d, 0.0739);
+        for &nu in &nus {
+            let v = voigt_profile_exact(nu - nu0 + 0.0054, gamma_d, 0.0739);
+            let i = hartmann_tran(&p, nu).re;
+            assert!(
+                (i - v).abs() <= 10.0 * ratio * peak,
+                "Γ₂/Γ₀ {ratio}, ν {nu}: {i} vs {v}"
+            );
+        }
+    }
+}
+
+/// η right below 1 with Γ₂/Γ₀ = 2/3 and no Dicke narrowing (the effective widths
+/// (1 − η) Γ(v) nearly vanish, where the speed average is too sharp for a quadrature): the
+/// profile is finite, non-negative and of unit area (∫ Re I dν over ±30 cm⁻¹ plus the
+/// Lorentzian wings beyond, 2Γ₀/(π·30)), to 1e-4.
+#[test]
+fn correlation_next_to_one_keeps_a_unit_area() {
+    for eta in [0.999, 0.999_999] {
+        let p = HtParameters {
+            nu0: 6359.967248,
+            gamma_d: 0.0058,
+            gamma0: 0.0739,
+            gamma2: 2.0 / 3.0 * 0.0739,
+            delta0: -0.0054,
+            delta2: 0.0,
+            nu_vc: 0.0,
+            eta,
+        };
+        let half = 30.0;
+        let n = 600_000;
+        let h = 2.0 * half / n as f64;
+        let mut area = 2.0 * p.gamma0 / (std::f64::consts::PI * half);
+        for k in 0..=n {
+            let nu = p.nu0 + p.delta0 - half + k as f64 * h;
+            let v = hartmann_tran(&p, nu).re;
+            assert!(v.is_finite() && v >= 0.0, "η {eta}, ν {nu}: {v}");
+            area += if k == 0 || k == n { 0.5 } else { 1.0 } * v * h;
+        }
+        assert!((area - 1.0).abs() < 1e-4, "η {eta}: area {area}");
+    }
+}
+
+/// First-order line mixing makes one line's profile negative beyond Γ/|Y| on one side (the
+/// physics of the approximation; a whole band's Σ S·Y ≈ 0 balances it). A list whose sum goes
+/// negative is refused naming the file, the line, the column and the cause, by `lbl` (exit 2,
+/// nothing written) and in a scene (before: "layer 0: τ = −2.4e-5", naming nothing), and the
+/// cure it names (a wing cutoff below Γ/|Y|) works. The shipped NIST band with line mixing is
+/// non-negative at 0.1 atm from 6150 to 6450 cm⁻¹ through the multigrid (before: −1.8e-46 cm²
+/// past the band, the multigrid's residue where no line reaches).
+#[test]
+fn negative_line_mixing_is_reported_at_its_line() {
+    // Y = 0.05 at 1 atm: negative below ν_c − Γ/Y ≈ ν_c − 1.48 cm⁻¹.
+    let text = format!(
+        "{CSV_HEAD}\n2,1,6359.967248,1.76E-23,106.1297,0.0739,0.67,-0.0054,0.08,0.0054,0,0.05,0.67\n"
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("mix.csv");
+    std::fs::write(&file, &text).unwrap();
+    let out = dir.path().join("x.csv");
+    let lbl = |wing: &str| {
+        lidarsim([
+            "lbl".as_ref(),
+            "--lines".as_ref(),
+            file.as_os_str(),
+            "--line-shape".as_ref(),
+            "ht".as_ref(),
+            "--line-mixing".as_ref(),
+            "--pressure-atm".as_ref(),
+            "1".as_ref(),
+            "--temperature-k".as_ref(),
+            "296".as_ref(),
+            "--start-cm1".as_ref(),
+            "6350".as_ref(),
+            "--end-cm1".as_ref(),
+            "6365".as_ref(),
+            "--step-cm1".as_ref(),
+            "0.001".as_ref(),
+            "--wing-cm1".as_ref(),
+            wing.as_ref(),
+            "--out".as_ref(),
+            out.as_os_str(),
+        ])
+    };
+    let run = lbl("25");
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert_eq!(run.status.code(), Some(2), "{stderr}");
+    for part in [
+        "mix.csv:2: `y_air`",
+        "negative absorption",
+        "line mixing",
+        "Γ/|Y| = 1.47",
+        "low-wavenumber",
+    ] {
+        assert!(stderr.contains(part), "{part}: {stderr}");
+    }
+    assert!(!out.exists());
+    let run = lbl("1.4");
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+
+    let scene = format!(
+        "{}\n[gas_absorption]\nlines = {:?}\nline_shape = \"ht\"\nline_mixing = true\n",
+        small_scene(6357.0),
+        file.display().to_string()
+    );
+    let s = lidarsim::scene::Scene::from_toml(&dir.path().join("s.toml"), &scene).unwrap();
+    let e = lidarsim::optics::OpticalAtmosphere::build(&s)
+        .unwrap_err()
+        .to_string();
+    for part in ["mix.csv:2: `y_air`", "line mixing", "layer 0–500 m"] {
+        assert!(e.contains(part), "{part}: {e}");
+    }
+
+    let Some(path) = shared_file("data/nist_30012/CO2_30012_NIST_SDNGP_LM.csv") else {
+        return;
+    };
+    let lines = LineList::read(&path, &LineFilter::default()).unwrap();
+    let grid = lidarsim::spectroscopy::WavenumberGrid::new(6150.0, 6450.0, 0.01).unwrap();
+    let state = GasState {
+        pressure_pa: 0.1 * 101_325.0,
+        temperature_k: 296.0,
+        self_vmr: 0.0,
+    };
+    let opts = LblOptions {
+        line_shape: LineShapeModel::HartmannTran,
+        line_mixing: true,
+        ..Default::default()
+    };
+    let sigma = lidarsim::spectroscopy::cross_section(&lines, 2, &state, &grid, &opts).unwrap();
+    assert!(sigma.iter().all(|s| *s >= 0.0));
+}

@@ -523,3 +523,53 @@ fn lbl_command_writes_layer_optical_depths() {
         assert!((ts[r] / (tv[r] / mu) - 1.0).abs() < 1e-8);
     }
 }
+
+/// A table whose grid step does not resolve the lines (0.05 cm⁻¹ against Doppler widths of
+/// 0.006 cm⁻¹ at 30–50 km) makes 6-point interpolation overshoot below zero between nodes next
+/// to a line: refused, naming the table's lines, the layer and the step, never a negative
+/// optical depth (before: "layer l: τ = −…" from the optics, naming nothing). A saved table
+/// holding a negative value is refused when loaded.
+#[test]
+fn a_table_never_answers_a_negative_optical_depth() {
+    let prof = us_standard_400ppm();
+    let lines = LineList::co2_30012_band_model();
+    let edges = [30_000.0, 40_000.0, 50_000.0];
+    let grid = WavenumberGrid::new(6340.0, 6380.0, 0.05).unwrap();
+    let opts = LblOptions::default();
+    let t = GasOpticalDepthTable::compute(&prof, &lines, &edges, &grid, &opts).unwrap();
+    let mut refused = 0;
+    for k in 60..grid.len - 60 {
+        let nu = grid.at(k) + 0.025;
+        match t.layer_tau(nu) {
+            Ok(tau) => assert!(tau.iter().all(|v| *v >= 0.0), "{nu}: {tau:?}"),
+            Err(e) => {
+                assert!(matches!(e, SpectroscopyError::NegativeAbsorption { .. }));
+                let e = e.to_string();
+                assert!(
+                    e.contains("band model")
+                        && e.contains("grid step 0.05")
+                        && e.contains("finer step")
+                        && (e.contains("30000–40000 m") || e.contains("40000–50000 m")),
+                    "{e}"
+                );
+                refused += 1;
+            }
+        }
+    }
+    assert!(
+        refused > 0,
+        "no overshoot found: the test needs a coarser grid"
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("neg.bin");
+    t.save(&path).unwrap();
+    let mut bytes = std::fs::read(&path).unwrap();
+    let n = bytes.len();
+    bytes[n - 8..].copy_from_slice(&(-1e-9f64).to_le_bytes());
+    std::fs::write(&path, &bytes).unwrap();
+    let e = GasOpticalDepthTable::load(&path).unwrap_err().to_string();
+    assert!(
+        e.contains("neg.bin") && e.contains("tau") && e.contains("negative"),
+        "{e}"
+    );
+}

@@ -21,9 +21,15 @@ use std::path::{Path, PathBuf};
 use super::hitran::{Broadener, Line, LineFilter, LineList, ShapeColumns, ShapeParameters, ranges};
 use crate::input::Bounds;
 
-/// `SD_gamma`: the speed dependence Γ₂/Γ₀ (typical 0.05–0.15; 1 would make the narrowest
-/// speed class's width vanish).
-const SD_RATIO: Bounds = Bounds::below(-1.0, 1.0);
+/// `SD_gamma`: the speed dependence Γ₂/Γ₀ (typical 0.05–0.15). The quadratic model gives the
+/// molecules of speed v the width Γ(v) = Γ₀ + Γ₂ (v²/v_p² − 3/2) (v_p the most probable speed;
+/// Tran, Ngo & Hartmann 2013, JQSRT 129, 199, Eq. 3), which is ≥ 0 at every speed only for
+/// 0 ≤ Γ₂/Γ₀ ≤ 2/3: below 0 the fast molecules, above 2/3 the slowest, would have a negative
+/// width, and the profile (a speed average of Lorentzians, and HAPI's closed form of it, which
+/// lidarsim evaluates) is then neither non-negative nor finite (Γ₂/Γ₀ = −0.001 gives ±1e40).
+pub const SD_RATIO: Bounds = Bounds::closed(0.0, 2.0 / 3.0);
+/// [`SD_RATIO`] as messages write it.
+const SD_RATIO_TEXT: &str = "[0, 2/3]";
 /// `SD_delta`: Δ₂/Δ₀.
 const SD_SHIFT_RATIO: Bounds = Bounds::closed(-10.0, 10.0);
 /// `eta`: the correlation parameter of the Hartmann-Tran profile.
@@ -248,11 +254,26 @@ impl LineList {
                     name_of(cols.n_delta0, &fb("n_delta0")),
                     ranges::DELTA,
                 )?;
-                check(
-                    b.sd_gamma,
-                    name_of(cols.sd_gamma, &fb("SD_gamma")),
-                    SD_RATIO,
-                )?;
+                let sd_name = name_of(cols.sd_gamma, &fb("SD_gamma"));
+                if b.sd_gamma.is_finite() && !SD_RATIO.contains(b.sd_gamma) {
+                    return Err(InputError::at(
+                        &path,
+                        line_no,
+                        sd_name,
+                        format!(
+                            "{} must lie in {SD_RATIO_TEXT}: the speed-dependent width \
+                             Γ(v) = Γ₀ + Γ₂ (v²/v_p² − 3/2) is negative at some speed outside it \
+                             ({}), and the profile with it is not a line shape",
+                            crate::input::fmt_bound(b.sd_gamma),
+                            if b.sd_gamma < 0.0 {
+                                "the fastest molecules"
+                            } else {
+                                "the slowest molecules: Γ₀ − 3Γ₂/2 < 0"
+                            }
+                        ),
+                    ));
+                }
+                check(b.sd_gamma, sd_name, SD_RATIO)?;
                 check(
                     b.n_gamma2,
                     name_of(cols.n_gamma2, &fb("n_gamma2")),
@@ -299,6 +320,7 @@ impl LineList {
                     air: a,
                     self_broadening: s,
                     columns,
+                    file_line: line_no,
                 })),
             });
         }

@@ -108,6 +108,8 @@ pub struct ShapeParameters {
     pub self_broadening: Broadener,
     /// The columns the file had.
     pub columns: ShapeColumns,
+    /// The line of the file (1-based) the line was read from, for messages that name it.
+    pub file_line: usize,
 }
 
 impl Line {

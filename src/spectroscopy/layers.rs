@@ -9,11 +9,14 @@
 //! U_air = ∫ n_air dz,   U_g = ∫ n_g dz,   p̄ = ∫ p n_air dz / U_air,   T̄ = ∫ T n_air dz / U_air
 //! ```
 //!
-//! Between profile levels, ln p and ln n (air and each gas) are linear in altitude and T is
-//! linear (a gas with a zero mixing ratio at either level is interpolated linearly in n). The
-//! integrals use 8-point Gauss-Legendre quadrature on each piece between levels inside the layer
-//! (exact to rounding for these smooth integrands), so layers thinner than the level spacing
-//! work. Edges outside the profile are an error.
+//! Between profile levels the state is the one hydrostatic integration of
+//! [`crate::atmosphere::hydrostatic::HydrostaticProfile`]: T linear in altitude, the pressure
+//! from the hydrostatic equation with the virtual temperature (so that the air column between
+//! two altitudes is their pressure difference over m g, the weighting function's Δp being that
+//! same difference), n = p/(kT), each gas's mixing ratio log-linear (linear where a level has
+//! none). The integrals use 8-point Gauss-Legendre quadrature on each piece between levels inside
+//! the layer (exact to rounding for these smooth integrands), so layers thinner than the level
+//! spacing work. Edges outside the profile are an error.
 //!
 //! Optical depths are vertical. In plane-parallel geometry the slant optical depth along a line
 //! of sight with zenith angle θ is τ_vertical/|cos θ| ([`LineOfSight`]).
@@ -23,6 +26,7 @@ use super::hitran::LineList;
 use super::isotopologues::molecule_name;
 use super::xsec::GasState;
 use crate::atmosphere::Profile;
+use crate::atmosphere::hydrostatic::HydrostaticProfile;
 
 /// One Curtis-Godson layer.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -58,18 +62,6 @@ impl CgLayer {
         }
     }
 }
-
-/// Gauss-Legendre nodes and weights on [−1, 1], 8 points.
-const GL8: [(f64, f64); 8] = [
-    (-0.960_289_856_497_536_2, 0.101_228_536_290_376_26),
-    (-0.796_666_477_413_626_7, 0.222_381_034_453_374_48),
-    (-0.525_532_409_916_329, 0.313_706_645_877_887_3),
-    (-0.183_434_642_495_649_8, 0.362_683_783_378_362),
-    (0.183_434_642_495_649_8, 0.362_683_783_378_362),
-    (0.525_532_409_916_329, 0.313_706_645_877_887_3),
-    (0.796_666_477_413_626_7, 0.222_381_034_453_374_48),
-    (0.960_289_856_497_536_2, 0.101_228_536_290_376_26),
-];
 
 fn check_profile(profile: &Profile) -> Result<(), SpectroscopyError> {
     let n = profile.len();
@@ -112,33 +104,6 @@ fn check_profile(profile: &Profile) -> Result<(), SpectroscopyError> {
     Ok(())
 }
 
-/// State at altitude z inside level interval i: (p, T, n_air, n_gas…).
-fn state_at(
-    profile: &Profile,
-    n_air: &[f64],
-    i: usize,
-    z: f64,
-    gas_out: &mut [f64],
-) -> (f64, f64, f64) {
-    let (z0, z1) = (profile.altitude_m[i], profile.altitude_m[i + 1]);
-    let t = (z - z0) / (z1 - z0);
-    let loglin = |a: f64, b: f64| {
-        if a > 0.0 && b > 0.0 {
-            a * (b / a).powf(t)
-        } else {
-            a + (b - a) * t
-        }
-    };
-    let p = loglin(profile.pressure_pa[i], profile.pressure_pa[i + 1]);
-    let temp =
-        profile.temperature_k[i] + (profile.temperature_k[i + 1] - profile.temperature_k[i]) * t;
-    let n = loglin(n_air[i], n_air[i + 1]);
-    for (g, out) in profile.gases.iter().zip(gas_out.iter_mut()) {
-        *out = loglin(g.vmr[i] * n_air[i], g.vmr[i + 1] * n_air[i + 1]);
-    }
-    (p, temp, n)
-}
-
 /// Curtis-Godson layers between consecutive `edges_m` (strictly increasing, inside the
 /// profile), module docs.
 pub fn curtis_godson_layers(
@@ -147,43 +112,17 @@ pub fn curtis_godson_layers(
 ) -> Result<Vec<CgLayer>, SpectroscopyError> {
     check_profile(profile)?;
     check_edges(profile, edges_m)?;
-    let n_air = profile.air_number_density_per_m3();
-    let ng = profile.gases.len();
-    let mut gas_n = vec![0.0; ng];
-    let z = &profile.altitude_m;
+    let hydro = HydrostaticProfile::new(profile);
     let mut layers = Vec::with_capacity(edges_m.len() - 1);
     for e in edges_m.windows(2) {
         let (zb, zt) = (e[0], e[1]);
-        let (mut u_air, mut u_p, mut u_t) = (0.0, 0.0, 0.0);
-        let mut u_gas = vec![0.0; ng];
-        // Pieces between profile levels.
-        let first = z
-            .partition_point(|&zi| zi <= zb)
-            .saturating_sub(1)
-            .min(z.len() - 2);
-        let mut i = first;
-        let mut a = zb;
-        while a < zt {
-            // i ≤ len − 2 here, and zt ≤ the top level (check_edges).
-            let b = z[i + 1].min(zt);
-            let (mid, half) = (0.5 * (a + b), 0.5 * (b - a));
-            for (x, wq) in GL8 {
-                let zz = mid + half * x;
-                let (p, t, n) = state_at(profile, &n_air, i, zz, &mut gas_n);
-                let wn = wq * half * n;
-                u_air += wn;
-                u_p += wn * p;
-                u_t += wn * t;
-                for (u, g) in u_gas.iter_mut().zip(&gas_n) {
-                    *u += wq * half * g;
-                }
-            }
-            a = b;
-            i += 1;
-            if i > z.len() - 2 {
-                break;
-            }
-        }
+        let c = hydro.integrate(zb, zt);
+        let (u_air, u_p, u_t, u_gas) = (
+            c.air_per_m2,
+            c.pressure_weighted,
+            c.temperature_weighted,
+            c.gas_per_m2,
+        );
         // per m² → per cm²
         layers.push(CgLayer {
             bottom_m: zb,
@@ -355,13 +294,35 @@ mod tests {
     use super::*;
     use crate::atmosphere::{GasProfile, StandardAtmosphere};
 
-    /// An isothermal exponential atmosphere: p = p0 e^{−z/H}, constant T and vmr.
+    /// ∫_0^z γ dz' for normal gravity's height factor γ = g(z)/g(0) (at 45°, as the
+    /// hydrostatic integration takes it): the geopotential over surface gravity, in closed form.
+    fn gamma_integral(z: f64) -> f64 {
+        use crate::atmosphere::hydrostatic::{
+            geopotential_m2_per_s2, normal_gravity_surface_m_per_s2,
+        };
+        geopotential_m2_per_s2(45.0, z) / normal_gravity_surface_m_per_s2(45.0)
+    }
+
+    /// Composite Simpson's rule with `n` (even) intervals.
+    fn simpson(f: impl Fn(f64) -> f64, a: f64, b: f64, n: usize) -> f64 {
+        let h = (b - a) / n as f64;
+        let inner: f64 = (1..n)
+            .map(|k| f(a + k as f64 * h) * if k % 2 == 1 { 4.0 } else { 2.0 })
+            .sum();
+        (f(a) + inner + f(b)) * h / 3.0
+    }
+
+    /// An isothermal atmosphere in hydrostatic balance with normal gravity:
+    /// p = p0 e^{−Γ(z)/H}, Γ = ∫γ dz, constant T and vmr.
     fn isothermal() -> Profile {
         let h = 8000.0;
         let z: Vec<f64> = (0..=10).map(|i| i as f64 * 2000.0).collect();
         Profile {
             name: "isothermal".into(),
-            pressure_pa: z.iter().map(|z| 1e5 * (-z / h).exp()).collect(),
+            pressure_pa: z
+                .iter()
+                .map(|z| 1e5 * (-gamma_integral(*z) / h).exp())
+                .collect(),
             temperature_k: vec![250.0; z.len()],
             gases: vec![GasProfile {
                 name: "CO2".into(),
@@ -371,64 +332,97 @@ mod tests {
         }
     }
 
+    /// The isothermal atmosphere's layer against its closed-form state, p(z) = p0 e^{−Γ(z)/H},
+    /// integrated by Simpson's rule (20 000 intervals): columns and p̄ to 1e-12.
     #[test]
-    fn columns_and_cg_pressure_match_the_analytic_exponential_atmosphere() {
+    fn columns_and_cg_pressure_match_the_isothermal_hydrostatic_atmosphere() {
         let prof = isothermal();
         let (h, n0) = (8000.0, 1e5 / (crate::constants::BOLTZMANN_J_PER_K * 250.0));
+        let n = |z: f64| n0 * (-gamma_integral(z) / h).exp();
         // A layer thinner than the level spacing, straddling a level.
         let (zb, zt) = (1500.0, 2700.0);
         let l = &curtis_godson_layers(&prof, &[zb, zt]).unwrap()[0];
-        let u = n0 * h * ((-zb / h).exp() - (-zt / h).exp()) * 1e-4;
+        let u = simpson(n, zb, zt, 20_000) * 1e-4;
         assert!((l.air_column_per_cm2 / u - 1.0).abs() < 1e-12);
         assert!((l.gas_columns_per_cm2[0] / (4e-4 * u) - 1.0).abs() < 1e-12);
-        // p̄ = ∫p n dz/∫n dz = p0 (e^{−2zb/H} − e^{−2zt/H}) / (2 (e^{−zb/H} − e^{−zt/H}))
-        let pbar = 1e5 * ((-2.0 * zb / h).exp() - (-2.0 * zt / h).exp())
-            / (2.0 * ((-zb / h).exp() - (-zt / h).exp()));
-        assert!((l.pressure_pa / pbar - 1.0).abs() < 1e-12);
+        let p_n = simpson(
+            |z| n(z) * 1e5 * (-gamma_integral(z) / h).exp(),
+            zb,
+            zt,
+            20_000,
+        );
+        assert!((l.pressure_pa / (p_n * 1e-4 / u) - 1.0).abs() < 1e-12);
         assert!((l.temperature_k - 250.0).abs() < 1e-9);
     }
 
+    /// A dry atmosphere with a constant lapse rate Γ_T in hydrostatic balance with normal
+    /// gravity: T = T0 − Γ_T z and ln p = ln p0 − (g0 M_d/R) ∫ γ/T dz, with levels on it. The
+    /// Curtis-Godson layer against that state integrated by Simpson's rule (the inner integral
+    /// by 2000 intervals, the outer by 4000): columns, p̄ and T̄ to 1e-10.
     #[test]
-    fn cg_temperature_matches_the_closed_form_under_a_constant_lapse_rate() {
-        // T = T0 − Γz and n = n0 e^{−z/H} at the levels (p = n k T there), so between levels T is
-        // exactly linear and n exactly log-linear: T̄ = T0 − Γ z̄ with the column-weighted mean
-        // height z̄ = [(a + H)e^{−a/H} − (b + H)e^{−b/H}] / (e^{−a/H} − e^{−b/H}).
-        let (h, n0, t0, lapse) = (8000.0_f64, 2.5e25, 288.15, 6.5e-3);
+    fn cg_layers_match_the_hydrostatic_state_under_a_constant_lapse_rate() {
+        use crate::atmosphere::hydrostatic::{
+            dry_air_gas_constant_j_per_kg_k, normal_gravity_surface_m_per_s2,
+        };
+        let (p0, t0, lapse) = (101_325.0_f64, 288.15, 6.5e-3);
+        let k = crate::constants::BOLTZMANN_J_PER_K;
+        let c = normal_gravity_surface_m_per_s2(45.0) / dry_air_gas_constant_j_per_kg_k();
+        let temperature = |z: f64| t0 - lapse * z;
+        let gamma = |z: f64| {
+            use crate::atmosphere::hydrostatic::normal_gravity_m_per_s2;
+            normal_gravity_m_per_s2(45.0, z) / normal_gravity_surface_m_per_s2(45.0)
+        };
+        let pressure =
+            |z: f64| p0 * (-c * simpson(|y| gamma(y) / temperature(y), 0.0, z, 2000)).exp();
         let mut prof = isothermal();
-        prof.temperature_k = prof.altitude_m.iter().map(|z| t0 - lapse * z).collect();
-        prof.pressure_pa = prof
-            .altitude_m
-            .iter()
-            .zip(&prof.temperature_k)
-            .map(|(z, t)| n0 * (-z / h).exp() * crate::constants::BOLTZMANN_J_PER_K * t)
-            .collect();
+        prof.temperature_k = prof.altitude_m.iter().map(|z| temperature(*z)).collect();
+        prof.pressure_pa = prof.altitude_m.iter().map(|z| pressure(*z)).collect();
         for (a, b) in [(1500.0, 2700.0), (0.0, 20_000.0), (9100.0, 9900.0)] {
             let l = &curtis_godson_layers(&prof, &[a, b]).unwrap()[0];
-            let (ea, eb) = ((-a / h).exp(), (-b / h).exp());
-            let zbar = ((a + h) * ea - (b + h) * eb) / (ea - eb);
+            let n = |z: f64| pressure(z) / (k * temperature(z));
+            let col = simpson(n, a, b, 4000);
+            let t_n = simpson(|z| n(z) * temperature(z), a, b, 4000);
+            let p_n = simpson(|z| n(z) * pressure(z), a, b, 4000);
             assert!(
-                (l.temperature_k - (t0 - lapse * zbar)).abs() < 1e-9,
-                "[{a}, {b}]: {} vs {}",
-                l.temperature_k,
-                t0 - lapse * zbar
+                (l.air_column_per_cm2 / (col * 1e-4) - 1.0).abs() < 1e-10,
+                "[{a}, {b}]: column {} vs {}",
+                l.air_column_per_cm2,
+                col * 1e-4
             );
-            assert!((l.air_column_per_cm2 / (n0 * h * (ea - eb) * 1e-4) - 1.0).abs() < 1e-12);
+            assert!(
+                (l.temperature_k / (t_n / col) - 1.0).abs() < 1e-10,
+                "[{a}, {b}]"
+            );
+            assert!(
+                (l.pressure_pa / (p_n / col) - 1.0).abs() < 1e-10,
+                "[{a}, {b}]"
+            );
         }
     }
 
+    /// vmr 0 at 2 km and 4e-4 at 4 km (and the reverse): ln x is undefined at the empty level,
+    /// so x is linear between the two; the column over [2 km, 3 km] is ∫ x(z) n(z) dz with the
+    /// isothermal atmosphere's n, by Simpson's rule, to 1e-12.
     #[test]
-    fn a_gas_absent_at_one_level_is_linear_in_number_density_there() {
-        // vmr 0 at 2 km and 4e-4 at 4 km (and the reverse): ln n_g is undefined at the empty
-        // level, so n_g is linear between the two and its column over [2 km, 3 km] is the
-        // trapezoid ∫ n₄ (z − 2 km)/(2 km) dz = n₄ · 250 m (n₄ · 750 m when the empty level is
-        // at 4 km).
+    fn a_gas_absent_at_one_level_is_linear_in_mixing_ratio_there() {
         let mut prof = isothermal();
-        let n_air = prof.air_number_density_per_m3();
-        for (empty, full, share_m) in [(1, 2, 250.0), (2, 1, 750.0)] {
+        let (h, n0) = (
+            8000.0_f64,
+            1e5 / (crate::constants::BOLTZMANN_J_PER_K * 250.0),
+        );
+        let n = |z: f64| n0 * (-gamma_integral(z) / h).exp();
+        let (a, b, c) = (2000.0_f64, 3000.0_f64, 4000.0_f64);
+        for (empty, x) in [
+            (
+                1,
+                Box::new(|z: f64| 4e-4 * (z - a) / (c - a)) as Box<dyn Fn(f64) -> f64>,
+            ),
+            (2, Box::new(|z: f64| 4e-4 * (c - z) / (c - a))),
+        ] {
             prof.gases[0].vmr = vec![4e-4; prof.len()];
             prof.gases[0].vmr[empty] = 0.0;
-            let l = &curtis_godson_layers(&prof, &[2000.0, 3000.0]).unwrap()[0];
-            let want = 4e-4 * n_air[full] * share_m * 1e-4;
+            let l = &curtis_godson_layers(&prof, &[a, b]).unwrap()[0];
+            let want = simpson(|z| x(z) * n(z), a, b, 20_000) * 1e-4;
             assert!(
                 (l.gas_columns_per_cm2[0] / want - 1.0).abs() < 1e-12,
                 "empty level {empty}: {} vs {want}",

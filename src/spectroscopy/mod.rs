@@ -105,6 +105,14 @@ pub enum SpectroscopyError {
         /// Highest level \[m\].
         top_m: f64,
     },
+    /// A cross-section or optical depth below zero: where, which line, and why.
+    #[error("{location}: {message}")]
+    NegativeAbsorption {
+        /// The line list (file and line, and the column, where one line is to blame) or table.
+        location: String,
+        /// What is negative, where, and the cause.
+        message: String,
+    },
     /// A saved table that does not match what it is asked for.
     #[error("the optical-depth table does not match: {0}")]
     TableMismatch(String),

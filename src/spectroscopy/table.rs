@@ -155,7 +155,8 @@ impl GasOpticalDepthTable {
                 if !super::xsec::count_layer_gas(col) {
                     continue;
                 }
-                let sigma = cross_section(lines, m, &layer.state_for(gi), grid, opts)?;
+                let sigma = cross_section(lines, m, &layer.state_for(gi), grid, opts)
+                    .map_err(|e| super::xsec::in_layer(e, layer, profile))?;
                 for (t, s) in row.iter_mut().zip(sigma) {
                     *t += s * col;
                 }
@@ -228,12 +229,34 @@ impl GasOpticalDepthTable {
                 .map(|o| (t - (o as f64 - 2.0)) / (xs - (o as f64 - 2.0)))
                 .product();
         }
-        Ok((0..self.n_layers())
+        let tau: Vec<f64> = (0..self.n_layers())
             .map(|l| {
                 let row = &self.tau[l * n + i - 2..l * n + i + 4];
                 row.iter().zip(&w).map(|(a, b)| a * b).sum()
             })
-            .collect())
+            .collect();
+        // The table's values are ≥ 0 (computed or loaded); quintic interpolation of them can
+        // overshoot below 0 next to a line the grid step does not resolve: no optical depth.
+        if let Some(l) = (0..tau.len()).find(|&l| !(tau[l] >= 0.0)) {
+            let row = &self.tau[l * n + i - 2..l * n + i + 4];
+            return Err(SpectroscopyError::NegativeAbsorption {
+                location: format!("the optical-depth table of {}", self.line_source),
+                message: format!(
+                    "6-point interpolation to {wavenumber_cm1} cm⁻¹ gives the layer {}–{} m the optical depth {:.4e} < 0 \
+                     (its grid values there: {}): the grid step {} cm⁻¹ does not resolve the absorption at this \
+                     wavenumber; compute the table with a finer step",
+                    self.edges_m[l],
+                    self.edges_m[l + 1],
+                    tau[l],
+                    row.iter()
+                        .map(|v| format!("{v:.3e}"))
+                        .collect::<Vec<_>>()
+                        .join(", "),
+                    self.grid.step_cm1
+                ),
+            });
+        }
+        Ok(tau)
     }
 
     /// Optical depths of coarser layers whose edges are a subset of the table's edges (each
@@ -392,6 +415,12 @@ impl GasOpticalDepthTable {
             .collect();
         if tau.iter().any(|v| !v.is_finite()) {
             return Err(bad("tau", "non-finite optical depth"));
+        }
+        if let Some(v) = tau.iter().find(|v| **v < 0.0) {
+            return Err(bad(
+                "tau",
+                &format!("negative optical depth {v:e} (a table lidarsim writes has none)"),
+            ));
         }
         Ok(GasOpticalDepthTable {
             edges_m: h.edges_m,

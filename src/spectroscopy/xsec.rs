@@ -320,9 +320,23 @@ struct Prepared {
     gamma_d: f64,
     /// Beyond the plain Voigt: line mixing and/or the Hartmann-Tran profile.
     beyond: Beyond,
+    /// Index of the line in its [`LineList`] (for messages that name it).
+    line: usize,
+    /// S(T) [cm/molecule], Lorentz HWHM Γ₀ [cm⁻¹] and first-order line mixing Y at the state
+    /// (for messages).
+    s_t: f64,
+    gamma_l: f64,
+    y_mix: f64,
+    /// How far from ν_c the speed classes' Lorentzians sit and spread [cm⁻¹]
+    /// ([`SPEED_SPREAD`] |C₂|; 0 without speed dependence): the multigrid's exact zone and the
+    /// far-wing form start that much farther out.
+    spread: f64,
 }
 
 /// How a prepared line departs from the Voigt.
+// The prepared lines sit in one vector the hot loops walk; a boxed variant would add an
+// indirection per evaluation for the sake of the Voigt lines' size.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, Copy)]
 enum Beyond {
     /// The Voigt.
@@ -335,17 +349,17 @@ enum Beyond {
 
 /// A beyond-Voigt line: its parameters, S(T), line mixing Y, and its far-wing form for the
 /// fast path: beyond `wing` from the centre, the Voigt of the same Γ₀ and Δ₀ plus the
-/// difference's leading terms, k_re/Δ⁴ (real part) and k_im/Δ³ (imaginary part), matched at
-/// ±`wing` on each side ([`HT_WING_WIDTHS`]).
+/// difference's leading terms, a₃/Δ³ + a₄/Δ⁴ in the real and in the imaginary part, matched at
+/// `wing` and 2·`wing` on each side ([`HT_WING_WIDTHS`]).
 #[derive(Debug, Clone, Copy)]
 struct HtLine {
     p: HtProfile,
     s_t: f64,
     y_mix: f64,
     wing: f64,
-    /// [below, above] the centre.
-    k_re: [f64; 2],
-    k_im: [f64; 2],
+    /// [below, above] the centre: (a₃, a₄) of the real and of the imaginary part.
+    k_re: [(f64, f64); 2],
+    k_im: [(f64, f64); 2],
 }
 
 impl HtLine {
@@ -357,12 +371,20 @@ impl HtLine {
             eta: 0.0,
             ..p
         };
-        let mut k_re = [0.0; 2];
-        let mut k_im = [0.0; 2];
+        let mut k_re = [(0.0, 0.0); 2];
+        let mut k_im = [(0.0, 0.0); 2];
         for (side, d) in [-wing, wing].into_iter().enumerate() {
-            let diff = hartmann_tran(&p, nu_c + d) - hartmann_tran(&voigt, nu_c + d);
-            k_re[side] = diff.re * d.powi(4);
-            k_im[side] = diff.im * d.powi(3);
+            let diff = |d: f64| hartmann_tran(&p, nu_c + d) - hartmann_tran(&voigt, nu_c + d);
+            // a₃/d³ + a₄/d⁴ = r₁ at d and r₂ at 2d: a₃ = d³ (16 r₂ − r₁), a₄ = d⁴ (2 r₁ − 16 r₂).
+            let (r1, r2) = (diff(d), diff(2.0 * d));
+            let fit = |r1: f64, r2: f64| {
+                (
+                    d.powi(3) * (16.0 * r2 - r1),
+                    d.powi(4) * (2.0 * r1 - 16.0 * r2),
+                )
+            };
+            k_re[side] = fit(r1.re, r2.re);
+            k_im[side] = fit(r1.im, r2.im);
         }
         HtLine {
             p: HtProfile::new(&p),
@@ -406,9 +428,10 @@ impl Prepared {
                     let x = d * self.cx;
                     let w = w_fast(num_complex::Complex64::new(x, self.y));
                     let side = usize::from(d > 0.0);
-                    let d2 = d * d;
-                    let re = self.amp * w.re + h.s_t * h.k_re[side] / (d2 * d2);
-                    let im = self.amp * w.im + h.s_t * h.k_im[side] / (d2 * d);
+                    let d3 = d * d * d;
+                    let tail = |(a3, a4): (f64, f64)| (a3 + a4 / d) / d3;
+                    let re = self.amp * w.re + h.s_t * tail(h.k_re[side]);
+                    let im = self.amp * w.im + h.s_t * tail(h.k_im[side]);
                     return re + h.y_mix * im;
                 }
                 let i = if exact {
@@ -464,7 +487,12 @@ fn prepare(
     // Q(T) and Q(296) per isotopologue, looked up once.
     let mut q_cache: Vec<((u8, u8), f64, f64, f64)> = Vec::new();
     let mut out = Vec::new();
-    for l in lines.lines.iter().filter(|l| l.molecule_id == molecule_id) {
+    for (index, l) in lines
+        .lines
+        .iter()
+        .enumerate()
+        .filter(|(_, l)| l.molecule_id == molecule_id)
+    {
         let key = (l.molecule_id, l.iso_id);
         let (q_t, q_ref, mass) = match q_cache.iter().find(|c| c.0 == key) {
             Some(c) => (c.1, c.2, c.3),
@@ -511,6 +539,12 @@ fn prepare(
                 };
                 let c = collisional(sp, p_atm, x_self, t);
                 check_columns(lines, l, sp, opts)?;
+                if matches!(
+                    opts.line_shape,
+                    LineShapeModel::SdVoigt | LineShapeModel::HartmannTran
+                ) {
+                    check_speed_dependence(lines, sp, &c, x_self, t)?;
+                }
                 (c.gamma0, c.delta0, Some(c))
             }
             None => {
@@ -539,6 +573,7 @@ fn prepare(
             (Some(c), true) => c.y,
             _ => 0.0,
         };
+        let mut spread = 0.0;
         let beyond = match (ht, opts.line_shape) {
             (Some(c), LineShapeModel::SdVoigt | LineShapeModel::HartmannTran)
                 if !(c.gamma2 == 0.0
@@ -547,6 +582,8 @@ fn prepare(
                         || (c.nu_vc == 0.0 && c.eta == 0.0))) =>
             {
                 let hart = opts.line_shape == LineShapeModel::HartmannTran;
+                let delta2 = if opts.line_shift { c.delta2 } else { 0.0 };
+                spread = SPEED_SPREAD * c.gamma2.hypot(delta2);
                 Beyond::Ht(HtLine::new(
                     HtParameters {
                         nu0: l.nu_cm1,
@@ -554,14 +591,14 @@ fn prepare(
                         gamma0: gamma_l,
                         gamma2: c.gamma2,
                         delta0: nu_c - l.nu_cm1,
-                        delta2: if opts.line_shift { c.delta2 } else { 0.0 },
+                        delta2,
                         nu_vc: if hart { c.nu_vc } else { 0.0 },
                         eta: if hart { c.eta } else { 0.0 },
                     },
                     s_t,
                     y_mix,
                     nu_c,
-                    HT_WING_WIDTHS * gamma_l.max(gamma_d),
+                    HT_WING_WIDTHS * gamma_l.max(gamma_d) + spread,
                 ))
             }
             // No speed dependence (and for HT no Dicke narrowing): the Voigt itself.
@@ -577,6 +614,11 @@ fn prepare(
             y: SQRT_LN2 * gamma_l / gamma_d,
             gamma_d,
             beyond,
+            line: index,
+            s_t,
+            gamma_l,
+            y_mix,
+            spread,
         });
     }
     // `LineList::lines` is public: a hand-built list may be unsorted; the searches need ν₀ order.
@@ -588,9 +630,21 @@ fn prepare(
 
 /// Beyond this many widths (the larger of Γ₀ and γ_D) from its centre, the fast path evaluates a
 /// beyond-Voigt line as the Voigt of the same Γ₀ and Δ₀ plus the leading terms of their
-/// difference, which falls as Δ⁻⁴ in the real part and Δ⁻³ in the imaginary part (measured for
-/// R(16)e at 1 and 0.1 atm), matched at this distance on each side of the line.
+/// difference. Expanding the speed average in 1/Δ, the difference starts at Δ⁻³ in both parts:
+/// in the imaginary part from the spread of the widths and shifts over the speeds, in the real
+/// part from their correlation (Γ₂Δ₂ ≠ 0; it vanishes without a speed-dependent shift, where
+/// the real part starts at Δ⁻⁴). Two terms, a₃/Δ³ + a₄/Δ⁴, are matched at this distance and at
+/// twice it on each side of the line (with one term, Δ⁻⁴ in the real part, Γ₂/Γ₀ = 2/3 with
+/// Δ₂/Δ₀ = 10 erred by 10 % of the peak).
 pub const HT_WING_WIDTHS: f64 = 8.0;
+
+/// The speed classes of a speed-dependent line have widths and shifts C₀ + C₂ (x² − 3/2)
+/// (x = v/v_p): from −3/2 to +8 times C₂ for all but e^{−9.5}·… ≈ 1e-3 of the molecules
+/// (x ≤ 3.1). A line's structure thus spans ν_c + Δ₂·[−1.5, 8] beyond its widths; the
+/// multigrid's interpolation and the far-wing expansion in 1/Δ are accurate only beyond it.
+/// With Δ₂ = 0.73 Γ₀ (Γ₂/Γ₀ = 2/3, Δ₂/Δ₀ = 10) and no such margin, the multigrid interpolated
+/// across the shifted peak and erred by 10 % of it.
+pub const SPEED_SPREAD: f64 = 8.0;
 
 /// A line's collisional parameters at one state \[cm⁻¹\] (Y dimensionless).
 #[derive(Debug, Clone, Copy)]
@@ -712,6 +766,151 @@ fn check_columns(
     })
 }
 
+/// The speed-dependent width of the mixture, Γ(v) = Γ₀ + Γ₂ (v²/v_p² − 3/2), must stay ≥ 0 at
+/// every speed v (Tran, Ngo & Hartmann 2013, JQSRT 129, 199, Eq. 3): Γ₂ ≥ 0, which the reader's
+/// range of `SD_gamma` ensures, and Γ₂ ≤ 2Γ₀/3, which it ensures at 296 K but which
+/// temperature exponents of Γ₂ and Γ₀ that differ can break at the state. Refused at the line
+/// of the file, naming the perturber whose own ratio is largest.
+fn check_speed_dependence(
+    lines: &LineList,
+    sp: &super::ShapeParameters,
+    c: &Collisional,
+    x_self: f64,
+    t: f64,
+) -> Result<(), SpectroscopyError> {
+    // A ratio at exactly 2/3 with equal exponents may exceed it by rounding.
+    if 1.5 * c.gamma2 <= c.gamma0 * (1.0 + 1e-12) {
+        return Ok(());
+    }
+    const T_REF: f64 = 296.0;
+    let r = T_REF / t;
+    let (b, side) = [(&sp.air, "air"), (&sp.self_broadening, "self")]
+        .into_iter()
+        .filter(|(_, side)| *side == "air" || x_self > 0.0)
+        .max_by(|a, b| {
+            let ratio = |b: &super::Broadener| b.sd_gamma * r.powf(b.n_gamma2 - b.n_gamma0);
+            ratio(a.0).total_cmp(&ratio(b.0))
+        })
+        .unwrap_or((&sp.air, "air"));
+    Err(crate::input::InputError::at(
+        std::path::PathBuf::from(&lines.source),
+        sp.file_line,
+        format!("SD_gamma_{side}"),
+        format!(
+            "{} with `n_gamma2_{side}` = {} and `n_gamma0_{side}` = {} gives the line Γ₂/Γ₀ = {:.4} at {t} K, above 2/3: \
+             the slowest molecules' width Γ₀ − 3Γ₂/2 would be negative (Tran et al. 2013, Eq. 3), \
+             and the profile is not a line shape there; the temperature exponents do not hold at {t} K",
+            b.sd_gamma,
+            b.n_gamma2,
+            b.n_gamma0,
+            c.gamma2 / c.gamma0,
+        ),
+    )
+    .into())
+}
+
+/// A cross-section below zero (or not finite) at some wavenumber is refused, naming the line
+/// whose profile is most negative there, the line of its file and the cause.
+///
+/// Within the parameter ranges the readers accept, the Voigt, speed-dependent Voigt and
+/// Hartmann-Tran profiles are non-negative (tests/beyond_voigt.rs checks them against the speed
+/// average at the ranges' edges), so a sum of them is too. First-order line mixing (Rosenkranz
+/// 1975) is not: Re I + Y·Im I of one line is negative beyond |ν − ν_c| ≈ Γ/|Y| on the side
+/// where Y (ν − ν_c) < 0, which is the physics of the approximation. Over a whole band the
+/// mixing coefficients balance (Σ S·Y ≈ 0) and the band's cross-section stays positive (the
+/// NIST list of the 30012 band, as shipped, is non-negative from 0.01 to 3 atm); a list that
+/// holds only part of a band can give a negative sum, which is no absorption coefficient:
+/// refused, with the cure.
+fn refuse_negative(
+    lines: &LineList,
+    prepared: &[Prepared],
+    state: &GasState,
+    opts: &LblOptions,
+    sigma: &[f64],
+    nu_at: impl Fn(usize) -> f64,
+) -> Result<(), SpectroscopyError> {
+    let Some(k) = (0..sigma.len())
+        .filter(|&k| !(sigma[k] >= 0.0 && sigma[k].is_finite()))
+        .min_by(|&a, &b| sigma[a].total_cmp(&sigma[b]))
+    else {
+        return Ok(());
+    };
+    let nu = nu_at(k);
+    let w = opts.wing_cm1;
+    let exact = opts.voigt == VoigtMethod::Exact;
+    let reaching: Vec<(&Prepared, f64)> = prepared
+        .iter()
+        .filter(|p| p.in_window(nu, w))
+        .map(|p| (p, p.eval(nu, exact)))
+        .collect();
+    let where_ = format!(
+        "cross-section {:.4e} cm²/molecule at {nu} cm⁻¹ (p = {:.5} atm, T = {:.2} K)",
+        sigma[k],
+        state.pressure_pa / constants::STANDARD_ATMOSPHERE_PA,
+        state.temperature_k
+    );
+    let Some(&(p, contribution)) = reaching.iter().min_by(|a, b| a.1.total_cmp(&b.1)) else {
+        return Err(SpectroscopyError::NegativeAbsorption {
+            location: lines.source.clone(),
+            message: format!("{where_}, where no line reaches: a numerical fault"),
+        });
+    };
+    let line = &lines.lines[p.line];
+    let location = match &line.shape {
+        Some(sp) => format!("{}:{}", lines.source, sp.file_line),
+        None => lines.source.clone(),
+    };
+    let column = "y_air";
+    let quanta = line.local_lower_quanta().trim();
+    let id = format!(
+        "the line at ν₀ = {} cm⁻¹{}",
+        line.nu_cm1,
+        if quanta.is_empty() {
+            String::new()
+        } else {
+            format!(" ({quanta})")
+        }
+    );
+    let message = if p.y_mix != 0.0 && contribution < 0.0 {
+        let (sum, abs) = reaching.iter().fold((0.0, 0.0), |(s, a), (q, _)| {
+            (s + q.s_t * q.y_mix, a + q.s_t * q.y_mix.abs())
+        });
+        let reach = p.gamma_l / p.y_mix.abs();
+        format!(
+            "negative absorption {where_}: `{column}` (with `y_self`, mole-fraction weighted) of {id} gives first-order line mixing Y = {:.4e} at this state, \
+             and Re I + Y·Im I of a line is negative beyond Γ/|Y| = {reach:.4} cm⁻¹ from its centre on its {} side \
+             (its share here {contribution:.4e} cm²/molecule); a whole band's mixing balances (Σ S·Y ≈ 0, Rosenkranz 1975) \
+             but of the {} of the list that reach {nu} cm⁻¹, Σ S·Y is {:.1} % of Σ S·|Y|. \
+             Give the band's other lines, a wing cutoff below about {reach:.4} cm⁻¹, or no line mixing",
+            p.y_mix,
+            if p.y_mix > 0.0 {
+                "low-wavenumber"
+            } else {
+                "high-wavenumber"
+            },
+            match reaching.len() {
+                1 => "1 line".to_string(),
+                n => format!("{n} lines"),
+            },
+            100.0 * sum / abs,
+        )
+    } else {
+        format!(
+            "negative absorption {where_}: the profile of {id} contributes {contribution:.4e} cm²/molecule there \
+             (line shape `{}`), outside what its parameters allow: a numerical fault",
+            opts.line_shape.name()
+        )
+    };
+    Err(SpectroscopyError::NegativeAbsorption {
+        location: if p.y_mix != 0.0 && contribution < 0.0 {
+            format!("{location}: `{column}`")
+        } else {
+            location
+        },
+        message,
+    })
+}
+
 /// Absorption cross-section σ(ν) [cm²/molecule] of molecule `molecule_id` (HITRAN number) at
 /// every wavenumber of `wavenumbers`, evaluating every line directly (module docs).
 ///
@@ -725,7 +924,11 @@ pub fn cross_section_at(
     opts: &LblOptions,
 ) -> Result<Vec<f64>, SpectroscopyError> {
     let prepared = prepare(lines, molecule_id, state, opts)?;
-    Ok(direct_sum(&prepared, wavenumbers_cm1, opts))
+    let sigma = direct_sum(&prepared, wavenumbers_cm1, opts);
+    refuse_negative(lines, &prepared, state, opts, &sigma, |k| {
+        wavenumbers_cm1[k]
+    })?;
+    Ok(sigma)
 }
 
 /// Direct sum at arbitrary wavenumbers, every line whose window contains ν, in line order.
@@ -777,10 +980,25 @@ pub fn cross_section(
     opts: &LblOptions,
 ) -> Result<Vec<f64>, SpectroscopyError> {
     let prepared = prepare(lines, molecule_id, state, opts)?;
-    if !opts.multigrid || grid.len < 2 {
-        return Ok(direct_sum(&prepared, &grid.wavenumbers(), opts));
-    }
-    Ok(multigrid_sum(&prepared, grid, opts))
+    let sigma = if !opts.multigrid || grid.len < 2 {
+        direct_sum(&prepared, &grid.wavenumbers(), opts)
+    } else {
+        let mut sigma = multigrid_sum(&prepared, grid, opts);
+        // Where the sum is ~0 (beyond every line's window, or where line mixing cancels) the
+        // multigrid's interpolation residue, ≲ 1e-6 of the lines' local values, can dip below 0
+        // (−1.8e-46 cm² 25 cm⁻¹ past the NIST band's last line at 0.1 atm): such points are
+        // evaluated directly, by the definition, which is non-negative for non-negative profiles.
+        let below: Vec<usize> = (0..grid.len).filter(|&i| !(sigma[i] >= 0.0)).collect();
+        if !below.is_empty() {
+            let nus: Vec<f64> = below.iter().map(|&i| grid.at(i)).collect();
+            for (i, v) in below.iter().zip(direct_sum(&prepared, &nus, opts)) {
+                sigma[*i] = v;
+            }
+        }
+        sigma
+    };
+    refuse_negative(lines, &prepared, state, opts, &sigma, |k| grid.at(k))?;
+    Ok(sigma)
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -955,7 +1173,7 @@ fn add_line(lv: &Levels, a: &mut [Vec<f64>], buf: &mut Vec<f64>, p: &Prepared, o
         if k == 0 {
             0.0
         } else {
-            (MG_M * lv.h(k)).max(MG_KAPPA * p.gamma_d)
+            (MG_M * lv.h(k)).max(MG_KAPPA * p.gamma_d) + p.spread
         }
     };
     let mut top = 0;
@@ -1081,6 +1299,27 @@ pub(super) fn count_layer_gas(column_per_cm2: f64) -> bool {
     compute
 }
 
+/// A negative cross-section's message with the layer of `profile` it was found in: the optical
+/// depth there would be negative.
+pub(super) fn in_layer(
+    e: SpectroscopyError,
+    layer: &super::CgLayer,
+    profile: &Profile,
+) -> SpectroscopyError {
+    match e {
+        SpectroscopyError::NegativeAbsorption { location, message } => {
+            SpectroscopyError::NegativeAbsorption {
+                location,
+                message: format!(
+                    "{message} (in the layer {}–{} m of the profile `{}`, whose optical depth would be negative)",
+                    layer.bottom_m, layer.top_m, profile.name
+                ),
+            }
+        }
+        other => other,
+    }
+}
+
 /// Vertical gas optical depth of each layer between `edges_m` at each wavenumber, computed
 /// directly (no grid): τ_l(ν) = Σ_gas σ_gas(ν; p̄_l, T̄_l) · U_gas,l with Curtis-Godson p̄, T̄ and
 /// columns U (see [`super::layers`]). Returns `[layer][wavenumber]`.
@@ -1105,7 +1344,8 @@ pub fn layer_optical_depths_at(
                 continue;
             }
             let state = layer.state_for(*gi);
-            let sigma = cross_section_at(lines, *m, &state, wavenumbers_cm1, opts)?;
+            let sigma = cross_section_at(lines, *m, &state, wavenumbers_cm1, opts)
+                .map_err(|e| in_layer(e, layer, profile))?;
             for (t, s) in tau.iter_mut().zip(sigma) {
                 *t += s * col;
             }

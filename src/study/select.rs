@@ -12,9 +12,10 @@
 //!   with lines from the top of the grid to the surface;
 //! * `wf_peak_hpa`: the pressure where the IPDA weighting function **per unit pressure**,
 //!   WF_l = Δτ_CO2,l / (x_l Δp_l) (layer l, Δτ_CO2 its CO2 differential optical depth, x_l its
-//!   dry-air CO2 mole fraction and Δp_l its pressure thickness in hPa, so that D_CO2 = Σ WF_l x_l
-//!   Δp_l), peaks: the centre (mean ln p) of the largest layer, refined by a parabola in ln p
-//!   through it and its neighbours (the resolution is the layer thickness near the surface);
+//!   dry-air CO2 mole fraction and Δp_l its pressure thickness in hPa, from the same hydrostatic
+//!   integration as the columns, so that D_CO2 = Σ WF_l x_l Δp_l; [`weighting_function`]),
+//!   peaks: the centre (mean ln p) of the largest layer, refined by a parabola in ln p through
+//!   it and its neighbours (the resolution is the layer thickness near the surface);
 //! * four sensitivities, XCO2 retrieved − XCO2 true \[ppm\] ([`Steps`]): a retrieval with the
 //!   assumed state's reference ([`crate::retrieval::ReferenceState`]) fits the scale s of its
 //!   CO2 to the true DAOD (`solve_scale`, which subtracts the assumed other-gas absorption), and
@@ -45,6 +46,7 @@
 
 use rayon::prelude::*;
 
+use crate::atmosphere::hydrostatic::HydrostaticProfile;
 use crate::atmosphere::{
     AtmosphereError, LatitudeClass, Profile, SetMember, StateShift, shift_member,
 };
@@ -528,14 +530,57 @@ fn shifted(member: &SetMember, steps: &Steps) -> Result<[Profile; 4], SelectErro
     Ok([none.profile, t.profile, q.profile, p.profile])
 }
 
-/// Layer pressures of a profile's weighting function: (centre ln p, Δp \[hPa\]) per layer.
-fn layer_pressures(profile: &Profile, edges_m: &[f64]) -> Result<Vec<(f64, f64)>, SelectError> {
-    let at = profile.interpolate_to_altitudes(edges_m)?;
-    Ok(at
-        .pressure_pa
-        .windows(2)
-        .map(|w| (0.5 * (w[0].ln() + w[1].ln()), (w[0] - w[1]) / 100.0))
-        .collect())
+/// The IPDA weighting function per unit pressure of one on/off pair on the layers of a
+/// reference state (module docs): WF_l = Δτ_CO2,l/(x_l Δp_l).
+#[derive(Debug, Clone, PartialEq)]
+pub struct WeightingFunction {
+    /// Centre of each layer, the mean of ln p \[Pa\] at its edges.
+    pub ln_p_centre: Vec<f64>,
+    /// Pressure thickness of each layer \[hPa\].
+    pub dp_hpa: Vec<f64>,
+    /// WF_l \[1/hPa\].
+    pub per_hpa: Vec<f64>,
+}
+
+impl WeightingFunction {
+    /// Pressure \[hPa\] where it peaks ([`peak_pressure_hpa`]'s parabola in ln p).
+    pub fn peak_hpa(&self) -> f64 {
+        peak_pressure_hpa(&self.ln_p_centre, &self.per_hpa)
+    }
+}
+
+/// The weighting function of lines `on` and `off` (their first quadrature node: a
+/// monochromatic laser) of `state`, computed on `profile` (the state's profile). The pressure
+/// thickness Δp_l comes from the same hydrostatic integration as the state's columns
+/// ([`HydrostaticProfile`]), so that x_l Δp_l is the layer's CO2 column times m g: within a
+/// level interval the column per unit pressure is then constant up to humidity, and WF_l is
+/// Δσ_l U_dry,l/Δp_l = Δσ_l (1 − x_w)/(m g) as the hydrostatic equation has it. (With Δp from
+/// ln p linear in z it varied by ΔT/T across each interval, ±1 % in the tropics, and that
+/// sawtooth set the peak where the weighting function is flat.)
+pub fn weighting_function(
+    profile: &Profile,
+    state: &ReferenceState,
+    on: usize,
+    off: usize,
+) -> WeightingFunction {
+    let edges = &state.columns.edges_m;
+    let hydro = HydrostaticProfile::new(profile);
+    let p: Vec<f64> = edges.iter().map(|z| hydro.pressure_pa(*z)).collect();
+    let n = edges.len().saturating_sub(1);
+    let mut wf = WeightingFunction {
+        ln_p_centre: Vec::with_capacity(n),
+        dp_hpa: Vec::with_capacity(n),
+        per_hpa: Vec::with_capacity(n),
+    };
+    for l in 0..n {
+        let dp = (p[l] - p[l + 1]) / 100.0;
+        let x = state.columns.gas_per_m2[l] / state.columns.dry_air_per_m2[l];
+        let dt = state.target_tau[l][on][0] - state.target_tau[l][off][0];
+        wf.ln_p_centre.push(0.5 * (p[l].ln() + p[l + 1].ln()));
+        wf.dp_hpa.push(dp);
+        wf.per_hpa.push(dt / (x * dp));
+    }
+    wf
 }
 
 /// Pressure \[hPa\] where `wf` (per layer, centres at ln p `x`) peaks: the largest layer,
@@ -648,13 +693,6 @@ pub fn study_member(member: &SetMember, cfg: &StudyConfig) -> Result<MemberResul
          d_true: f64,
          x_true: f64| { (s.solve_scale(p, on, off, d_true) * x_assumed - x_true) * 1e6 };
 
-    // Weighting function per unit pressure of the unshifted profile.
-    let lp = layer_pressures(&profiles[0], &edges)?;
-    let ln_p: Vec<f64> = lp.iter().map(|l| l.0).collect();
-    let x_layer: Vec<f64> = (0..lp.len())
-        .map(|l| s0.columns.gas_per_m2[l] / s0.columns.dry_air_per_m2[l])
-        .collect();
-
     // Rayleigh optical depth of the air column over the grid (Bucholtz 1995).
     let rayleigh_tau = match &cfg.noise {
         Some(_) => {
@@ -675,12 +713,8 @@ pub fn study_member(member: &SetMember, cfg: &StudyConfig) -> Result<MemberResul
     let mut positions = Vec::with_capacity(n);
     for (i, pos) in cfg.positions.iter().enumerate() {
         let d0 = tau(&p0, i) - tau_off;
-        let wf: Vec<f64> = (0..lp.len())
-            .map(|l| {
-                let dt = s0.target_tau[l][i][0] - s0.target_tau[l][off][0];
-                dt / (x_layer[l] * lp[l].1)
-            })
-            .collect();
+        // Weighting function per unit pressure of the unshifted profile.
+        let wf = weighting_function(&profiles[0], &s0, i, off);
         let d_of = |s: &ReferenceState, p: &crate::retrieval::PathDepths| s.daod(p, i, off, 1.0).0;
         let d_f = s0.daod(&p0, n + 1 + i, off, 1.0).0;
         let t2_on = (-2.0 * tau(&p0, i)).exp();
@@ -714,7 +748,7 @@ pub fn study_member(member: &SetMember, cfg: &StudyConfig) -> Result<MemberResul
         };
         positions.push(PositionResult {
             daod_one_way: d0,
-            wf_peak_hpa: peak_pressure_hpa(&ln_p, &wf),
+            wf_peak_hpa: wf.peak_hpa(),
             dxco2_per_k_ppm: error_ppm(&s0, &p0, x0, i, d_of(&s_t, &p_t), x_t),
             dxco2_per_mhz_ppm: error_ppm(&s0, &p0, x0, i, d_f, x0),
             dxco2_per_hpa_ppm: error_ppm(&s_p, &p_p, x_p, i, d_of(&s0, &p0), x0),
