@@ -1034,15 +1034,6 @@ const KNOWN: &[Known] = &[
         always: true,
     },
     Known {
-        command: "lbl",
-        id: "F13",
-        what: "negative cross-sections and optical depths from the multigrid",
-        matches: |why, _| {
-            why.contains("is negative") && (why.contains("`sigma_") || why.contains("`tau_"))
-        },
-        always: true,
-    },
-    Known {
         command: "mie",
         id: "F6",
         what: "distribution errors name the library's fields, not the options",
@@ -2588,7 +2579,6 @@ mod findings {
     }
 
     #[test]
-    #[ignore = "issue 37: F13 lbl's multigrid gives negative cross-sections far from the lines"]
     fn f13_cross_sections_are_never_negative() {
         let dir = tempfile::tempdir().unwrap();
         let ran = run_in(
