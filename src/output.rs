@@ -26,6 +26,13 @@
 //! existing ancestor otherwise, so that it is on the target's filesystem (a rename cannot cross
 //! filesystems) even when the target is a mount point. A process that is killed can leave one
 //! behind: it is hidden, and its name says what it is.
+//!
+//! **No `NaN` or `inf` in a CSV file.** A number that cannot be computed is an empty field
+//! ([`csv_number`] formats one so), and every `.csv` file staged is checked: an unquoted field
+//! that reads as a non-finite number (`NaN`, `inf`, `-inf`, `Infinity`, any case) refuses the
+//! whole set with the file, line and column named ([`OutputError::NonFinite`]), so that a
+//! writer that forgets [`csv_number`] fails loudly instead of writing it. Text fields that
+//! would read so are quoted by [`csv_field`].
 
 use std::borrow::Cow;
 use std::ffi::OsString;
@@ -61,6 +68,22 @@ pub enum OutputError {
     /// The path names no file (`..`, `/`).
     #[error("cannot write {}: it does not name a file", .0.display())]
     NotAFileName(PathBuf),
+    /// A CSV file holds a non-finite number (a bug of its writer, which must write an empty
+    /// field for a value that cannot be computed).
+    #[error(
+        "cannot write {}: line {line}, column {column} is `{value}`: a value that cannot be computed must be an empty field (a bug in lidarsim; please report it)",
+        path.display()
+    )]
+    NonFinite {
+        /// The output.
+        path: PathBuf,
+        /// Its line (1-based).
+        line: usize,
+        /// The column: its name from the header line, or its number.
+        column: String,
+        /// The field as written.
+        value: String,
+    },
     /// Two outputs of one command have the same path.
     #[error("{} is given for two outputs", .0.display())]
     Twice(PathBuf),
@@ -126,14 +149,159 @@ impl OutputError {
 }
 
 /// `field` as one RFC 4180 CSV field: quoted, with its quotes doubled, when it holds a comma,
-/// a double quote, a CR or a LF; as it is otherwise. Every text field of lidarsim's CSV files
-/// goes through it (names in scenes may hold any text).
+/// a double quote, a CR or a LF, or reads as a non-finite number (a profile named `NaN`, which
+/// the check of staged CSV files would otherwise take for one); as it is otherwise. Every text
+/// field of lidarsim's CSV files goes through it (names in scenes may hold any text).
 pub fn csv_field(field: &str) -> Cow<'_, str> {
-    if field.contains([',', '"', '\r', '\n']) {
+    if field.contains([',', '"', '\r', '\n']) || reads_non_finite(field) {
         Cow::Owned(format!("\"{}\"", field.replace('"', "\"\"")))
     } else {
         Cow::Borrowed(field)
     }
+}
+
+/// A number as a CSV field: written with the format it is given (`{}`, `{:.9e}`, `{:.6}`) when
+/// it is finite, as nothing (an empty field) when it is not: the contract's "a value that
+/// cannot be computed is an empty field, never `NaN` or `inf`".
+pub fn csv_number(x: f64) -> CsvNumber {
+    CsvNumber(x)
+}
+
+/// A number that formats as an empty field when it is not finite ([`csv_number`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CsvNumber(pub f64);
+
+impl Display for CsvNumber {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if self.0.is_finite() {
+            Display::fmt(&self.0, f)
+        } else {
+            Ok(())
+        }
+    }
+}
+
+impl std::fmt::LowerExp for CsvNumber {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if self.0.is_finite() {
+            std::fmt::LowerExp::fmt(&self.0, f)
+        } else {
+            Ok(())
+        }
+    }
+}
+
+/// Whether `field` (unquoted, surrounding blanks ignored) reads as a non-finite number to
+/// Rust, pandas or a spreadsheet: `nan`, `inf` or `infinity`, any case, with an optional sign.
+fn reads_non_finite(field: &str) -> bool {
+    let t = field.trim();
+    let t = t.strip_prefix(['+', '-']).unwrap_or(t);
+    ["nan", "inf", "infinity"]
+        .iter()
+        .any(|w| t.eq_ignore_ascii_case(w))
+}
+
+/// The first unquoted field of the CSV text `bytes` that reads as a non-finite number: (line,
+/// column, field). The column is named by the header, the first line that is not a `#`
+/// comment, when it has that many fields. Quoted fields (RFC 4180) are text and are skipped.
+fn non_finite_field(bytes: &[u8]) -> Option<(usize, String, String)> {
+    // Most files hold neither word anywhere: no need to parse them.
+    let has = |word: &[u8]| {
+        bytes
+            .windows(word.len())
+            .any(|w| w.eq_ignore_ascii_case(word))
+    };
+    if !has(b"nan") && !has(b"inf") {
+        return None;
+    }
+    let mut header: Option<Vec<String>> = None;
+    let mut fields: Vec<(Vec<u8>, bool)> = Vec::new();
+    let (mut field, mut quoted, mut in_quotes) = (Vec::new(), false, false);
+    let (mut line, mut record_line) = (1usize, 1usize);
+    let mut i = 0;
+    while i <= bytes.len() {
+        let b = bytes.get(i).copied();
+        if in_quotes {
+            match b {
+                Some(b'"') if bytes.get(i + 1) == Some(&b'"') => {
+                    field.push(b'"');
+                    i += 1;
+                }
+                Some(b'"') => in_quotes = false,
+                Some(c) => {
+                    line += usize::from(c == b'\n');
+                    field.push(c);
+                }
+                None => {}
+            }
+            i += 1;
+            continue;
+        }
+        match b {
+            Some(b'"') if field.is_empty() => {
+                in_quotes = true;
+                quoted = true;
+            }
+            Some(b',') => fields.push((std::mem::take(&mut field), std::mem::take(&mut quoted))),
+            Some(b'\n') | None => {
+                if b.is_some() || !field.is_empty() || !fields.is_empty() {
+                    fields.push((std::mem::take(&mut field), std::mem::take(&mut quoted)));
+                }
+                let comment = fields
+                    .first()
+                    .is_some_and(|(f, q)| !q && f.first() == Some(&b'#'));
+                if !comment && !fields.is_empty() {
+                    for (k, (f, q)) in fields.iter().enumerate() {
+                        let text = String::from_utf8_lossy(f);
+                        let text = text.trim_end_matches('\r');
+                        if !q && reads_non_finite(text) {
+                            let column = header
+                                .as_ref()
+                                .and_then(|h| h.get(k))
+                                .map_or(format!("{}", k + 1), |name| format!("`{name}`"));
+                            return Some((record_line, column, text.to_string()));
+                        }
+                    }
+                    if header.is_none() {
+                        header = Some(
+                            fields
+                                .iter()
+                                .map(|(f, _)| {
+                                    String::from_utf8_lossy(f)
+                                        .trim_end_matches('\r')
+                                        .to_string()
+                                })
+                                .collect(),
+                        );
+                    }
+                }
+                fields.clear();
+                line += 1;
+                record_line = line;
+            }
+            Some(c) => field.push(c),
+        }
+        i += 1;
+    }
+    None
+}
+
+/// Refuse the staged CSV text `bytes` of `path` if it holds a non-finite number.
+fn check_csv(path: &Path, bytes: &[u8]) -> Result<(), OutputError> {
+    match non_finite_field(bytes) {
+        None => Ok(()),
+        Some((line, column, value)) => Err(OutputError::NonFinite {
+            path: path.to_path_buf(),
+            line,
+            column,
+            value,
+        }),
+    }
+}
+
+fn is_csv(path: &Path) -> bool {
+    path.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("csv"))
 }
 
 /// Write one file whole or not at all (an [`OutputSet`] of one file).
@@ -384,7 +552,15 @@ impl OutputSet {
         }
         refuse_directory(&target.join(&name), path)?;
         let staged = stage.dir.join("new").join(&name);
-        if let Err(e) = write(&staged) {
+        // However it was written, a CSV file is read back and checked (module documentation).
+        let checked = write(&staged).and_then(|()| {
+            if is_csv(path) {
+                let bytes = fs::read(&staged).map_err(|e| OutputError::io(path, e))?;
+                check_csv(path, &bytes)?;
+            }
+            Ok(())
+        });
+        if let Err(e) = checked {
             // The set may still be committed: a failed file must not be part of it.
             let _ = fs::remove_file(&staged);
             return Err(e);
@@ -621,6 +797,69 @@ mod tests {
         fs::write(out.join("b.csv"), "old b\n").unwrap();
         fs::write(out.join("notes.txt"), "mine\n").unwrap();
         out
+    }
+
+    /// Staged CSV files never hold a non-finite number: `csv_number` writes an empty field, and
+    /// a file with `NaN` or `inf` in an unquoted field is refused, naming line and column;
+    /// text that reads so is quoted by `csv_field`, and quoted fields are text.
+    #[test]
+    fn csv_files_with_non_finite_numbers_are_refused() {
+        assert_eq!(format!("{}", csv_number(0.25)), "0.25");
+        assert_eq!(format!("{:.3e}", csv_number(1234.5)), "1.234e3");
+        assert_eq!(format!("{:.2}", csv_number(-1.0 / 3.0)), "-0.33");
+        for x in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+            assert_eq!(
+                format!(
+                    "{}|{:.9e}|{:.4}",
+                    csv_number(x),
+                    csv_number(x),
+                    csv_number(x)
+                ),
+                "||"
+            );
+        }
+        for text in ["NaN", "nan", "-inf", "+Infinity", " inf"] {
+            assert!(reads_non_finite(text), "{text}");
+            assert_eq!(csv_field(text), format!("\"{text}\""));
+        }
+        for text in ["info", "nano", "in", "1e308", ""] {
+            assert!(!reads_non_finite(text), "{text}");
+        }
+        let ok = "# a comment, with nan\nname,x\n\"NaN\",1\n\"two\nlines, inf\",2\ninfo,3\n";
+        assert_eq!(non_finite_field(ok.as_bytes()), None);
+        let bad = "name,x,y\r\n\"a\nb\",1,2\r\nc,-inf,3\r\n";
+        assert_eq!(
+            non_finite_field(bad.as_bytes()),
+            Some((4, "`x`".into(), "-inf".into()))
+        );
+        // A row wider than the header: its column by number.
+        assert_eq!(
+            non_finite_field(b"a\n3,NaN"),
+            Some((2, "2".into(), "NaN".into()))
+        );
+        let root = tempfile::tempdir().unwrap();
+        let out = earlier_run(root.path());
+        let before = snapshot(root.path());
+        let mut set = OutputSet::new();
+        set.write(out.join("a.csv"), "new a\n").unwrap();
+        let e = set.write(out.join("b.csv"), bad).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            format!(
+                "cannot write {}: line 4, column `x` is `-inf`: a value that cannot be computed must be an empty field (a bug in lidarsim; please report it)",
+                out.join("b.csv").display()
+            )
+        );
+        // However the file is written.
+        let e = set
+            .write_via(out.join("c.csv"), |p| fs::write(p, "x\nNaN\n"))
+            .unwrap_err();
+        assert!(matches!(e, OutputError::NonFinite { line: 2, .. }), "{e}");
+        drop(set);
+        assert_eq!(snapshot(root.path()), before);
+        // Other files are not CSV.
+        let mut set = OutputSet::new();
+        set.write(out.join("notes.json"), "{\"x\": NaN}").unwrap();
     }
 
     #[test]

@@ -9,7 +9,7 @@ use anyhow::{Context, bail};
 
 use lidarsim::atmosphere::ProfileSet;
 use lidarsim::input::Bounds;
-use lidarsim::output::{self, OutputSet, csv_field};
+use lidarsim::output::{self, OutputSet, csv_field, csv_number as num};
 use lidarsim::scene::Scene;
 use lidarsim::shard::{self, ShardSpec};
 use lidarsim::study::dial::{
@@ -56,8 +56,10 @@ pub struct Args {
     /// Budget: temperature knowledge error [K].
     #[arg(long, default_value_t = 1.0, allow_negative_numbers = true, value_parser = super::real(Bounds::closed(-100.0, 100.0)))]
     pub budget_temperature_k: f64,
-    /// Budget: humidity knowledge error [%].
-    #[arg(long, default_value_t = 10.0, allow_negative_numbers = true, value_parser = super::real(Bounds::above(-100.0, 1000.0)))]
+    /// Budget: humidity knowledge error [%]: the truth this much wetter than the retrieval
+    /// assumes, in [-50, 1000] (the assumed humidity between 1/11 and 2 times the truth's:
+    /// positive and finite, and a knowledge error rather than another atmosphere).
+    #[arg(long, default_value_t = 10.0, allow_negative_numbers = true, value_parser = super::real(Bounds::closed(-50.0, 1000.0)))]
     pub budget_humidity_percent: f64,
     /// Budget: surface-pressure knowledge error [hPa].
     #[arg(long, default_value_t = 1.0, allow_negative_numbers = true, value_parser = super::real(Bounds::closed(-100.0, 100.0)))]
@@ -275,17 +277,17 @@ fn profiles_csv(result: &StudyResult) -> String {
                 o.class,
                 csv_field(&r.pair),
                 r.method.label(),
-                r.altitude_m.0,
-                r.altitude_m.1,
-                r.truth_ppm,
-                r.retrieved_ppm,
-                r.error_ppm(),
-                r.retrieved_noisy_ppm,
-                r.error_noisy_ppm(),
-                r.retrieved_own_ppm
+                num(r.altitude_m.0),
+                num(r.altitude_m.1),
+                num(r.truth_ppm),
+                num(r.retrieved_ppm),
+                num(r.error_ppm()),
+                num(r.retrieved_noisy_ppm),
+                num(r.error_noisy_ppm()),
+                num(r.retrieved_own_ppm)
             );
             for v in &r.budget_ppm {
-                let _ = write!(s, ",{v}");
+                let _ = write!(s, ",{}", num(*v));
             }
             s.push('\n');
         }
@@ -294,7 +296,7 @@ fn profiles_csv(result: &StudyResult) -> String {
 }
 
 /// Header of `summary.csv`, one row per class (and `all`), pair and retrieved quantity.
-pub const SUMMARY_HEADER: &str = "class,pair,method,altitude_bottom_m,altitude_top_m,profiles,truth_mean_ppm,bias_ppm,sd_ppm,noisy_bias_ppm,noisy_sd_ppm,random_error_rms_ppm,noise_ratio,total_budget_ppm";
+pub const SUMMARY_HEADER: &str = "class,pair,method,altitude_bottom_m,altitude_top_m,profiles,noisy_profiles,truth_mean_ppm,bias_ppm,sd_ppm,noisy_bias_ppm,noisy_sd_ppm,random_error_rms_ppm,noise_ratio,total_budget_ppm";
 
 fn summary_csv(summaries: &[Summary]) -> String {
     let mut s = String::from(SUMMARY_HEADER);
@@ -302,21 +304,22 @@ fn summary_csv(summaries: &[Summary]) -> String {
     for m in summaries {
         let _ = writeln!(
             s,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
             csv_field(&m.class),
             csv_field(&m.pair),
             m.method.label(),
-            m.altitude_m.0,
-            m.altitude_m.1,
+            num(m.altitude_m.0),
+            num(m.altitude_m.1),
             m.profiles,
-            m.truth_mean_ppm,
-            m.bias_ppm,
-            m.sd_ppm,
-            m.noisy_bias_ppm,
-            m.noisy_sd_ppm,
-            m.sources[0].rms_ppm,
-            m.noise_ratio,
-            m.total_ppm
+            m.noisy_profiles,
+            num(m.truth_mean_ppm),
+            num(m.bias_ppm),
+            num(m.sd_ppm),
+            num(m.noisy_bias_ppm),
+            num(m.noisy_sd_ppm),
+            num(m.sources[0].rms_ppm),
+            num(m.noise_ratio),
+            num(m.total_ppm)
         );
     }
     s
@@ -337,14 +340,14 @@ fn budget_csv(summaries: &[Summary], steps: &BudgetSteps, scene: &Scene) -> Stri
                 csv_field(&m.class),
                 csv_field(&m.pair),
                 m.method.label(),
-                m.altitude_m.0,
-                m.altitude_m.1,
+                num(m.altitude_m.0),
+                num(m.altitude_m.1),
                 src.label(),
                 csv_field(&src.describe(steps, &scene.laser)),
-                st.bias_ppm,
-                st.sd_ppm,
-                st.rms_ppm,
-                st.share
+                num(st.bias_ppm),
+                num(st.sd_ppm),
+                num(st.rms_ppm),
+                num(st.share)
             );
         }
     }
