@@ -1094,7 +1094,7 @@ fn select_lines_shards_of_a_profile_set_and_a_line_file() {
     let single = d.join("single");
     let single_stdout = study(&single, &[]);
     assert!(
-        single_stdout.contains("tropical: profile short excluded: "),
+        single_stdout.contains("tropical: excluded 1 profile: "),
         "{single_stdout}"
     );
     let shards = d.join("shards");
@@ -1128,7 +1128,7 @@ fn select_lines_shards_of_a_profile_set_and_a_line_file() {
     ]);
     assert_eq!(
         file_names(&plain),
-        ["sensitivities.csv", "sensitivities.nc"]
+        ["failed.csv", "sensitivities.csv", "sensitivities.nc"]
     );
     assert!(
         fs::read(single.join("sensitivities.csv")).unwrap()

@@ -741,3 +741,146 @@ fn the_humidity_step_is_bounded() {
         "2 profiles × (1 IPDA column + 5 DIAL cells)"
     );
 }
+
+/// A generated profile set (`profiles generate --class mid --n 4`) with profiles 1 and 3 made
+/// supersaturated at the surface (water vapour × 5) and profile 2 cut above 30 km (below the
+/// scene's top of the atmosphere, 50 km), as (set file, its text).
+fn set_with_failures(dir: &Path, keep_good: bool) -> std::path::PathBuf {
+    let set = dir.join("set.csv");
+    lidarsim_ok([
+        "profiles".as_ref(),
+        "generate".as_ref(),
+        "--class".as_ref(),
+        "mid".as_ref(),
+        "--n".as_ref(),
+        "4".as_ref(),
+        "--seed".as_ref(),
+        "1".as_ref(),
+        "--out".as_ref(),
+        set.as_os_str(),
+    ]);
+    let text = std::fs::read_to_string(&set).unwrap();
+    let header: Vec<&str> = text
+        .lines()
+        .find(|l| l.starts_with("profile,"))
+        .unwrap()
+        .split(',')
+        .collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let mut out = String::new();
+    for line in text.lines() {
+        let mut f: Vec<String> = line.split(',').map(str::to_string).collect();
+        let id = f[0].clone();
+        if !line.starts_with('#') && !line.starts_with("profile,") {
+            let level: usize = f[col("level")].parse().unwrap();
+            let z: f64 = f[col("altitude_m")].parse().unwrap();
+            let wet = id.ends_with("0001")
+                || id.ends_with("0003")
+                || (!keep_good && id.ends_with("0004"));
+            if wet && level == 1 {
+                let q: f64 = f[col("H2O_ppmv")].parse().unwrap();
+                f[col("H2O_ppmv")] = (5.0 * q).to_string();
+            }
+            if id.ends_with("0002") && z > 30_000.0 {
+                continue;
+            }
+        }
+        out.push_str(&f.join(","));
+        out.push('\n');
+    }
+    std::fs::write(&set, out).unwrap();
+    set
+}
+
+/// Issue 37, item 5: failures that say so. Of four profiles, two supersaturated and one too
+/// short: exit 0, each reason said once with its count and first profile (not a line per
+/// profile), failed.csv lists the three, and the statistics are of the one left. With the
+/// fourth supersaturated too, every profile has failed: exit 2, one line on stderr with the
+/// counts by reason, and nothing written (an earlier study's files in the directory stay as
+/// they were).
+#[test]
+fn a_study_whose_profiles_fail_says_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene_path = dir.path().join("study.toml");
+    std::fs::write(&scene_path, SCENE).unwrap();
+    let out = dir.path().join("out");
+    let run = |set: &Path| {
+        lidarsim([
+            "dial".as_ref(),
+            scene_path.as_os_str(),
+            "--profiles".as_ref(),
+            set.as_os_str(),
+            "--no-plots".as_ref(),
+            "--out".as_ref(),
+            out.as_os_str(),
+        ])
+    };
+    let some = set_with_failures(dir.path(), true);
+    let o = run(&some);
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        stdout.contains("4 profiles of ")
+            && stdout.contains(", 3 failed and left out of the statistics (failed.csv):"),
+        "{stdout}"
+    );
+    let failed: Vec<&str> = stdout
+        .lines()
+        .filter(|l| l.starts_with("  failed: "))
+        .collect();
+    assert_eq!(failed.len(), 2, "{stdout}");
+    assert!(
+        failed[0].starts_with("  failed: 2 profiles: supersaturated: relative humidity ")
+            && failed[0].ends_with(" (profile mid-0001 and 1 more)"),
+        "{}",
+        failed[0]
+    );
+    assert!(
+        failed[1].starts_with("  failed: 1 profile: ")
+            && failed[1].contains("top_m")
+            && failed[1].ends_with(" (profile mid-0002)"),
+        "{}",
+        failed[1]
+    );
+    let (h, rows) = read_csv(&out.join("failed.csv"));
+    assert_eq!(h, ["profile_id", "class", "reason"]);
+    let ids: Vec<&str> = rows.iter().map(|r| r[0].as_str()).collect();
+    assert_eq!(ids, ["mid-0001", "mid-0002", "mid-0003"]);
+    let (h, rows) = read_csv(&out.join("summary.csv"));
+    let c = h.iter().position(|x| x == "profiles").unwrap();
+    assert!(
+        !rows.is_empty() && rows.iter().all(|r| r[c] == "1"),
+        "{rows:?}"
+    );
+    crate::output::assert_no_non_finite(&out);
+
+    let before = std::fs::read(out.join("summary.csv")).unwrap();
+    let names = |d: &Path| {
+        let mut v: Vec<_> = std::fs::read_dir(d)
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        v.sort();
+        v
+    };
+    let listed = names(&out);
+    let none = set_with_failures(dir.path(), false);
+    let o = run(&none);
+    assert_eq!(o.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(stderr.lines().count(), 1, "{stderr}");
+    assert!(
+        stderr.starts_with(
+            "lidarsim: error: every profile failed (4 of 4): 3 profiles: supersaturated: relative humidity "
+        ) && stderr.contains(" (profile mid-0001 and 2 more); 1 profile: ")
+            && stderr.trim_end().ends_with(" (profile mid-0002); nothing was written"),
+        "{stderr}"
+    );
+    assert_eq!(std::fs::read(out.join("summary.csv")).unwrap(), before);
+    assert_eq!(names(&out), listed);
+}

@@ -12,6 +12,7 @@ use lidarsim::input::Bounds;
 use lidarsim::output::{self, OutputSet, csv_field, csv_number as num};
 use lidarsim::scene::Scene;
 use lidarsim::shard::{self, ShardSpec};
+use lidarsim::study;
 use lidarsim::study::dial::{
     self, BudgetSteps, N_SOURCES, ProfileOutcome, ProfileSource, Source, StudyOptions, StudyResult,
     Summary,
@@ -216,6 +217,11 @@ pub fn write_outputs(
     result: &StudyResult,
 ) -> anyhow::Result<()> {
     let (scene, set, options) = (&inputs.scene, &inputs.set, &inputs.options);
+    let failures = failure_groups(&result.outcomes);
+    if !result.outcomes.is_empty() && result.outcomes.iter().all(|o| o.records.is_err()) {
+        // Nothing to report: no file is written as if the study had succeeded.
+        bail!("{}", study::all_failed_message(&failures));
+    }
     let summaries = dial::summarise(&result.outcomes);
     let mut files = OutputSet::new();
     files.write(dir.join("profiles.csv"), profiles_csv(result))?;
@@ -252,7 +258,14 @@ pub fn write_outputs(
     let written = files.commit()?;
 
     let mut out = std::io::stdout().lock();
-    print_report(&mut out, set, result, &summaries, options.photons)?;
+    print_report(
+        &mut out,
+        set,
+        result,
+        &summaries,
+        &failures,
+        options.photons,
+    )?;
     let names: Vec<String> = written.iter().map(|p| p.display().to_string()).collect();
     writeln!(out, "wrote {}", names.join(", "))?;
     Ok(())
@@ -404,21 +417,36 @@ fn summary_json(
     format!("{v:#}\n")
 }
 
+/// `x` with three decimals, `-` where it cannot be computed (a standard deviation of one
+/// profile).
+fn fixed(x: f64) -> String {
+    if x.is_finite() {
+        format!("{x:.3}")
+    } else {
+        "-".into()
+    }
+}
+
+/// The failed profiles of `outcomes` grouped by reason ([`study::group_failures`]).
+fn failure_groups(outcomes: &[ProfileOutcome]) -> Vec<study::FailureGroup> {
+    study::group_failures(outcomes.iter().filter_map(|o| match &o.records {
+        Err(e) => Some((o.id.as_str(), e.as_str())),
+        Ok(_) => None,
+    }))
+}
+
 fn print_report(
     out: &mut impl Write,
     set: &ProfileSet,
     result: &StudyResult,
     summaries: &[Summary],
+    failures: &[study::FailureGroup],
     photons: u64,
 ) -> std::io::Result<()> {
-    let failed: Vec<&ProfileOutcome> = result
-        .outcomes
-        .iter()
-        .filter(|o| o.records.is_err())
-        .collect();
+    let failed: usize = failures.iter().map(|g| g.count).sum();
     writeln!(
         out,
-        "{} profiles of {} ({}), {} failed and left out of the statistics",
+        "{} profiles of {} ({}), {failed} failed and left out of the statistics{}",
         set.len(),
         set.name,
         if photons > 0 {
@@ -426,12 +454,11 @@ fn print_report(
         } else {
             "analytic lidar equation".into()
         },
-        failed.len()
+        if failed > 0 { " (failed.csv):" } else { "" }
     )?;
-    for o in &failed {
-        if let Err(e) = &o.records {
-            writeln!(out, "  failed: profile {} ({}): {e}", o.id, o.class)?;
-        }
+    // Each reason once, with its count and first profile: not a line per profile.
+    for g in failures {
+        writeln!(out, "  failed: {g}")?;
     }
     writeln!(
         out,
@@ -455,16 +482,16 @@ fn print_report(
             .collect();
         writeln!(
             out,
-            "  {:<9} {:<20} {:>5} {:>8.3} {:>8.3} {:>9.3} {:>9.3} {:>8.3} {:>7.3}  {}",
+            "  {:<9} {:<20} {:>5} {:>8} {:>8} {:>9} {:>9} {:>8} {:>7}  {}",
             m.class,
             m.pair,
             m.profiles,
-            m.bias_ppm,
-            m.sd_ppm,
-            m.noisy_sd_ppm,
-            m.sources[0].rms_ppm,
-            m.total_ppm,
-            m.noise_ratio,
+            fixed(m.bias_ppm),
+            fixed(m.sd_ppm),
+            fixed(m.noisy_sd_ppm),
+            fixed(m.sources[0].rms_ppm),
+            fixed(m.total_ppm),
+            fixed(m.noise_ratio),
             top.join(", ")
         )?;
     }

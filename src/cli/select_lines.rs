@@ -13,10 +13,11 @@ use plotters::prelude::*;
 
 use lidarsim::atmosphere::StandardAtmosphere;
 use lidarsim::input::Bounds;
-use lidarsim::output::{self, OutputError, OutputSet};
+use lidarsim::output::{self, OutputError, OutputSet, csv_field};
 use lidarsim::scene::Scene;
 use lidarsim::shard::{self, ShardSpec};
-use lidarsim::study::select::{self, Row, StudyConfig, Uncertainties};
+use lidarsim::study;
+use lidarsim::study::select::{self, MemberFailure, Row, StudyConfig, Uncertainties};
 use lidarsim::study::select_shard;
 use lidarsim::study::select_study::{
     GroupSummary, MemberOutcome, SPECTRUM_HALF_GHZ, SelectOptions, SelectSource, SelectStudy,
@@ -140,6 +141,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         None => vec![
             a.out.join("sensitivities.csv"),
             a.out.join("sensitivities.nc"),
+            a.out.join(FAILED_CSV),
         ],
     };
     output::check_paths(&out_files)?;
@@ -226,13 +228,24 @@ pub fn write_outputs(
     study: &SelectStudy,
     outcomes: &[MemberOutcome],
 ) -> anyhow::Result<()> {
+    let failed: Vec<&MemberFailure> = outcomes.iter().filter_map(|o| o.as_ref().err()).collect();
+    if !outcomes.is_empty() && failed.len() == outcomes.len() {
+        // Nothing to report: no file is written as if the study had succeeded.
+        anyhow::bail!(
+            "{}",
+            study::all_failed_message(&study::group_failures(
+                failed.iter().map(|f| (f.id.as_str(), f.reason.as_str()))
+            ))
+        );
+    }
     let summaries = study.summarise(outcomes);
     let mut rows: Vec<Row> = Vec::new();
     let mut per_profile: Vec<Row> = Vec::new();
     for g in &summaries {
         let name = &g.name;
-        for f in &g.failed {
-            outln!("{name}: profile {} excluded: {}", f.id, f.reason);
+        // Each reason once, with its count and first profile: not a line per profile.
+        for f in g.failure_groups() {
+            outln!("{name}: excluded {f}");
         }
         g.check(study)?;
         outln!(
@@ -266,6 +279,7 @@ pub fn write_outputs(
     rows.extend(per_profile);
     let mut files = OutputSet::new();
     files.write(dir.join("sensitivities.csv"), select::to_csv(&rows))?;
+    files.write(dir.join(FAILED_CSV), failed_csv(study, outcomes))?;
     if !rows.is_empty() {
         let history = super::netcdf_history();
         let nc = select::to_netcdf(
@@ -291,6 +305,32 @@ pub fn write_outputs(
         outln!("wrote {}", p.display());
     }
     Ok(())
+}
+
+/// The file that lists the profiles that could not be studied.
+pub const FAILED_CSV: &str = "failed.csv";
+
+/// `failed.csv`: `profile_id,group,reason`, one row per member that could not be studied, in
+/// member order (the header alone when none failed).
+fn failed_csv(study: &SelectStudy, outcomes: &[MemberOutcome]) -> String {
+    use std::fmt::Write as _;
+    let mut s = String::from("profile_id,group,reason\n");
+    let groups = study
+        .groups
+        .iter()
+        .flat_map(|(name, members)| std::iter::repeat_n(name, members.len()));
+    for (o, group) in outcomes.iter().zip(groups) {
+        if let Err(f) = o {
+            let _ = writeln!(
+                s,
+                "{},{},{}",
+                csv_field(&f.id),
+                csv_field(group),
+                csv_field(&f.reason)
+            );
+        }
+    }
+    s
 }
 
 type DrawResult = Result<(), Box<dyn std::error::Error>>;
