@@ -17,7 +17,10 @@
 //!   renames start only when every file of the set is written and flushed and no name is
 //!   blocked (a directory in the way is refused before anything is written, and checked again
 //!   here), and each old file is first kept as a hard link (or a copy) in the staging
-//!   directory. If a rename fails midway, the renames done are undone: the old files come back,
+//!   directory. Then the earlier run's outputs this set does not rewrite
+//!   ([`OutputSet::replaces`]: files with the names the command may write, never any other)
+//!   are renamed into the staging directory, so that no stale file is left beside the new
+//!   ones. If a rename fails midway, the renames done are undone: the old files come back,
 //!   the new names go, and the error says that nothing changed. Only a crash or power loss in
 //!   the instant of the renames, or an undo that fails too, can leave a mix; the error then
 //!   names the files that are new.
@@ -108,10 +111,9 @@ pub enum OutputError {
     },
     /// A commit failed midway and could not be undone entirely.
     #[error(
-        "cannot move {} into place: {error}; undoing the other moves failed too: {} {} from this run{}, every other output is as it was",
+        "cannot move {} into place: {error}; undoing the other moves failed too: {}{}, every other output is as it was",
         path.display(),
-        list(new),
-        if new.len() == 1 { "is" } else { "are" },
+        partly_note(new, removed),
         kept_note(kept)
     )]
     PartlyCommitted {
@@ -120,15 +122,32 @@ pub enum OutputError {
         /// What the system reported.
         error: io::Error,
         /// The outputs (files, or a whole new directory) that are now this run's.
-        new: Vec<PathBuf>,
-        /// Where the previous versions of new files that replaced old ones are kept.
-        kept: Vec<PathBuf>,
+        new: Box<[PathBuf]>,
+        /// An earlier run's outputs that were removed ([`OutputSet::replaces`]) and could not
+        /// be put back.
+        removed: Box<[PathBuf]>,
+        /// Where the previous versions of new files that replaced old ones are kept (and the
+        /// earlier outputs that were removed and could not be put back).
+        kept: Box<[PathBuf]>,
     },
 }
 
 fn list(paths: &[PathBuf]) -> String {
     let v: Vec<String> = paths.iter().map(|p| p.display().to_string()).collect();
     v.join(", ")
+}
+
+fn partly_note(new: &[PathBuf], removed: &[PathBuf]) -> String {
+    let mut parts = Vec::new();
+    if !new.is_empty() {
+        let verb = if new.len() == 1 { "is" } else { "are" };
+        parts.push(format!("{} {verb} from this run", list(new)));
+    }
+    if !removed.is_empty() {
+        let verb = if removed.len() == 1 { "was" } else { "were" };
+        parts.push(format!("{} {verb} removed", list(removed)));
+    }
+    parts.join(" and ")
 }
 
 fn kept_note(kept: &[PathBuf]) -> String {
@@ -340,6 +359,9 @@ pub struct OutputSet {
     stages: Vec<Stage>,
     /// The outputs in the order they were staged.
     order: Vec<PathBuf>,
+    /// Per directory (absolute), the names of the outputs an earlier run may have left there
+    /// ([`Self::replaces`]).
+    owned: Vec<(PathBuf, Vec<OsString>)>,
 }
 
 /// The files staged for one target directory.
@@ -459,6 +481,20 @@ enum Step {
         dest: PathBuf,
         prior: Prior,
     },
+    /// An earlier output this set does not rewrite was moved from `dest` to `kept`.
+    Removed {
+        stage: usize,
+        dest: PathBuf,
+        kept: PathBuf,
+    },
+}
+
+/// An earlier output to move out of a target directory during a commit.
+struct Stale {
+    /// Where it is.
+    dest: PathBuf,
+    /// Where it goes: the staging directory's `old/`.
+    kept: PathBuf,
 }
 
 /// One file's move into an existing target directory.
@@ -487,6 +523,24 @@ impl OutputSet {
     /// An empty set.
     pub fn new() -> Self {
         Self::default()
+    }
+
+    /// Have the commit remove from `dir`, if it exists, every file named in `names` that this
+    /// set does not write into it: the outputs of an earlier run that this one did not rewrite
+    /// (a `retrieval.csv` of a scene with a retrieval, where this one has none), which would
+    /// otherwise stay beside the new ones with nothing to say they are stale. Only those names
+    /// are touched (a command gives the names of every file it may write there); a directory
+    /// of such a name is left alone. The removal is part of the commit: the files are moved
+    /// into the staging directory and come back if the commit fails.
+    pub fn replaces(&mut self, dir: impl AsRef<Path>, names: &[&str]) -> Result<(), OutputError> {
+        let dir = dir.as_ref();
+        let key = absolute(dir, dir)?;
+        let names = names.iter().map(OsString::from);
+        match self.owned.iter_mut().find(|(k, _)| *k == key) {
+            Some((_, v)) => v.extend(names),
+            None => self.owned.push((key, names.collect())),
+        }
+        Ok(())
     }
 
     /// Stage `bytes` as the file `path`.
@@ -589,8 +643,15 @@ impl OutputSet {
         }
         // Every check and every copy of an old file before the first rename.
         let mut plan = Vec::new();
+        let mut stale = Vec::new();
         for s in &self.stages {
-            plan.push(Self::prepare(s)?);
+            let p = Self::prepare(s)?;
+            let owned = self.owned.iter().find(|(k, _)| *k == s.key);
+            stale.push(match (&p, owned) {
+                (Some(_), Some((_, names))) => Self::stale(s, names)?,
+                _ => Vec::new(),
+            });
+            plan.push(p);
         }
         let mut done: Vec<Step> = Vec::new();
         for (i, p) in plan.into_iter().enumerate() {
@@ -624,6 +685,19 @@ impl OutputSet {
                 }
             }
         }
+        // The earlier outputs not rewritten, once every new file is in place.
+        for (i, files) in stale.into_iter().enumerate() {
+            for f in files {
+                if let Err(e) = rename(&f.dest, &f.kept) {
+                    return Err(self.undo(done, &f.dest, e, rename));
+                }
+                done.push(Step::Removed {
+                    stage: i,
+                    dest: f.dest,
+                    kept: f.kept,
+                });
+            }
+        }
         for s in &self.stages {
             sync_dir(&s.target);
             if let Some(parent) = s.target.parent() {
@@ -631,6 +705,34 @@ impl OutputSet {
             }
         }
         Ok(())
+    }
+
+    /// The files of `names` in the existing target of `s` that `s` does not write: an earlier
+    /// run's outputs, to be moved into the staging directory's `old/`.
+    fn stale(s: &Stage, names: &[OsString]) -> Result<Vec<Stale>, OutputError> {
+        let old = s.dir.join("old");
+        let mut out = Vec::new();
+        for name in names {
+            if s.files.iter().any(|(n, _)| n == name)
+                || out.iter().any(|f: &Stale| f.kept.file_name() == Some(name))
+            {
+                continue;
+            }
+            let dest = s.target.join(name);
+            match fs::symlink_metadata(&dest) {
+                Ok(m) if !m.is_dir() => {
+                    if !old.exists() {
+                        fs::create_dir(&old).map_err(|e| OutputError::io(&dest, e))?;
+                    }
+                    out.push(Stale {
+                        dest,
+                        kept: old.join(name),
+                    });
+                }
+                _ => {}
+            }
+        }
+        Ok(out)
     }
 
     /// For a target that does not exist: `None` (the staging directory will be renamed to it).
@@ -689,6 +791,7 @@ impl OutputSet {
     ) -> OutputError {
         let mut new = Vec::new();
         let mut kept = Vec::new();
+        let mut removed = Vec::new();
         for step in done.into_iter().rev() {
             match step {
                 Step::Dir { stage, created } => {
@@ -697,6 +800,17 @@ impl OutputSet {
                         remove_created(&created);
                     } else {
                         new.push(s.target.clone());
+                    }
+                }
+                Step::Removed {
+                    stage,
+                    dest,
+                    kept: k,
+                } => {
+                    if rename(&k, &dest).is_err() {
+                        self.stages[stage].keep = true;
+                        kept.push(k);
+                        removed.push(dest);
                     }
                 }
                 Step::File {
@@ -720,18 +834,20 @@ impl OutputSet {
                 }
             }
         }
-        if new.is_empty() {
+        if new.is_empty() && removed.is_empty() {
             OutputError::Commit {
                 path: path.to_path_buf(),
                 error,
             }
         } else {
             new.reverse();
+            removed.reverse();
             OutputError::PartlyCommitted {
                 path: path.to_path_buf(),
                 error,
-                new,
-                kept,
+                new: new.into(),
+                removed: removed.into(),
+                kept: kept.into(),
             }
         }
     }
@@ -1127,7 +1243,7 @@ mod tests {
             panic!("{e}");
         };
         assert_eq!(path, &out.join("b.csv"));
-        assert_eq!(new, &[out.join("a.csv")]);
+        assert_eq!(&**new, &[out.join("a.csv")]);
         assert_eq!(fs::read_to_string(out.join("a.csv")).unwrap(), "new a\n");
         assert_eq!(fs::read_to_string(out.join("b.csv")).unwrap(), "old b\n");
         let msg = e.to_string();
@@ -1135,6 +1251,104 @@ mod tests {
         drop(set);
         // The only copy of the old a.csv is not deleted.
         assert_eq!(fs::read_to_string(&kept[0]).unwrap(), "old a\n");
+    }
+
+    /// An earlier run's outputs that this set does not rewrite are removed by the commit; files
+    /// of other names (the user's), and a directory of an output's name, are left alone.
+    #[test]
+    fn a_commit_removes_the_earlier_outputs_it_does_not_rewrite() {
+        let root = tempfile::tempdir().unwrap();
+        let out = earlier_run(root.path());
+        fs::create_dir(out.join("d.png")).unwrap();
+        let mut set = OutputSet::new();
+        set.replaces(&out, &["a.csv", "b.csv", "c.csv", "d.png"])
+            .unwrap();
+        set.write(out.join("a.csv"), "new a\n").unwrap();
+        assert_eq!(fs::read_to_string(out.join("b.csv")).unwrap(), "old b\n");
+        set.commit().unwrap();
+        assert_eq!(fs::read_to_string(out.join("a.csv")).unwrap(), "new a\n");
+        assert!(!out.join("b.csv").exists(), "the stale b.csv is gone");
+        assert_eq!(fs::read_to_string(out.join("notes.txt")).unwrap(), "mine\n");
+        assert!(out.join("d.png").is_dir());
+        assert_eq!(hidden(root.path()), Vec::<PathBuf>::new());
+        // Into a new directory there is nothing to remove.
+        let fresh = root.path().join("fresh");
+        let mut set = OutputSet::new();
+        set.replaces(&fresh, &["a.csv", "b.csv"]).unwrap();
+        set.write(fresh.join("a.csv"), "a").unwrap();
+        set.commit().unwrap();
+        assert_eq!(fs::read_dir(&fresh).unwrap().count(), 1);
+    }
+
+    /// A commit that fails after a stale file went (the removal of the next fails) puts it
+    /// back, and the new files go: nothing changed.
+    #[test]
+    fn a_failed_commit_puts_the_stale_outputs_back() {
+        let root = tempfile::tempdir().unwrap();
+        let out = earlier_run(root.path());
+        fs::write(out.join("c.csv"), "old c\n").unwrap();
+        let fresh = root.path().join("fresh");
+        let before = snapshot(root.path());
+        let mut set = OutputSet::new();
+        set.replaces(&out, &["a.csv", "b.csv", "c.csv"]).unwrap();
+        set.write(out.join("a.csv"), "new a\n").unwrap();
+        set.write(fresh.join("f.csv"), "f\n").unwrap();
+        let mut removed_b = false;
+        let e = set
+            .commit_with(&mut |from, to| {
+                if from == out.join("c.csv") {
+                    assert!(removed_b, "b.csv went first");
+                    return Err(io::ErrorKind::StorageFull.into());
+                }
+                removed_b |= from == out.join("b.csv");
+                fs::rename(from, to)
+            })
+            .unwrap_err();
+        assert!(
+            matches!(&e, OutputError::Commit { path, .. } if path == &out.join("c.csv")),
+            "{e}"
+        );
+        drop(set);
+        assert_eq!(snapshot(root.path()), before);
+    }
+
+    /// If a stale file cannot be put back, the error says it was removed and where it is kept.
+    #[test]
+    fn a_stale_output_that_cannot_be_put_back_is_named() {
+        let root = tempfile::tempdir().unwrap();
+        let out = earlier_run(root.path());
+        fs::write(out.join("c.csv"), "old c\n").unwrap();
+        let mut set = OutputSet::new();
+        set.replaces(&out, &["a.csv", "b.csv", "c.csv"]).unwrap();
+        set.write(out.join("a.csv"), "new a\n").unwrap();
+        let e = set
+            .commit_with(&mut |from, to| {
+                if from == out.join("c.csv") || to == out.join("b.csv") {
+                    return Err(io::ErrorKind::StorageFull.into());
+                }
+                fs::rename(from, to)
+            })
+            .unwrap_err();
+        let OutputError::PartlyCommitted {
+            new, removed, kept, ..
+        } = &e
+        else {
+            panic!("{e}");
+        };
+        assert!(new.is_empty(), "a.csv was put back: {new:?}");
+        assert_eq!(&**removed, &[out.join("b.csv")]);
+        assert!(
+            e.to_string().contains(&format!(
+                "{} was removed (the previous versions are kept as {})",
+                out.join("b.csv").display(),
+                kept[0].display()
+            )),
+            "{e}"
+        );
+        assert_eq!(fs::read_to_string(out.join("a.csv")).unwrap(), "old a\n");
+        assert_eq!(fs::read_to_string(out.join("c.csv")).unwrap(), "old c\n");
+        drop(set);
+        assert_eq!(fs::read_to_string(&kept[0]).unwrap(), "old b\n");
     }
 
     #[test]

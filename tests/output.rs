@@ -478,3 +478,204 @@ fn depolarisation_csv_leaves_bins_without_a_co_polarised_return_empty() {
     // analytic row (5 gates).
     assert_eq!(empty, 4 * 5 + 5 * 3, "{rows} rows");
 }
+
+/// The names of the entries of `dir`, sorted.
+fn names_in(dir: &Path) -> Vec<String> {
+    let mut v: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    v.sort();
+    v
+}
+
+/// Issue 37, item 5: a second run into a directory removes the earlier run's outputs it does
+/// not rewrite, with the commit, so that no stale file stays beside the new ones: the airborne
+/// DIAL scene (signals, retrieval, figures, run.nc), then C.1 without `[receiver]` and
+/// `[retrieval]`, `--no-netcdf`; then a merge of C.1 shards with figures off into a directory
+/// holding the airborne run's files again. Files of other names (the user's `notes.txt`, a
+/// `profiles.csv` that `run` never writes) stay.
+#[test]
+fn a_run_or_merge_removes_the_earlier_outputs_it_does_not_rewrite() {
+    let root = tempfile::tempdir().unwrap();
+    let out = root.path().join("out");
+    let airborne = crate::util::project_root().join("scenes/airborne_co2_dial.toml");
+    let c1 = crate::util::project_root().join("scenes/bissonnette_c1.toml");
+    let first = |out: &Path| {
+        lidarsim_ok([
+            "run".as_ref(),
+            airborne.as_os_str(),
+            "--photons".as_ref(),
+            "0".as_ref(),
+            "--out".as_ref(),
+            out.as_os_str(),
+        ]);
+        std::fs::write(out.join("notes.txt"), "mine\n").unwrap();
+        std::fs::write(out.join("profiles.csv"), "mine too\n").unwrap();
+        assert_eq!(
+            names_in(out),
+            [
+                "dial.png",
+                "notes.txt",
+                "profiles.csv",
+                "retrieval.csv",
+                "returns.csv",
+                "returns.png",
+                "run.nc",
+                "signals.csv",
+                "summary.json"
+            ]
+        );
+    };
+    first(&out);
+    lidarsim_ok([
+        "run".as_ref(),
+        c1.as_os_str(),
+        "--photons".as_ref(),
+        "0".as_ref(),
+        "--no-netcdf".as_ref(),
+        "--out".as_ref(),
+        out.as_os_str(),
+    ]);
+    assert_eq!(
+        names_in(&out),
+        ["notes.txt", "profiles.csv", "returns.csv", "summary.json"]
+    );
+    assert_eq!(
+        std::fs::read_to_string(out.join("notes.txt")).unwrap(),
+        "mine\n"
+    );
+    assert_eq!(
+        std::fs::read_to_string(out.join("profiles.csv")).unwrap(),
+        "mine too\n"
+    );
+    let summary = std::fs::read_to_string(out.join("summary.json")).unwrap();
+    assert!(summary.contains("bissonnette_c1.toml"), "{summary}");
+
+    let merged = root.path().join("merged");
+    first(&merged);
+    let shards = root.path().join("shards");
+    for i in 0..2 {
+        lidarsim_ok([
+            "run".as_ref(),
+            c1.as_os_str(),
+            "--photons".as_ref(),
+            "400".as_ref(),
+            "--shard".as_ref(),
+            format!("{i}/2").as_ref(),
+            "--out".as_ref(),
+            shards.as_os_str(),
+        ]);
+    }
+    lidarsim_ok([
+        "merge".as_ref(),
+        shards.as_os_str(),
+        "--no-plots".as_ref(),
+        "--out".as_ref(),
+        merged.as_os_str(),
+    ]);
+    assert_eq!(
+        names_in(&merged),
+        [
+            "notes.txt",
+            "profiles.csv",
+            "returns.csv",
+            "run.nc",
+            "summary.json"
+        ]
+    );
+    // A merge into the shards' own directory leaves the shards.
+    lidarsim_ok([
+        "merge".as_ref(),
+        shards.as_os_str(),
+        "--no-plots".as_ref(),
+        "--out".as_ref(),
+        shards.as_os_str(),
+    ]);
+    assert_eq!(
+        names_in(&shards),
+        [
+            "returns.csv",
+            "run.nc",
+            "shard-0-of-2.lshard",
+            "shard-1-of-2.lshard",
+            "summary.json"
+        ]
+    );
+}
+
+/// The same for the studies: a `dial` study with figures and NetCDF files, then one with
+/// `--no-plots --no-netcdf` into the same directory; a `select-lines` study of two atmospheres
+/// with figures, then of one without. The second leaves only its own files (and the user's).
+#[test]
+fn a_study_removes_the_earlier_studys_outputs_it_does_not_rewrite() {
+    let root = tempfile::tempdir().unwrap();
+    let scene = root.path().join("study.toml");
+    std::fs::write(&scene, crate::study::SCENE).unwrap();
+    let out = root.path().join("dial");
+    let dial = |extra: &[&str]| {
+        let mut args: Vec<std::ffi::OsString> = vec![
+            "dial".into(),
+            scene.clone().into(),
+            "--ensemble".into(),
+            "2".into(),
+            "--class".into(),
+            "mid".into(),
+            "--out".into(),
+            out.clone().into(),
+        ];
+        args.extend(extra.iter().map(|a| a.into()));
+        lidarsim_ok(args)
+    };
+    dial(&[]);
+    std::fs::write(out.join("notes.txt"), "mine\n").unwrap();
+    assert!(out.join("errors.png").is_file() && out.join("profiles.nc").is_file());
+    dial(&["--no-plots", "--no-netcdf"]);
+    assert_eq!(
+        names_in(&out),
+        [
+            "budget.csv",
+            "failed.csv",
+            "notes.txt",
+            "profiles.csv",
+            "summary.csv",
+            "summary.json"
+        ]
+    );
+
+    let out = root.path().join("select");
+    let select = |atmospheres: &str, extra: &[&str]| {
+        let mut args: Vec<std::ffi::OsString> = [
+            "select-lines",
+            "--atmosphere",
+            atmospheres,
+            "--on-cm1",
+            "6360.04",
+            "--off-cm1",
+            "6360.61",
+            "--co2-ppm",
+            "420",
+            "--layer-m",
+            "2000",
+        ]
+        .iter()
+        .map(|a| a.into())
+        .collect();
+        args.extend(["--out".into(), out.clone().into()]);
+        args.extend(extra.iter().map(|a| a.into()));
+        lidarsim_ok(args)
+    };
+    select("tropical,us_standard", &[]);
+    std::fs::write(out.join("notes.txt"), "mine\n").unwrap();
+    assert!(out.join("transmission_us_standard.png").is_file());
+    select("tropical", &["--no-plots"]);
+    assert_eq!(
+        names_in(&out),
+        [
+            "failed.csv",
+            "notes.txt",
+            "sensitivities.csv",
+            "sensitivities.nc"
+        ]
+    );
+}

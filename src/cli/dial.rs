@@ -223,7 +223,10 @@ pub fn write_outputs(
         bail!("{}", study::all_failed_message(&failures));
     }
     let summaries = dial::summarise(&result.outcomes);
+    // An earlier study's files this one does not rewrite (figures, a NetCDF file) go with the
+    // commit.
     let mut files = OutputSet::new();
+    files.replaces(dir, &FILES)?;
     files.write(dir.join("profiles.csv"), profiles_csv(result))?;
     files.write(dir.join("summary.csv"), summary_csv(&summaries))?;
     if netcdf {

@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use plotters::prelude::*;
 
-use lidarsim::atmosphere::StandardAtmosphere;
+use lidarsim::atmosphere::{LatitudeClass, StandardAtmosphere};
 use lidarsim::input::Bounds;
 use lidarsim::output::{self, OutputError, OutputSet, csv_field};
 use lidarsim::scene::Scene;
@@ -277,7 +277,11 @@ pub fn write_outputs(
         per_profile.extend(g.per_profile.iter().cloned());
     }
     rows.extend(per_profile);
+    // An earlier study's files this one does not rewrite (the figures of other groups, a
+    // NetCDF file) go with the commit.
     let mut files = OutputSet::new();
+    let names = file_names();
+    files.replaces(dir, &names.iter().map(String::as_str).collect::<Vec<_>>())?;
     files.write(dir.join("sensitivities.csv"), select::to_csv(&rows))?;
     files.write(dir.join(FAILED_CSV), failed_csv(study, outcomes))?;
     if !rows.is_empty() {
@@ -309,6 +313,23 @@ pub fn write_outputs(
 
 /// The file that lists the profiles that could not be studied.
 pub const FAILED_CSV: &str = "failed.csv";
+
+/// Every file `select-lines` may write into its directory: the tables, and the two figures of
+/// each group it can have (an AFGL atmosphere or a latitude class).
+pub fn file_names() -> Vec<String> {
+    let mut v: Vec<String> = ["sensitivities.csv", "sensitivities.nc", FAILED_CSV]
+        .map(String::from)
+        .to_vec();
+    let groups = StandardAtmosphere::ALL
+        .iter()
+        .map(|a| a.name())
+        .chain(LatitudeClass::ALL.iter().map(|c| c.name()));
+    for g in groups {
+        v.push(format!("transmission_{g}.png"));
+        v.push(format!("errors_{g}.png"));
+    }
+    v
+}
 
 /// `failed.csv`: `profile_id,group,reason`, one row per member that could not be studied, in
 /// member order (the header alone when none failed).
