@@ -317,6 +317,12 @@ fn retrieval_csv_holds_no_nan_and_leaves_what_cannot_be_computed_empty() {
     assert!(rows > 100, "{rows} rows");
     // The case this test is about: some far cells have no Monte Carlo signal at 2000 photons.
     assert!(empty_mc > 0, "every Monte Carlo cell had a signal");
+    // And no other file of the run holds NaN or inf either (issue 37, item 5).
+    assert_eq!(
+        assert_no_non_finite(dir.path()).len(),
+        4,
+        "3 CSV files and run.nc"
+    );
 }
 
 /// Whether a CSV field reads as a non-finite number (as Rust, pandas or a spreadsheet would).
