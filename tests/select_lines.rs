@@ -643,10 +643,12 @@ fn cli_profiles_that_fail_are_counted_once_per_reason() {
     let stderr = String::from_utf8_lossy(&o.stderr);
     assert_eq!(stderr.lines().count(), 1, "{stderr}");
     assert!(
-        stderr.starts_with("lidarsim: error: every profile failed (2 of 2): 2 profiles: ")
-            && stderr
-                .trim_end()
-                .ends_with(" (profile short1 and 1 more); nothing was written"),
+        stderr.starts_with(&format!(
+            "lidarsim: error: every profile of {} failed (2 of 2): 2 profiles: ",
+            set.display()
+        )) && stderr
+            .trim_end()
+            .ends_with(" (profile short1 and 1 more); nothing was written"),
         "{stderr}"
     );
     assert_eq!(

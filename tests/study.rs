@@ -875,9 +875,10 @@ fn a_study_whose_profiles_fail_says_so() {
     let stderr = String::from_utf8_lossy(&o.stderr);
     assert_eq!(stderr.lines().count(), 1, "{stderr}");
     assert!(
-        stderr.starts_with(
-            "lidarsim: error: every profile failed (4 of 4): 3 profiles: supersaturated: relative humidity "
-        ) && stderr.contains(" (profile mid-0001 and 2 more); 1 profile: ")
+        stderr.starts_with(&format!(
+            "lidarsim: error: every profile of {} failed (4 of 4): 3 profiles: supersaturated: relative humidity ",
+            none.display()
+        )) && stderr.contains(" (profile mid-0001 and 2 more); 1 profile: ")
             && stderr.trim_end().ends_with(" (profile mid-0002); nothing was written"),
         "{stderr}"
     );

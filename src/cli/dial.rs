@@ -220,7 +220,11 @@ pub fn write_outputs(
     let failures = failure_groups(&result.outcomes);
     if !result.outcomes.is_empty() && result.outcomes.iter().all(|o| o.records.is_err()) {
         // Nothing to report: no file is written as if the study had succeeded.
-        bail!("{}", study::all_failed_message(&failures));
+        let of = match &inputs.source {
+            ProfileSource::Set(p) => p.display().to_string(),
+            ProfileSource::Ensemble(_) => format!("the ensemble ({})", set.name),
+        };
+        bail!("{}", study::all_failed_message(&of, &failures));
     }
     let summaries = dial::summarise(&result.outcomes);
     // An earlier study's files this one does not rewrite (figures, a NetCDF file) go with the

@@ -231,11 +231,23 @@ pub fn write_outputs(
     let failed: Vec<&MemberFailure> = outcomes.iter().filter_map(|o| o.as_ref().err()).collect();
     if !outcomes.is_empty() && failed.len() == outcomes.len() {
         // Nothing to report: no file is written as if the study had succeeded.
+        let o = &study.options;
+        let of = match &o.source {
+            SelectSource::Set(p) => p.display().to_string(),
+            SelectSource::Ensemble(n) => {
+                format!("the ensemble ({n} members per class, seed {})", o.seed)
+            }
+            SelectSource::Atmospheres(a) => {
+                let names: Vec<&str> = a.iter().map(|s| s.name()).collect();
+                format!("--atmosphere {}", names.join(","))
+            }
+        };
         anyhow::bail!(
             "{}",
-            study::all_failed_message(&study::group_failures(
-                failed.iter().map(|f| (f.id.as_str(), f.reason.as_str()))
-            ))
+            study::all_failed_message(
+                &of,
+                &study::group_failures(failed.iter().map(|f| (f.id.as_str(), f.reason.as_str())))
+            )
         );
     }
     let summaries = study.summarise(outcomes);

@@ -92,13 +92,14 @@ fn reason_kind(reason: &str, id: &str) -> String {
     out
 }
 
-/// The one line that says a whole study failed: `every profile failed (N of N): <each reason
-/// once, with its count and first profile>`.
-pub fn all_failed_message(groups: &[FailureGroup]) -> String {
+/// The one line that says a whole study of the profiles `of` (a set file, an ensemble)
+/// failed: `every profile of <of> failed (N of N): <each reason once, with its count and first
+/// profile>; nothing was written`.
+pub fn all_failed_message(of: &str, groups: &[FailureGroup]) -> String {
     let n: usize = groups.iter().map(|g| g.count).sum();
     let each: Vec<String> = groups.iter().map(|g| g.to_string()).collect();
     format!(
-        "every profile failed ({n} of {n}): {}; nothing was written",
+        "every profile of {of} failed ({n} of {n}): {}; nothing was written",
         each.join("; ")
     )
 }
@@ -138,6 +139,9 @@ mod tests {
             g[1].to_string(),
             "1 profile: the profile ends at 30000 m, below `atmosphere.top_m` 60000 m (profile mid-0002)"
         );
-        assert!(all_failed_message(&g).starts_with("every profile failed (5 of 5): 2 profiles: "));
+        assert!(
+            all_failed_message("set.csv", &g)
+                .starts_with("every profile of set.csv failed (5 of 5): 2 profiles: ")
+        );
     }
 }
