@@ -18,7 +18,9 @@
 //! (`dry_atmosphere_mole_fraction_of_carbon_dioxide` / `_of_methane`); range, field of view,
 //! wavenumber, received energy and photo-electrons have none. Range gates have `bounds` (§7.1); an
 //! estimate names its standard error in `ancillary_variables` (§3.4); a bin with no value
-//! holds `_FillValue` (§2.5.1; the CSV writes those as empty fields or `NaN`).
+//! holds `_FillValue` (§2.5.1; the CSV writes those as empty fields). No file holds `NaN` or
+//! `inf`: a variable without `_FillValue` (a coordinate, bounds, a count) that holds one is
+//! refused as a bug, and so is a non-finite attribute ([`Builder::finish`]).
 //!
 //! **Layout** (README, "Output: `run.nc`"). The dimensions and coordinates carry the CSV
 //! columns' names: `source` (`mc`, `analytic`), `channel`, `fov_full_angle_mrad`, `range_m`
@@ -784,9 +786,33 @@ impl Builder {
         &mut self.vars[n]
     }
 
-    /// Define the data set, write header and values into memory, and return the bytes.
+    /// Define the data set, write header and values into memory, and return the bytes. A
+    /// non-finite number where it cannot be `_FillValue` (a variable without one, an
+    /// attribute) is refused: it would be `NaN` or `inf` in the file.
     fn finish(self) -> Result<Vec<u8>, NetcdfError> {
         let err = |e: &dyn std::fmt::Debug| NetcdfError::Format(format!("{e:?}"));
+        let non_finite = |what: String| {
+            NetcdfError::Layout(format!(
+                "{what} holds a value that is not finite and cannot be _FillValue (a bug in lidarsim; please report it)"
+            ))
+        };
+        for (name, a) in &self.globals {
+            if matches!(a, Attr::F64(v) if v.iter().any(|x| !x.is_finite())) {
+                return Err(non_finite(format!("the global attribute `{name}`")));
+            }
+        }
+        for v in &self.vars {
+            for (name, a) in &v.attrs {
+                if matches!(a, Attr::F64(x) if x.iter().any(|x| !x.is_finite())) {
+                    return Err(non_finite(format!("the attribute `{}:{name}`", v.name)));
+                }
+            }
+            if let Values::F64(x) = &v.values
+                && x.iter().any(|x| !x.is_finite())
+            {
+                return Err(non_finite(format!("the variable `{}`", v.name)));
+            }
+        }
         let mut ds = DataSet::new();
         for (name, len) in &self.dims {
             ds.add_fixed_dim(name, *len).map_err(|e| err(&e))?;

@@ -17,7 +17,10 @@
 //!   renames start only when every file of the set is written and flushed and no name is
 //!   blocked (a directory in the way is refused before anything is written, and checked again
 //!   here), and each old file is first kept as a hard link (or a copy) in the staging
-//!   directory. If a rename fails midway, the renames done are undone: the old files come back,
+//!   directory. Then the earlier run's outputs this set does not rewrite
+//!   ([`OutputSet::replaces`]: files with the names the command may write, never any other)
+//!   are renamed into the staging directory, so that no stale file is left beside the new
+//!   ones. If a rename fails midway, the renames done are undone: the old files come back,
 //!   the new names go, and the error says that nothing changed. Only a crash or power loss in
 //!   the instant of the renames, or an undo that fails too, can leave a mix; the error then
 //!   names the files that are new.
@@ -26,6 +29,13 @@
 //! existing ancestor otherwise, so that it is on the target's filesystem (a rename cannot cross
 //! filesystems) even when the target is a mount point. A process that is killed can leave one
 //! behind: it is hidden, and its name says what it is.
+//!
+//! **No `NaN` or `inf` in a CSV file.** A number that cannot be computed is an empty field
+//! ([`csv_number`] formats one so), and every `.csv` file staged is checked: an unquoted field
+//! that reads as a non-finite number (`NaN`, `inf`, `-inf`, `Infinity`, any case) refuses the
+//! whole set with the file, line and column named ([`OutputError::NonFinite`]), so that a
+//! writer that forgets [`csv_number`] fails loudly instead of writing it. Text fields that
+//! would read so are quoted by [`csv_field`].
 
 use std::borrow::Cow;
 use std::ffi::OsString;
@@ -61,6 +71,22 @@ pub enum OutputError {
     /// The path names no file (`..`, `/`).
     #[error("cannot write {}: it does not name a file", .0.display())]
     NotAFileName(PathBuf),
+    /// A CSV file holds a non-finite number (a bug of its writer, which must write an empty
+    /// field for a value that cannot be computed).
+    #[error(
+        "cannot write {}: line {line}, column {column} is `{value}`: a value that cannot be computed must be an empty field (a bug in lidarsim; please report it)",
+        path.display()
+    )]
+    NonFinite {
+        /// The output.
+        path: PathBuf,
+        /// Its line (1-based).
+        line: usize,
+        /// The column: its name from the header line, or its number.
+        column: String,
+        /// The field as written.
+        value: String,
+    },
     /// Two outputs of one command have the same path.
     #[error("{} is given for two outputs", .0.display())]
     Twice(PathBuf),
@@ -85,10 +111,9 @@ pub enum OutputError {
     },
     /// A commit failed midway and could not be undone entirely.
     #[error(
-        "cannot move {} into place: {error}; undoing the other moves failed too: {} {} from this run{}, every other output is as it was",
+        "cannot move {} into place: {error}; undoing the other moves failed too: {}{}, every other output is as it was",
         path.display(),
-        list(new),
-        if new.len() == 1 { "is" } else { "are" },
+        partly_note(new, removed),
         kept_note(kept)
     )]
     PartlyCommitted {
@@ -97,15 +122,32 @@ pub enum OutputError {
         /// What the system reported.
         error: io::Error,
         /// The outputs (files, or a whole new directory) that are now this run's.
-        new: Vec<PathBuf>,
-        /// Where the previous versions of new files that replaced old ones are kept.
-        kept: Vec<PathBuf>,
+        new: Box<[PathBuf]>,
+        /// An earlier run's outputs that were removed ([`OutputSet::replaces`]) and could not
+        /// be put back.
+        removed: Box<[PathBuf]>,
+        /// Where the previous versions of new files that replaced old ones are kept (and the
+        /// earlier outputs that were removed and could not be put back).
+        kept: Box<[PathBuf]>,
     },
 }
 
 fn list(paths: &[PathBuf]) -> String {
     let v: Vec<String> = paths.iter().map(|p| p.display().to_string()).collect();
     v.join(", ")
+}
+
+fn partly_note(new: &[PathBuf], removed: &[PathBuf]) -> String {
+    let mut parts = Vec::new();
+    if !new.is_empty() {
+        let verb = if new.len() == 1 { "is" } else { "are" };
+        parts.push(format!("{} {verb} from this run", list(new)));
+    }
+    if !removed.is_empty() {
+        let verb = if removed.len() == 1 { "was" } else { "were" };
+        parts.push(format!("{} {verb} removed", list(removed)));
+    }
+    parts.join(" and ")
 }
 
 fn kept_note(kept: &[PathBuf]) -> String {
@@ -126,14 +168,174 @@ impl OutputError {
 }
 
 /// `field` as one RFC 4180 CSV field: quoted, with its quotes doubled, when it holds a comma,
-/// a double quote, a CR or a LF; as it is otherwise. Every text field of lidarsim's CSV files
-/// goes through it (names in scenes may hold any text).
+/// a double quote, a CR or a LF, or reads as a non-finite number (a profile named `NaN`, which
+/// the check of staged CSV files would otherwise take for one); as it is otherwise. Every text
+/// field of lidarsim's CSV files goes through it (names in scenes may hold any text).
 pub fn csv_field(field: &str) -> Cow<'_, str> {
-    if field.contains([',', '"', '\r', '\n']) {
+    if field.contains([',', '"', '\r', '\n']) || reads_non_finite(field) {
         Cow::Owned(format!("\"{}\"", field.replace('"', "\"\"")))
     } else {
         Cow::Borrowed(field)
     }
+}
+
+/// A number as a CSV field: written with the format it is given (`{}`, `{:.9e}`, `{:.6}`) when
+/// it is finite, as nothing (an empty field) when it is not: the contract's "a value that
+/// cannot be computed is an empty field, never `NaN` or `inf`".
+pub fn csv_number(x: f64) -> CsvNumber {
+    CsvNumber(x)
+}
+
+/// A number that formats as an empty field when it is not finite ([`csv_number`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CsvNumber(pub f64);
+
+impl Display for CsvNumber {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if self.0.is_finite() {
+            Display::fmt(&self.0, f)
+        } else {
+            Ok(())
+        }
+    }
+}
+
+impl std::fmt::LowerExp for CsvNumber {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if self.0.is_finite() {
+            std::fmt::LowerExp::fmt(&self.0, f)
+        } else {
+            Ok(())
+        }
+    }
+}
+
+/// Whether `field` (unquoted, surrounding blanks ignored) reads as a non-finite number to
+/// Rust, pandas or a spreadsheet: `nan`, `inf` or `infinity`, any case, with an optional sign.
+fn reads_non_finite(field: &str) -> bool {
+    let t = field.trim();
+    let t = t.strip_prefix(['+', '-']).unwrap_or(t);
+    ["nan", "inf", "infinity"]
+        .iter()
+        .any(|w| t.eq_ignore_ascii_case(w))
+}
+
+/// The first unquoted field of the CSV text `bytes` that reads as a non-finite number: (line,
+/// column, field). The column is named by the header, the first line that is not a `#`
+/// comment, when it has that many fields. Quoted fields (RFC 4180) are text and are skipped.
+fn non_finite_field(bytes: &[u8]) -> Option<(usize, String, String)> {
+    // Most files hold neither word anywhere: no need to parse them.
+    let has = |word: &[u8]| {
+        bytes
+            .windows(word.len())
+            .any(|w| w.eq_ignore_ascii_case(word))
+    };
+    if !has(b"nan") && !has(b"inf") {
+        return None;
+    }
+    // One pass over the bytes; a field is a range of them (quoted ones are text, never read
+    // as numbers, and only the header's are unquoted for its names).
+    let text = |f: &[u8]| {
+        String::from_utf8_lossy(f)
+            .trim_end_matches('\r')
+            .to_string()
+    };
+    let unquote = |f: &[u8]| {
+        text(
+            f.strip_prefix(b"\"")
+                .and_then(|f| f.strip_suffix(b"\""))
+                .unwrap_or(f),
+        )
+        .replace("\"\"", "\"")
+    };
+    let mut header: Option<Vec<String>> = None;
+    let mut fields: Vec<(usize, usize, bool)> = Vec::new();
+    let (mut start, mut quoted, mut in_quotes) = (0, false, false);
+    let (mut line, mut record_line) = (1usize, 1usize);
+    let mut i = 0;
+    while i <= bytes.len() {
+        let b = bytes.get(i).copied();
+        if in_quotes {
+            match b {
+                // A doubled quote is one quote inside the field; a single one ends it.
+                Some(b'"') if bytes.get(i + 1) == Some(&b'"') => i += 1,
+                Some(b'"') => in_quotes = false,
+                Some(b'\n') => line += 1,
+                Some(_) => {}
+                // An unterminated quote: the field ends with the text.
+                None => {
+                    in_quotes = false;
+                    continue;
+                }
+            }
+            i += 1;
+            continue;
+        }
+        match b {
+            Some(b'"') if i == start => {
+                in_quotes = true;
+                quoted = true;
+            }
+            Some(b',') => {
+                fields.push((start, i, quoted));
+                (start, quoted) = (i + 1, false);
+            }
+            Some(b'\n') | None => {
+                if b.is_some() || i > start || !fields.is_empty() {
+                    fields.push((start, i, quoted));
+                }
+                let comment = fields
+                    .first()
+                    .is_some_and(|&(a, _, q)| !q && bytes.get(a) == Some(&b'#'));
+                if !comment && !fields.is_empty() {
+                    for (k, &(a, z, q)) in fields.iter().enumerate() {
+                        let f = &bytes[a..z];
+                        let f = f.strip_suffix(b"\r").unwrap_or(f);
+                        if !q && f.len() <= 12 && reads_non_finite(&String::from_utf8_lossy(f)) {
+                            let column = header
+                                .as_ref()
+                                .and_then(|h| h.get(k))
+                                .map_or(format!("{}", k + 1), |name| format!("`{name}`"));
+                            return Some((record_line, column, text(f)));
+                        }
+                    }
+                    if header.is_none() {
+                        header = Some(
+                            fields
+                                .iter()
+                                .map(|&(a, z, _)| unquote(&bytes[a..z]))
+                                .collect(),
+                        );
+                    }
+                }
+                fields.clear();
+                (start, quoted) = (i + 1, false);
+                line += 1;
+                record_line = line;
+            }
+            _ => {}
+        }
+        i += 1;
+    }
+    None
+}
+
+/// Refuse the staged CSV text `bytes` of `path` if it holds a non-finite number.
+fn check_csv(path: &Path, bytes: &[u8]) -> Result<(), OutputError> {
+    match non_finite_field(bytes) {
+        None => Ok(()),
+        Some((line, column, value)) => Err(OutputError::NonFinite {
+            path: path.to_path_buf(),
+            line,
+            column,
+            value,
+        }),
+    }
+}
+
+fn is_csv(path: &Path) -> bool {
+    path.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("csv"))
 }
 
 /// Write one file whole or not at all (an [`OutputSet`] of one file).
@@ -172,6 +374,9 @@ pub struct OutputSet {
     stages: Vec<Stage>,
     /// The outputs in the order they were staged.
     order: Vec<PathBuf>,
+    /// Per directory (absolute), the names of the outputs an earlier run may have left there
+    /// ([`Self::replaces`]).
+    owned: Vec<(PathBuf, Vec<OsString>)>,
 }
 
 /// The files staged for one target directory.
@@ -291,6 +496,20 @@ enum Step {
         dest: PathBuf,
         prior: Prior,
     },
+    /// An earlier output this set does not rewrite was moved from `dest` to `kept`.
+    Removed {
+        stage: usize,
+        dest: PathBuf,
+        kept: PathBuf,
+    },
+}
+
+/// An earlier output to move out of a target directory during a commit.
+struct Stale {
+    /// Where it is.
+    dest: PathBuf,
+    /// Where it goes: the staging directory's `old/`.
+    kept: PathBuf,
 }
 
 /// One file's move into an existing target directory.
@@ -321,13 +540,40 @@ impl OutputSet {
         Self::default()
     }
 
+    /// Have the commit remove from `dir`, if it exists, every file named in `names` that this
+    /// set does not write into it: the outputs of an earlier run that this one did not rewrite
+    /// (a `retrieval.csv` of a scene with a retrieval, where this one has none), which would
+    /// otherwise stay beside the new ones with nothing to say they are stale. Only those names
+    /// are touched (a command gives the names of every file it may write there); a directory
+    /// of such a name is left alone. The removal is part of the commit: the files are moved
+    /// into the staging directory and come back if the commit fails.
+    pub fn replaces(&mut self, dir: impl AsRef<Path>, names: &[&str]) -> Result<(), OutputError> {
+        let dir = dir.as_ref();
+        let key = absolute(dir, dir)?;
+        let names = names.iter().map(OsString::from);
+        match self.owned.iter_mut().find(|(k, _)| *k == key) {
+            Some((_, v)) => v.extend(names),
+            None => self.owned.push((key, names.collect())),
+        }
+        Ok(())
+    }
+
     /// Stage `bytes` as the file `path`.
     pub fn write(
         &mut self,
         path: impl AsRef<Path>,
         bytes: impl AsRef<[u8]>,
     ) -> Result<(), OutputError> {
-        self.write_with(path, |f| f.write_all(bytes.as_ref()))
+        let (path, bytes) = (path.as_ref(), bytes.as_ref());
+        // A CSV file is checked here, in memory, rather than read back once staged.
+        if is_csv(path) {
+            check_csv(path, bytes)?;
+        }
+        self.stage(path, false, |staged| {
+            let mut f = File::create(staged).map_err(|e| OutputError::io(path, e))?;
+            f.write_all(bytes).map_err(|e| OutputError::io(path, e))?;
+            f.sync_all().map_err(|e| OutputError::io(path, e))
+        })
     }
 
     /// Stage the file `path`, written by `write` into the file it is given.
@@ -337,7 +583,7 @@ impl OutputSet {
         write: impl FnOnce(&mut File) -> io::Result<()>,
     ) -> Result<(), OutputError> {
         let path = path.as_ref();
-        self.stage(path, |staged| {
+        self.stage(path, true, |staged| {
             let mut f = File::create(staged).map_err(|e| OutputError::io(path, e))?;
             write(&mut f).map_err(|e| OutputError::io(path, e))?;
             f.sync_all().map_err(|e| OutputError::io(path, e))
@@ -352,7 +598,7 @@ impl OutputSet {
         produce: impl FnOnce(&Path) -> Result<(), E>,
     ) -> Result<(), OutputError> {
         let path = path.as_ref();
-        self.stage(path, |staged| {
+        self.stage(path, true, |staged| {
             produce(staged).map_err(|e| OutputError::Produce {
                 path: path.to_path_buf(),
                 message: e.to_string(),
@@ -362,10 +608,12 @@ impl OutputSet {
         })
     }
 
-    /// Check `path`, have `write` write its staged file, and record it.
+    /// Check `path`, have `write` write its staged file, and record it. With
+    /// `check_csv_file`, a CSV file is read back and checked (module documentation).
     fn stage(
         &mut self,
         path: &Path,
+        check_csv_file: bool,
         write: impl FnOnce(&Path) -> Result<(), OutputError>,
     ) -> Result<(), OutputError> {
         let (target, name) = split(path)?;
@@ -384,7 +632,15 @@ impl OutputSet {
         }
         refuse_directory(&target.join(&name), path)?;
         let staged = stage.dir.join("new").join(&name);
-        if let Err(e) = write(&staged) {
+        // However it was written, a CSV file is checked (module documentation).
+        let checked = write(&staged).and_then(|()| {
+            if check_csv_file && is_csv(path) {
+                let bytes = fs::read(&staged).map_err(|e| OutputError::io(path, e))?;
+                check_csv(path, &bytes)?;
+            }
+            Ok(())
+        });
+        if let Err(e) = checked {
             // The set may still be committed: a failed file must not be part of it.
             let _ = fs::remove_file(&staged);
             return Err(e);
@@ -413,8 +669,15 @@ impl OutputSet {
         }
         // Every check and every copy of an old file before the first rename.
         let mut plan = Vec::new();
+        let mut stale = Vec::new();
         for s in &self.stages {
-            plan.push(Self::prepare(s)?);
+            let p = Self::prepare(s)?;
+            let owned = self.owned.iter().find(|(k, _)| *k == s.key);
+            stale.push(match (&p, owned) {
+                (Some(_), Some((_, names))) => Self::stale(s, names)?,
+                _ => Vec::new(),
+            });
+            plan.push(p);
         }
         let mut done: Vec<Step> = Vec::new();
         for (i, p) in plan.into_iter().enumerate() {
@@ -448,6 +711,19 @@ impl OutputSet {
                 }
             }
         }
+        // The earlier outputs not rewritten, once every new file is in place.
+        for (i, files) in stale.into_iter().enumerate() {
+            for f in files {
+                if let Err(e) = rename(&f.dest, &f.kept) {
+                    return Err(self.undo(done, &f.dest, e, rename));
+                }
+                done.push(Step::Removed {
+                    stage: i,
+                    dest: f.dest,
+                    kept: f.kept,
+                });
+            }
+        }
         for s in &self.stages {
             sync_dir(&s.target);
             if let Some(parent) = s.target.parent() {
@@ -455,6 +731,34 @@ impl OutputSet {
             }
         }
         Ok(())
+    }
+
+    /// The files of `names` in the existing target of `s` that `s` does not write: an earlier
+    /// run's outputs, to be moved into the staging directory's `old/`.
+    fn stale(s: &Stage, names: &[OsString]) -> Result<Vec<Stale>, OutputError> {
+        let old = s.dir.join("old");
+        let mut out = Vec::new();
+        for name in names {
+            if s.files.iter().any(|(n, _)| n == name)
+                || out.iter().any(|f: &Stale| f.kept.file_name() == Some(name))
+            {
+                continue;
+            }
+            let dest = s.target.join(name);
+            match fs::symlink_metadata(&dest) {
+                Ok(m) if !m.is_dir() => {
+                    if !old.exists() {
+                        fs::create_dir(&old).map_err(|e| OutputError::io(&dest, e))?;
+                    }
+                    out.push(Stale {
+                        dest,
+                        kept: old.join(name),
+                    });
+                }
+                _ => {}
+            }
+        }
+        Ok(out)
     }
 
     /// For a target that does not exist: `None` (the staging directory will be renamed to it).
@@ -513,6 +817,7 @@ impl OutputSet {
     ) -> OutputError {
         let mut new = Vec::new();
         let mut kept = Vec::new();
+        let mut removed = Vec::new();
         for step in done.into_iter().rev() {
             match step {
                 Step::Dir { stage, created } => {
@@ -521,6 +826,17 @@ impl OutputSet {
                         remove_created(&created);
                     } else {
                         new.push(s.target.clone());
+                    }
+                }
+                Step::Removed {
+                    stage,
+                    dest,
+                    kept: k,
+                } => {
+                    if rename(&k, &dest).is_err() {
+                        self.stages[stage].keep = true;
+                        kept.push(k);
+                        removed.push(dest);
                     }
                 }
                 Step::File {
@@ -544,18 +860,20 @@ impl OutputSet {
                 }
             }
         }
-        if new.is_empty() {
+        if new.is_empty() && removed.is_empty() {
             OutputError::Commit {
                 path: path.to_path_buf(),
                 error,
             }
         } else {
             new.reverse();
+            removed.reverse();
             OutputError::PartlyCommitted {
                 path: path.to_path_buf(),
                 error,
-                new,
-                kept,
+                new: new.into(),
+                removed: removed.into(),
+                kept: kept.into(),
             }
         }
     }
@@ -621,6 +939,69 @@ mod tests {
         fs::write(out.join("b.csv"), "old b\n").unwrap();
         fs::write(out.join("notes.txt"), "mine\n").unwrap();
         out
+    }
+
+    /// Staged CSV files never hold a non-finite number: `csv_number` writes an empty field, and
+    /// a file with `NaN` or `inf` in an unquoted field is refused, naming line and column;
+    /// text that reads so is quoted by `csv_field`, and quoted fields are text.
+    #[test]
+    fn csv_files_with_non_finite_numbers_are_refused() {
+        assert_eq!(format!("{}", csv_number(0.25)), "0.25");
+        assert_eq!(format!("{:.3e}", csv_number(1234.5)), "1.234e3");
+        assert_eq!(format!("{:.2}", csv_number(-1.0 / 3.0)), "-0.33");
+        for x in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+            assert_eq!(
+                format!(
+                    "{}|{:.9e}|{:.4}",
+                    csv_number(x),
+                    csv_number(x),
+                    csv_number(x)
+                ),
+                "||"
+            );
+        }
+        for text in ["NaN", "nan", "-inf", "+Infinity", " inf"] {
+            assert!(reads_non_finite(text), "{text}");
+            assert_eq!(csv_field(text), format!("\"{text}\""));
+        }
+        for text in ["info", "nano", "in", "1e308", ""] {
+            assert!(!reads_non_finite(text), "{text}");
+        }
+        let ok = "# a comment, with nan\nname,x\n\"NaN\",1\n\"two\nlines, inf\",2\ninfo,3\n\"say \"\"inf\"\",\",4\n";
+        assert_eq!(non_finite_field(ok.as_bytes()), None);
+        let bad = "name,x,y\r\n\"a\nb\",1,2\r\nc,-inf,3\r\n";
+        assert_eq!(
+            non_finite_field(bad.as_bytes()),
+            Some((4, "`x`".into(), "-inf".into()))
+        );
+        // A row wider than the header: its column by number.
+        assert_eq!(
+            non_finite_field(b"a\n3,NaN"),
+            Some((2, "2".into(), "NaN".into()))
+        );
+        let root = tempfile::tempdir().unwrap();
+        let out = earlier_run(root.path());
+        let before = snapshot(root.path());
+        let mut set = OutputSet::new();
+        set.write(out.join("a.csv"), "new a\n").unwrap();
+        let e = set.write(out.join("b.csv"), bad).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            format!(
+                "cannot write {}: line 4, column `x` is `-inf`: a value that cannot be computed must be an empty field (a bug in lidarsim; please report it)",
+                out.join("b.csv").display()
+            )
+        );
+        // However the file is written.
+        let e = set
+            .write_via(out.join("c.csv"), |p| fs::write(p, "x\nNaN\n"))
+            .unwrap_err();
+        assert!(matches!(e, OutputError::NonFinite { line: 2, .. }), "{e}");
+        drop(set);
+        assert_eq!(snapshot(root.path()), before);
+        // Other files are not CSV.
+        let mut set = OutputSet::new();
+        set.write(out.join("notes.json"), "{\"x\": NaN}").unwrap();
     }
 
     #[test]
@@ -888,7 +1269,7 @@ mod tests {
             panic!("{e}");
         };
         assert_eq!(path, &out.join("b.csv"));
-        assert_eq!(new, &[out.join("a.csv")]);
+        assert_eq!(&**new, &[out.join("a.csv")]);
         assert_eq!(fs::read_to_string(out.join("a.csv")).unwrap(), "new a\n");
         assert_eq!(fs::read_to_string(out.join("b.csv")).unwrap(), "old b\n");
         let msg = e.to_string();
@@ -896,6 +1277,104 @@ mod tests {
         drop(set);
         // The only copy of the old a.csv is not deleted.
         assert_eq!(fs::read_to_string(&kept[0]).unwrap(), "old a\n");
+    }
+
+    /// An earlier run's outputs that this set does not rewrite are removed by the commit; files
+    /// of other names (the user's), and a directory of an output's name, are left alone.
+    #[test]
+    fn a_commit_removes_the_earlier_outputs_it_does_not_rewrite() {
+        let root = tempfile::tempdir().unwrap();
+        let out = earlier_run(root.path());
+        fs::create_dir(out.join("d.png")).unwrap();
+        let mut set = OutputSet::new();
+        set.replaces(&out, &["a.csv", "b.csv", "c.csv", "d.png"])
+            .unwrap();
+        set.write(out.join("a.csv"), "new a\n").unwrap();
+        assert_eq!(fs::read_to_string(out.join("b.csv")).unwrap(), "old b\n");
+        set.commit().unwrap();
+        assert_eq!(fs::read_to_string(out.join("a.csv")).unwrap(), "new a\n");
+        assert!(!out.join("b.csv").exists(), "the stale b.csv is gone");
+        assert_eq!(fs::read_to_string(out.join("notes.txt")).unwrap(), "mine\n");
+        assert!(out.join("d.png").is_dir());
+        assert_eq!(hidden(root.path()), Vec::<PathBuf>::new());
+        // Into a new directory there is nothing to remove.
+        let fresh = root.path().join("fresh");
+        let mut set = OutputSet::new();
+        set.replaces(&fresh, &["a.csv", "b.csv"]).unwrap();
+        set.write(fresh.join("a.csv"), "a").unwrap();
+        set.commit().unwrap();
+        assert_eq!(fs::read_dir(&fresh).unwrap().count(), 1);
+    }
+
+    /// A commit that fails after a stale file went (the removal of the next fails) puts it
+    /// back, and the new files go: nothing changed.
+    #[test]
+    fn a_failed_commit_puts_the_stale_outputs_back() {
+        let root = tempfile::tempdir().unwrap();
+        let out = earlier_run(root.path());
+        fs::write(out.join("c.csv"), "old c\n").unwrap();
+        let fresh = root.path().join("fresh");
+        let before = snapshot(root.path());
+        let mut set = OutputSet::new();
+        set.replaces(&out, &["a.csv", "b.csv", "c.csv"]).unwrap();
+        set.write(out.join("a.csv"), "new a\n").unwrap();
+        set.write(fresh.join("f.csv"), "f\n").unwrap();
+        let mut removed_b = false;
+        let e = set
+            .commit_with(&mut |from, to| {
+                if from == out.join("c.csv") {
+                    assert!(removed_b, "b.csv went first");
+                    return Err(io::ErrorKind::StorageFull.into());
+                }
+                removed_b |= from == out.join("b.csv");
+                fs::rename(from, to)
+            })
+            .unwrap_err();
+        assert!(
+            matches!(&e, OutputError::Commit { path, .. } if path == &out.join("c.csv")),
+            "{e}"
+        );
+        drop(set);
+        assert_eq!(snapshot(root.path()), before);
+    }
+
+    /// If a stale file cannot be put back, the error says it was removed and where it is kept.
+    #[test]
+    fn a_stale_output_that_cannot_be_put_back_is_named() {
+        let root = tempfile::tempdir().unwrap();
+        let out = earlier_run(root.path());
+        fs::write(out.join("c.csv"), "old c\n").unwrap();
+        let mut set = OutputSet::new();
+        set.replaces(&out, &["a.csv", "b.csv", "c.csv"]).unwrap();
+        set.write(out.join("a.csv"), "new a\n").unwrap();
+        let e = set
+            .commit_with(&mut |from, to| {
+                if from == out.join("c.csv") || to == out.join("b.csv") {
+                    return Err(io::ErrorKind::StorageFull.into());
+                }
+                fs::rename(from, to)
+            })
+            .unwrap_err();
+        let OutputError::PartlyCommitted {
+            new, removed, kept, ..
+        } = &e
+        else {
+            panic!("{e}");
+        };
+        assert!(new.is_empty(), "a.csv was put back: {new:?}");
+        assert_eq!(&**removed, &[out.join("b.csv")]);
+        assert!(
+            e.to_string().contains(&format!(
+                "{} was removed (the previous versions are kept as {})",
+                out.join("b.csv").display(),
+                kept[0].display()
+            )),
+            "{e}"
+        );
+        assert_eq!(fs::read_to_string(out.join("a.csv")).unwrap(), "old a\n");
+        assert_eq!(fs::read_to_string(out.join("c.csv")).unwrap(), "old c\n");
+        drop(set);
+        assert_eq!(fs::read_to_string(&kept[0]).unwrap(), "old b\n");
     }
 
     #[test]

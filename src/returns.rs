@@ -9,7 +9,7 @@
 
 use std::fmt::Write as _;
 
-use crate::output::csv_field;
+use crate::output::{csv_field, csv_number};
 
 /// Where a set of returns comes from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -260,7 +260,8 @@ impl Returns {
                         let _ = writeln!(
                             out,
                             "{src},{ch},{fov},{r},{label},{:.9e},{:.9e},{polarisation}",
-                            self.energy_j[i], self.stderr_j[i]
+                            csv_number(self.energy_j[i]),
+                            csv_number(self.stderr_j[i])
                         );
                     }
                 }
@@ -293,7 +294,8 @@ pub const DEPOLARISATION_HEADER: &str =
 /// returns (same grid), with its standard error from the two errors and the covariance of the
 /// two means (`cov_j2`, index [`Returns::index`]; `None` for analytic returns, whose error is
 /// 0), by the first-order propagation
-/// σ²_δ = δ² (σ²_x/x² + σ²_c/c² − 2 cov/(x c)). Bins whose co-polarised return is 0 give NaN.
+/// σ²_δ = δ² (σ²_x/x² + σ²_c/c² − 2 cov/(x c)). A bin whose co-polarised return is 0 has no
+/// ratio: both fields are empty.
 pub fn depolarisation_rows(
     out: &mut String,
     co: &Returns,
@@ -324,7 +326,12 @@ pub fn depolarisation_rows(
                             }
                         }
                     };
-                    let _ = writeln!(out, "{src},{ch},{fov},{r},{label},{delta:.9e},{se:.9e}");
+                    let _ = writeln!(
+                        out,
+                        "{src},{ch},{fov},{r},{label},{:.9e},{:.9e}",
+                        csv_number(delta),
+                        csv_number(if delta.is_finite() { se } else { f64::NAN })
+                    );
                 }
             }
         }

@@ -1116,6 +1116,8 @@ impl ShardFile {
         }
         let wall_s = f64::from_bits(u64_at(&bytes, body - 16));
         let threads = u64_at(&bytes, body - 8);
+        check_wall_and_threads(path, wall_s, threads)?;
+        check_records(path, &header, &bytes[records_at..body - 16])?;
         Ok(ShardFile {
             path: path.to_path_buf(),
             header,
@@ -1173,6 +1175,143 @@ impl ShardFile {
             }
         })
     }
+}
+
+/// `v` as the shorter of its decimal and its exponent form (`-1e300`, not 300 zeros), for
+/// messages that quote a number read from a file.
+pub(crate) fn number(v: f64) -> String {
+    let (plain, exp) = (format!("{v}"), format!("{v:e}"));
+    if exp.len() < plain.len() { exp } else { plain }
+}
+
+/// Refuse a shard whose recorded wall time is negative or not finite, or whose thread count is
+/// 0: a checksum proves only that the file is as written, not that what was written is sound.
+pub(crate) fn check_wall_and_threads(
+    path: &Path,
+    wall_s: f64,
+    threads: u64,
+) -> Result<(), ShardError> {
+    let bad = |what: String| ShardError::Bad {
+        path: path.to_path_buf(),
+        what,
+    };
+    if !(wall_s.is_finite() && wall_s >= 0.0) {
+        return Err(bad(format!(
+            "its wall time is {} s: a time is a finite number ≥ 0",
+            number(wall_s)
+        )));
+    }
+    if threads == 0 {
+        return Err(bad("it ran on 0 threads".into()));
+    }
+    Ok(())
+}
+
+/// Check every batch record of a run shard (`records`, laid out as its `header` says): each
+/// holds its batch, in order; its photon counter is the header's photons per batch; and every
+/// tally is a finite number, the flux tally's (energies) ≥ 0. The sign of the returns' bins is
+/// checked by [`ShardSet::fold`], which knows whether they are co- and cross-polarised.
+fn check_records(path: &Path, header: &ShardHeader, records: &[u8]) -> Result<(), ShardError> {
+    let bad = |what: String| ShardError::Bad {
+        path: path.to_path_buf(),
+        what,
+    };
+    let (bins, ch) = (header.bins_per_batch as usize, header.channels as usize);
+    let rec = header.record_bytes().unwrap_or(0) as usize;
+    let parts = ["up", "down", "absorbed", "cut"];
+    for (r, record) in records.chunks_exact(rec.max(1)).enumerate() {
+        let batch = header.first_batch + r as u64;
+        let index = u64_at(record, 0);
+        if index != batch {
+            return Err(bad(format!(
+                "its record {r} holds batch {index} where batch {batch} belongs"
+            )));
+        }
+        let photons = u64_at(record, 8);
+        if photons != header.photons_per_batch {
+            return Err(bad(format!(
+                "batch {batch}: {photons} photons counted where each batch traces {}",
+                header.photons_per_batch
+            )));
+        }
+        let values = record[8 * (1 + N_COUNTERS)..].chunks_exact(8);
+        for (i, v) in values
+            .map(|b| f64::from_le_bytes(b.try_into().unwrap_or([0; 8])))
+            .enumerate()
+        {
+            let what = || {
+                if i < bins {
+                    format!("returns tally {i} of {bins}")
+                } else {
+                    let k = i - bins;
+                    format!(
+                        "flux tally `{}` of channel {}",
+                        parts[k / ch.max(1)],
+                        k % ch.max(1)
+                    )
+                }
+            };
+            if !v.is_finite() {
+                return Err(bad(format!(
+                    "batch {batch}: {} is {}: a tally is a finite number",
+                    what(),
+                    number(v)
+                )));
+            }
+            if i >= bins && v < 0.0 {
+                return Err(bad(format!(
+                    "batch {batch}: {} is {}: an energy is never negative",
+                    what(),
+                    number(v)
+                )));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Refuse a batch whose returns tallies are negative: energies, ≥ 0 exactly for scalar light.
+/// With polarised light each (gate, order, annulus) holds the co-polarised returns of the
+/// `channels` channels, then the cross-polarised ones; each is half the intensity plus or
+/// minus the analysed part, so rounding can leave one a few ulps below 0 where it is 0: each
+/// must be ≥ −1e-9 times their sum, which must be ≥ 0.
+fn check_returns_signs(
+    path: &Path,
+    batch: &BatchTally,
+    channels: usize,
+    polarised: bool,
+) -> Result<(), ShardError> {
+    let bad = |i: usize, v: f64, why: &str| ShardError::Bad {
+        path: path.to_path_buf(),
+        what: format!(
+            "batch {}: returns tally {i} of {} is {}: {why}",
+            batch.index,
+            batch.bins.len(),
+            number(v)
+        ),
+    };
+    if !polarised {
+        return match batch.bins.iter().position(|v| *v < 0.0) {
+            Some(i) => Err(bad(i, batch.bins[i], "an energy is never negative")),
+            None => Ok(()),
+        };
+    }
+    let n = channels.max(1);
+    for (g, group) in batch.bins.chunks(2 * n).enumerate() {
+        for k in 0..n.min(group.len()) {
+            let (co, cross) = (group[k], group.get(n + k).copied().unwrap_or(0.0));
+            // The smaller of the two decides.
+            let (j, v) = if cross < co { (n + k, cross) } else { (k, co) };
+            if v < -1e-9 * (co + cross).max(0.0) {
+                return Err(bad(
+                    g * 2 * n + j,
+                    v,
+                    "a co- or cross-polarised energy is never negative",
+                ));
+            }
+        }
+    }
+    Ok(())
 }
 
 /// The shard files among `inputs`: a directory gives every `*.lshard` file in it, a file is
@@ -1267,8 +1406,10 @@ impl ShardSet {
     }
 
     /// Fold every shard's batches in batch order into the run's result. Its `wall_s` is the sum
-    /// of the shards' transport times, its `threads` the most any shard used.
-    pub fn fold(&self, plan: &transport::Plan) -> Result<McResult, ShardError> {
+    /// of the shards' transport times, its `threads` the most any shard used. `polarised`: the
+    /// scene's light is polarised (the returns tallies are co- and cross-polarised), for the
+    /// check of their signs.
+    pub fn fold(&self, plan: &transport::Plan, polarised: bool) -> Result<McResult, ShardError> {
         let h = self.first();
         let (path0, _) = &self.shards[0];
         if plan.batches() as u64 != h.batches || plan.photons_per_batch() != h.photons_per_batch {
@@ -1296,6 +1437,7 @@ impl ShardSet {
                 });
             }
             for t in f.batches() {
+                check_returns_signs(path, &t, h.channels as usize, polarised)?;
                 fold.add(t).map_err(|e| ShardError::Bad {
                     path: path.clone(),
                     what: e.to_string(),
@@ -1405,8 +1547,9 @@ pub fn merge(inputs: &[PathBuf]) -> Result<Merged, ShardError> {
     let scene = set.scene()?;
     let opts = set.transport_options(&scene);
     let mut failure: Option<ShardError> = None;
+    let polarised = scene.lidar.polarisation != crate::scene::Polarisation::None;
     let result = pipeline::run_with(&scene, &opts, &mut |plan| {
-        set.fold(plan).map_err(|e| {
+        set.fold(plan, polarised).map_err(|e| {
             failure = Some(e);
             // The real error is `failure`; this one only stops the pipeline.
             TransportError::Options("the shards could not be folded".into())

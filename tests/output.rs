@@ -317,4 +317,371 @@ fn retrieval_csv_holds_no_nan_and_leaves_what_cannot_be_computed_empty() {
     assert!(rows > 100, "{rows} rows");
     // The case this test is about: some far cells have no Monte Carlo signal at 2000 photons.
     assert!(empty_mc > 0, "every Monte Carlo cell had a signal");
+    // And no other file of the run holds NaN or inf either (issue 37, item 5).
+    assert_eq!(
+        assert_no_non_finite(dir.path()).len(),
+        4,
+        "3 CSV files and run.nc"
+    );
+}
+
+/// Whether a CSV field reads as a non-finite number (as Rust, pandas or a spreadsheet would).
+fn non_finite_text(field: &str) -> bool {
+    let t = field.trim();
+    let t = t.strip_prefix(['+', '-']).unwrap_or(t);
+    ["nan", "inf", "infinity"]
+        .iter()
+        .any(|w| t.eq_ignore_ascii_case(w))
+}
+
+/// Issue 37, item 5: no CSV or NetCDF file under `dir` (recursively) holds `NaN` or `inf`. Every
+/// field of every `*.csv` (parsed by the `csv` crate, `#` lines as comments) and every value of
+/// every variable and attribute of every `*.nc` (read by the `netcdf3` crate) is checked.
+/// Returns the files checked.
+pub(crate) fn assert_no_non_finite(dir: &Path) -> Vec<PathBuf> {
+    let mut checked = Vec::new();
+    for (p, _) in snapshot(dir) {
+        let ext = p.extension().and_then(|e| e.to_str()).unwrap_or("");
+        if ext == "csv" {
+            let mut r = csv::ReaderBuilder::new()
+                .has_headers(false)
+                .flexible(true)
+                .comment(Some(b'#'))
+                .from_path(&p)
+                .unwrap();
+            for (line, rec) in r.records().enumerate() {
+                let rec = rec.unwrap();
+                for field in rec.iter() {
+                    assert!(
+                        !non_finite_text(field),
+                        "{} record {}: `{field}` in {rec:?}",
+                        p.display(),
+                        line + 1
+                    );
+                }
+            }
+            checked.push(p);
+        } else if ext == "nc" {
+            let mut r = netcdf3::FileReader::open(&p).unwrap();
+            for (name, values) in r.read_all_vars().unwrap() {
+                if let Some(v) = values.get_f64() {
+                    assert!(
+                        v.iter().all(|x| x.is_finite()),
+                        "{}: variable {name} holds a non-finite value",
+                        p.display()
+                    );
+                }
+            }
+            let (ds, _) = r.close();
+            for a in ds.get_global_attrs() {
+                if let Some(v) = a.get_f64() {
+                    assert!(v.iter().all(|x| x.is_finite()), "{}", p.display());
+                }
+            }
+            for var in ds.get_vars() {
+                for a in var.get_attrs() {
+                    if let Some(v) = a.get_f64() {
+                        assert!(
+                            v.iter().all(|x| x.is_finite()),
+                            "{}: {}:{}",
+                            p.display(),
+                            var.name(),
+                            a.name()
+                        );
+                    }
+                }
+            }
+            checked.push(p);
+        }
+    }
+    checked
+}
+
+/// A ground lidar with linear polarisation under an HG cloud at 1500–1700 m, no air: the gates
+/// below the cloud receive nothing.
+pub(crate) const POLARISED_CLOUD: &str = r#"
+[lidar]
+altitude_m = 0.0
+zenith_angle_deg = 0.0
+pulse_energy_j = 1.0
+beam_divergence_full_angle_mrad = 0.5
+telescope_diameter_m = 1.0
+optical_efficiency = 1.0
+fov_full_angle_mrad = 1.0
+polarisation = "linear"
+[[channel]]
+name = "355"
+wavelength_nm = 355.0
+[gates]
+start_m = 500.0
+end_m = 3000.0
+width_m = 250.0
+[[layer]]
+name = "cloud"
+base_m = 1500.0
+top_m = 1700.0
+extinction_per_km = 5.0
+single_scattering_albedo = 1.0
+phase = { kind = "henyey_greenstein", g = 0.8 }
+[simulation]
+photons = 20000
+max_order = 2
+multiple_scattering = "always"
+"#;
+
+/// Issue 37, item 5: `depolarisation.csv` follows the contract of every CSV file: a bin with
+/// no co-polarised return in returns.csv (below the cloud; above it, orders 1 and 2) has no
+/// ratio, and its δ and error are empty fields (they were `NaN`); every other bin's δ is a
+/// finite number ≥ 0, and no file of the run holds `NaN` or `inf`.
+#[test]
+fn depolarisation_csv_leaves_bins_without_a_co_polarised_return_empty() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("pol.toml");
+    std::fs::write(&scene, POLARISED_CLOUD).unwrap();
+    let out = dir.path().join("out");
+    lidarsim_ok([
+        "run".as_ref(),
+        scene.as_os_str(),
+        "--no-plots".as_ref(),
+        "--out".as_ref(),
+        out.as_os_str(),
+    ]);
+    assert_eq!(
+        assert_no_non_finite(&out).len(),
+        3,
+        "two CSV files and run.nc"
+    );
+    // The co-polarised energy of every bin: (source, range, order) → J.
+    let mut co = std::collections::HashMap::new();
+    let mut r = csv::Reader::from_path(out.join("returns.csv")).unwrap();
+    for rec in r.records() {
+        let rec = rec.unwrap();
+        if &rec[7] == "co" {
+            let e: f64 = rec[5].parse().unwrap();
+            co.insert(
+                (rec[0].to_string(), rec[3].to_string(), rec[4].to_string()),
+                e,
+            );
+        }
+    }
+    let mut r = csv::Reader::from_path(out.join("depolarisation.csv")).unwrap();
+    let (mut empty, mut rows) = (0, 0);
+    for rec in r.records() {
+        let rec = rec.unwrap();
+        rows += 1;
+        let e = co[&(rec[0].to_string(), rec[3].to_string(), rec[4].to_string())];
+        if e > 0.0 {
+            let delta: f64 = rec[5].parse().unwrap();
+            let se: f64 = rec[6].parse().unwrap();
+            assert!(delta >= 0.0 && se >= 0.0, "{rec:?}");
+        } else {
+            assert_eq!((&rec[5], &rec[6]), ("", ""), "{rec:?}");
+            empty += 1;
+        }
+    }
+    assert_eq!(rows, co.len());
+    // Below the cloud (4 gates) every row; above it orders 1 and 2 of the Monte Carlo and the
+    // analytic row (5 gates).
+    assert_eq!(empty, 4 * 5 + 5 * 3, "{rows} rows");
+}
+
+/// The names of the entries of `dir`, sorted.
+fn names_in(dir: &Path) -> Vec<String> {
+    let mut v: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    v.sort();
+    v
+}
+
+/// Issue 37, item 5: a second run into a directory removes the earlier run's outputs it does
+/// not rewrite, with the commit, so that no stale file stays beside the new ones: the airborne
+/// DIAL scene (signals, retrieval, figures, run.nc), then C.1 without `[receiver]` and
+/// `[retrieval]`, `--no-netcdf`; then a merge of C.1 shards with figures off into a directory
+/// holding the airborne run's files again. Files of other names (the user's `notes.txt`, a
+/// `profiles.csv` that `run` never writes) stay.
+#[test]
+fn a_run_or_merge_removes_the_earlier_outputs_it_does_not_rewrite() {
+    let root = tempfile::tempdir().unwrap();
+    let out = root.path().join("out");
+    let airborne = crate::util::project_root().join("scenes/airborne_co2_dial.toml");
+    let c1 = crate::util::project_root().join("scenes/bissonnette_c1.toml");
+    let first = |out: &Path| {
+        lidarsim_ok([
+            "run".as_ref(),
+            airborne.as_os_str(),
+            "--photons".as_ref(),
+            "0".as_ref(),
+            "--out".as_ref(),
+            out.as_os_str(),
+        ]);
+        std::fs::write(out.join("notes.txt"), "mine\n").unwrap();
+        std::fs::write(out.join("profiles.csv"), "mine too\n").unwrap();
+        assert_eq!(
+            names_in(out),
+            [
+                "dial.png",
+                "notes.txt",
+                "profiles.csv",
+                "retrieval.csv",
+                "returns.csv",
+                "returns.png",
+                "run.nc",
+                "signals.csv",
+                "summary.json"
+            ]
+        );
+    };
+    first(&out);
+    lidarsim_ok([
+        "run".as_ref(),
+        c1.as_os_str(),
+        "--photons".as_ref(),
+        "0".as_ref(),
+        "--no-netcdf".as_ref(),
+        "--out".as_ref(),
+        out.as_os_str(),
+    ]);
+    assert_eq!(
+        names_in(&out),
+        ["notes.txt", "profiles.csv", "returns.csv", "summary.json"]
+    );
+    assert_eq!(
+        std::fs::read_to_string(out.join("notes.txt")).unwrap(),
+        "mine\n"
+    );
+    assert_eq!(
+        std::fs::read_to_string(out.join("profiles.csv")).unwrap(),
+        "mine too\n"
+    );
+    let summary = std::fs::read_to_string(out.join("summary.json")).unwrap();
+    assert!(summary.contains("bissonnette_c1.toml"), "{summary}");
+
+    let merged = root.path().join("merged");
+    first(&merged);
+    let shards = root.path().join("shards");
+    for i in 0..2 {
+        lidarsim_ok([
+            "run".as_ref(),
+            c1.as_os_str(),
+            "--photons".as_ref(),
+            "400".as_ref(),
+            "--shard".as_ref(),
+            format!("{i}/2").as_ref(),
+            "--out".as_ref(),
+            shards.as_os_str(),
+        ]);
+    }
+    lidarsim_ok([
+        "merge".as_ref(),
+        shards.as_os_str(),
+        "--no-plots".as_ref(),
+        "--out".as_ref(),
+        merged.as_os_str(),
+    ]);
+    assert_eq!(
+        names_in(&merged),
+        [
+            "notes.txt",
+            "profiles.csv",
+            "returns.csv",
+            "run.nc",
+            "summary.json"
+        ]
+    );
+    // A merge into the shards' own directory leaves the shards.
+    lidarsim_ok([
+        "merge".as_ref(),
+        shards.as_os_str(),
+        "--no-plots".as_ref(),
+        "--out".as_ref(),
+        shards.as_os_str(),
+    ]);
+    assert_eq!(
+        names_in(&shards),
+        [
+            "returns.csv",
+            "run.nc",
+            "shard-0-of-2.lshard",
+            "shard-1-of-2.lshard",
+            "summary.json"
+        ]
+    );
+}
+
+/// The same for the studies: a `dial` study with figures and NetCDF files, then one with
+/// `--no-plots --no-netcdf` into the same directory; a `select-lines` study of two atmospheres
+/// with figures, then of one without. The second leaves only its own files (and the user's).
+#[test]
+fn a_study_removes_the_earlier_studys_outputs_it_does_not_rewrite() {
+    let root = tempfile::tempdir().unwrap();
+    let scene = root.path().join("study.toml");
+    std::fs::write(&scene, crate::study::SCENE).unwrap();
+    let out = root.path().join("dial");
+    let dial = |extra: &[&str]| {
+        let mut args: Vec<std::ffi::OsString> = vec![
+            "dial".into(),
+            scene.clone().into(),
+            "--ensemble".into(),
+            "2".into(),
+            "--class".into(),
+            "mid".into(),
+            "--out".into(),
+            out.clone().into(),
+        ];
+        args.extend(extra.iter().map(|a| a.into()));
+        lidarsim_ok(args)
+    };
+    dial(&[]);
+    std::fs::write(out.join("notes.txt"), "mine\n").unwrap();
+    assert!(out.join("errors.png").is_file() && out.join("profiles.nc").is_file());
+    dial(&["--no-plots", "--no-netcdf"]);
+    assert_eq!(
+        names_in(&out),
+        [
+            "budget.csv",
+            "failed.csv",
+            "notes.txt",
+            "profiles.csv",
+            "summary.csv",
+            "summary.json"
+        ]
+    );
+
+    let out = root.path().join("select");
+    let select = |atmospheres: &str, extra: &[&str]| {
+        let mut args: Vec<std::ffi::OsString> = [
+            "select-lines",
+            "--atmosphere",
+            atmospheres,
+            "--on-cm1",
+            "6360.04",
+            "--off-cm1",
+            "6360.61",
+            "--co2-ppm",
+            "420",
+            "--layer-m",
+            "2000",
+        ]
+        .iter()
+        .map(|a| a.into())
+        .collect();
+        args.extend(["--out".into(), out.clone().into()]);
+        args.extend(extra.iter().map(|a| a.into()));
+        lidarsim_ok(args)
+    };
+    select("tropical,us_standard", &[]);
+    std::fs::write(out.join("notes.txt"), "mine\n").unwrap();
+    assert!(out.join("transmission_us_standard.png").is_file());
+    select("tropical", &["--no-plots"]);
+    assert_eq!(
+        names_in(&out),
+        [
+            "failed.csv",
+            "notes.txt",
+            "sensitivities.csv",
+            "sensitivities.nc"
+        ]
+    );
 }

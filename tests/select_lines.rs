@@ -447,7 +447,7 @@ fn cli_profile_set_classes_failures_and_figures() {
         out.as_os_str(),
     ]);
     assert!(
-        stdout.contains("tropical: profile short excluded: "),
+        stdout.contains("tropical: excluded 1 profile: "),
         "{stdout}"
     );
     assert!(
@@ -723,5 +723,89 @@ fn check_weighting_function(atm: StandardAtmosphere, label: &str, offset_ghz: f6
     assert!(
         (reported - best_p).abs() < 3.0,
         "{atm:?} {label}: {reported} vs {best_p}"
+
+/// Issue 37, item 5, for line selection: of four tropical profiles two end at 700 hPa, about
+/// 3 km, below one 4 km layer: exit 0, the reason said once with its count and first profile,
+/// failed.csv lists both; when every profile ends there, exit 2 with one line and no file.
+#[test]
+fn cli_profiles_that_fail_are_counted_once_per_reason() {
+    let dir = tempfile::tempdir().unwrap();
+    let set = dir.path().join("set.csv");
+    let out = dir.path().join("out");
+    let run = |text: String| {
+        std::fs::write(&set, text).unwrap();
+        lidarsim([
+            "select-lines".as_ref(),
+            "--profiles".as_ref(),
+            set.as_os_str(),
+            "--on-cm1".as_ref(),
+            "6360.04".as_ref(),
+            "--off-cm1".as_ref(),
+            "6360.61".as_ref(),
+            "--co2-ppm".as_ref(),
+            "410".as_ref(),
+            "--layer-m".as_ref(),
+            "4000".as_ref(),
+            "--top-km".as_ref(),
+            "40".as_ref(),
+            "--no-plots".as_ref(),
+            "--out".as_ref(),
+            out.as_os_str(),
+        ])
+    };
+    let o = run(tropical_set(&[
+        ("a", 10.0, 0.0, 10),
+        ("short1", 5.0, 0.0, 3),
+        ("b", -12.0, 2.0, 10),
+        ("short2", 6.0, 1.0, 3),
+    ]));
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    let excluded: Vec<&str> = stdout
+        .lines()
+        .filter(|l| l.contains(" excluded "))
+        .collect();
+    assert_eq!(excluded.len(), 1, "{stdout}");
+    assert!(
+        excluded[0].starts_with("tropical: excluded 2 profiles: ")
+            && excluded[0].ends_with(" (profile short1 and 1 more)"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("tropical: 2 profiles (2 excluded)"),
+        "{stdout}"
+    );
+    let failed = std::fs::read_to_string(out.join("failed.csv")).unwrap();
+    let rows: Vec<&str> = failed.lines().collect();
+    assert_eq!(rows[0], "profile_id,group,reason");
+    assert_eq!(rows.len(), 3, "{failed}");
+    assert!(rows[1].starts_with("short1,tropical,") && rows[2].starts_with("short2,tropical,"));
+    crate::output::assert_no_non_finite(&out);
+
+    let out_before = std::fs::read(out.join("sensitivities.csv")).unwrap();
+    let o = run(tropical_set(&[
+        ("short1", 5.0, 0.0, 3),
+        ("short2", 6.0, 1.0, 3),
+    ]));
+    assert_eq!(o.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(stderr.lines().count(), 1, "{stderr}");
+    assert!(
+        stderr.starts_with(&format!(
+            "lidarsim: error: every profile of {} failed (2 of 2): 2 profiles: ",
+            set.display()
+        )) && stderr
+            .trim_end()
+            .ends_with(" (profile short1 and 1 more); nothing was written"),
+        "{stderr}"
+    );
+    assert_eq!(
+        std::fs::read(out.join("sensitivities.csv")).unwrap(),
+        out_before
     );
 }

@@ -1094,7 +1094,7 @@ fn select_lines_shards_of_a_profile_set_and_a_line_file() {
     let single = d.join("single");
     let single_stdout = study(&single, &[]);
     assert!(
-        single_stdout.contains("tropical: profile short excluded: "),
+        single_stdout.contains("tropical: excluded 1 profile: "),
         "{single_stdout}"
     );
     let shards = d.join("shards");
@@ -1128,7 +1128,7 @@ fn select_lines_shards_of_a_profile_set_and_a_line_file() {
     ]);
     assert_eq!(
         file_names(&plain),
-        ["sensitivities.csv", "sensitivities.nc"]
+        ["failed.csv", "sensitivities.csv", "sensitivities.nc"]
     );
     assert!(
         fs::read(single.join("sensitivities.csv")).unwrap()
@@ -1195,6 +1195,208 @@ fn select_lines_shards_of_a_profile_set_and_a_line_file() {
     let e = merge_refused(&[shards]);
     assert!(
         e.contains("the line list as read now") && e.contains("co2.par"),
+        "{e}"
+    );
+}
+
+/// `bytes` (a shard file) with the 8 bytes at `at` replaced by `value` and a correct checksum:
+/// a file whose framing is sound and whose numbers are not.
+fn with_bits(bytes: &[u8], at: usize, value: u64) -> Vec<u8> {
+    let mut out = bytes[..bytes.len() - 8].to_vec();
+    out[at..at + 8].copy_from_slice(&value.to_le_bytes());
+    let sum = fnv(&out);
+    out.extend(sum.to_le_bytes());
+    out
+}
+
+/// Where the batch records of a run shard start, how long one is, and its tallies per batch
+/// (returns bins, flux channels), from its header.
+fn run_layout(bytes: &[u8]) -> (usize, usize, usize, usize) {
+    let len = u64::from_le_bytes(bytes[20..28].try_into().unwrap()) as usize;
+    let h: serde_json::Value = serde_json::from_slice(&bytes[28..28 + len]).unwrap();
+    let bins = h["bins_per_batch"].as_u64().unwrap() as usize;
+    let ch = h["channels"].as_u64().unwrap() as usize;
+    (28 + len, 8 * (10 + bins + 4 * ch), bins, ch)
+}
+
+/// Issue 37, item 5: a merge checks the numbers of a run shard, not only its checksum. A
+/// shard (C.1, unpolarised) whose returns or flux tally holds NaN, ±inf or −1e300, whose
+/// photon counter is not the batches', or whose wall time is negative or NaN, each with a
+/// correct checksum, is refused with the file and the batch named; nothing is written.
+#[test]
+fn merge_refuses_shards_whose_tallies_are_not_energies() {
+    let dir = tempfile::tempdir().unwrap();
+    let files = four_shards(&dir.path().join("a"), &[]);
+    let good = fs::read(&files[1]).unwrap();
+    let (records, rec, bins, _) = run_layout(&good);
+    // Shard 1 of 4 of C.1's 100 batches holds batches 25..50; its second record is batch 26.
+    let second = records + rec;
+    let tally = |i: usize| second + 8 * (10 + i);
+    let n = good.len();
+    let bits = f64::to_bits;
+    let cases: Vec<(&str, Vec<u8>, String)> = vec![
+        (
+            "nan",
+            with_bits(&good, tally(5), bits(f64::NAN)),
+            format!("batch 26: returns tally 5 of {bins} is NaN: a tally is a finite number"),
+        ),
+        (
+            "inf",
+            with_bits(&good, tally(bins - 1), bits(f64::INFINITY)),
+            format!("batch 26: returns tally {} of {bins} is inf", bins - 1),
+        ),
+        (
+            "negative",
+            with_bits(&good, tally(3), bits(-1e300)),
+            format!("batch 26: returns tally 3 of {bins} is -1e300: an energy is never negative"),
+        ),
+        (
+            "flux",
+            with_bits(&good, tally(bins), bits(-1.0)),
+            "batch 26: flux tally `up` of channel 0 is -1: an energy is never negative".into(),
+        ),
+        (
+            "photons",
+            with_bits(&good, second + 8, 3),
+            "batch 26: 3 photons counted where each batch traces 4".into(),
+        ),
+        (
+            "wall",
+            with_bits(&good, n - 24, bits(-1.0)),
+            "its wall time is -1 s: a time is a finite number ≥ 0".into(),
+        ),
+        (
+            "wall_nan",
+            with_bits(&good, n - 24, bits(f64::NAN)),
+            "its wall time is NaN s".into(),
+        ),
+    ];
+    let bad = dir.path().join("bad");
+    fs::create_dir(&bad).unwrap();
+    for (name, bytes, why) in cases {
+        let p = bad.join(format!("{name}.lshard"));
+        fs::write(&p, bytes).unwrap();
+        let e = merge_refused(&[
+            files[0].clone(),
+            p.clone(),
+            files[2].clone(),
+            files[3].clone(),
+        ]);
+        assert!(e.contains(&why) && e.contains(&s(&p)), "{name}: {e}");
+        fs::remove_file(&p).unwrap();
+    }
+}
+
+/// With polarised light each returns bin is a co- or cross-polarised energy: −1e-300 where the
+/// bin's co + cross is 0 is refused, naming file and batch; a cross-polarised energy of −1e-15
+/// times the bin's intensity (rounding of (I − Q)/2) is accepted, and the merge writes files
+/// without `NaN` or `inf`.
+#[test]
+fn merge_checks_polarised_tallies_up_to_rounding() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("pol.toml");
+    fs::write(&scene, crate::output::POLARISED_CLOUD).unwrap();
+    let shards = dir.path().join("shards");
+    for i in 0..2 {
+        shard(
+            Some(&s(&scene)),
+            &format!("{i}/2"),
+            &shards,
+            &["--threads", "1"],
+        );
+    }
+    let path = shards.join("shard-1-of-2.lshard");
+    let good = fs::read(&path).unwrap();
+    let (records, _, bins, ch) = run_layout(&good);
+    assert_eq!(ch, 1);
+    let value =
+        |i: usize| f64::from_le_bytes(good[records + 80 + 8 * i..][..8].try_into().unwrap());
+    // (co, cross) pairs: one with no return, one with a return.
+    let empty = (0..bins / 2)
+        .find(|g| value(2 * g) == 0.0 && value(2 * g + 1) == 0.0)
+        .unwrap();
+    let lit = (0..bins / 2).find(|g| value(2 * g) > 0.0).unwrap();
+    let at = |i: usize| records + 80 + 8 * i;
+    fs::write(
+        &path,
+        with_bits(&good, at(2 * empty + 1), (-1e-300f64).to_bits()),
+    )
+    .unwrap();
+    let e = merge_refused(std::slice::from_ref(&shards));
+    assert!(
+        e.contains(&format!(
+            "batch 50: returns tally {} of {bins} is -1e-300: a co- or cross-polarised energy is never negative",
+            2 * empty + 1
+        )) && e.contains(&s(&path)),
+        "{e}"
+    );
+    let tiny = -1e-15 * value(2 * lit);
+    fs::write(&path, with_bits(&good, at(2 * lit + 1), tiny.to_bits())).unwrap();
+    let out = dir.path().join("merged");
+    lidarsim_ok([
+        "merge".to_string(),
+        s(&shards),
+        "--no-plots".into(),
+        "--out".into(),
+        s(&out),
+    ]);
+    crate::output::assert_no_non_finite(&out);
+}
+
+/// Dial and select-lines shards: a record whose retrieved XCO2 is NaN (the noisy value alone
+/// may be undefined), a negative random error, a negative or NaN time in the header, each with
+/// a correct checksum, are refused with the file and the profile named.
+#[test]
+fn merge_refuses_study_shards_with_impossible_values() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let scene = study_scene(d);
+    let base = three_dial_shards(&scene, d, "base", &[]);
+    let good = fs::read(&base[1]).unwrap();
+    let file = lidarsim::study::shard::DialShardFile::parse(&base[1], &good).unwrap();
+    let o = &file.outcomes[0];
+    let r = &o.records.as_ref().unwrap()[0];
+    // The record's values are unique bit patterns in the body: find them there.
+    let find = |v: f64| {
+        let b = v.to_le_bytes();
+        let at: Vec<usize> = (0..good.len() - 8)
+            .filter(|i| good[*i..*i + 8] == b)
+            .collect();
+        assert_eq!(at.len(), 1, "{v}");
+        at[0]
+    };
+    let cases: Vec<(&str, Vec<u8>, String)> = vec![
+        (
+            "retrieved",
+            with_bits(&good, find(r.retrieved_ppm), f64::NAN.to_bits()),
+            format!("profile {}, {} ipda", o.id, r.pair),
+        ),
+        (
+            "random",
+            with_bits(&good, find(r.budget_ppm[0]), (-1.0f64).to_bits()),
+            "random_ppm is -1: a standard deviation is never negative".into(),
+        ),
+        (
+            "timing",
+            with_header(&good, |h| h["timing_s"][5] = (-2.5).into()),
+            "its wall time is -2.5 s".into(),
+        ),
+    ];
+    for (name, bytes, why) in cases {
+        let p = d.join(format!("{name}.lshard"));
+        fs::write(&p, bytes).unwrap();
+        let e = merge_refused(&[base[0].clone(), p.clone(), base[2].clone()]);
+        assert!(e.contains(&why) && e.contains(&s(&p)), "{name}: {e}");
+    }
+    let select = three_select_shards(d, "select", &[]);
+    let bytes = with_header(&fs::read(&select[0]).unwrap(), |h| {
+        h["wall_s"] = (-1.0).into()
+    });
+    let p = d.join("select_wall.lshard");
+    fs::write(&p, bytes).unwrap();
+    let e = merge_refused(&[p.clone(), select[1].clone(), select[2].clone()]);
+    assert!(
+        e.contains("its wall time is -1 s") && e.contains(&s(&p)),
         "{e}"
     );
 }

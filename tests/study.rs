@@ -558,3 +558,330 @@ fn swapped_profiles_and_lasers_equal_parsed_scenes() {
         tropical.atmosphere.unwrap().profile
     );
 }
+
+/// A CSV file as its header and records (the `csv` crate's reader).
+pub(crate) fn read_csv(path: &Path) -> (Vec<String>, Vec<Vec<String>>) {
+    let mut r = csv::Reader::from_path(path).unwrap();
+    let header = r.headers().unwrap().iter().map(str::to_string).collect();
+    let rows = r
+        .records()
+        .map(|rec| rec.unwrap().iter().map(str::to_string).collect())
+        .collect();
+    (header, rows)
+}
+
+/// Issue 37, item 5, the README's own example: `dial scenes/study_co2_ipda.toml --ensemble 3`.
+/// From 450 km the 2 km DIAL cells have an SNR far below 1 (random errors of 1e5 ppm), so one
+/// noisy measurement often has no positive signal and cannot be retrieved: that field is empty
+/// in profiles.csv (it was `NaN`), and summary.csv's noisy statistics are over the profiles
+/// whose measurement was retrieved, `noisy_profiles` of them (they were `NaN` for the whole
+/// row). Checked against the same statistics computed here from profiles.csv, and no CSV or
+/// NetCDF file holds `NaN` or `inf`.
+#[test]
+fn the_readme_study_writes_no_nan_and_counts_its_noisy_profiles() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("study");
+    let scene = crate::util::project_root().join("scenes/study_co2_ipda.toml");
+    lidarsim_ok([
+        "dial".as_ref(),
+        scene.as_os_str(),
+        "--ensemble".as_ref(),
+        "3".as_ref(),
+        "--no-plots".as_ref(),
+        "--out".as_ref(),
+        out.as_os_str(),
+    ]);
+    let mut checked: Vec<String> = crate::output::assert_no_non_finite(&out)
+        .iter()
+        .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
+        .collect();
+    checked.sort();
+    assert_eq!(
+        checked,
+        [
+            "budget.csv",
+            "failed.csv",
+            "profiles.csv",
+            "profiles.nc",
+            "summary.csv",
+            "summary.nc"
+        ]
+    );
+    let (ph, profiles) = read_csv(&out.join("profiles.csv"));
+    let pc = |name: &str| ph.iter().position(|h| h == name).unwrap();
+    let (sh, summary) = read_csv(&out.join("summary.csv"));
+    let sc = |name: &str| sh.iter().position(|h| h == name).unwrap();
+    let num = |s: &str| -> f64 { s.parse().unwrap() };
+    let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * b.abs().max(1.0);
+    let mut partly = 0;
+    for row in &summary {
+        let key = |r: &Vec<String>| {
+            (row[sc("class")] == "all" || r[pc("class")] == row[sc("class")])
+                && r[pc("pair")] == row[sc("pair")]
+                && r[pc("method")] == row[sc("method")]
+                && r[pc("altitude_bottom_m")] == row[sc("altitude_bottom_m")]
+        };
+        let members: Vec<&Vec<String>> = profiles.iter().filter(|r| key(r)).collect();
+        assert_eq!(num(&row[sc("profiles")]) as usize, members.len(), "{row:?}");
+        // The noisy measurement and its error are empty together.
+        for r in &members {
+            assert_eq!(
+                r[pc("retrieved_noisy_ppm")].is_empty(),
+                r[pc("error_noisy_ppm")].is_empty(),
+                "{r:?}"
+            );
+        }
+        let noisy: Vec<&&Vec<String>> = members
+            .iter()
+            .filter(|r| !r[pc("retrieved_noisy_ppm")].is_empty())
+            .collect();
+        let n = noisy.len();
+        assert_eq!(num(&row[sc("noisy_profiles")]) as usize, n, "{row:?}");
+        if n < members.len() {
+            partly += 1;
+            assert_eq!(
+                row[sc("method")],
+                "dial",
+                "an IPDA column lost its noisy value"
+            );
+        }
+        let errors: Vec<f64> = noisy
+            .iter()
+            .map(|r| num(&r[pc("error_noisy_ppm")]))
+            .collect();
+        let noise: Vec<f64> = noisy
+            .iter()
+            .map(|r| num(&r[pc("retrieved_noisy_ppm")]) - num(&r[pc("retrieved_ppm")]))
+            .collect();
+        let random: Vec<f64> = noisy.iter().map(|r| num(&r[pc("random_ppm")])).collect();
+        let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+        let sd = |v: &[f64]| {
+            let m = mean(v);
+            (v.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / (v.len() as f64 - 1.0)).sqrt()
+        };
+        let field = |name: &str| row[sc(name)].as_str();
+        if n == 0 {
+            assert_eq!(field("noisy_bias_ppm"), "", "{row:?}");
+        } else {
+            assert!(
+                close(num(field("noisy_bias_ppm")), mean(&errors)),
+                "{row:?}"
+            );
+        }
+        if n < 2 {
+            for name in ["noisy_sd_ppm", "noise_ratio"] {
+                assert_eq!(field(name), "", "{name}: {row:?}");
+            }
+        } else {
+            assert!(close(num(field("noisy_sd_ppm")), sd(&errors)), "{row:?}");
+            let rms = (random.iter().map(|x| x * x).sum::<f64>() / n as f64).sqrt();
+            assert!(
+                close(num(field("noise_ratio")), sd(&noise) / rms),
+                "{row:?}"
+            );
+        }
+    }
+    assert!(
+        partly > 0,
+        "every DIAL cell had its noisy measurement retrieved"
+    );
+}
+
+/// Issue 37, item 5: the humidity step of the budget keeps the assumed humidity positive and
+/// finite and a knowledge error: `--budget-humidity-percent -99.9` (an assumed humidity 1000
+/// times the truth's, which wrote `inf`) is refused by its bound before any work, and the
+/// bound itself, −50 % (the assumed humidity twice the truth's), gives finite rows.
+#[test]
+fn the_humidity_step_is_bounded() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("study");
+    let scene = crate::util::project_root().join("scenes/study_co2_ipda.toml");
+    let run = |percent: &str| {
+        lidarsim([
+            "dial".as_ref(),
+            scene.as_os_str(),
+            "--ensemble".as_ref(),
+            "2".as_ref(),
+            "--class".as_ref(),
+            "tropical".as_ref(),
+            "--budget-humidity-percent".as_ref(),
+            percent.as_ref(),
+            "--no-plots".as_ref(),
+            "--out".as_ref(),
+            out.as_os_str(),
+        ])
+    };
+    for bad in ["-99.9", "-50.01", "1000.1"] {
+        let o = run(bad);
+        assert_eq!(o.status.code(), Some(2), "{bad}");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(
+            err.trim_end(),
+            format!("lidarsim: error: --budget-humidity-percent {bad} must lie in [-50, 1000]")
+        );
+        assert!(!out.exists(), "{bad}: output written");
+    }
+    let o = run("-50");
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    crate::output::assert_no_non_finite(&out);
+    let (h, rows) = read_csv(&out.join("profiles.csv"));
+    let c = h.iter().position(|x| x == "humidity_ppm").unwrap();
+    for r in &rows {
+        let v: f64 = r[c].parse().unwrap();
+        assert!(v.is_finite(), "{r:?}");
+    }
+    assert_eq!(
+        rows.len(),
+        2 * 6,
+        "2 profiles × (1 IPDA column + 5 DIAL cells)"
+    );
+}
+
+/// A generated profile set (`profiles generate --class mid --n 4`) with profiles 1 and 3 made
+/// supersaturated at the surface (water vapour × 5) and profile 2 cut above 30 km (below the
+/// scene's top of the atmosphere, 50 km), as (set file, its text).
+fn set_with_failures(dir: &Path, keep_good: bool) -> std::path::PathBuf {
+    let set = dir.join("set.csv");
+    lidarsim_ok([
+        "profiles".as_ref(),
+        "generate".as_ref(),
+        "--class".as_ref(),
+        "mid".as_ref(),
+        "--n".as_ref(),
+        "4".as_ref(),
+        "--seed".as_ref(),
+        "1".as_ref(),
+        "--out".as_ref(),
+        set.as_os_str(),
+    ]);
+    let text = std::fs::read_to_string(&set).unwrap();
+    let header: Vec<&str> = text
+        .lines()
+        .find(|l| l.starts_with("profile,"))
+        .unwrap()
+        .split(',')
+        .collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let mut out = String::new();
+    for line in text.lines() {
+        let mut f: Vec<String> = line.split(',').map(str::to_string).collect();
+        let id = f[0].clone();
+        if !line.starts_with('#') && !line.starts_with("profile,") {
+            let level: usize = f[col("level")].parse().unwrap();
+            let z: f64 = f[col("altitude_m")].parse().unwrap();
+            let wet = id.ends_with("0001")
+                || id.ends_with("0003")
+                || (!keep_good && id.ends_with("0004"));
+            if wet && level == 1 {
+                let q: f64 = f[col("H2O_ppmv")].parse().unwrap();
+                f[col("H2O_ppmv")] = (5.0 * q).to_string();
+            }
+            if id.ends_with("0002") && z > 30_000.0 {
+                continue;
+            }
+        }
+        out.push_str(&f.join(","));
+        out.push('\n');
+    }
+    std::fs::write(&set, out).unwrap();
+    set
+}
+
+/// Issue 37, item 5: failures that say so. Of four profiles, two supersaturated and one too
+/// short: exit 0, each reason said once with its count and first profile (not a line per
+/// profile), failed.csv lists the three, and the statistics are of the one left. With the
+/// fourth supersaturated too, every profile has failed: exit 2, one line on stderr with the
+/// counts by reason, and nothing written (an earlier study's files in the directory stay as
+/// they were).
+#[test]
+fn a_study_whose_profiles_fail_says_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene_path = dir.path().join("study.toml");
+    std::fs::write(&scene_path, SCENE).unwrap();
+    let out = dir.path().join("out");
+    let run = |set: &Path| {
+        lidarsim([
+            "dial".as_ref(),
+            scene_path.as_os_str(),
+            "--profiles".as_ref(),
+            set.as_os_str(),
+            "--no-plots".as_ref(),
+            "--out".as_ref(),
+            out.as_os_str(),
+        ])
+    };
+    let some = set_with_failures(dir.path(), true);
+    let o = run(&some);
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        stdout.contains("4 profiles of ")
+            && stdout.contains(", 3 failed and left out of the statistics (failed.csv):"),
+        "{stdout}"
+    );
+    let failed: Vec<&str> = stdout
+        .lines()
+        .filter(|l| l.starts_with("  failed: "))
+        .collect();
+    assert_eq!(failed.len(), 2, "{stdout}");
+    assert!(
+        failed[0].starts_with("  failed: 2 profiles: supersaturated: relative humidity ")
+            && failed[0].ends_with(" (profile mid-0001 and 1 more)"),
+        "{}",
+        failed[0]
+    );
+    assert!(
+        failed[1].starts_with("  failed: 1 profile: ")
+            && failed[1].contains("top_m")
+            && failed[1].ends_with(" (profile mid-0002)"),
+        "{}",
+        failed[1]
+    );
+    let (h, rows) = read_csv(&out.join("failed.csv"));
+    assert_eq!(h, ["profile_id", "class", "reason"]);
+    let ids: Vec<&str> = rows.iter().map(|r| r[0].as_str()).collect();
+    assert_eq!(ids, ["mid-0001", "mid-0002", "mid-0003"]);
+    let (h, rows) = read_csv(&out.join("summary.csv"));
+    let c = h.iter().position(|x| x == "profiles").unwrap();
+    assert!(
+        !rows.is_empty() && rows.iter().all(|r| r[c] == "1"),
+        "{rows:?}"
+    );
+    crate::output::assert_no_non_finite(&out);
+
+    let before = std::fs::read(out.join("summary.csv")).unwrap();
+    let names = |d: &Path| {
+        let mut v: Vec<_> = std::fs::read_dir(d)
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        v.sort();
+        v
+    };
+    let listed = names(&out);
+    let none = set_with_failures(dir.path(), false);
+    let o = run(&none);
+    assert_eq!(o.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(stderr.lines().count(), 1, "{stderr}");
+    assert!(
+        stderr.starts_with(&format!(
+            "lidarsim: error: every profile of {} failed (4 of 4): 3 profiles: supersaturated: relative humidity ",
+            none.display()
+        )) && stderr.contains(" (profile mid-0001 and 2 more); 1 profile: ")
+            && stderr.trim_end().ends_with(" (profile mid-0002); nothing was written"),
+        "{stderr}"
+    );
+    assert_eq!(std::fs::read(out.join("summary.csv")).unwrap(), before);
+    assert_eq!(names(&out), listed);
+}

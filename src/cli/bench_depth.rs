@@ -245,18 +245,20 @@ pub fn run(
             / (c.var_per_photon / ours.photons as f64 + p.var_per_photon / long_photons as f64)
                 .sqrt();
         z2 += z * z;
+        // A cell without signal has no error, FOM or z: empty fields, never `NaN` or `inf`.
+        let n = lidarsim::output::csv_number;
         writeln!(
             csv,
             "{},{},{:e},{:e},{:e},{:e},{:e},{:e},{:.3}",
             c.fov_mrad,
             c.depth_m,
-            c.mean_j,
-            rel,
-            c.fom(),
-            p.mean_j,
-            p.fom(),
-            ratio,
-            z
+            n(c.mean_j),
+            n(rel),
+            n(c.fom()),
+            n(p.mean_j),
+            n(p.fom()),
+            n(ratio),
+            n(z)
         )?;
         rows.push((*c, p, ratio));
     }
@@ -385,10 +387,16 @@ pub fn scatter(
             .sqrt();
         *ratio = sd / rms_se;
         let c = runs[0][i];
+        let n = lidarsim::output::csv_number;
         writeln!(
             csv,
-            "{},{},{mean:e},{sd:e},{rms_se:e},{ratio:.3}",
-            c.fov_mrad, c.depth_m
+            "{},{},{:e},{:e},{:e},{:.3}",
+            c.fov_mrad,
+            c.depth_m,
+            n(mean),
+            n(sd),
+            n(rms_se),
+            n(*ratio)
         )?;
     }
     let n_depth = n_cells / FOVS_MRAD.len();
@@ -455,10 +463,14 @@ pub fn ladder(
                     .map_or(f64::NAN, |p| {
                         (p.var_per_photon / r.photons as f64).sqrt() / p.mean_j
                     });
+                let n = lidarsim::output::csv_number;
                 writeln!(
                     csv,
-                    "{name},{fov},{depth},{},{:.4},{rel:e},{expected:e}",
-                    r.photons, r.wall_s
+                    "{name},{fov},{depth},{},{:.4},{:e},{:e}",
+                    r.photons,
+                    r.wall_s,
+                    n(rel),
+                    n(expected)
                 )?;
                 // The plain estimator is drawn with its expected error (long reference).
                 pts[j].push((r.wall_s, if plain_method { expected } else { rel }));

@@ -9,9 +9,10 @@ use anyhow::{Context, bail};
 
 use lidarsim::atmosphere::ProfileSet;
 use lidarsim::input::Bounds;
-use lidarsim::output::{self, OutputSet, csv_field};
+use lidarsim::output::{self, OutputSet, csv_field, csv_number as num};
 use lidarsim::scene::Scene;
 use lidarsim::shard::{self, ShardSpec};
+use lidarsim::study;
 use lidarsim::study::dial::{
     self, BudgetSteps, N_SOURCES, ProfileOutcome, ProfileSource, Source, StudyOptions, StudyResult,
     Summary,
@@ -56,8 +57,10 @@ pub struct Args {
     /// Budget: temperature knowledge error [K].
     #[arg(long, default_value_t = 1.0, allow_negative_numbers = true, value_parser = super::real(Bounds::closed(-100.0, 100.0)))]
     pub budget_temperature_k: f64,
-    /// Budget: humidity knowledge error [%].
-    #[arg(long, default_value_t = 10.0, allow_negative_numbers = true, value_parser = super::real(Bounds::above(-100.0, 1000.0)))]
+    /// Budget: humidity knowledge error [%]: the truth this much wetter than the retrieval
+    /// assumes, in [-50, 1000] (the assumed humidity between 1/11 and 2 times the truth's:
+    /// positive and finite, and a knowledge error rather than another atmosphere).
+    #[arg(long, default_value_t = 10.0, allow_negative_numbers = true, value_parser = super::real(Bounds::closed(-50.0, 1000.0)))]
     pub budget_humidity_percent: f64,
     /// Budget: surface-pressure knowledge error [hPa].
     #[arg(long, default_value_t = 1.0, allow_negative_numbers = true, value_parser = super::real(Bounds::closed(-100.0, 100.0)))]
@@ -214,8 +217,20 @@ pub fn write_outputs(
     result: &StudyResult,
 ) -> anyhow::Result<()> {
     let (scene, set, options) = (&inputs.scene, &inputs.set, &inputs.options);
+    let failures = failure_groups(&result.outcomes);
+    if !result.outcomes.is_empty() && result.outcomes.iter().all(|o| o.records.is_err()) {
+        // Nothing to report: no file is written as if the study had succeeded.
+        let of = match &inputs.source {
+            ProfileSource::Set(p) => p.display().to_string(),
+            ProfileSource::Ensemble(_) => format!("the ensemble ({})", set.name),
+        };
+        bail!("{}", study::all_failed_message(&of, &failures));
+    }
     let summaries = dial::summarise(&result.outcomes);
+    // An earlier study's files this one does not rewrite (figures, a NetCDF file) go with the
+    // commit.
     let mut files = OutputSet::new();
+    files.replaces(dir, &FILES)?;
     files.write(dir.join("profiles.csv"), profiles_csv(result))?;
     files.write(dir.join("summary.csv"), summary_csv(&summaries))?;
     if netcdf {
@@ -250,7 +265,14 @@ pub fn write_outputs(
     let written = files.commit()?;
 
     let mut out = std::io::stdout().lock();
-    print_report(&mut out, set, result, &summaries, options.photons)?;
+    print_report(
+        &mut out,
+        set,
+        result,
+        &summaries,
+        &failures,
+        options.photons,
+    )?;
     let names: Vec<String> = written.iter().map(|p| p.display().to_string()).collect();
     writeln!(out, "wrote {}", names.join(", "))?;
     Ok(())
@@ -275,17 +297,17 @@ fn profiles_csv(result: &StudyResult) -> String {
                 o.class,
                 csv_field(&r.pair),
                 r.method.label(),
-                r.altitude_m.0,
-                r.altitude_m.1,
-                r.truth_ppm,
-                r.retrieved_ppm,
-                r.error_ppm(),
-                r.retrieved_noisy_ppm,
-                r.error_noisy_ppm(),
-                r.retrieved_own_ppm
+                num(r.altitude_m.0),
+                num(r.altitude_m.1),
+                num(r.truth_ppm),
+                num(r.retrieved_ppm),
+                num(r.error_ppm()),
+                num(r.retrieved_noisy_ppm),
+                num(r.error_noisy_ppm()),
+                num(r.retrieved_own_ppm)
             );
             for v in &r.budget_ppm {
-                let _ = write!(s, ",{v}");
+                let _ = write!(s, ",{}", num(*v));
             }
             s.push('\n');
         }
@@ -294,7 +316,7 @@ fn profiles_csv(result: &StudyResult) -> String {
 }
 
 /// Header of `summary.csv`, one row per class (and `all`), pair and retrieved quantity.
-pub const SUMMARY_HEADER: &str = "class,pair,method,altitude_bottom_m,altitude_top_m,profiles,truth_mean_ppm,bias_ppm,sd_ppm,noisy_bias_ppm,noisy_sd_ppm,random_error_rms_ppm,noise_ratio,total_budget_ppm";
+pub const SUMMARY_HEADER: &str = "class,pair,method,altitude_bottom_m,altitude_top_m,profiles,noisy_profiles,truth_mean_ppm,bias_ppm,sd_ppm,noisy_bias_ppm,noisy_sd_ppm,random_error_rms_ppm,noise_ratio,total_budget_ppm";
 
 fn summary_csv(summaries: &[Summary]) -> String {
     let mut s = String::from(SUMMARY_HEADER);
@@ -302,21 +324,22 @@ fn summary_csv(summaries: &[Summary]) -> String {
     for m in summaries {
         let _ = writeln!(
             s,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
             csv_field(&m.class),
             csv_field(&m.pair),
             m.method.label(),
-            m.altitude_m.0,
-            m.altitude_m.1,
+            num(m.altitude_m.0),
+            num(m.altitude_m.1),
             m.profiles,
-            m.truth_mean_ppm,
-            m.bias_ppm,
-            m.sd_ppm,
-            m.noisy_bias_ppm,
-            m.noisy_sd_ppm,
-            m.sources[0].rms_ppm,
-            m.noise_ratio,
-            m.total_ppm
+            m.noisy_profiles,
+            num(m.truth_mean_ppm),
+            num(m.bias_ppm),
+            num(m.sd_ppm),
+            num(m.noisy_bias_ppm),
+            num(m.noisy_sd_ppm),
+            num(m.sources[0].rms_ppm),
+            num(m.noise_ratio),
+            num(m.total_ppm)
         );
     }
     s
@@ -337,14 +360,14 @@ fn budget_csv(summaries: &[Summary], steps: &BudgetSteps, scene: &Scene) -> Stri
                 csv_field(&m.class),
                 csv_field(&m.pair),
                 m.method.label(),
-                m.altitude_m.0,
-                m.altitude_m.1,
+                num(m.altitude_m.0),
+                num(m.altitude_m.1),
                 src.label(),
                 csv_field(&src.describe(steps, &scene.laser)),
-                st.bias_ppm,
-                st.sd_ppm,
-                st.rms_ppm,
-                st.share
+                num(st.bias_ppm),
+                num(st.sd_ppm),
+                num(st.rms_ppm),
+                num(st.share)
             );
         }
     }
@@ -401,21 +424,36 @@ fn summary_json(
     format!("{v:#}\n")
 }
 
+/// `x` with three decimals, `-` where it cannot be computed (a standard deviation of one
+/// profile).
+fn fixed(x: f64) -> String {
+    if x.is_finite() {
+        format!("{x:.3}")
+    } else {
+        "-".into()
+    }
+}
+
+/// The failed profiles of `outcomes` grouped by reason ([`study::group_failures`]).
+fn failure_groups(outcomes: &[ProfileOutcome]) -> Vec<study::FailureGroup> {
+    study::group_failures(outcomes.iter().filter_map(|o| match &o.records {
+        Err(e) => Some((o.id.as_str(), e.as_str())),
+        Ok(_) => None,
+    }))
+}
+
 fn print_report(
     out: &mut impl Write,
     set: &ProfileSet,
     result: &StudyResult,
     summaries: &[Summary],
+    failures: &[study::FailureGroup],
     photons: u64,
 ) -> std::io::Result<()> {
-    let failed: Vec<&ProfileOutcome> = result
-        .outcomes
-        .iter()
-        .filter(|o| o.records.is_err())
-        .collect();
+    let failed: usize = failures.iter().map(|g| g.count).sum();
     writeln!(
         out,
-        "{} profiles of {} ({}), {} failed and left out of the statistics",
+        "{} profiles of {} ({}), {failed} failed and left out of the statistics{}",
         set.len(),
         set.name,
         if photons > 0 {
@@ -423,12 +461,11 @@ fn print_report(
         } else {
             "analytic lidar equation".into()
         },
-        failed.len()
+        if failed > 0 { " (failed.csv):" } else { "" }
     )?;
-    for o in &failed {
-        if let Err(e) = &o.records {
-            writeln!(out, "  failed: profile {} ({}): {e}", o.id, o.class)?;
-        }
+    // Each reason once, with its count and first profile: not a line per profile.
+    for g in failures {
+        writeln!(out, "  failed: {g}")?;
     }
     writeln!(
         out,
@@ -452,16 +489,16 @@ fn print_report(
             .collect();
         writeln!(
             out,
-            "  {:<9} {:<20} {:>5} {:>8.3} {:>8.3} {:>9.3} {:>9.3} {:>8.3} {:>7.3}  {}",
+            "  {:<9} {:<20} {:>5} {:>8} {:>8} {:>9} {:>9} {:>8} {:>7}  {}",
             m.class,
             m.pair,
             m.profiles,
-            m.bias_ppm,
-            m.sd_ppm,
-            m.noisy_sd_ppm,
-            m.sources[0].rms_ppm,
-            m.total_ppm,
-            m.noise_ratio,
+            fixed(m.bias_ppm),
+            fixed(m.sd_ppm),
+            fixed(m.noisy_sd_ppm),
+            fixed(m.sources[0].rms_ppm),
+            fixed(m.total_ppm),
+            fixed(m.noise_ratio),
             top.join(", ")
         )?;
     }

@@ -35,6 +35,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         output::check_paths(&[
             args.out.join("sensitivities.csv"),
             args.out.join("sensitivities.nc"),
+            args.out.join(super::select_lines::FAILED_CSV),
         ])?;
         let merged = lidarsim::study::select_shard::merge(&paths)?;
         let study = &merged.study;

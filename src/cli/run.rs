@@ -101,8 +101,10 @@ pub(super) fn write_outputs(
     scene: &Scene,
     run: &RunOutput,
 ) -> anyhow::Result<()> {
-    // Everything is computed; now write all files together or none (`lidarsim::output`).
+    // Everything is computed; now write all files together or none (`lidarsim::output`), and
+    // an earlier run's files this one does not rewrite go with the commit.
     let mut files = OutputSet::new();
+    files.replaces(out_dir, &FILES)?;
     let sets: Vec<&Returns> = run
         .mc_lines
         .iter()

@@ -11,12 +11,13 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use plotters::prelude::*;
 
-use lidarsim::atmosphere::StandardAtmosphere;
+use lidarsim::atmosphere::{LatitudeClass, StandardAtmosphere};
 use lidarsim::input::Bounds;
-use lidarsim::output::{self, OutputError, OutputSet};
+use lidarsim::output::{self, OutputError, OutputSet, csv_field};
 use lidarsim::scene::Scene;
 use lidarsim::shard::{self, ShardSpec};
-use lidarsim::study::select::{self, Row, StudyConfig, Uncertainties};
+use lidarsim::study;
+use lidarsim::study::select::{self, MemberFailure, Row, StudyConfig, Uncertainties};
 use lidarsim::study::select_shard;
 use lidarsim::study::select_study::{
     GroupSummary, MemberOutcome, SPECTRUM_HALF_GHZ, SelectOptions, SelectSource, SelectStudy,
@@ -140,6 +141,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         None => vec![
             a.out.join("sensitivities.csv"),
             a.out.join("sensitivities.nc"),
+            a.out.join(FAILED_CSV),
         ],
     };
     output::check_paths(&out_files)?;
@@ -226,13 +228,36 @@ pub fn write_outputs(
     study: &SelectStudy,
     outcomes: &[MemberOutcome],
 ) -> anyhow::Result<()> {
+    let failed: Vec<&MemberFailure> = outcomes.iter().filter_map(|o| o.as_ref().err()).collect();
+    if !outcomes.is_empty() && failed.len() == outcomes.len() {
+        // Nothing to report: no file is written as if the study had succeeded.
+        let o = &study.options;
+        let of = match &o.source {
+            SelectSource::Set(p) => p.display().to_string(),
+            SelectSource::Ensemble(n) => {
+                format!("the ensemble ({n} members per class, seed {})", o.seed)
+            }
+            SelectSource::Atmospheres(a) => {
+                let names: Vec<&str> = a.iter().map(|s| s.name()).collect();
+                format!("--atmosphere {}", names.join(","))
+            }
+        };
+        anyhow::bail!(
+            "{}",
+            study::all_failed_message(
+                &of,
+                &study::group_failures(failed.iter().map(|f| (f.id.as_str(), f.reason.as_str())))
+            )
+        );
+    }
     let summaries = study.summarise(outcomes);
     let mut rows: Vec<Row> = Vec::new();
     let mut per_profile: Vec<Row> = Vec::new();
     for g in &summaries {
         let name = &g.name;
-        for f in &g.failed {
-            outln!("{name}: profile {} excluded: {}", f.id, f.reason);
+        // Each reason once, with its count and first profile: not a line per profile.
+        for f in g.failure_groups() {
+            outln!("{name}: excluded {f}");
         }
         g.check(study)?;
         outln!(
@@ -264,8 +289,13 @@ pub fn write_outputs(
         per_profile.extend(g.per_profile.iter().cloned());
     }
     rows.extend(per_profile);
+    // An earlier study's files this one does not rewrite (the figures of other groups, a
+    // NetCDF file) go with the commit.
     let mut files = OutputSet::new();
+    let names = file_names();
+    files.replaces(dir, &names.iter().map(String::as_str).collect::<Vec<_>>())?;
     files.write(dir.join("sensitivities.csv"), select::to_csv(&rows))?;
+    files.write(dir.join(FAILED_CSV), failed_csv(study, outcomes))?;
     if !rows.is_empty() {
         let history = super::netcdf_history();
         let nc = select::to_netcdf(
@@ -291,6 +321,49 @@ pub fn write_outputs(
         outln!("wrote {}", p.display());
     }
     Ok(())
+}
+
+/// The file that lists the profiles that could not be studied.
+pub const FAILED_CSV: &str = "failed.csv";
+
+/// Every file `select-lines` may write into its directory: the tables, and the two figures of
+/// each group it can have (an AFGL atmosphere or a latitude class).
+pub fn file_names() -> Vec<String> {
+    let mut v: Vec<String> = ["sensitivities.csv", "sensitivities.nc", FAILED_CSV]
+        .map(String::from)
+        .to_vec();
+    let groups = StandardAtmosphere::ALL
+        .iter()
+        .map(|a| a.name())
+        .chain(LatitudeClass::ALL.iter().map(|c| c.name()));
+    for g in groups {
+        v.push(format!("transmission_{g}.png"));
+        v.push(format!("errors_{g}.png"));
+    }
+    v
+}
+
+/// `failed.csv`: `profile_id,group,reason`, one row per member that could not be studied, in
+/// member order (the header alone when none failed).
+fn failed_csv(study: &SelectStudy, outcomes: &[MemberOutcome]) -> String {
+    use std::fmt::Write as _;
+    let mut s = String::from("profile_id,group,reason\n");
+    let groups = study
+        .groups
+        .iter()
+        .flat_map(|(name, members)| std::iter::repeat_n(name, members.len()));
+    for (o, group) in outcomes.iter().zip(groups) {
+        if let Err(f) = o {
+            let _ = writeln!(
+                s,
+                "{},{},{}",
+                csv_field(&f.id),
+                csv_field(group),
+                csv_field(&f.reason)
+            );
+        }
+    }
+    s
 }
 
 type DrawResult = Result<(), Box<dyn std::error::Error>>;

@@ -265,11 +265,11 @@ impl Signals {
                         out,
                         "{src},{order},{},{fov},{r},{:.9e},{:.9e},{:.9e},{:.9e},{:.9e}",
                         crate::output::csv_field(&line.name),
-                        n.signal_pe,
-                        n.background_pe,
-                        n.dark_pe,
-                        n.std_pe(),
-                        n.snr()
+                        crate::output::csv_number(n.signal_pe),
+                        crate::output::csv_number(n.background_pe),
+                        crate::output::csv_number(n.dark_pe),
+                        crate::output::csv_number(n.std_pe()),
+                        crate::output::csv_number(n.snr())
                     );
                 }
             }

@@ -260,7 +260,9 @@ pub struct Record {
     /// Retrieved from the noise-free signals with the class-mean virtual σ (the study's
     /// retrieval).
     pub retrieved_ppm: f64,
-    /// The same from one noisy averaged measurement.
+    /// The same from one noisy averaged measurement; NaN when it cannot be retrieved (the
+    /// noisy signal of a window is not positive: its logarithm is undefined), written as an
+    /// empty field and left out of the noisy statistics ([`Summary::noisy_profiles`]).
     pub retrieved_noisy_ppm: f64,
     /// Retrieved from the noise-free signals with the profile's own state as reference.
     pub retrieved_own_ppm: f64,
@@ -787,6 +789,7 @@ impl Study<'_> {
             };
             let shifted = |s: StateShift| -> Result<ReferenceState, String> {
                 let p = shift_member(&truth_member, &s).map_err(|e| e.to_string())?;
+                check_dry_air(&p.profile, s.h2o_factor)?;
                 self.reference(&p.profile, &edges)
             };
             let none = StateShift::NONE;
@@ -859,7 +862,7 @@ impl Study<'_> {
                     .transpose()
             })
             .collect::<Result<_, _>>()?;
-        let mut records = Vec::new();
+        let mut records: Vec<Record> = Vec::new();
         for p in 0..self.options.pairs.len() {
             let know_p: Vec<Vec<Product>> = know.iter().map(|k| k[p].clone()).collect();
             let las_p: Vec<Option<Vec<Product>>> = las
@@ -869,8 +872,55 @@ impl Study<'_> {
             let exact = exact_p.as_ref().map(|e| e[p].as_slice());
             records.extend(pair_records(&paper[p], &own_p[p], exact, &know_p, &las_p));
         }
+        check_records(&records)?;
         Ok(records)
     }
+}
+
+/// Refuse a water-vapour factor that leaves a level of `p` (a state shifted by it) without dry
+/// air: the dry-air column, and with it the mixing ratio, would be 0 or negative.
+fn check_dry_air(p: &Profile, factor: f64) -> Result<(), String> {
+    let Some(h2o) = p.gas("H2O") else {
+        return Ok(());
+    };
+    match h2o.iter().enumerate().find(|(_, x)| !(**x < 1.0)) {
+        Some((k, x)) => Err(format!(
+            "the humidity budget's assumed state (water vapour × {factor:.4}) has an H2O mole fraction of {x:.3} at {:.0} m, leaving no dry air (give a smaller --budget-humidity-percent below 0)",
+            p.altitude_m[k]
+        )),
+        None => Ok(()),
+    }
+}
+
+/// Every value of a profile's records but the noisy one (NaN where it cannot be retrieved)
+/// is finite, or the profile fails with the value named: no number a study reports as
+/// computed is NaN or infinite.
+fn check_records(records: &[Record]) -> Result<(), String> {
+    for r in records {
+        let values = [
+            ("truth_ppm", r.truth_ppm),
+            ("retrieved_ppm", r.retrieved_ppm),
+            ("retrieved_own_profile_ppm", r.retrieved_own_ppm),
+        ];
+        let budget = Source::ALL
+            .iter()
+            .zip(&r.budget_ppm)
+            .map(|(s, v)| (s.column(), *v));
+        if let Some((name, v)) = values
+            .into_iter()
+            .chain(budget)
+            .find(|(_, v)| !v.is_finite())
+        {
+            return Err(format!(
+                "{name} of {} {} {:.0}–{:.0} m is {v}: it cannot be computed",
+                r.pair,
+                r.method.label(),
+                r.altitude_m.0,
+                r.altitude_m.1
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// Signals of a truth's line returns through its receiver.
@@ -1030,18 +1080,25 @@ pub struct Summary {
     pub altitude_m: (f64, f64),
     /// Profiles in the group (failed ones excluded).
     pub profiles: usize,
+    /// Of those, the profiles whose noisy measurement could be retrieved: the members of
+    /// `noisy_bias_ppm`, `noisy_sd_ppm` and `noise_ratio`.
+    pub noisy_profiles: usize,
     /// Mean truth \[ppm\].
     pub truth_mean_ppm: f64,
-    /// Mean and standard deviation of retrieved − truth, noise-free \[ppm\].
+    /// Mean and standard deviation of retrieved − truth, noise-free \[ppm\] (the standard
+    /// deviation NaN, an empty field, for one profile).
     pub bias_ppm: f64,
     /// See `bias_ppm`.
     pub sd_ppm: f64,
-    /// The same with one noisy measurement per profile \[ppm\].
+    /// The same with one noisy measurement per profile, over the `noisy_profiles` whose
+    /// measurement could be retrieved \[ppm\] (NaN, an empty field, for none; the standard
+    /// deviation also for one).
     pub noisy_bias_ppm: f64,
     /// See `noisy_bias_ppm`.
     pub noisy_sd_ppm: f64,
-    /// Standard deviation of noisy − noise-free over the profiles, divided by the rms analytic
-    /// random error: 1 within sampling error (√(1/(2n)) relative) if the analytic error is right.
+    /// Standard deviation of noisy − noise-free over the `noisy_profiles`, divided by the rms
+    /// analytic random error over the same profiles: 1 within sampling error (√(1/(2n))
+    /// relative) if the analytic error is right (NaN, an empty field, for fewer than 2).
     pub noise_ratio: f64,
     /// The budget rows in [`Source::ALL`] order.
     pub sources: [SourceStats; N_SOURCES],
@@ -1049,6 +1106,13 @@ pub struct Summary {
     pub total_ppm: f64,
 }
 
+/// Root mean square (NaN for none).
+fn rms(v: &[f64]) -> f64 {
+    (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt()
+}
+
+/// Mean and sample standard deviation; NaN where undefined (no value; one, for the standard
+/// deviation), which the writers make empty fields and `_FillValue`.
 fn mean_sd(v: &[f64]) -> (f64, f64) {
     let n = v.len() as f64;
     if v.is_empty() {
@@ -1093,8 +1157,18 @@ pub fn summarise(outcomes: &[ProfileOutcome]) -> Vec<Summary> {
                 |f: &dyn Fn(&Record) -> f64| -> Vec<f64> { recs.iter().map(|r| f(r)).collect() };
             let (truth_mean_ppm, _) = mean_sd(&col(&|r| r.truth_ppm));
             let (bias_ppm, sd_ppm) = mean_sd(&col(&|r| r.error_ppm()));
-            let (noisy_bias_ppm, noisy_sd_ppm) = mean_sd(&col(&|r| r.error_noisy_ppm()));
-            let (_, noise_sd) = mean_sd(&col(&|r| r.retrieved_noisy_ppm - r.retrieved_ppm));
+            // The noisy statistics over the profiles whose noisy measurement was retrieved
+            // (a far DIAL cell from space often has no positive noisy signal).
+            let noisy: Vec<&Record> = recs
+                .iter()
+                .copied()
+                .filter(|r| r.retrieved_noisy_ppm.is_finite())
+                .collect();
+            let noisy_col =
+                |f: &dyn Fn(&Record) -> f64| -> Vec<f64> { noisy.iter().map(|r| f(r)).collect() };
+            let (noisy_bias_ppm, noisy_sd_ppm) = mean_sd(&noisy_col(&|r| r.error_noisy_ppm()));
+            let (_, noise_sd) = mean_sd(&noisy_col(&|r| r.retrieved_noisy_ppm - r.retrieved_ppm));
+            let noisy_random = rms(&noisy_col(&|r| r.budget_ppm[0]));
             let mut sources = [SourceStats {
                 bias_ppm: 0.0,
                 sd_ppm: 0.0,
@@ -1104,7 +1178,7 @@ pub fn summarise(outcomes: &[ProfileOutcome]) -> Vec<Summary> {
             for (j, s) in sources.iter_mut().enumerate() {
                 let v = col(&|r| r.budget_ppm[j]);
                 if j == 0 {
-                    let rms = (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt();
+                    let rms = rms(&v);
                     *s = SourceStats {
                         bias_ppm: 0.0,
                         sd_ppm: rms,
@@ -1136,12 +1210,13 @@ pub fn summarise(outcomes: &[ProfileOutcome]) -> Vec<Summary> {
                 method: r0.method,
                 altitude_m: r0.altitude_m,
                 profiles: recs.len(),
+                noisy_profiles: noisy.len(),
                 truth_mean_ppm,
                 bias_ppm,
                 sd_ppm,
                 noisy_bias_ppm,
                 noisy_sd_ppm,
-                noise_ratio: noise_sd / sources[0].rms_ppm,
+                noise_ratio: noise_sd / noisy_random,
                 sources,
                 total_ppm: total2.sqrt(),
             });
@@ -1291,6 +1366,12 @@ pub fn summary_netcdf(
             "profiles in the group (failed ones excluded)",
             "1",
             |m| m.profiles as f64,
+        ),
+        num(
+            "noisy_profiles",
+            "profiles whose noisy measurement could be retrieved (the members of noisy_bias_ppm, noisy_sd_ppm and noise_ratio)",
+            "1",
+            |m| m.noisy_profiles as f64,
         ),
         num(
             "truth_mean_ppm",

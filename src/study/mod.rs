@@ -16,3 +16,132 @@ pub mod select;
 pub mod select_shard;
 pub mod select_study;
 pub mod shard;
+
+/// The profiles of a study that failed for one reason: how many, and the first of them.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct FailureGroup {
+    /// Profiles that failed for this reason.
+    pub count: usize,
+    /// The first of them, in the study's order.
+    pub id: String,
+    /// Its reason, as reported.
+    pub reason: String,
+}
+
+impl std::fmt::Display for FailureGroup {
+    /// `2 profiles: <the first reason> (profile <id> and 1 more)`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let s = if self.count == 1 { "" } else { "s" };
+        write!(
+            f,
+            "{} profile{s}: {} (profile {}",
+            self.count, self.reason, self.id
+        )?;
+        if self.count > 1 {
+            write!(f, " and {} more", self.count - 1)?;
+        }
+        write!(f, ")")
+    }
+}
+
+/// The failures `(profile id, reason)` of a study grouped by reason, in order of first
+/// appearance, so that a report says each reason once, not once per profile. Two reasons are
+/// the same when they differ only in their numbers and the profile's own id
+/// (`supersaturated: relative humidity 355.4 % at 0 m` and `… 416.7 % at 0 m`).
+pub fn group_failures<'a>(
+    failures: impl IntoIterator<Item = (&'a str, &'a str)>,
+) -> Vec<FailureGroup> {
+    let mut groups: Vec<(String, FailureGroup)> = Vec::new();
+    for (id, reason) in failures {
+        let key = reason_kind(reason, id);
+        match groups.iter_mut().find(|(k, _)| *k == key) {
+            Some((_, g)) => g.count += 1,
+            None => groups.push((
+                key,
+                FailureGroup {
+                    count: 1,
+                    id: id.to_string(),
+                    reason: reason.to_string(),
+                },
+            )),
+        }
+    }
+    groups.into_iter().map(|(_, g)| g).collect()
+}
+
+/// `reason` with the profile's `id` and every number replaced by placeholders.
+fn reason_kind(reason: &str, id: &str) -> String {
+    let text = if id.is_empty() {
+        reason.to_string()
+    } else {
+        reason.replace(id, "\u{1}")
+    };
+    let mut out = String::with_capacity(text.len());
+    let mut in_number = false;
+    for c in text.chars() {
+        if c.is_ascii_digit() || (in_number && c == '.') {
+            if !in_number {
+                out.push('#');
+                in_number = true;
+            }
+        } else {
+            in_number = false;
+            out.push(c);
+        }
+    }
+    out
+}
+
+/// The one line that says a whole study of the profiles `of` (a set file, an ensemble)
+/// failed: `every profile of <of> failed (N of N): <each reason once, with its count and first
+/// profile>; nothing was written`.
+pub fn all_failed_message(of: &str, groups: &[FailureGroup]) -> String {
+    let n: usize = groups.iter().map(|g| g.count).sum();
+    let each: Vec<String> = groups.iter().map(|g| g.to_string()).collect();
+    format!(
+        "every profile of {of} failed ({n} of {n}): {}; nothing was written",
+        each.join("; ")
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn failures_are_grouped_by_reason_with_their_first_profile() {
+        let failures = [
+            (
+                "mid-0001",
+                "supersaturated: relative humidity 355.4 % at 0 m (1014.4 hPa)",
+            ),
+            (
+                "mid-0002",
+                "the profile ends at 30000 m, below `atmosphere.top_m` 60000 m",
+            ),
+            (
+                "mid-0003",
+                "supersaturated: relative humidity 416.7 % at 250 m (990.1 hPa)",
+            ),
+            ("x1", "profile `x1` has no CO2"),
+            ("x2", "profile `x2` has no CO2"),
+        ];
+        let g = group_failures(failures);
+        assert_eq!(g.len(), 3, "{g:?}");
+        assert_eq!((g[0].count, g[0].id.as_str()), (2, "mid-0001"));
+        assert_eq!((g[1].count, g[1].id.as_str()), (1, "mid-0002"));
+        assert_eq!((g[2].count, g[2].id.as_str()), (2, "x1"));
+        assert_eq!(
+            g[0].to_string(),
+            "2 profiles: supersaturated: relative humidity 355.4 % at 0 m (1014.4 hPa) (profile mid-0001 and 1 more)"
+        );
+        assert_eq!(
+            g[1].to_string(),
+            "1 profile: the profile ends at 30000 m, below `atmosphere.top_m` 60000 m (profile mid-0002)"
+        );
+        assert!(
+            all_failed_message("set.csv", &g)
+                .starts_with("every profile of set.csv failed (5 of 5): 2 profiles: ")
+        );
+    }
+}

@@ -151,6 +151,10 @@ impl StudyHeader for SelectShardHeader {
     fn held(&self) -> (u64, u64) {
         (self.first_profile, self.end_profile)
     }
+
+    fn times(&self) -> (Vec<(&'static str, f64)>, u64) {
+        (vec![("wall", self.wall_s)], self.threads)
+    }
 }
 
 impl SelectShardHeader {
@@ -403,6 +407,62 @@ pub type SelectShardFile = StudyShardFile<SelectShardHeader>;
 impl ReadOutcome for MemberOutcome {
     fn read(body: &mut Body) -> Result<Self, String> {
         read_outcome(body)
+    }
+
+    /// The XCO2 a mixing ratio in (0, 10⁶] ppm, the layer edges finite and increasing, every
+    /// transmission in [0, 1]; a position whose DAOD is > 0 (one the study keeps) with its
+    /// sensitivities finite, its weighting-function peak and random error ≥ 0 or NaN (a peak
+    /// without a finite weighting function; no noise model), never infinite. Positions with a
+    /// DAOD ≤ 0 are dropped by the study, and their values may be undefined.
+    fn check(&self) -> Result<(), String> {
+        let Ok(m) = self else { return Ok(()) };
+        let id = &m.id;
+        if !(m.xco2_ppm > 0.0 && m.xco2_ppm <= 1e6) {
+            return Err(format!(
+                "profile {id}: XCO2 is {} ppm: a mixing ratio lies in (0, 1e6] ppm",
+                m.xco2_ppm
+            ));
+        }
+        if m.edges_m.iter().any(|z| !z.is_finite()) || m.edges_m.windows(2).any(|w| w[1] <= w[0]) {
+            return Err(format!(
+                "profile {id}: its layer edges are not finite and increasing"
+            ));
+        }
+        let transmission = |t: f64| (0.0..=1.0).contains(&t);
+        if let Some(t) = m.spectra.iter().flatten().find(|t| !transmission(**t)) {
+            return Err(format!(
+                "profile {id}: a transmission of its spectra is {t}, outside [0, 1]"
+            ));
+        }
+        for (i, p) in m.positions.iter().enumerate() {
+            if !p.daod_one_way.is_finite() {
+                return Err(format!(
+                    "profile {id}, position {i}: DAOD is {}: not a finite number",
+                    p.daod_one_way
+                ));
+            }
+            if p.daod_one_way <= 0.0 {
+                continue;
+            }
+            let values = position_values(p);
+            let sensitivities = [
+                p.dxco2_per_k_ppm,
+                p.dxco2_per_mhz_ppm,
+                p.dxco2_per_hpa_ppm,
+                p.dxco2_per_10pct_h2o_ppm,
+            ];
+            let nan_or_non_negative = |v: f64| v.is_nan() || (v.is_finite() && v >= 0.0);
+            if !sensitivities.iter().all(|v| v.is_finite())
+                || !transmission(p.t2_on)
+                || !nan_or_non_negative(p.wf_peak_hpa)
+                || !nan_or_non_negative(p.random_error_ppm)
+            {
+                return Err(format!(
+                    "profile {id}, position {i}: values {values:?}: a sensitivity not finite, a transmission outside [0, 1], or a peak pressure or random error negative or infinite"
+                ));
+            }
+        }
+        Ok(())
     }
 }
 

@@ -392,13 +392,30 @@ pub struct GroupSummary {
 }
 
 impl GroupSummary {
-    /// Refuse a group of which no member could be studied, or, with positions given by
-    /// `--on-cm1`, where one was dropped.
+    /// The members that could not be studied, grouped by reason
+    /// ([`crate::study::group_failures`]).
+    pub fn failure_groups(&self) -> Vec<crate::study::FailureGroup> {
+        crate::study::group_failures(
+            self.failed
+                .iter()
+                .map(|f| (f.id.as_str(), f.reason.as_str())),
+        )
+    }
+
+    /// Refuse a group of which no member could be studied (each reason once), or, with
+    /// positions given by `--on-cm1`, where one was dropped.
     pub fn check(&self, study: &SelectStudy) -> Result<(), SelectError> {
         if self.profiles == 0 {
+            let each: Vec<String> = self
+                .failure_groups()
+                .iter()
+                .map(|g| g.to_string())
+                .collect();
             return Err(usage(format!(
-                "{}: every profile failed (see above)",
-                self.name
+                "{}: every profile of the group failed ({}): {}; nothing was written",
+                self.name,
+                self.failed.len(),
+                each.join("; ")
             )));
         }
         if !study.options.on_cm1.is_empty() && !self.dropped.is_empty() {

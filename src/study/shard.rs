@@ -124,6 +124,18 @@ impl StudyHeader for DialShardHeader {
     fn held(&self) -> (u64, u64) {
         (self.first_profile, self.end_profile)
     }
+
+    fn times(&self) -> (Vec<(&'static str, f64)>, u64) {
+        let names = [
+            "class-mean",
+            "truth-optics",
+            "returns",
+            "reference-state",
+            "retrieval",
+            "wall",
+        ];
+        (names.into_iter().zip(self.timing_s).collect(), self.threads)
+    }
 }
 
 impl DialShardHeader {
@@ -419,17 +431,85 @@ pub trait StudyHeader: DeserializeOwned {
     fn shard_of(&self) -> [u64; 3];
     /// The shard's profiles: the first, and one past the last.
     fn held(&self) -> (u64, u64);
+    /// The times it records, named \[s\], and the threads it ran on: checked on reading
+    /// ([`shard::check_wall_and_threads`]).
+    fn times(&self) -> (Vec<(&'static str, f64)>, u64);
 }
 
 /// The outcome of one profile as a study shard's body holds it.
 pub trait ReadOutcome: Sized {
     /// Read one from `body`; the error says what is wrong, the caller names the file.
     fn read(body: &mut Body) -> Result<Self, String>;
+    /// Refuse values the study cannot have made (NaN or infinite where it computes a number,
+    /// negative where it cannot be): a checksum proves only that the file is as written.
+    fn check(&self) -> Result<(), String>;
 }
 
 impl ReadOutcome for ProfileOutcome {
     fn read(body: &mut Body) -> Result<Self, String> {
         read_outcome(body)
+    }
+
+    /// Every value of a record finite but the noisy one (NaN where it could not be retrieved,
+    /// never infinite), the truth a mixing ratio in (0, 10⁶] ppm, the random error ≥ 0.
+    fn check(&self) -> Result<(), String> {
+        let Ok(records) = &self.records else {
+            return Ok(());
+        };
+        for r in records {
+            let at = || {
+                format!(
+                    "profile {}, {} {} {}–{} m",
+                    self.id,
+                    r.pair,
+                    r.method.label(),
+                    r.altitude_m.0,
+                    r.altitude_m.1
+                )
+            };
+            let finite = [
+                ("altitude_bottom_m", r.altitude_m.0),
+                ("altitude_top_m", r.altitude_m.1),
+                ("truth_ppm", r.truth_ppm),
+                ("retrieved_ppm", r.retrieved_ppm),
+                ("retrieved_own_profile_ppm", r.retrieved_own_ppm),
+            ];
+            let budget = crate::study::dial::Source::ALL
+                .iter()
+                .zip(&r.budget_ppm)
+                .map(|(s, v)| (s.column(), *v));
+            for (name, v) in finite.into_iter().chain(budget) {
+                if !v.is_finite() {
+                    return Err(format!(
+                        "{}: {name} is {}: not a finite number",
+                        at(),
+                        shard::number(v)
+                    ));
+                }
+            }
+            if r.retrieved_noisy_ppm.is_infinite() {
+                return Err(format!(
+                    "{}: retrieved_noisy_ppm is {}: not a finite number",
+                    at(),
+                    r.retrieved_noisy_ppm
+                ));
+            }
+            if !(r.truth_ppm > 0.0 && r.truth_ppm <= 1e6) {
+                return Err(format!(
+                    "{}: truth_ppm is {}: a mixing ratio lies in (0, 1e6] ppm",
+                    at(),
+                    shard::number(r.truth_ppm)
+                ));
+            }
+            if r.budget_ppm[0] < 0.0 {
+                return Err(format!(
+                    "{}: random_ppm is {}: a standard deviation is never negative",
+                    at(),
+                    shard::number(r.budget_ppm[0])
+                ));
+            }
+        }
+        Ok(())
     }
 }
 
@@ -485,10 +565,22 @@ impl<H: StudyHeader> StudyShardFile<H> {
         let (frame, header): (_, H) = shard::read_header(path, bytes, 0, H::KIND)?;
         frame.check_sum(path)?;
         let range = header_slice(path, header.shard_of(), header.held())?;
+        let (times, threads) = header.times();
+        for (name, t) in times {
+            if !(t.is_finite() && t >= 0.0) {
+                return Err(bad(format!(
+                    "its {name} time is {} s: a time is a finite number ≥ 0",
+                    shard::number(t)
+                )));
+            }
+        }
+        shard::check_wall_and_threads(path, 0.0, threads)?;
         let mut body = Body::new(&bytes[frame.body_at..frame.sum_at]);
         let mut outcomes = Vec::with_capacity(range.len().min(1 << 20));
         for _ in range {
-            outcomes.push(H::Outcome::read(&mut body).map_err(&bad)?);
+            let o = H::Outcome::read(&mut body).map_err(&bad)?;
+            o.check().map_err(&bad)?;
+            outcomes.push(o);
         }
         if body.left() != 0 {
             return Err(bad(format!(
