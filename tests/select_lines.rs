@@ -723,6 +723,8 @@ fn check_weighting_function(atm: StandardAtmosphere, label: &str, offset_ghz: f6
     assert!(
         (reported - best_p).abs() < 3.0,
         "{atm:?} {label}: {reported} vs {best_p}"
+    );
+}
 
 /// Issue 37, item 5, for line selection: of four tropical profiles two end at 700 hPa, about
 /// 3 km, below one 4 km layer: exit 0, the reason said once with its count and first profile,
