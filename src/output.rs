@@ -60,6 +60,14 @@ pub enum OutputError {
     /// A directory has the name of an output file.
     #[error("cannot write {}: a directory of that name is in the way", .0.display())]
     DirectoryInTheWay(PathBuf),
+    /// An output's path holds something that is not a file: a named pipe, a socket or a
+    /// device, which a whole-or-nothing write would replace by a regular file (as root, even
+    /// /dev/null).
+    #[error(
+        "cannot write {}: it is a pipe, socket or device, not a regular file (lidarsim writes each output whole and renames it into place; give a file or directory path)",
+        .0.display()
+    )]
+    NotARegularFile(PathBuf),
     /// Something on the way to an output file is not a directory.
     #[error("cannot write {}: {} is not a directory", path.display(), dir.display())]
     NotADirectory {
@@ -451,9 +459,15 @@ fn locate(dir: &Path, path: &Path) -> Result<Option<PathBuf>, OutputError> {
     Err(OutputError::io(path, io::ErrorKind::NotFound.into()))
 }
 
+/// Refuse what an output must not replace at `file`: a directory, or anything that is not a
+/// regular file or a symbolic link (a pipe, socket or device; renaming the staged file over
+/// `--out /dev/null` replaced the machine's /dev/null). A link is replaced, not followed.
 fn refuse_directory(file: &Path, path: &Path) -> Result<(), OutputError> {
     match fs::symlink_metadata(file) {
         Ok(m) if m.is_dir() => Err(OutputError::DirectoryInTheWay(path.to_path_buf())),
+        Ok(m) if !(m.is_file() || m.is_symlink()) => {
+            Err(OutputError::NotARegularFile(path.to_path_buf()))
+        }
         _ => Ok(()),
     }
 }
@@ -746,7 +760,8 @@ impl OutputSet {
             }
             let dest = s.target.join(name);
             match fs::symlink_metadata(&dest) {
-                Ok(m) if !m.is_dir() => {
+                // Only a file (or a link) an earlier run may have left; never a pipe or device.
+                Ok(m) if m.is_file() || m.is_symlink() => {
                     if !old.exists() {
                         fs::create_dir(&old).map_err(|e| OutputError::io(&dest, e))?;
                     }
@@ -783,6 +798,9 @@ impl OutputSet {
             let dest = s.target.join(name);
             let prior = match fs::symlink_metadata(&dest) {
                 Ok(m) if m.is_dir() => return Err(OutputError::DirectoryInTheWay(path.clone())),
+                Ok(m) if !(m.is_file() || m.is_symlink()) => {
+                    return Err(OutputError::NotARegularFile(path.clone()));
+                }
                 Ok(_) => {
                     if !old.exists() {
                         fs::create_dir(&old).map_err(|e| OutputError::io(path, e))?;
@@ -1188,6 +1206,56 @@ mod tests {
         assert!(matches!(set.write(&again, "b"), Err(OutputError::Twice(_))));
         drop(set);
         assert_eq!(fs::read_dir(root.path()).unwrap().count(), 1);
+    }
+
+    /// A named pipe where an output goes is refused before writing and at the commit, and is
+    /// left as it was: a whole-or-nothing write would replace it by a regular file (fuzz
+    /// finding F12: `--out /dev/null` replaced the machine's /dev/null).
+    #[cfg(unix)]
+    #[test]
+    fn a_pipe_or_device_is_never_replaced() {
+        use std::os::unix::fs::FileTypeExt;
+        let root = tempfile::tempdir().unwrap();
+        let fifo = root.path().join("a.csv");
+        let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+        if !made.is_ok_and(|s| s.success()) {
+            println!("skipped: mkfifo is not available");
+            return;
+        }
+        assert!(matches!(
+            check_paths(&[&fifo]),
+            Err(OutputError::NotARegularFile(_))
+        ));
+        let mut set = OutputSet::new();
+        assert!(matches!(
+            set.write(&fifo, "a\n"),
+            Err(OutputError::NotARegularFile(_))
+        ));
+        // A pipe that appears between staging and the commit.
+        let late = root.path().join("c.csv");
+        set.write(&late, "c\n").unwrap();
+        std::process::Command::new("mkfifo")
+            .arg(&late)
+            .status()
+            .unwrap();
+        assert!(matches!(set.commit(), Err(OutputError::NotARegularFile(_))));
+        for p in [&fifo, &late] {
+            assert!(fs::symlink_metadata(p).unwrap().file_type().is_fifo());
+        }
+        fs::remove_file(&late).unwrap();
+        // And an earlier run's name held by a pipe is not removed as stale.
+        let mut set = OutputSet::new();
+        set.replaces(root.path(), &["a.csv"]).unwrap();
+        set.write(root.path().join("b.csv"), "b\n").unwrap();
+        set.commit().unwrap();
+        assert!(fs::symlink_metadata(&fifo).unwrap().file_type().is_fifo());
+        // /dev/null itself, where it exists, is refused before any work.
+        if Path::new("/dev/null").exists() {
+            assert!(matches!(
+                check_paths(&[Path::new("/dev/null")]),
+                Err(OutputError::NotARegularFile(_))
+            ));
+        }
     }
 
     #[test]

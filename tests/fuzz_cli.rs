@@ -969,20 +969,6 @@ fn non_finite_in(why: &str, files: &[&str]) -> bool {
 const KNOWN: &[Known] = &[
     Known {
         command: "dial",
-        id: "F1",
-        what: "NaN and inf in the study's tables",
-        matches: |why, _| non_finite_in(why, &["d/profiles.csv", "d/summary.csv", "d/budget.csv"]),
-        always: true,
-    },
-    Known {
-        command: "dial",
-        id: "F2",
-        what: "a study where every profile failed exits 0",
-        matches: |why, _| why.contains("every profile failed"),
-        always: true,
-    },
-    Known {
-        command: "dial",
         id: "F8",
         what: "--class refused without naming the option",
         matches: |why, _| why.contains("unknown latitude class"),
@@ -993,32 +979,6 @@ const KNOWN: &[Known] = &[
         id: "F8",
         what: "--class refused without naming the option",
         matches: |why, _| why.contains("unknown latitude class"),
-        always: true,
-    },
-    Known {
-        command: "merge",
-        id: "F1",
-        what: "NaN and inf in the tables of merged dial shards",
-        matches: |why, _| non_finite_in(why, &["m/profiles.csv", "m/summary.csv", "m/budget.csv"]),
-        always: true,
-    },
-    Known {
-        command: "merge",
-        id: "F10",
-        what: "non-finite or negative tallies and wall times merged",
-        matches: |why, _| {
-            non_finite_in(
-                why,
-                &[
-                    "m/returns.csv",
-                    "m/signals.csv",
-                    "m/retrieval.csv",
-                    "m/summary.json",
-                ],
-            ) || (why.starts_with("m/returns.csv") && why.contains("is negative"))
-                || why.contains("summary.json `wall_s` = -")
-                || (why.starts_with("exit 0 printed") && why.contains("± inf J"))
-        },
         always: true,
     },
     Known {
@@ -1068,15 +1028,6 @@ const KNOWN: &[Known] = &[
         what: "size integrations that do not end (no contrast, large particles)",
         matches: |why, _| why.starts_with("no end after"),
         always: false,
-    },
-    Known {
-        command: "bench",
-        id: "F4",
-        what: "inf and NaN in bench --depth files; the --plain reader",
-        matches: |why, _| {
-            non_finite_in(why, &["depth/"]) || why.contains("plain reference has no cell")
-        },
-        always: true,
     },
 ];
 
@@ -2334,7 +2285,6 @@ mod findings {
     }
 
     #[test]
-    #[ignore = "issue 37: F1 dial writes NaN in profiles.csv and summary.csv"]
     fn f1_a_study_writes_no_nan() {
         let dir = tempfile::tempdir().unwrap();
         let ran = run_in(
@@ -2358,7 +2308,6 @@ mod findings {
     }
 
     #[test]
-    #[ignore = "issue 37: F2 a study where every profile failed exits 0"]
     fn f2_a_study_where_every_profile_failed_exits_2() {
         let dir = tempfile::tempdir().unwrap();
         std::fs::write(dir.path().join("set.csv"), fuzz::PROFILES_A).unwrap();
@@ -2378,7 +2327,6 @@ mod findings {
     }
 
     #[test]
-    #[ignore = "issue 37: F4 bench --depth writes inf in fom_depth.csv"]
     fn f4_bench_depth_writes_no_inf() {
         let dir = tempfile::tempdir().unwrap();
         let ran = run_in(
@@ -2682,7 +2630,6 @@ mod findings {
     /// is negative, with its checksum recomputed, is refused naming the file; a tally of 1e300 J
     /// (beyond any pulse) is refused or gives finite outputs.
     #[test]
-    #[ignore = "issue 37: F10 merge accepts non-finite and negative tallies and wall times"]
     fn merge_refuses_non_finite_and_negative_shard_numbers() {
         let f = Fixtures::get();
         let mut names: Vec<PathBuf> = std::fs::read_dir(f.dir.join("run_shards"))

@@ -622,7 +622,6 @@ fn an_lbl_table_reads_back() {
 /// replaced by a regular file (`--out /dev/null` replaced the device when run as root).
 #[cfg(unix)]
 #[test]
-#[ignore = "issue 37: F12 an output that is a FIFO or a device is replaced by a regular file"]
 fn an_output_that_is_a_fifo_is_not_replaced() {
     use std::os::unix::fs::{FileTypeExt, OpenOptionsExt};
     let dir = tempfile::tempdir().unwrap();
