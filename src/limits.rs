@@ -52,6 +52,51 @@ pub const MAX_LBL_ROWS: u64 = 5_000_000;
 /// per level in memory and a CSV row per level.
 pub const MAX_ENSEMBLE_LEVELS: u64 = 2_000_000;
 
+/// Mie work of one particle layer (all its channels' wavelengths) or of one `lidarsim mie`, in
+/// term-angles (`particles::distribution::MieWork`: Mie terms summed over the radii of the
+/// finest size grids × (phase-function angles + the coefficients' cost in angles)). About 2.4 h
+/// on one core at [`MIE_SECONDS_PER_WORK`]: a hundredfold the largest shipped computation, OPAC
+/// maritime clean at 532 nm with its phase function (3.9·10¹¹, the table in
+/// `phase_functions/`; 42 s measured, the bound counting the grids its two smaller modes did
+/// not need).
+pub const MAX_MIE_WORK: f64 = 4.0e13;
+
+/// Mie work above which the size integration says, before it starts, how long it may take
+/// (about a minute on one core).
+pub const MIE_WORK_WARN: f64 = 3.0e11;
+
+/// Seconds per term-angle of Mie work on one core of the reference machine (measured on
+/// `lidarsim mie` with one thread: 2.0–2.3·10⁻¹⁰ where the size grid reaches its bound, as
+/// for the C.1 cloud at 532 and 1064 nm; less where it converges sooner). Times in messages are
+/// this machine's, as an order of magnitude.
+pub const MIE_SECONDS_PER_WORK: f64 = 2.2e-10;
+
+/// Cost of the Mie coefficients of one radius in units of the matrix products of one angle
+/// (measured: about 50 ns a term against 0.25 ns a term and angle).
+pub const MIE_COEFFICIENT_ANGLES: u64 = 200;
+
+/// Values of a Mie angle table: phase-function angles × Mie terms at the largest radius (two
+/// tables of 8-byte values, 2.4 GB at the limit, are held while a size distribution's matrix is
+/// integrated; the largest shipped, maritime clean at 532 nm, has 1.04·10⁶).
+pub const MAX_MIE_ANGLE_TABLE_VALUES: u64 = 150_000_000;
+
+/// Say on standard error that a run allowed by a limit will be long (the warning tier of a
+/// limit: README, "Limits").
+pub fn warn(message: &str) {
+    eprintln!("lidarsim: warning: {message}");
+}
+
+/// A duration for messages: "40 s", "12 min", "3.5 h".
+pub fn fmt_seconds(s: f64) -> String {
+    if s < 100.0 {
+        format!("{} s", (s.max(0.0) * 10.0).round() / 10.0)
+    } else if s < 6000.0 {
+        format!("{} min", (s / 60.0).round())
+    } else {
+        format!("{} h", (s / 360.0).round() / 10.0)
+    }
+}
+
 /// The product of `factors` if it is at most `limit`, else a message naming the product, its
 /// factors and the limit. Saturates instead of overflowing, so any input can be checked.
 pub fn check_product(what: &str, factors: &[(&str, u64)], limit: u64) -> Result<u64, String> {

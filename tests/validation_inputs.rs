@@ -882,3 +882,109 @@ fn line_list_and_phase_table_fields_out_of_range_are_refused() {
         "{e}"
     );
 }
+
+/// A ground lidar at `WL` nm under a layer of water drops (log-normal, median radius `RG` µm,
+/// σ_g 1.5): Mie theory on the fly. The `particles` key is on line 21.
+const DROPS: &str = r#"[lidar]
+altitude_m = 0.0
+zenith_angle_deg = 0.0
+pulse_energy_j = 1.0
+beam_divergence_full_angle_mrad = 0.0
+telescope_diameter_m = 1.0
+optical_efficiency = 1.0
+fov_full_angle_mrad = 1.0
+[[channel]]
+name = "c"
+wavelength_nm = WL
+[gates]
+start_m = 1000.0
+end_m = 1400.0
+width_m = 10.0
+[[layer]]
+name = "drops"
+base_m = 1000.0
+top_m = 1300.0
+extinction_per_km = 1.0
+particles = { distribution = "lognormal", median_radius_um = RG, sigma_g = 1.5, refractive_index = "M" }
+"#;
+
+/// Mie work beyond its limit (README, "Limits"), refused in well under a second within a 1 GiB
+/// address space, naming the product and the limit: a layer of 1 mm drops at 532 nm (hours of
+/// Mie theory) at its file, line and key, and `lidarsim mie` for them with a phase table. Work
+/// above a minute but below the limit is allowed with a warning that says how long it may take
+/// (drops so absorbing that the size integration converges at once, so the test is quick).
+#[test]
+fn mie_work_beyond_the_limit_is_refused_fast() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = |wl: &str, rg: &str, m: &str| {
+        DROPS
+            .replace("WL", wl)
+            .replace("RG", rg)
+            .replace("\"M\"", &format!("\"{m}\""))
+    };
+    let path = dir.path().join("rain.toml");
+    std::fs::write(&path, scene("532.0", "1000.0", "1.33+0i")).unwrap();
+    let out_dir = dir.path().join("out");
+    let (out, took) = lidarsim_small([
+        "run".as_ref(),
+        path.as_os_str(),
+        "--no-plots".as_ref(),
+        "--out".as_ref(),
+        out_dir.as_os_str(),
+    ]);
+    let stderr = assert_refused("1 mm drops", &out);
+    assert!(
+        stderr.contains(&format!(
+            "{}:21: `layer.particles`: Mie work",
+            path.display()
+        )) && stderr.contains("term-angles")
+            && stderr.contains("limit of 4e13"),
+        "{stderr}"
+    );
+    assert!(took < Duration::from_secs(1), "{took:?}");
+    assert!(!out_dir.exists());
+
+    let table = dir.path().join("t.txt");
+    let (out, took) = lidarsim_small([
+        "mie",
+        "--distribution",
+        "lognormal",
+        "--refractive-index",
+        "1.33+0i",
+        "--median-radius-um",
+        "1000",
+        "--sigma-g",
+        "1.5",
+        "--wavelength-nm",
+        "532",
+        "--out",
+        table.to_str().unwrap(),
+    ]);
+    let stderr = assert_refused("mie at 1000 µm", &out);
+    assert!(
+        stderr.contains("Mie work") && stderr.contains("angles") && stderr.contains("Limits"),
+        "{stderr}"
+    );
+    assert!(took < Duration::from_secs(1), "{took:?}");
+    assert!(!table.exists());
+
+    // Allowed, with the warning before the work.
+    let path = dir.path().join("soot.toml");
+    std::fs::write(&path, scene("532.0", "20.0", "1.5+0.5i")).unwrap();
+    let out = lidarsim([
+        "run".as_ref(),
+        path.as_os_str(),
+        "--no-plots".as_ref(),
+        "--out".as_ref(),
+        out_dir.as_os_str(),
+    ]);
+    let stderr = stderr_of(&out);
+    assert_eq!(out.status.code(), Some(0), "{stderr}");
+    assert!(
+        stderr.contains(&format!(
+            "lidarsim: warning: {}:21: `layer.particles`: Mie work",
+            path.display()
+        )) && stderr.contains("up to about"),
+        "{stderr}"
+    );
+}
