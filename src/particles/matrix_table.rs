@@ -234,10 +234,11 @@ pub const EXACT_DIRECTION_TOLERANCE: f64 = MUELLER_TOLERANCE;
 /// (Mishchenko, Travis & Lacis 2002, *Scattering, Absorption, and Emission of Light by Small
 /// Particles*, Cambridge University Press, the symmetry relations of the scattering matrix at
 /// 0 and 180°; Hovenier, van der Mee & Domke 2004, §2.7). A table that breaks them describes
-/// no such medium, and gives answers that depend on which plane a calculation picks: the Monte
-/// Carlo (the plane its photon's history leaves) and the analytic lidar equation (the lidar's
-/// plane of polarisation) then disagree at order 1, by a factor of a thousand for F12 = ½ F11
-/// at 180°. Tables must have nodes at exactly 0° and 180° ([`check_angles`]: nothing is
+/// no such medium, and gives answers that depend on which plane a calculation picks: a
+/// polarised Monte Carlo scores single backscatter in the lidar's plane of polarisation
+/// (F11 + F12 at 180° for linear light), the scalar lidar equation in none (F11), so their
+/// order-1 returns differed by (1 + F12/F11): 1.04e-3 for a polariser with F12 = −0.999 F11
+/// (`tests/matrices.rs`). Tables must have nodes at exactly 0° and 180° ([`check_angles`]: nothing is
 /// extrapolated), so the conditions are checked at those two rows, each to
 /// [`EXACT_DIRECTION_TOLERANCE`] × F11, and a row that breaks one is refused at its line and
 /// the column it names. (Backscattering also has F44 = F11 − 2 F22 by reciprocity, Mishchenko
