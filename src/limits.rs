@@ -80,6 +80,21 @@ pub const MIE_COEFFICIENT_ANGLES: u64 = 200;
 /// integrated; the largest shipped, maritime clean at 532 nm, has 1.04·10⁶).
 pub const MAX_MIE_ANGLE_TABLE_VALUES: u64 = 150_000_000;
 
+/// Monte Carlo work of one run (`pipeline::McWork`: photons × estimated scattering events per
+/// photon × channels), over all its shards or ranks: about a year of one core at
+/// [`MC_SECONDS_PER_WORK`] (a day of 350), a hundredfold the largest run the README shows (the
+/// C.1 cloud with 10¹⁰ photons over 100 Slurm shards, 2.1·10¹¹).
+pub const MAX_MC_WORK: f64 = 3.0e13;
+
+/// Monte Carlo work above which a run says, before tracing, how long it may take (about an
+/// hour of one core).
+pub const MC_WORK_WARN: f64 = 3.6e9;
+
+/// Seconds per channel-event of Monte Carlo work on one core of the reference machine, as an
+/// order of magnitude: measured 0.3–2.5·10⁻⁶ on the shipped and validation scenes (2 threads,
+/// per core), up to 1.4·10⁻⁵ where a photon scatters little but crosses a thousand gates.
+pub const MC_SECONDS_PER_WORK: f64 = 1.0e-6;
+
 /// Say on standard error that a run allowed by a limit will be long (the warning tier of a
 /// limit: README, "Limits").
 pub fn warn(message: &str) {

@@ -988,3 +988,243 @@ fn mie_work_beyond_the_limit_is_refused_fast() {
         "{stderr}"
     );
 }
+
+/// A scene of the project: a shipped one (`scenes/NAME`) or a validation one
+/// (`validation/NAME`), parsed.
+fn project_scene(path: &str) -> lidarsim::scene::Scene {
+    let p = project_root().join(path);
+    lidarsim::scene::Scene::read(&p).unwrap_or_else(|e| panic!("{path}: {e}"))
+}
+
+/// [`project_scene`] with text replacements (each must occur).
+fn edited_scene(path: &str, edits: &[(&str, &str)]) -> lidarsim::scene::Scene {
+    let p = project_root().join(path);
+    let text = std::fs::read_to_string(&p).unwrap();
+    let text = crate::transport::edited(&text, edits);
+    lidarsim::scene::Scene::from_toml(&p, &text).unwrap_or_else(|e| panic!("{path}: {e}"))
+}
+
+/// The Monte Carlo work estimate (`pipeline::McWork`: events per photon from the scattering
+/// optical depth of the longest path that can still reach the last gate and the largest
+/// single-scattering albedo) against the events the transport counts (scatterings and surface
+/// reflections per photon, fixed seed): at least the count, and at most 40 times it, on shipped
+/// and validation scenes and extremes — thin and thick, isotropic and forward-peaked, absorbing,
+/// gates far beyond a cloud, an albedo-1 surface. The closest cases are I3RC experiment 2 (a
+/// semi-infinite conservative cloud whose photons use their whole path) and an isotropic layer
+/// of optical depth 1 (forced collisions), both about 0.8 of the estimate; the loosest, gates
+/// 9 km beyond a thin forward-peaked layer (0.07: the estimate lets every path stay in the
+/// layer).
+#[test]
+fn monte_carlo_work_estimate_bounds_the_counted_events() {
+    use lidarsim::optics::OpticalAtmosphere;
+    use lidarsim::pipeline::monte_carlo_work;
+    let c1 = "scenes/bissonnette_c1.toml";
+    let hg = |g: &str| format!("phase = {{ kind = \"henyey_greenstein\", g = {g} }}");
+    let c1_table =
+        "phase = { kind = \"table\", file = \"../phase_functions/bissonnette_c1_1064nm.txt\" }";
+    let hg0 = hg("0.0");
+    let hg85 = hg("0.85");
+    let cases: Vec<(&str, lidarsim::scene::Scene)> = vec![
+        ("bissonnette_c1", project_scene(c1)),
+        (
+            "ground_rayleigh_aerosol_cloud",
+            project_scene("scenes/ground_rayleigh_aerosol_cloud.toml"),
+        ),
+        (
+            "spaceborne_nadir_aerosol",
+            project_scene("scenes/spaceborne_nadir_aerosol.toml"),
+        ),
+        (
+            "I3RC exp. 2",
+            project_scene("validation/i3rc_case7/exp2.toml"),
+        ),
+        (
+            "C.1 × 0.01",
+            edited_scene(
+                c1,
+                &[("extinction_per_km = 17.23", "extinction_per_km = 0.1723")],
+            ),
+        ),
+        (
+            "C.1 × 10, gates to 3 km",
+            edited_scene(
+                c1,
+                &[
+                    ("extinction_per_km = 17.23", "extinction_per_km = 172.3"),
+                    ("end_m = 1400.0", "end_m = 3000.0"),
+                ],
+            ),
+        ),
+        (
+            "C.1 × 10, albedo 0.5",
+            edited_scene(
+                c1,
+                &[
+                    ("extinction_per_km = 17.23", "extinction_per_km = 172.3"),
+                    (
+                        "single_scattering_albedo = 0.999908",
+                        "single_scattering_albedo = 0.5",
+                    ),
+                ],
+            ),
+        ),
+        (
+            "isotropic, optical depth 1",
+            edited_scene(
+                c1,
+                &[
+                    (c1_table, &hg0),
+                    ("extinction_per_km = 17.23", "extinction_per_km = 3.33"),
+                ],
+            ),
+        ),
+        (
+            "g = 0.85, optical depth 0.6, gates to 10 km",
+            edited_scene(
+                c1,
+                &[
+                    (c1_table, &hg85),
+                    ("extinction_per_km = 17.23", "extinction_per_km = 2.0"),
+                    ("end_m = 1400.0", "end_m = 10000.0"),
+                ],
+            ),
+        ),
+        (
+            "fog over an albedo-1 surface",
+            edited_scene(
+                c1,
+                &[
+                    (
+                        "[simulation]",
+                        "[surface]\naltitude_m = 0.0\nalbedo = 1.0\n[simulation]",
+                    ),
+                    ("base_m = 1000.0", "base_m = 0.0"),
+                    ("top_m = 1300.0", "top_m = 100.0"),
+                    ("[lidar]\naltitude_m = 0.0", "[lidar]\naltitude_m = 0.001"),
+                    ("start_m = 1000.0", "start_m = 10.0"),
+                    ("end_m = 1400.0", "end_m = 1010.0"),
+                ],
+            ),
+        ),
+    ];
+    let mut report = Vec::new();
+    let mut failures = Vec::new();
+    for (name, scene) in &cases {
+        let atm = OpticalAtmosphere::build(scene).unwrap();
+        let photons = 10_000;
+        let estimate = monte_carlo_work(scene, &atm, photons);
+        let r = crate::transport::run(scene, photons, |_| {});
+        let counted =
+            (r.stats.collisions + r.stats.surface_reflections) as f64 / r.stats.photons as f64;
+        let ratio = counted / estimate.events_per_photon;
+        report.push(format!(
+            "{name}: {counted:.2} of {:.2} events per photon ({ratio:.3})",
+            estimate.events_per_photon
+        ));
+        if !(1.0 / 40.0..=1.0).contains(&ratio) {
+            failures.push(report.last().unwrap().clone());
+        }
+    }
+    assert!(
+        failures.is_empty(),
+        "{}\nall:\n{}",
+        failures.join("\n"),
+        report.join("\n")
+    );
+}
+
+/// Every run the project ships or documents is at least a hundredfold below the limit of
+/// Monte Carlo work: the shipped scenes at their own photons, the validation scenes at the
+/// photons of their scripts (I3RC case 7: 10⁶, Platt: 2·10⁶), and the README's largest, the C.1
+/// cloud with 10¹⁰ photons over 100 Slurm shards. A thick cloud (extinction 17 m⁻¹, gates to
+/// 10 km) with 10⁹ photons is refused in milliseconds at `simulation.photons` with the product
+/// and the limit; 10⁹ photons of C.1 are allowed with a warning.
+#[test]
+fn monte_carlo_work_of_shipped_runs_is_a_hundredfold_below_the_limit() {
+    use lidarsim::limits::MAX_MC_WORK;
+    use lidarsim::optics::OpticalAtmosphere;
+    use lidarsim::pipeline::monte_carlo_work;
+    let mut runs: Vec<(String, lidarsim::scene::Scene, u64)> = Vec::new();
+    for entry in std::fs::read_dir(project_root().join("scenes")).unwrap() {
+        let p = entry.unwrap().path();
+        let rel = format!("scenes/{}", p.file_name().unwrap().to_string_lossy());
+        let scene = project_scene(&rel);
+        let photons = scene.simulation.photons;
+        runs.push((rel, scene, photons));
+    }
+    for e in 1..=6 {
+        let rel = format!("validation/i3rc_case7/exp{e}.toml");
+        runs.push((rel.clone(), project_scene(&rel), 1_000_000));
+    }
+    for t in [1, 10] {
+        let rel = format!("validation/platt/tau{t}.toml");
+        runs.push((rel.clone(), project_scene(&rel), 2_000_000));
+    }
+    runs.push((
+        "C.1, 10¹⁰ photons".into(),
+        project_scene("scenes/bissonnette_c1.toml"),
+        10_000_000_000,
+    ));
+    let mut largest = (String::new(), 0.0);
+    for (name, scene, photons) in &runs {
+        let atm = OpticalAtmosphere::build(scene).unwrap();
+        let w = monte_carlo_work(scene, &atm, *photons).work();
+        assert!(w * 100.0 <= MAX_MC_WORK, "{name}: {w:e}");
+        if w > largest.1 {
+            largest = (name.clone(), w);
+        }
+    }
+    assert_eq!(largest.0, "C.1, 10¹⁰ photons", "{largest:?}");
+
+    let scene = edited_scene(
+        "scenes/bissonnette_c1.toml",
+        &[
+            ("extinction_per_km = 17.23", "extinction_per_km = 17230.0"),
+            ("end_m = 1400.0", "end_m = 10000.0"),
+        ],
+    );
+    let atm = OpticalAtmosphere::build(&scene).unwrap();
+    assert!(
+        monte_carlo_work(&scene, &atm, 1_000_000_000)
+            .check()
+            .is_err()
+    );
+    let c1 = project_scene("scenes/bissonnette_c1.toml");
+    let atm = OpticalAtmosphere::build(&c1).unwrap();
+    let w = monte_carlo_work(&c1, &atm, 1_000_000_000);
+    assert!(w.check().is_ok() && w.warning().is_some());
+
+    // Through the binary: refused at the scene's key, before any photon.
+    let dir = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(project_root().join("scenes/bissonnette_c1.toml"))
+        .unwrap()
+        .replace("extinction_per_km = 17.23", "extinction_per_km = 17230.0")
+        .replace("end_m = 1400.0", "end_m = 10000.0")
+        .replace(
+            "\"../phase_functions/",
+            &format!("\"{}/phase_functions/", project_root().display()),
+        );
+    let path = dir.path().join("fog.toml");
+    std::fs::write(&path, &text).unwrap();
+    let line = text.lines().position(|l| l.starts_with("photons")).unwrap() + 1;
+    let out_dir = dir.path().join("out");
+    let (out, took) = lidarsim_small([
+        "run".as_ref(),
+        path.as_os_str(),
+        "--photons".as_ref(),
+        "1000000000".as_ref(),
+        "--no-plots".as_ref(),
+        "--out".as_ref(),
+        out_dir.as_os_str(),
+    ]);
+    let stderr = assert_refused("thick fog", &out);
+    assert!(
+        stderr.contains(&format!(
+            "fog.toml:{line}: `simulation.photons`: Monte Carlo work"
+        )) && stderr.contains("channel-events")
+            && stderr.contains("limit of 3e13"),
+        "{stderr}"
+    );
+    assert!(took < Duration::from_secs(2), "{took:?}");
+    assert!(!out_dir.exists());
+}
