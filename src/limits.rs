@@ -95,20 +95,44 @@ pub const MC_WORK_WARN: f64 = 3.6e9;
 /// per core), up to 1.4·10⁻⁵ where a photon scatters little but crosses a thousand gates.
 pub const MC_SECONDS_PER_WORK: f64 = 1.0e-6;
 
+/// Line evaluations of a study over many profiles (`pipeline::StudyWork`: profile runs × 8
+/// states × channels × molecular layers × gas lines; `lidarsim dial`, `lidarsim bench
+/// --study`): about 44 h of one core at [`STUDY_SECONDS_PER_EVALUATION`], a hundredfold the
+/// largest study the README shows (`bench --study 1000` at its default threads 1,2 and 3
+/// repeats: 18 000 profile runs of `scenes/study_co2_ipda.toml`, 5.6·10¹⁰).
+pub const MAX_STUDY_WORK: f64 = 1.0e13;
+
+/// Study work above which a study says, before its first profile, how long it may take (about
+/// an hour of one core).
+pub const STUDY_WORK_WARN: f64 = 2.25e11;
+
+/// Seconds per line evaluation of a study, all of a profile's work counted (measured: 51 ms a
+/// profile of `scenes/study_co2_ipda.toml` on one core, 3.1·10⁶ evaluations; README
+/// "Benchmarks").
+pub const STUDY_SECONDS_PER_EVALUATION: f64 = 1.6e-8;
+
+/// Points of one figure (plotters draws about 4·10⁶ a second: 25 s at the limit). The figures
+/// of `run` and `dial` stay below 10⁷ within the returns and ensemble limits; this one bounds
+/// `profiles plot`, whose profile-set file may hold any number of profiles (three panels ×
+/// members × levels; an RFMIP-sized set of 1800 profiles × 61 levels draws 3.3·10⁵).
+pub const MAX_FIGURE_POINTS: u64 = 100_000_000;
+
 /// Say on standard error that a run allowed by a limit will be long (the warning tier of a
 /// limit: README, "Limits").
 pub fn warn(message: &str) {
     eprintln!("lidarsim: warning: {message}");
 }
 
-/// A duration for messages: "40 s", "12 min", "3.5 h".
+/// A duration for messages: "40 s", "12 min", "3.5 h", "40 days".
 pub fn fmt_seconds(s: f64) -> String {
     if s < 100.0 {
         format!("{} s", (s.max(0.0) * 10.0).round() / 10.0)
     } else if s < 6000.0 {
         format!("{} min", (s / 60.0).round())
-    } else {
+    } else if s < 360_000.0 {
         format!("{} h", (s / 360.0).round() / 10.0)
+    } else {
+        format!("{} days", (s / 86_400.0).round())
     }
 }
 

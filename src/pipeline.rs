@@ -350,15 +350,23 @@ impl McWork {
         self.photons as f64 * self.events_per_photon * self.channels as f64
     }
 
-    fn describe(&self) -> String {
+    /// The factors of the work, for messages.
+    fn factors(&self) -> String {
         format!(
-            "{} photons × {:.1} scattering events per photon (estimated from the scattering optical depth {:.3} along the longest path that can still reach the last gate and the largest single-scattering albedo {}) × {} channel{} = {:.2e} channel-events, up to about {} on one core",
+            "{} photons × {:.1} scattering events per photon (estimated from the scattering optical depth {:.3} along the longest path that can still reach the last gate and the largest single-scattering albedo {:.6}) × {} channel{}",
             crate::input::fmt_bound(self.photons as f64),
             self.events_per_photon,
             self.tau_path,
             self.albedo_max,
             self.channels,
             if self.channels == 1 { "" } else { "s" },
+        )
+    }
+
+    fn describe(&self) -> String {
+        format!(
+            "{} = {:.2e} channel-events, up to about {} on one core",
+            self.factors(),
             self.work(),
             crate::limits::fmt_seconds(self.work() * crate::limits::MC_SECONDS_PER_WORK),
         )
@@ -437,4 +445,138 @@ pub fn monte_carlo_work(scene: &Scene, atm: &OpticalAtmosphere, photons: u64) ->
         albedo_max,
         events_per_photon: 1.25 * tau_path.min(absorbed) + 4.0,
     }
+}
+
+/// The cost of a study that runs a scene's stages for many atmospheric profiles (`lidarsim
+/// dial`, `lidarsim bench --study`), estimated before the first profile (README, "Limits").
+///
+/// Per profile the study computes line by line three truths at every channel and five
+/// reference states at every line-shape node (`docs/retrieval.md`): at most 8 × channels ×
+/// molecular layers × gas lines line evaluations (each line reaching every channel is the bound;
+/// the lines are already cut to the channels' window and wing), and with photons it traces each
+/// of the three truths ([`McWork`] of the scene's own profile for each).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StudyWork {
+    /// Profile runs: profiles × repetitions.
+    pub profile_runs: u64,
+    /// Monochromatic channels.
+    pub channels: usize,
+    /// Molecular layers.
+    pub layers: usize,
+    /// Gas lines (cut to the channels' window and wing).
+    pub gas_lines: usize,
+    /// The Monte Carlo of one truth, if the study traces photons.
+    pub mc: Option<McWork>,
+}
+
+/// Truths and reference states computed line by line per profile, and truths traced.
+const STUDY_LBL_STATES: u64 = 8;
+const STUDY_TRACED_TRUTHS: u64 = 3;
+
+impl StudyWork {
+    /// Line evaluations of the whole study.
+    pub fn line_evaluations(&self) -> f64 {
+        self.profile_runs as f64
+            * (STUDY_LBL_STATES as f64)
+            * self.channels as f64
+            * self.layers as f64
+            * self.gas_lines as f64
+    }
+
+    /// Monte Carlo work of the whole study \[channel-events\].
+    pub fn mc_work(&self) -> f64 {
+        self.mc.map_or(0.0, |m| {
+            m.work() * (self.profile_runs * STUDY_TRACED_TRUTHS) as f64
+        })
+    }
+
+    fn describe_lbl(&self) -> String {
+        format!(
+            "{} profile runs × {STUDY_LBL_STATES} states (3 truths, 5 reference states) × {} channels × {} molecular layers × {} gas lines = {:.2e} line evaluations, up to about {} on one core",
+            self.profile_runs,
+            self.channels,
+            self.layers,
+            self.gas_lines,
+            self.line_evaluations(),
+            crate::limits::fmt_seconds(
+                self.line_evaluations() * crate::limits::STUDY_SECONDS_PER_EVALUATION
+            )
+        )
+    }
+
+    fn describe_mc(&self) -> String {
+        format!(
+            "{} profile runs × {STUDY_TRACED_TRUTHS} truths traced × {}",
+            self.profile_runs,
+            self.mc.map_or(String::new(), |m| m.factors())
+        )
+    }
+
+    /// Ok within the limits of study and Monte Carlo work, else the message naming the
+    /// product and the limit.
+    pub fn check(&self) -> Result<(), String> {
+        use crate::limits::{
+            MAX_MC_WORK, MAX_STUDY_WORK, MC_SECONDS_PER_WORK, STUDY_SECONDS_PER_EVALUATION,
+            fmt_seconds,
+        };
+        if self.line_evaluations() > MAX_STUDY_WORK {
+            return Err(format!(
+                "study work: {}, more than the limit of {MAX_STUDY_WORK:e} (about {}; README, \"Limits\")",
+                self.describe_lbl(),
+                fmt_seconds(MAX_STUDY_WORK * STUDY_SECONDS_PER_EVALUATION)
+            ));
+        }
+        if self.mc_work() > MAX_MC_WORK {
+            return Err(format!(
+                "study Monte Carlo work: {} = {:.2e} channel-events, more than the limit of {MAX_MC_WORK:e} (about {}; README, \"Limits\"): fewer profiles or photons",
+                self.describe_mc(),
+                self.mc_work(),
+                fmt_seconds(MAX_MC_WORK * MC_SECONDS_PER_WORK)
+            ));
+        }
+        Ok(())
+    }
+
+    /// Notes when the study is allowed but long (above [`crate::limits::STUDY_WORK_WARN`] or
+    /// [`crate::limits::MC_WORK_WARN`]).
+    pub fn warnings(&self) -> Vec<String> {
+        let mut v = Vec::new();
+        if self.line_evaluations() > crate::limits::STUDY_WORK_WARN {
+            v.push(format!("study work: {}", self.describe_lbl()));
+        }
+        if self.mc_work() > crate::limits::MC_WORK_WARN {
+            v.push(format!(
+                "study Monte Carlo work: {} = {:.2e} channel-events, up to about {} on one core",
+                self.describe_mc(),
+                self.mc_work(),
+                crate::limits::fmt_seconds(self.mc_work() * crate::limits::MC_SECONDS_PER_WORK)
+            ));
+        }
+        v
+    }
+}
+
+/// [`StudyWork`] of `profile_runs` runs of `scene`'s stages, tracing `photons` per truth (0:
+/// the analytic equation only). Builds the scene's own optics once (its line-by-line
+/// absorption: about one profile's share of the work).
+pub fn study_work(
+    scene: &Scene,
+    profile_runs: u64,
+    photons: u64,
+) -> Result<StudyWork, OpticsError> {
+    let mc = if photons > 0 {
+        let atm = OpticalAtmosphere::build(scene)?;
+        Some(monte_carlo_work(scene, &atm, photons))
+    } else {
+        None
+    };
+    Ok(StudyWork {
+        profile_runs,
+        channels: scene.channels.len(),
+        layers: scene
+            .molecular_edges()
+            .map_or(0, |e| e.len().saturating_sub(1)),
+        gas_lines: scene.gas.as_ref().map_or(0, |g| g.lines.lines.len()),
+        mc,
+    })
 }

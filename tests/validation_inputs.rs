@@ -1228,3 +1228,61 @@ fn monte_carlo_work_of_shipped_runs_is_a_hundredfold_below_the_limit() {
     assert!(took < Duration::from_secs(2), "{took:?}");
     assert!(!out_dir.exists());
 }
+
+/// Study sizes (README, "Limits"): `bench --study` (3N profiles × thread counts × repeats)
+/// and `dial` (profiles × line evaluations, and with photons × three traced truths) beyond
+/// their limits are refused in well under a second, before an ensemble is drawn, naming the
+/// product and the limit; the README's own studies (`bench --study 1000` at its defaults,
+/// `dial --ensemble 1000` of the study scene, and of the airborne DIAL scene with its photons)
+/// are a hundredfold below.
+#[test]
+fn study_sizes_are_refused_fast_and_shipped_studies_are_far_below() {
+    use lidarsim::limits::{MAX_MC_WORK, MAX_STUDY_WORK};
+    use lidarsim::pipeline::study_work;
+    let study = project_scene("scenes/study_co2_ipda.toml");
+    let bench = study_work(&study, 3 * 1000 * 2 * 3, 0).unwrap();
+    assert!(bench.check().is_ok() && bench.line_evaluations() * 100.0 <= MAX_STUDY_WORK);
+    let dial = study_work(&study, 3000, 0).unwrap();
+    assert!(dial.line_evaluations() * 100.0 <= MAX_STUDY_WORK);
+    let airborne = project_scene("scenes/airborne_co2_dial.toml");
+    let photons = airborne.simulation.photons;
+    let w = study_work(&airborne, 3000, photons).unwrap();
+    assert!(w.mc_work() * 100.0 <= MAX_MC_WORK && w.line_evaluations() * 100.0 <= MAX_STUDY_WORK);
+
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let airborne_path = project_root().join("scenes/airborne_co2_dial.toml");
+    for (what, args, words) in [
+        (
+            "bench --study",
+            vec!["bench", "--study", "40000", "--repeat", "1000"],
+            "line evaluations",
+        ),
+        (
+            "dial with photons",
+            vec![
+                "dial",
+                airborne_path.to_str().unwrap(),
+                "--ensemble",
+                "40000",
+                "--photons",
+                "100000000",
+                "--no-plots",
+                "--out",
+                out.to_str().unwrap(),
+            ],
+            "study Monte Carlo work",
+        ),
+    ] {
+        let (o, took) = lidarsim_small(&args);
+        let stderr = assert_refused(what, &o);
+        assert!(
+            stderr.contains(words)
+                && stderr.contains("more than the limit")
+                && stderr.contains("Limits"),
+            "{what}: {stderr}"
+        );
+        assert!(took < Duration::from_secs(1), "{what}: {took:?}");
+    }
+    assert!(!out.exists());
+}
