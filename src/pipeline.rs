@@ -327,9 +327,10 @@ fn retrieval_error(scene: &Scene, e: RetrievalError) -> RunError {
 /// (polarisation, I3RC case 7, Platt) and extremes (C.1 × 0.01 to × 10 and with gates to 10 km,
 /// isotropic and g = 0.85 to 0.99 layers of optical depth 0.3 to 30, albedos 0.5 to 1, an
 /// albedo-1 surface under and above clouds; 57 scenes, 10⁴ photons each): the count lies
-/// between 0.03 and 0.83 times the estimate (`tests/validation_inputs.rs` checks ten of them). `max_order` does not enter: orders above it are
-/// tallied together, not cut. Not covered: the cost of detector-directed sampling and
-/// splitting on phase functions with a strong backward peak (issue 37).
+/// between 0.03 and 0.83 times the estimate (`tests/validation_inputs.rs` checks ten of them).
+/// `max_order` does not enter: orders above it are tallied together, not cut. Not covered: the
+/// cost of detector-directed sampling and splitting on phase functions with a strong backward
+/// peak (issue 37).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct McWork {
     /// Photon packets.
