@@ -52,6 +52,90 @@ pub const MAX_LBL_ROWS: u64 = 5_000_000;
 /// per level in memory and a CSV row per level.
 pub const MAX_ENSEMBLE_LEVELS: u64 = 2_000_000;
 
+/// Mie work of one particle layer (all its channels' wavelengths) or of one `lidarsim mie`, in
+/// term-angles (`particles::distribution::MieWork`: Mie terms summed over the radii of the
+/// finest size grids × (phase-function angles + the coefficients' cost in angles)). About 2.4 h
+/// on one core at [`MIE_SECONDS_PER_WORK`]: a hundredfold the largest shipped computation, OPAC
+/// maritime clean at 532 nm with its phase function (3.9·10¹¹, the table in
+/// `phase_functions/`; 42 s measured, the bound counting the grids its two smaller modes did
+/// not need).
+pub const MAX_MIE_WORK: f64 = 4.0e13;
+
+/// Mie work above which the size integration says, before it starts, how long it may take
+/// (about a minute on one core).
+pub const MIE_WORK_WARN: f64 = 3.0e11;
+
+/// Seconds per term-angle of Mie work on one core of the reference machine (measured on
+/// `lidarsim mie` with one thread: 2.0–2.3·10⁻¹⁰ where the size grid reaches its bound, as
+/// for the C.1 cloud at 532 and 1064 nm; less where it converges sooner). Times in messages are
+/// this machine's, as an order of magnitude.
+pub const MIE_SECONDS_PER_WORK: f64 = 2.2e-10;
+
+/// Cost of the Mie coefficients of one radius in units of the matrix products of one angle
+/// (measured: about 50 ns a term against 0.25 ns a term and angle).
+pub const MIE_COEFFICIENT_ANGLES: u64 = 200;
+
+/// Values of a Mie angle table: phase-function angles × Mie terms at the largest radius (two
+/// tables of 8-byte values, 2.4 GB at the limit, are held while a size distribution's matrix is
+/// integrated; the largest shipped, maritime clean at 532 nm, has 1.04·10⁶).
+pub const MAX_MIE_ANGLE_TABLE_VALUES: u64 = 150_000_000;
+
+/// Monte Carlo work of one run (`pipeline::McWork`: photons × estimated scattering events per
+/// photon × channels), over all its shards or ranks: about a year of one core at
+/// [`MC_SECONDS_PER_WORK`] (a day of 350), a hundredfold the largest run the README shows (the
+/// C.1 cloud with 10¹⁰ photons over 100 Slurm shards, 2.1·10¹¹).
+pub const MAX_MC_WORK: f64 = 3.0e13;
+
+/// Monte Carlo work above which a run says, before tracing, how long it may take (about an
+/// hour of one core).
+pub const MC_WORK_WARN: f64 = 3.6e9;
+
+/// Seconds per channel-event of Monte Carlo work on one core of the reference machine, as an
+/// order of magnitude: measured 0.3–2.5·10⁻⁶ on the shipped and validation scenes (2 threads,
+/// per core), up to 1.4·10⁻⁵ where a photon scatters little but crosses a thousand gates.
+pub const MC_SECONDS_PER_WORK: f64 = 1.0e-6;
+
+/// Line evaluations of a study over many profiles (`pipeline::StudyWork`: profile runs × 8
+/// states × channels × molecular layers × gas lines; `lidarsim dial`, `lidarsim bench
+/// --study`): about 44 h of one core at [`STUDY_SECONDS_PER_EVALUATION`], a hundredfold the
+/// largest study the README shows (`bench --study 1000` at its default threads 1,2 and 3
+/// repeats: 18 000 profile runs of `scenes/study_co2_ipda.toml`, 5.6·10¹⁰).
+pub const MAX_STUDY_WORK: f64 = 1.0e13;
+
+/// Study work above which a study says, before its first profile, how long it may take (about
+/// an hour of one core).
+pub const STUDY_WORK_WARN: f64 = 2.25e11;
+
+/// Seconds per line evaluation of a study, all of a profile's work counted (measured: 51 ms a
+/// profile of `scenes/study_co2_ipda.toml` on one core, 3.1·10⁶ evaluations; README
+/// "Benchmarks").
+pub const STUDY_SECONDS_PER_EVALUATION: f64 = 1.6e-8;
+
+/// Points of one figure (plotters draws about 4·10⁶ a second: 25 s at the limit). The figures
+/// of `run` and `dial` stay below 10⁷ within the returns and ensemble limits; this one bounds
+/// `profiles plot`, whose profile-set file may hold any number of profiles (three panels ×
+/// members × levels; an RFMIP-sized set of 1800 profiles × 61 levels draws 3.3·10⁵).
+pub const MAX_FIGURE_POINTS: u64 = 100_000_000;
+
+/// Say on standard error that a run allowed by a limit will be long (the warning tier of a
+/// limit: README, "Limits").
+pub fn warn(message: &str) {
+    eprintln!("lidarsim: warning: {message}");
+}
+
+/// A duration for messages: "40 s", "12 min", "3.5 h", "40 days".
+pub fn fmt_seconds(s: f64) -> String {
+    if s < 100.0 {
+        format!("{} s", (s.max(0.0) * 10.0).round() / 10.0)
+    } else if s < 6000.0 {
+        format!("{} min", (s / 60.0).round())
+    } else if s < 360_000.0 {
+        format!("{} h", (s / 360.0).round() / 10.0)
+    } else {
+        format!("{} days", (s / 86_400.0).round())
+    }
+}
+
 /// The product of `factors` if it is at most `limit`, else a message naming the product, its
 /// factors and the limit. Saturates instead of overflowing, so any input can be checked.
 pub fn check_product(what: &str, factors: &[(&str, u64)], limit: u64) -> Result<u64, String> {

@@ -598,3 +598,82 @@ fn every_shipped_table_is_a_builtin() {
         lidarsim::particles::builtin_table(name).unwrap();
     }
 }
+
+/// Every Mie computation the project ships or validates with is at least a hundredfold below
+/// the limits of Mie work and angle-table size (README, "Limits"): the C.1 tables and the
+/// polarisation scenes' C.1 at 532 nm (`validation/mie_c1`, `validation/polarisation`), the
+/// OPAC type tables (`validation/mie_opac`, maritime clean at 532 nm the largest), and the
+/// OPAC component validation at OPAC's 19 wavelengths, coarse sea salt with OPAC's 111-angle
+/// grid. The bound is milliseconds of arithmetic, so all of them are checked.
+#[test]
+fn shipped_mie_work_is_a_hundredfold_below_the_limits() {
+    use lidarsim::limits::{MAX_MIE_ANGLE_TABLE_VALUES, MAX_MIE_WORK};
+    use lidarsim::particles::distribution::{Component, MieWork, mie_work};
+    use lidarsim::particles::opac::{OpacComponent, OpacType};
+    let defaults = BulkOptions::default();
+    let no_phase = BulkOptions {
+        angles_deg: Some(Vec::new()),
+        ..BulkOptions::default()
+    };
+    let mut opac_grid: Vec<f64> = (0..=20).map(|i| i as f64 * 0.1).collect();
+    opac_grid.extend([3.0, 4.0, 5.0, 6.0]);
+    opac_grid.extend((4..=90).map(|i| 2.0 * i as f64));
+    let opac_grid = BulkOptions {
+        angles_deg: Some(opac_grid),
+        ..BulkOptions::default()
+    };
+    let mut cases: Vec<(String, MieWork)> = Vec::new();
+    let c1 = |m: Complex64| Component {
+        name: "c1".into(),
+        distribution: SizeDistribution::deirmendjian_c1(),
+        refractive_index: m,
+    };
+    for (w, m) in [
+        (532.0, Complex64::new(1.3371, 1.8e-9)),
+        (532.0, Complex64::new(1.334, 1.5e-9)),
+        (1064.0, Complex64::new(1.3205, 1.28e-6)),
+        (1572.0, Complex64::new(1.3103, 1.13e-4)),
+    ] {
+        let work = mie_work(&[c1(m)], w * 1e-9, &defaults).unwrap();
+        cases.push((format!("C.1 {w} nm"), work));
+    }
+    for t in [OpacType::ContinentalAverage, OpacType::MaritimeClean] {
+        for w in [532.0, 550.0, 1064.0, 1572.0] {
+            let comps = t.components(w * 1e-9).unwrap();
+            let work = mie_work(&comps, w * 1e-9, &defaults).unwrap();
+            cases.push((format!("{} {w} nm", t.name()), work));
+        }
+    }
+    let t =
+        CsvTable::read(&crate::util::project_root().join("validation/mie_opac/opac_optics_00.csv"))
+            .unwrap();
+    let wavelengths_um = t.f64_column("wavelength_um").unwrap();
+    for c in [
+        OpacComponent::Inso,
+        OpacComponent::Ssam,
+        OpacComponent::Sscm,
+    ] {
+        for w in &wavelengths_um {
+            let opts = if c == OpacComponent::Sscm {
+                &opac_grid
+            } else {
+                &no_phase
+            };
+            let comp = c.component(1.0, w * 1e-6).unwrap();
+            let work = mie_work(&[comp], w * 1e-6, opts).unwrap();
+            cases.push((format!("{} {w} um", c.name()), work));
+        }
+    }
+    let (name, largest) = cases
+        .iter()
+        .max_by(|a, b| a.1.work.total_cmp(&b.1.work))
+        .unwrap();
+    assert_eq!(name, "maritime-clean 532 nm", "{largest:?}");
+    for (name, w) in &cases {
+        assert!(w.work * 100.0 <= MAX_MIE_WORK, "{name}: {w:?}");
+        assert!(
+            w.angle_table_values * 100 <= MAX_MIE_ANGLE_TABLE_VALUES,
+            "{name}: {w:?}"
+        );
+    }
+}

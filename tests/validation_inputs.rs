@@ -882,3 +882,407 @@ fn line_list_and_phase_table_fields_out_of_range_are_refused() {
         "{e}"
     );
 }
+
+/// A ground lidar at `WL` nm under a layer of water drops (log-normal, median radius `RG` µm,
+/// σ_g 1.5): Mie theory on the fly. The `particles` key is on line 21.
+const DROPS: &str = r#"[lidar]
+altitude_m = 0.0
+zenith_angle_deg = 0.0
+pulse_energy_j = 1.0
+beam_divergence_full_angle_mrad = 0.0
+telescope_diameter_m = 1.0
+optical_efficiency = 1.0
+fov_full_angle_mrad = 1.0
+[[channel]]
+name = "c"
+wavelength_nm = WL
+[gates]
+start_m = 1000.0
+end_m = 1400.0
+width_m = 10.0
+[[layer]]
+name = "drops"
+base_m = 1000.0
+top_m = 1300.0
+extinction_per_km = 1.0
+particles = { distribution = "lognormal", median_radius_um = RG, sigma_g = 1.5, refractive_index = "M" }
+"#;
+
+/// Mie work beyond its limit (README, "Limits"), refused in well under a second within a 1 GiB
+/// address space, naming the product and the limit: a layer of 1 mm drops at 532 nm (hours of
+/// Mie theory) at its file, line and key, and `lidarsim mie` for them with a phase table. Work
+/// above a minute but below the limit is allowed with a warning that says how long it may take
+/// (drops so absorbing that the size integration converges at once, so the test is quick).
+#[test]
+fn mie_work_beyond_the_limit_is_refused_fast() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = |wl: &str, rg: &str, m: &str| {
+        DROPS
+            .replace("WL", wl)
+            .replace("RG", rg)
+            .replace("\"M\"", &format!("\"{m}\""))
+    };
+    let path = dir.path().join("rain.toml");
+    std::fs::write(&path, scene("532.0", "1000.0", "1.33+0i")).unwrap();
+    let out_dir = dir.path().join("out");
+    let (out, took) = lidarsim_small([
+        "run".as_ref(),
+        path.as_os_str(),
+        "--no-plots".as_ref(),
+        "--out".as_ref(),
+        out_dir.as_os_str(),
+    ]);
+    let stderr = assert_refused("1 mm drops", &out);
+    assert!(
+        stderr.contains(&format!(
+            "{}:21: `layer.particles`: Mie work",
+            path.display()
+        )) && stderr.contains("term-angles")
+            && stderr.contains("limit of 4e13"),
+        "{stderr}"
+    );
+    assert!(took < Duration::from_secs(1), "{took:?}");
+    assert!(!out_dir.exists());
+
+    let table = dir.path().join("t.txt");
+    let (out, took) = lidarsim_small([
+        "mie",
+        "--distribution",
+        "lognormal",
+        "--refractive-index",
+        "1.33+0i",
+        "--median-radius-um",
+        "1000",
+        "--sigma-g",
+        "1.5",
+        "--wavelength-nm",
+        "532",
+        "--out",
+        table.to_str().unwrap(),
+    ]);
+    let stderr = assert_refused("mie at 1000 µm", &out);
+    assert!(
+        stderr.contains("Mie work") && stderr.contains("angles") && stderr.contains("Limits"),
+        "{stderr}"
+    );
+    assert!(took < Duration::from_secs(1), "{took:?}");
+    assert!(!table.exists());
+
+    // Allowed, with the warning before the work.
+    let path = dir.path().join("soot.toml");
+    std::fs::write(&path, scene("532.0", "20.0", "1.5+0.5i")).unwrap();
+    let out = lidarsim([
+        "run".as_ref(),
+        path.as_os_str(),
+        "--no-plots".as_ref(),
+        "--out".as_ref(),
+        out_dir.as_os_str(),
+    ]);
+    let stderr = stderr_of(&out);
+    assert_eq!(out.status.code(), Some(0), "{stderr}");
+    assert!(
+        stderr.contains(&format!(
+            "lidarsim: warning: {}:21: `layer.particles`: Mie work",
+            path.display()
+        )) && stderr.contains("up to about"),
+        "{stderr}"
+    );
+}
+
+/// A scene of the project: a shipped one (`scenes/NAME`) or a validation one
+/// (`validation/NAME`), parsed.
+fn project_scene(path: &str) -> lidarsim::scene::Scene {
+    let p = project_root().join(path);
+    lidarsim::scene::Scene::read(&p).unwrap_or_else(|e| panic!("{path}: {e}"))
+}
+
+/// [`project_scene`] with text replacements (each must occur).
+fn edited_scene(path: &str, edits: &[(&str, &str)]) -> lidarsim::scene::Scene {
+    let p = project_root().join(path);
+    let text = std::fs::read_to_string(&p).unwrap();
+    let text = crate::transport::edited(&text, edits);
+    lidarsim::scene::Scene::from_toml(&p, &text).unwrap_or_else(|e| panic!("{path}: {e}"))
+}
+
+/// The Monte Carlo work estimate (`pipeline::McWork`: events per photon from the scattering
+/// optical depth of the longest path that can still reach the last gate and the largest
+/// single-scattering albedo) against the events the transport counts (scatterings and surface
+/// reflections per photon, fixed seed): at least the count, and at most 40 times it, on shipped
+/// and validation scenes and extremes — thin and thick, isotropic and forward-peaked, absorbing,
+/// gates far beyond a cloud, an albedo-1 surface. The closest cases are I3RC experiment 2 (a
+/// semi-infinite conservative cloud whose photons use their whole path) and an isotropic layer
+/// of optical depth 1 (forced collisions), both about 0.8 of the estimate; the loosest, gates
+/// 9 km beyond a thin forward-peaked layer (0.07: the estimate lets every path stay in the
+/// layer).
+#[test]
+fn monte_carlo_work_estimate_bounds_the_counted_events() {
+    use lidarsim::optics::OpticalAtmosphere;
+    use lidarsim::pipeline::monte_carlo_work;
+    let c1 = "scenes/bissonnette_c1.toml";
+    let hg = |g: &str| format!("phase = {{ kind = \"henyey_greenstein\", g = {g} }}");
+    let c1_table =
+        "phase = { kind = \"table\", file = \"../phase_functions/bissonnette_c1_1064nm.txt\" }";
+    let hg0 = hg("0.0");
+    let hg85 = hg("0.85");
+    let cases: Vec<(&str, lidarsim::scene::Scene)> = vec![
+        ("bissonnette_c1", project_scene(c1)),
+        (
+            "ground_rayleigh_aerosol_cloud",
+            project_scene("scenes/ground_rayleigh_aerosol_cloud.toml"),
+        ),
+        (
+            "spaceborne_nadir_aerosol",
+            project_scene("scenes/spaceborne_nadir_aerosol.toml"),
+        ),
+        (
+            "I3RC exp. 2",
+            project_scene("validation/i3rc_case7/exp2.toml"),
+        ),
+        (
+            "C.1 × 0.01",
+            edited_scene(
+                c1,
+                &[("extinction_per_km = 17.23", "extinction_per_km = 0.1723")],
+            ),
+        ),
+        (
+            "C.1 × 10, gates to 3 km",
+            edited_scene(
+                c1,
+                &[
+                    ("extinction_per_km = 17.23", "extinction_per_km = 172.3"),
+                    ("end_m = 1400.0", "end_m = 3000.0"),
+                ],
+            ),
+        ),
+        (
+            "C.1 × 10, albedo 0.5",
+            edited_scene(
+                c1,
+                &[
+                    ("extinction_per_km = 17.23", "extinction_per_km = 172.3"),
+                    (
+                        "single_scattering_albedo = 0.999908",
+                        "single_scattering_albedo = 0.5",
+                    ),
+                ],
+            ),
+        ),
+        (
+            "isotropic, optical depth 1",
+            edited_scene(
+                c1,
+                &[
+                    (c1_table, &hg0),
+                    ("extinction_per_km = 17.23", "extinction_per_km = 3.33"),
+                ],
+            ),
+        ),
+        (
+            "g = 0.85, optical depth 0.6, gates to 10 km",
+            edited_scene(
+                c1,
+                &[
+                    (c1_table, &hg85),
+                    ("extinction_per_km = 17.23", "extinction_per_km = 2.0"),
+                    ("end_m = 1400.0", "end_m = 10000.0"),
+                ],
+            ),
+        ),
+        (
+            "fog over an albedo-1 surface",
+            edited_scene(
+                c1,
+                &[
+                    (
+                        "[simulation]",
+                        "[surface]\naltitude_m = 0.0\nalbedo = 1.0\n[simulation]",
+                    ),
+                    ("base_m = 1000.0", "base_m = 0.0"),
+                    ("top_m = 1300.0", "top_m = 100.0"),
+                    ("[lidar]\naltitude_m = 0.0", "[lidar]\naltitude_m = 0.001"),
+                    ("start_m = 1000.0", "start_m = 10.0"),
+                    ("end_m = 1400.0", "end_m = 1010.0"),
+                ],
+            ),
+        ),
+    ];
+    let mut report = Vec::new();
+    let mut failures = Vec::new();
+    for (name, scene) in &cases {
+        let atm = OpticalAtmosphere::build(scene).unwrap();
+        let photons = 10_000;
+        let estimate = monte_carlo_work(scene, &atm, photons);
+        let r = crate::transport::run(scene, photons, |_| {});
+        let counted =
+            (r.stats.collisions + r.stats.surface_reflections) as f64 / r.stats.photons as f64;
+        let ratio = counted / estimate.events_per_photon;
+        report.push(format!(
+            "{name}: {counted:.2} of {:.2} events per photon ({ratio:.3})",
+            estimate.events_per_photon
+        ));
+        if !(1.0 / 40.0..=1.0).contains(&ratio) {
+            failures.push(report.last().unwrap().clone());
+        }
+    }
+    assert!(
+        failures.is_empty(),
+        "{}\nall:\n{}",
+        failures.join("\n"),
+        report.join("\n")
+    );
+}
+
+/// Every run the project ships or documents is at least a hundredfold below the limit of
+/// Monte Carlo work: the shipped scenes at their own photons, the validation scenes at the
+/// photons of their scripts (I3RC case 7: 10⁶, Platt: 2·10⁶), and the README's largest, the C.1
+/// cloud with 10¹⁰ photons over 100 Slurm shards. A thick cloud (extinction 17 m⁻¹, gates to
+/// 10 km) with 10⁹ photons is refused in milliseconds at `simulation.photons` with the product
+/// and the limit; 10⁹ photons of C.1 are allowed with a warning.
+#[test]
+fn monte_carlo_work_of_shipped_runs_is_a_hundredfold_below_the_limit() {
+    use lidarsim::limits::MAX_MC_WORK;
+    use lidarsim::optics::OpticalAtmosphere;
+    use lidarsim::pipeline::monte_carlo_work;
+    let mut runs: Vec<(String, lidarsim::scene::Scene, u64)> = Vec::new();
+    for entry in std::fs::read_dir(project_root().join("scenes")).unwrap() {
+        let p = entry.unwrap().path();
+        let rel = format!("scenes/{}", p.file_name().unwrap().to_string_lossy());
+        let scene = project_scene(&rel);
+        let photons = scene.simulation.photons;
+        runs.push((rel, scene, photons));
+    }
+    for e in 1..=6 {
+        let rel = format!("validation/i3rc_case7/exp{e}.toml");
+        runs.push((rel.clone(), project_scene(&rel), 1_000_000));
+    }
+    for t in [1, 10] {
+        let rel = format!("validation/platt/tau{t}.toml");
+        runs.push((rel.clone(), project_scene(&rel), 2_000_000));
+    }
+    runs.push((
+        "C.1, 10¹⁰ photons".into(),
+        project_scene("scenes/bissonnette_c1.toml"),
+        10_000_000_000,
+    ));
+    let mut largest = (String::new(), 0.0);
+    for (name, scene, photons) in &runs {
+        let atm = OpticalAtmosphere::build(scene).unwrap();
+        let w = monte_carlo_work(scene, &atm, *photons).work();
+        assert!(w * 100.0 <= MAX_MC_WORK, "{name}: {w:e}");
+        if w > largest.1 {
+            largest = (name.clone(), w);
+        }
+    }
+    assert_eq!(largest.0, "C.1, 10¹⁰ photons", "{largest:?}");
+
+    let scene = edited_scene(
+        "scenes/bissonnette_c1.toml",
+        &[
+            ("extinction_per_km = 17.23", "extinction_per_km = 17230.0"),
+            ("end_m = 1400.0", "end_m = 10000.0"),
+        ],
+    );
+    let atm = OpticalAtmosphere::build(&scene).unwrap();
+    assert!(
+        monte_carlo_work(&scene, &atm, 1_000_000_000)
+            .check()
+            .is_err()
+    );
+    let c1 = project_scene("scenes/bissonnette_c1.toml");
+    let atm = OpticalAtmosphere::build(&c1).unwrap();
+    let w = monte_carlo_work(&c1, &atm, 1_000_000_000);
+    assert!(w.check().is_ok() && w.warning().is_some());
+
+    // Through the binary: refused at the scene's key, before any photon.
+    let dir = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(project_root().join("scenes/bissonnette_c1.toml"))
+        .unwrap()
+        .replace("extinction_per_km = 17.23", "extinction_per_km = 17230.0")
+        .replace("end_m = 1400.0", "end_m = 10000.0")
+        .replace(
+            "\"../phase_functions/",
+            &format!("\"{}/phase_functions/", project_root().display()),
+        );
+    let path = dir.path().join("fog.toml");
+    std::fs::write(&path, &text).unwrap();
+    let line = text.lines().position(|l| l.starts_with("photons")).unwrap() + 1;
+    let out_dir = dir.path().join("out");
+    let (out, took) = lidarsim_small([
+        "run".as_ref(),
+        path.as_os_str(),
+        "--photons".as_ref(),
+        "1000000000".as_ref(),
+        "--no-plots".as_ref(),
+        "--out".as_ref(),
+        out_dir.as_os_str(),
+    ]);
+    let stderr = assert_refused("thick fog", &out);
+    assert!(
+        stderr.contains(&format!(
+            "fog.toml:{line}: `simulation.photons`: Monte Carlo work"
+        )) && stderr.contains("channel-events")
+            && stderr.contains("limit of 3e13"),
+        "{stderr}"
+    );
+    assert!(took < Duration::from_secs(2), "{took:?}");
+    assert!(!out_dir.exists());
+}
+
+/// Study sizes (README, "Limits"): `bench --study` (3N profiles × thread counts × repeats)
+/// and `dial` (profiles × line evaluations, and with photons × three traced truths) beyond
+/// their limits are refused in well under a second, before an ensemble is drawn, naming the
+/// product and the limit; the README's own studies (`bench --study 1000` at its defaults,
+/// `dial --ensemble 1000` of the study scene, and of the airborne DIAL scene with its photons)
+/// are a hundredfold below.
+#[test]
+fn study_sizes_are_refused_fast_and_shipped_studies_are_far_below() {
+    use lidarsim::limits::{MAX_MC_WORK, MAX_STUDY_WORK};
+    use lidarsim::pipeline::study_work;
+    let study = project_scene("scenes/study_co2_ipda.toml");
+    let bench = study_work(&study, 3 * 1000 * 2 * 3, 0).unwrap();
+    assert!(bench.check().is_ok() && bench.line_evaluations() * 100.0 <= MAX_STUDY_WORK);
+    let dial = study_work(&study, 3000, 0).unwrap();
+    assert!(dial.line_evaluations() * 100.0 <= MAX_STUDY_WORK);
+    let airborne = project_scene("scenes/airborne_co2_dial.toml");
+    let photons = airborne.simulation.photons;
+    let w = study_work(&airborne, 3000, photons).unwrap();
+    assert!(w.mc_work() * 100.0 <= MAX_MC_WORK && w.line_evaluations() * 100.0 <= MAX_STUDY_WORK);
+
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let airborne_path = project_root().join("scenes/airborne_co2_dial.toml");
+    for (what, args, words) in [
+        (
+            "bench --study",
+            vec!["bench", "--study", "40000", "--repeat", "1000"],
+            "line evaluations",
+        ),
+        (
+            "dial with photons",
+            vec![
+                "dial",
+                airborne_path.to_str().unwrap(),
+                "--ensemble",
+                "40000",
+                "--photons",
+                "100000000",
+                "--no-plots",
+                "--out",
+                out.to_str().unwrap(),
+            ],
+            "study Monte Carlo work",
+        ),
+    ] {
+        let (o, took) = lidarsim_small(&args);
+        let stderr = assert_refused(what, &o);
+        assert!(
+            stderr.contains(words)
+                && stderr.contains("more than the limit")
+                && stderr.contains("Limits"),
+            "{what}: {stderr}"
+        );
+        assert!(took < Duration::from_secs(1), "{what}: {took:?}");
+    }
+    assert!(!out.exists());
+}

@@ -184,6 +184,17 @@ fn study_bench(n: usize, args: &Args) -> anyhow::Result<()> {
         .filter(|&k| k != retrieval.off)
         .map(|k| (k, retrieval.off))
         .collect();
+    // Every thread count runs the study `repeat` times: its size before the ensemble is drawn
+    // (README, "Limits").
+    let runs = (3 * n as u64)
+        .saturating_mul(args.threads.len() as u64)
+        .saturating_mul(args.repeat as u64);
+    let work = lidarsim::pipeline::study_work(&scene, runs, 0)?;
+    work.check()
+        .map_err(|m| anyhow::anyhow!("--study {n} (× --threads, × --repeat): {m}"))?;
+    work.warnings()
+        .iter()
+        .for_each(|w| lidarsim::limits::warn(w));
     let t = Instant::now();
     let mut set = ProfileSet::default();
     for (i, c) in LatitudeClass::ALL.iter().enumerate() {

@@ -149,7 +149,28 @@ fn study_inputs(args: &Args) -> anyhow::Result<StudyInputs> {
         (None, Some(n)) => ProfileSource::Ensemble(n),
         (None, None) => bail!("give --profiles SET or --ensemble N"),
     };
+    let photons = args.photons.unwrap_or(if scene.layers.is_empty() {
+        0
+    } else {
+        scene.simulation.photons
+    });
+    // The study's size, before its first profile and before an ensemble is drawn (N per class;
+    // a set's size is known once read) (README, "Limits").
+    let check_size = |profiles: usize| -> anyhow::Result<()> {
+        let work = lidarsim::pipeline::study_work(&scene, profiles as u64, photons)?;
+        work.check().map_err(anyhow::Error::msg)?;
+        work.warnings()
+            .iter()
+            .for_each(|w| lidarsim::limits::warn(w));
+        Ok(())
+    };
+    if let ProfileSource::Ensemble(n) = source {
+        check_size(n.saturating_mul(if args.class == "all" { 3 } else { 1 }))?;
+    }
     let set = dial::profile_set(&source, &args.class, seed)?;
+    if let ProfileSource::Set(_) = source {
+        check_size(set.len())?;
+    }
     // Each step was checked by the argument parser (finite, signed where a sign means a
     // direction of the error).
     let steps = BudgetSteps {
@@ -185,11 +206,6 @@ fn study_inputs(args: &Args) -> anyhow::Result<StudyInputs> {
         }
         p
     };
-    let photons = args.photons.unwrap_or(if scene.layers.is_empty() {
-        0
-    } else {
-        scene.simulation.photons
-    });
     let options = StudyOptions {
         photons,
         seed,

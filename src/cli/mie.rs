@@ -7,7 +7,8 @@ use anyhow::{Context, bail};
 use clap::ValueEnum;
 use lidarsim::input::{Bounds, check_finite_range};
 use lidarsim::particles::distribution::{
-    BulkOptions, SizeDistribution, bulk_optics, format_refractive_index,
+    BulkOptions, Component, MieWork, SizeDistribution, bulk_optics, format_refractive_index,
+    mie_work,
 };
 use lidarsim::particles::mie::{MAX_SIZE_PARAMETER, MieCoefficients, parse_refractive_index};
 use lidarsim::particles::opac::{OpacComponent, OpacType};
@@ -229,6 +230,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         )?;
     }
     let opts = bulk_opts(&args);
+    let work = check_work(
+        &[Component {
+            name: "particles".into(),
+            distribution: dist.clone(),
+            refractive_index: m,
+        }],
+        wavelength_nm * 1e-9,
+        &opts,
+    )?;
     let mut b = bulk_optics(&dist, m, wavelength_nm * 1e-9, &opts)?;
     add_meta(&mut b, &args.meta)?;
     finish(
@@ -237,6 +247,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         wavelength_nm,
         json!(format_refractive_index(m)),
         dist.to_string(),
+        &work,
     )
 }
 
@@ -267,7 +278,7 @@ fn run_opac(args: &Args) -> anyhow::Result<()> {
     let wavelength_nm = need(args.wavelength_nm, "--wavelength-nm")?;
     let wavelength_m = wavelength_nm * 1e-9;
     let opts = bulk_opts(args);
-    let (mut b, indices, description) = match (&args.aerosol_type, &args.opac_component) {
+    let (mut b, indices, description, work) = match (&args.aerosol_type, &args.opac_component) {
         (Some(t), None) => {
             let t = OpacType::from_name(t).with_context(|| {
                 format!(
@@ -276,6 +287,7 @@ fn run_opac(args: &Args) -> anyhow::Result<()> {
                 )
             })?;
             let comps = t.components(wavelength_m).context("--wavelength-nm")?;
+            let work = check_work(&comps, wavelength_m, &opts)?;
             let b = t.bulk_optics(wavelength_m, &opts)?;
             let indices: serde_json::Map<String, serde_json::Value> = comps
                 .iter()
@@ -287,7 +299,7 @@ fn run_opac(args: &Args) -> anyhow::Result<()> {
                 })
                 .collect();
             let desc = b.phase.meta("distribution").unwrap_or_default().to_string();
-            (b, serde_json::Value::Object(indices), desc)
+            (b, serde_json::Value::Object(indices), desc, work)
         }
         (None, Some(c)) => {
             let c = OpacComponent::from_name(c).with_context(|| {
@@ -299,16 +311,36 @@ fn run_opac(args: &Args) -> anyhow::Result<()> {
             let m = c
                 .refractive_index(wavelength_m)
                 .context("--wavelength-nm")?;
+            let work = check_work(
+                &[c.component(args.number_density_per_cm3, wavelength_m)?],
+                wavelength_m,
+                &opts,
+            )?;
             let b = c.bulk_optics(args.number_density_per_cm3, wavelength_m, &opts)?;
             let desc = c
                 .size_distribution(args.number_density_per_cm3)?
                 .to_string();
-            (b, json!(format_refractive_index(m)), desc)
+            (b, json!(format_refractive_index(m)), desc, work)
         }
         _ => bail!("--distribution opac needs --aerosol-type TYPE or --opac-component NAME"),
     };
     add_meta(&mut b, &args.meta)?;
-    finish(&b, args, wavelength_nm, indices, description)
+    finish(&b, args, wavelength_nm, indices, description, &work)
+}
+
+/// Refuse, in milliseconds, a size integration beyond the limit of Mie work (README, "Limits"),
+/// and say how long one above a minute will take before starting it.
+fn check_work(
+    components: &[Component],
+    wavelength_m: f64,
+    opts: &BulkOptions,
+) -> anyhow::Result<MieWork> {
+    let w = mie_work(components, wavelength_m, opts)?;
+    w.check().map_err(anyhow::Error::msg)?;
+    if let Some(note) = w.warning() {
+        eprintln!("lidarsim: warning: {note}");
+    }
+    Ok(w)
 }
 
 /// Add the --meta KEY=VALUE lines before the final `source` line.
@@ -343,6 +375,7 @@ fn finish(
     wavelength_nm: f64,
     refractive_index: serde_json::Value,
     distribution: String,
+    work: &MieWork,
 ) -> anyhow::Result<()> {
     if let Some(path) = &args.out {
         b.phase.write(path)?;
@@ -369,6 +402,10 @@ fn finish(
             "r_min_um": c.r_range_um.0, "r_max_um": c.r_range_um.1, "step_x": c.step_x,
             "points": c.points, "last_rel_change": c.last_rel_change, "converged": c.converged,
         })).collect::<Vec<_>>(),
+        "mie_work": json!({
+            "term_angles": work.work, "radii_bound": work.radii, "terms": work.terms,
+            "angles": work.angles, "estimated_seconds_one_core": work.seconds(),
+        }),
         "table": args.out.as_ref().map(|p| p.display().to_string()),
         "matrix_table": args.matrix_out.as_ref().map(|p| p.display().to_string()),
     });

@@ -424,6 +424,19 @@ fn y_of(p_pa: f64) -> f64 {
 
 fn plot(a: PlotArgs) -> anyhow::Result<()> {
     let set = read_set(&a.set)?;
+    // Three panels (T, H2O, CO2) of every member's levels (README, "Limits").
+    lidarsim::limits::check_product(
+        &format!("profiles plot {}", a.set.display()),
+        &[
+            ("panels", 3),
+            (
+                "level values",
+                set.members.iter().map(|m| m.profile.len() as u64).sum(),
+            ),
+        ],
+        lidarsim::limits::MAX_FIGURE_POINTS,
+    )
+    .map_err(anyhow::Error::msg)?;
     let classes: Vec<LatitudeClass> = LatitudeClass::ALL
         .into_iter()
         .filter(|c| set.members.iter().any(|m| m.meta.class() == *c))

@@ -701,14 +701,13 @@ fn sum_points(
     Ok(total)
 }
 
-fn integrate_mode(
-    name: &str,
+/// The radius range \[µm\] a mode is integrated over (all but `tail_fraction` of its geometric
+/// cross-section, within its truncation), for wavenumber `k` \[1/µm\].
+fn mode_range_um(
     mode: &SizeDistribution,
-    m: Complex64,
-    wavelength_um: f64,
+    k: f64,
     opts: &BulkOptions,
-) -> Result<(ModeGrid, ModeConvergence), MieError> {
-    let k = 2.0 * PI / wavelength_um;
+) -> Result<(f64, f64), MieError> {
     let (tr_lo, tr_hi) = mode.range_um();
     let r_lo = mode.area_quantile(0.5 * opts.tail_fraction).max(tr_lo);
     let r_hi = mode
@@ -721,10 +720,35 @@ fn integrate_mode(
             "the truncation range holds none of the distribution",
         ));
     }
-    let (x_lo, x_hi) = (k * r_lo, k * r_hi);
-    if x_hi > super::mie::MAX_SIZE_PARAMETER {
-        return Err(MieError::SizeParameter(x_hi));
+    if k * r_hi > super::mie::MAX_SIZE_PARAMETER {
+        return Err(MieError::SizeParameter(k * r_hi));
     }
+    Ok((r_lo, r_hi))
+}
+
+/// Intervals of the finest grid the step halving of [`integrate_mode`] can reach over
+/// `[x_lo, x_hi]` (it stops there if it has not converged before): 128 · 2^j, the same
+/// arithmetic as the halving itself.
+fn max_intervals(x_lo: f64, x_hi: f64, opts: &BulkOptions) -> usize {
+    let mut intervals = 128usize;
+    let mut dx = (x_hi - x_lo) / intervals as f64;
+    while !(dx * 0.5 < opts.min_step_x || 2 * intervals + 1 > opts.max_points) {
+        dx *= 0.5;
+        intervals *= 2;
+    }
+    intervals
+}
+
+fn integrate_mode(
+    name: &str,
+    mode: &SizeDistribution,
+    m: Complex64,
+    wavelength_um: f64,
+    opts: &BulkOptions,
+) -> Result<(ModeGrid, ModeConvergence), MieError> {
+    let k = 2.0 * PI / wavelength_um;
+    let (r_lo, r_hi) = mode_range_um(mode, k, opts)?;
+    let (x_lo, x_hi) = (k * r_lo, k * r_hi);
     // Level 0: 128 intervals.
     let mut intervals = 128usize;
     let mut dx = (x_hi - x_lo) / intervals as f64;
@@ -965,41 +989,16 @@ pub fn bulk_optics_mixture(
     wavelength_m: f64,
     opts: &BulkOptions,
 ) -> Result<BulkOptics, MieError> {
-    if components.is_empty() {
-        return Err(param("components", 0.0, "at least one component is needed"));
-    }
-    if !(wavelength_m.is_finite() && wavelength_m > 1e-8 && wavelength_m < 1e-3) {
-        return Err(param(
-            "wavelength_m",
-            wavelength_m,
-            "must lie in (10 nm, 1 mm)",
-        ));
-    }
-    if !(opts.tail_fraction > 0.0 && opts.tail_fraction < 0.1) {
-        return Err(param(
-            "tail_fraction",
-            opts.tail_fraction,
-            "must lie in (0, 0.1)",
-        ));
-    }
-    if !(opts.rel_tol > 0.0 && opts.rel_tol < 0.5) {
-        return Err(param("rel_tol", opts.rel_tol, "must lie in (0, 0.5)"));
-    }
-    if !(opts.min_step_x > 0.0) {
-        return Err(param("min_step_x", opts.min_step_x, "must be > 0"));
-    }
-    if opts.max_points < 257 {
-        return Err(param("max_points", opts.max_points as f64, "must be ≥ 257"));
-    }
+    check_inputs(components, wavelength_m, opts)?;
+    // Refused before any of it is done when it would run for hours (README, "Limits").
+    mie_work(components, wavelength_m, opts)?
+        .check()
+        .map_err(MieError::Work)?;
     let wavelength_um = wavelength_m * 1e6;
     let mut grids = Vec::new();
     let mut convergence = Vec::new();
     let mut number_density = 0.0;
     for c in components {
-        check_refractive_index(c.refractive_index)?;
-        if matches!(&c.distribution, SizeDistribution::Sum(v) if v.is_empty()) {
-            return Err(param("modes", 0.0, "a sum needs at least one mode"));
-        }
         number_density += c.distribution.number_density_per_cm3();
         for mode in c.distribution.modes() {
             let (g, conv) =
@@ -1176,6 +1175,208 @@ pub fn bulk_optics_mixture(
     })
 }
 
+/// The cost of Mie size integrations, bounded before any of them is done (README, "Limits").
+///
+/// Time goes in two places: the Mie coefficients of every radius of a mode's grid (Wiscombe's
+/// N(x) = x + 4.05 x^(1/3) + 2 terms each), and the matrix products that turn them into the
+/// phase function and scattering matrix on K angles (N(x)·K multiply-adds a radius). The grid is
+/// the finest the step halving can reach (128·2^j intervals, down to `min_step_x` or up to
+/// `max_points`): the halving may stop sooner on convergence, so the count is an upper bound,
+/// and for the large droplets whose cost matters it is usually the grid reached. The work is
+/// `terms × (angles + c)`, `terms` the sum of N(x) over the grids' radii and `c` the cost of the
+/// coefficients in angles ([`crate::limits::MIE_COEFFICIENT_ANGLES`], twice with a phase
+/// function: they are computed again for the matrix products); its unit, a "term-angle", takes
+/// [`crate::limits::MIE_SECONDS_PER_WORK`] on one core of the reference machine.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct MieWork {
+    /// Size integrations: modes × wavelengths.
+    pub integrations: u64,
+    /// Radii of the finest grids, summed over the integrations.
+    pub radii: u64,
+    /// Mie terms summed over those radii (an upper bound: N(x) is concave, and is evaluated
+    /// at each grid's middle).
+    pub terms: f64,
+    /// Angles of the phase function (0: none asked for), the largest of the integrations.
+    pub angles: u64,
+    /// Values of the largest angle table (angles × terms at the largest radius), held twice.
+    pub angle_table_values: u64,
+    /// `terms × (angles + c)` summed over the integrations \[term-angles\].
+    pub work: f64,
+}
+
+impl MieWork {
+    /// The work of two sets of integrations (the angle table is the larger one's: tables are
+    /// made one integration at a time).
+    pub fn add(&mut self, o: &MieWork) {
+        self.integrations += o.integrations;
+        self.radii += o.radii;
+        self.terms += o.terms;
+        self.angles = self.angles.max(o.angles);
+        self.angle_table_values = self.angle_table_values.max(o.angle_table_values);
+        self.work += o.work;
+    }
+
+    /// The coefficients' cost in angles, `c` (see the type's documentation).
+    fn coefficient_angles(&self) -> u64 {
+        let c = crate::limits::MIE_COEFFICIENT_ANGLES;
+        if self.angles > 0 { 2 * c } else { c }
+    }
+
+    /// Seconds on one core of the reference machine (README, "Limits").
+    pub fn seconds(&self) -> f64 {
+        self.work * crate::limits::MIE_SECONDS_PER_WORK
+    }
+
+    /// The work as a product of its factors, for messages.
+    fn describe(&self) -> String {
+        // Three significant digits: an order of magnitude is what a reader needs here.
+        let f = |v: f64| {
+            if v >= 1e5 {
+                format!("{v:.2e}")
+            } else {
+                format!("{}", v.round())
+            }
+        };
+        let c = self.coefficient_angles();
+        format!(
+            "{} size integration{} (modes × wavelengths) over up to {} radii: {} Mie terms × ({} angles + {c} for the coefficients) = {} term-angles, up to about {} on one core",
+            self.integrations,
+            if self.integrations == 1 { "" } else { "s" },
+            self.radii,
+            f(self.terms),
+            self.angles,
+            f(self.work),
+            crate::limits::fmt_seconds(self.seconds()),
+        )
+    }
+
+    /// Ok below the limits, else the message naming the product and the limit.
+    pub fn check(&self) -> Result<(), String> {
+        use crate::limits::{MAX_MIE_ANGLE_TABLE_VALUES, MAX_MIE_WORK, check_product};
+        if self.work > MAX_MIE_WORK {
+            return Err(format!(
+                "Mie work: {}, more than the limit of {} (about {}; README, \"Limits\")",
+                self.describe(),
+                crate::input::fmt_bound(MAX_MIE_WORK),
+                crate::limits::fmt_seconds(MAX_MIE_WORK * crate::limits::MIE_SECONDS_PER_WORK),
+            ));
+        }
+        let n_max = self
+            .angle_table_values
+            .checked_div(self.angles)
+            .unwrap_or(0);
+        check_product(
+            "Mie angle tables",
+            &[("angles", self.angles), ("Mie terms", n_max)],
+            MAX_MIE_ANGLE_TABLE_VALUES,
+        )
+        .map(|_| ())
+    }
+
+    /// A note when the work is allowed but long (above [`crate::limits::MIE_WORK_WARN`]).
+    pub fn warning(&self) -> Option<String> {
+        (self.work > crate::limits::MIE_WORK_WARN).then(|| format!("Mie work: {}", self.describe()))
+    }
+}
+
+/// The cost of [`bulk_optics_mixture`] for these inputs ([`MieWork`]), from the radius ranges
+/// alone: milliseconds. Errors are those of the inputs (as [`bulk_optics_mixture`] gives them).
+pub fn mie_work(
+    components: &[Component],
+    wavelength_m: f64,
+    opts: &BulkOptions,
+) -> Result<MieWork, MieError> {
+    check_inputs(components, wavelength_m, opts)?;
+    let k = 2.0 * PI / (wavelength_m * 1e6);
+    let n_terms_f = |x: f64| x + 4.05 * x.cbrt() + 2.0;
+    let mut w = MieWork::default();
+    let (mut area, mut vol, mut x_max) = (0.0, 0.0, 0.0f64);
+    for c in components {
+        let n = c.distribution.number_density_per_cm3();
+        area += n * c.distribution.moment(2.0);
+        vol += n * c.distribution.moment(3.0);
+        for mode in c.distribution.modes() {
+            let (r_lo, r_hi) = mode_range_um(&mode, k, opts)?;
+            let (x_lo, x_hi) = (k * r_lo, k * r_hi);
+            let radii = max_intervals(x_lo, x_hi, opts) + 1;
+            w.integrations += 1;
+            w.radii += radii as u64;
+            w.terms += radii as f64 * n_terms_f(0.5 * (x_lo + x_hi));
+            x_max = x_max.max(x_hi);
+        }
+    }
+    // The angles bulk_optics_mixture will use: its default grid depends on the effective size
+    // parameter (here of the untruncated distributions, within the integrated range).
+    w.angles = match &opts.angles_deg {
+        Some(a) => a.len() as u64,
+        None => default_angle_grid((k * vol / area).min(x_max)).len() as u64,
+    };
+    w.angle_table_values = w.angles.saturating_mul(n_terms(x_max) as u64);
+    w.work = w.terms * (w.angles + w.coefficient_angles()) as f64;
+    Ok(w)
+}
+
+/// The cost of the size integrations of several (components, wavelength) sets, each counted
+/// once however often it appears (equal inputs are computed once: the cache of
+/// [`super::cache`]).
+pub fn mie_work_of<'a>(
+    sets: impl IntoIterator<Item = (&'a [Component], f64)>,
+    opts: &BulkOptions,
+) -> Result<MieWork, MieError> {
+    let mut seen = std::collections::HashSet::new();
+    let mut total = MieWork::default();
+    for (components, wavelength_m) in sets {
+        if seen.insert(fingerprint(components, wavelength_m, opts)) {
+            total.add(&mie_work(components, wavelength_m, opts)?);
+        }
+    }
+    Ok(total)
+}
+
+/// The checks of [`bulk_optics_mixture`]'s inputs that need no Mie theory.
+fn check_inputs(
+    components: &[Component],
+    wavelength_m: f64,
+    opts: &BulkOptions,
+) -> Result<(), MieError> {
+    if components.is_empty() {
+        return Err(param("components", 0.0, "at least one component is needed"));
+    }
+    if !(wavelength_m.is_finite() && wavelength_m > 1e-8 && wavelength_m < 1e-3) {
+        return Err(param(
+            "wavelength_m",
+            wavelength_m,
+            "must lie in (10 nm, 1 mm)",
+        ));
+    }
+    if !(opts.tail_fraction > 0.0 && opts.tail_fraction < 0.1) {
+        return Err(param(
+            "tail_fraction",
+            opts.tail_fraction,
+            "must lie in (0, 0.1)",
+        ));
+    }
+    if !(opts.rel_tol > 0.0 && opts.rel_tol < 0.5) {
+        return Err(param("rel_tol", opts.rel_tol, "must lie in (0, 0.5)"));
+    }
+    if !(opts.min_step_x > 0.0) {
+        return Err(param("min_step_x", opts.min_step_x, "must be > 0"));
+    }
+    if opts.max_points < 257 {
+        return Err(param("max_points", opts.max_points as f64, "must be ≥ 257"));
+    }
+    for c in components {
+        check_refractive_index(c.refractive_index)?;
+        if matches!(&c.distribution, SizeDistribution::Sum(v) if v.is_empty()) {
+            return Err(param("modes", 0.0, "a sum needs at least one mode"));
+        }
+    }
+    if let Some(a) = &opts.angles_deg {
+        check_angles(a)?;
+    }
+    Ok(())
+}
+
 fn check_angles(a: &[f64]) -> Result<(), MieError> {
     if a.is_empty() {
         return Ok(());
@@ -1225,6 +1426,94 @@ mod tests {
         }
         assert!((s0 / 100.0 - 1.0).abs() < 1e-9);
         assert!((s / 100.0 / d.moment(2.0) - 1.0).abs() < 1e-9);
+    }
+
+    /// The work's radii are the grid the step halving reaches when it cannot converge (a
+    /// tolerance it never meets), radius for radius, and bound it when it converges sooner;
+    /// its Mie terms bound the sum of N(x) over those radii; the angles are the ones used.
+    #[test]
+    fn mie_work_bounds_the_grid_and_the_terms() {
+        let m = Complex64::new(1.5, 0.01);
+        let bimodal = SizeDistribution::sum(vec![
+            SizeDistribution::lognormal(100.0, 0.05, 1.6).unwrap(),
+            SizeDistribution::lognormal(1.0, 0.5, 1.4).unwrap(),
+        ])
+        .unwrap();
+        let comps = |d: &SizeDistribution| {
+            vec![Component {
+                name: "p".into(),
+                distribution: d.clone(),
+                refractive_index: m,
+            }]
+        };
+        let never = BulkOptions {
+            rel_tol: 1e-15,
+            angles_deg: Some(vec![]),
+            ..BulkOptions::default()
+        };
+        let w = mie_work(&comps(&bimodal), 1064e-9, &never).unwrap();
+        let b = bulk_optics(&bimodal, m, 1064e-9, &never).unwrap();
+        assert_eq!(w.integrations, 2);
+        assert!(b.convergence.iter().all(|c| !c.converged));
+        let radii: usize = b.convergence.iter().map(|c| c.points).sum();
+        assert_eq!(w.radii, radii as u64);
+        // Σ N(x) over the final grids, directly.
+        let k = 2.0 * PI / 1.064;
+        let direct: f64 = b
+            .convergence
+            .iter()
+            .map(|c| {
+                let (x0, x1) = (k * c.r_range_um.0, k * c.r_range_um.1);
+                (0..c.points)
+                    .map(|i| {
+                        let x = x0 + (x1 - x0) * i as f64 / (c.points - 1) as f64;
+                        x + 4.05 * x.cbrt() + 2.0
+                    })
+                    .sum::<f64>()
+            })
+            .sum();
+        assert!(
+            w.terms >= direct && w.terms < 1.05 * direct,
+            "{} vs {direct}",
+            w.terms
+        );
+        assert_eq!(w.angles, 0);
+        assert_eq!(w.work, w.terms * 200.0);
+        // Converging at the default tolerance: fewer radii than the bound; the default grid's
+        // angles counted.
+        let w = mie_work(&comps(&bimodal), 1064e-9, &BulkOptions::default()).unwrap();
+        let b = bulk_optics(&bimodal, m, 1064e-9, &BulkOptions::default()).unwrap();
+        let radii: usize = b.convergence.iter().map(|c| c.points).sum();
+        assert!(w.radii >= radii as u64);
+        assert_eq!(w.angles, b.phase.theta_deg.len() as u64);
+        // The same inputs twice count once; two wavelengths twice.
+        let c = comps(&bimodal);
+        let sets = [(&c[..], 1064e-9), (&c[..], 1064e-9), (&c[..], 532e-9)];
+        let all = mie_work_of(sets, &BulkOptions::default()).unwrap();
+        assert_eq!(all.integrations, 4);
+    }
+
+    /// Beyond the limit, `bulk_optics` refuses before any work, naming the product and the
+    /// limit: 2 mm drops at 532 nm with a phase function.
+    #[test]
+    fn bulk_optics_refuses_work_beyond_the_limit() {
+        let d = SizeDistribution::lognormal(1.0, 2000.0, 1.2).unwrap();
+        let t = std::time::Instant::now();
+        let e = bulk_optics(
+            &d,
+            Complex64::new(1.33, 0.0),
+            532e-9,
+            &BulkOptions::default(),
+        )
+        .unwrap_err();
+        assert!(t.elapsed().as_secs_f64() < 1.0);
+        let MieError::Work(msg) = e else {
+            panic!("{e:?}")
+        };
+        assert!(
+            msg.contains("term-angles") && msg.contains("limit of 4e13") && msg.contains("Limits"),
+            "{msg}"
+        );
     }
 
     #[test]

@@ -125,6 +125,7 @@ impl MatrixTable {
                 ));
             }
         }
+        check_exact_directions(&t, &theta_deg, &elements, circular)?;
         Ok(MatrixTable {
             meta,
             theta_deg,
@@ -213,6 +214,78 @@ impl MatrixTable {
     pub fn write(&self, path: &Path) -> Result<(), crate::output::OutputError> {
         crate::output::write_file(path, self.to_text().as_bytes())
     }
+}
+
+/// Relative tolerance (× F11) of the exact-forward and exact-backscattering conditions
+/// ([`check_exact_directions`]): that of the Mueller inequalities, so that a table printed to 6
+/// significant digits passes by rounding alone (Mie tables, printed to 10, meet them to ~1e-10).
+pub const EXACT_DIRECTION_TOLERANCE: f64 = MUELLER_TOLERANCE;
+
+/// At exactly 0° and 180° the scattering plane, the reference plane of the elements, is not
+/// defined: any plane through the direction serves, so the matrix of a macroscopically
+/// isotropic, mirror-symmetric medium (spheres; randomly oriented particles with their mirror
+/// images) must not change when the plane turns. That holds if and only if
+///
+/// ```text
+/// θ = 0°:    F12 = F34 = 0,  F33 = F22      (exact forward scattering)
+/// θ = 180°:  F12 = F34 = 0,  F33 = −F22     (exact backscattering)
+/// ```
+///
+/// (Mishchenko, Travis & Lacis 2002, *Scattering, Absorption, and Emission of Light by Small
+/// Particles*, Cambridge University Press, the symmetry relations of the scattering matrix at
+/// 0 and 180°; Hovenier, van der Mee & Domke 2004, §2.7). A table that breaks them describes
+/// no such medium, and gives answers that depend on which plane a calculation picks: a
+/// polarised Monte Carlo scores single backscatter in the lidar's plane of polarisation
+/// (F11 + F12 at 180° for linear light), the scalar lidar equation in none (F11), so their
+/// order-1 returns differed by (1 + F12/F11): 1.04e-3 for a polariser with F12 = −0.999 F11
+/// (`tests/matrices.rs`). Tables must have nodes at exactly 0° and 180° ([`check_angles`]: nothing is
+/// extrapolated), so the conditions are checked at those two rows, each to
+/// [`EXACT_DIRECTION_TOLERANCE`] × F11, and a row that breaks one is refused at its line and
+/// the column it names. (Backscattering also has F44 = F11 − 2 F22 by reciprocity, Mishchenko
+/// & Hovenier 1995; it does not depend on the plane and is not enforced.)
+fn check_exact_directions(
+    t: &CsvTable,
+    theta_deg: &[f64],
+    elements: &[MatrixElements],
+    circular: bool,
+) -> Result<(), InputError> {
+    let last = elements.len() - 1;
+    for (r, sign, name) in [
+        (0, 1.0, "exact forward scattering"),
+        (last, -1.0, "exact backscattering"),
+    ] {
+        let e = &elements[r];
+        let tol = EXACT_DIRECTION_TOLERANCE * e.f11;
+        let f33_rule = if sign > 0.0 { "F22" } else { "−F22" };
+        let mut broken: Vec<(&str, String)> = Vec::new();
+        if !(e.f12.abs() <= tol) {
+            broken.push(("F12", format!("F12 = {} must be 0", e.f12)));
+        }
+        if circular && !(e.f34.abs() <= tol) {
+            broken.push(("F34", format!("F34 = {} must be 0", e.f34)));
+        }
+        if !((e.f33 - sign * e.f22).abs() <= tol) {
+            broken.push((
+                "F33",
+                format!("F33 = {} must equal {f33_rule} = {}", e.f33, sign * e.f22),
+            ));
+        }
+        if let Some((field, what)) = broken.into_iter().next() {
+            return Err(InputError::at(
+                t.path(),
+                t.line_of(r),
+                field,
+                format!(
+                    "θ = {}° ({name}): {what}, so that the matrix does not depend on the \
+                     reference plane, which is undefined there (spheres and randomly oriented \
+                     mirror-symmetric particles: F12 = F34 = 0, F33 = {f33_rule}; Mishchenko, \
+                     Travis & Lacis 2002); tolerance {EXACT_DIRECTION_TOLERANCE:e} × F11",
+                    theta_deg[r]
+                ),
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// The header must hold `theta_deg`, F11, F22, F33, F12 and either both or neither of F44 and
@@ -552,5 +625,98 @@ mod tests {
         let e = parse(&bad.to_text()).unwrap_err();
         assert_eq!(e.field.as_deref(), Some("F33"), "{e}");
         assert_eq!(e.line, Some(line_of_angle(&bad.to_text(), "90")));
+    }
+
+    /// The exact-direction conditions, each broken in the 0° or 180° row by 1 % of F11, are
+    /// refused at that row's line with the column and the condition named; broken by 1e-5 F11
+    /// (within the tolerance) accepted. The molecular rows of the base table meet them exactly.
+    #[test]
+    fn refuses_rows_that_break_the_exact_direction_conditions() {
+        let base = rayleigh_table(19, 1.0);
+        let text = base.to_text();
+        let last = base.elements.len() - 1;
+        type Edit = fn(&mut MatrixElements, f64);
+        // (row, edit by d × F11, the column named, words of the condition).
+        let cases: [(usize, Edit, &str, &str); 6] = [
+            (
+                last,
+                |e, d| e.f12 = d * e.f11,
+                "F12",
+                "exact backscattering",
+            ),
+            (
+                last,
+                |e, d| e.f34 = d * e.f11,
+                "F34",
+                "exact backscattering",
+            ),
+            (
+                last,
+                |e, d| e.f33 = -e.f22 + d * e.f11,
+                "F33",
+                "must equal −F22",
+            ),
+            (
+                0,
+                |e, d| e.f12 = -d * e.f11,
+                "F12",
+                "exact forward scattering",
+            ),
+            (
+                0,
+                |e, d| e.f34 = d * e.f11,
+                "F34",
+                "exact forward scattering",
+            ),
+            (0, |e, d| e.f33 = e.f22 - d * e.f11, "F33", "must equal F22"),
+        ];
+        for (row, edit, field, words) in cases {
+            let theta = if row == 0 { "0" } else { "180" };
+            let mut t = base.clone();
+            edit(&mut t.elements[row], 1e-2);
+            let e = parse(&t.to_text()).unwrap_err();
+            assert_eq!(
+                e.line,
+                Some(line_of_angle(&text, theta)),
+                "{field} {theta}: {e}"
+            );
+            assert_eq!(e.field.as_deref(), Some(field), "{theta}: {e}");
+            assert!(
+                e.message.contains(words) && e.message.contains("reference plane"),
+                "{e}"
+            );
+            let mut t = base.clone();
+            edit(&mut t.elements[row], 1e-5);
+            assert!(
+                parse(&t.to_text()).is_ok(),
+                "{field} {theta}: refused within tolerance"
+            );
+        }
+        // A linear-only table: F12 and F33 are checked (F34 is held 0).
+        let lin = two_rows(&LINEAR_COLUMNS).replace("180,1,1,-1,0", "180,1,0.5,-0.5,0.3");
+        let e = parse(&lin).unwrap_err();
+        assert_eq!((e.line, e.field.as_deref()), (Some(6), Some("F12")), "{e}");
+        let lin = two_rows(&LINEAR_COLUMNS).replace("180,1,1,-1,0", "180,1,0.5,-0.4,0");
+        let e = parse(&lin).unwrap_err();
+        assert_eq!((e.line, e.field.as_deref()), (Some(6), Some("F33")), "{e}");
+        // The issue's table: a physical matrix (F11 = 1, F22 = 0.5, F33 = −0.5, F44 = −0.5)
+        // but F12 = 0.3 at 180°.
+        let issue = two_rows(&COLUMNS).replace("180,1,1,-1,-1,0,0", "180,1,0.5,-0.5,-0.5,0.3,0");
+        let e = parse(&issue).unwrap_err();
+        assert_eq!((e.line, e.field.as_deref()), (Some(6), Some("F12")), "{e}");
+    }
+
+    /// Nothing is extrapolated to 0° or 180°: a table without a node at exactly 0° or exactly
+    /// 180° is refused at its first or last row, so the exact-direction conditions are always
+    /// checked on rows of the file.
+    #[test]
+    fn tables_need_nodes_at_exactly_0_and_180_degrees() {
+        let text = rayleigh_table(19, 1.0).to_text();
+        let e = parse(&text.replace("\n0,", "\n0.5,")).unwrap_err();
+        assert_eq!(e.field.as_deref(), Some("theta_deg"), "{e}");
+        assert!(e.message.contains("first angle must be 0"), "{e}");
+        let e = parse(&text.replace("\n180,", "\n179.9,")).unwrap_err();
+        assert_eq!(e.field.as_deref(), Some("theta_deg"), "{e}");
+        assert_eq!(e.line, Some(line_of_angle(&text, "180")), "{e}");
     }
 }

@@ -66,6 +66,10 @@ pub enum MieError {
     /// A cosine of the scattering angle outside [−1, 1] (or not finite).
     #[error("cosine of the scattering angle {0} must lie in [-1, 1]")]
     Cosine(f64),
+    /// The size integration would take longer than the limit allows (README, "Limits"): the
+    /// message names the product and the limit.
+    #[error("{0}")]
+    Work(String),
     /// A size-distribution or integration parameter is invalid.
     #[error("{name} = {value}: {reason}")]
     Parameter {

@@ -1461,6 +1461,20 @@ impl Validator<'_> {
                 })
                 .collect::<Result<_, InputError>>()?
         };
+        // Mie theory is the slow part: its cost over every channel, bounded before any of it
+        // is done (README, "Limits").
+        let work = crate::particles::distribution::mie_work_of(
+            channels
+                .iter()
+                .zip(&components)
+                .map(|(c, comps)| (comps.as_slice(), c.wavelength_nm() * 1e-9)),
+            &BulkOptions::default(),
+        )
+        .map_err(|e| mie_err(e.to_string()))?;
+        work.check().map_err(mie_err)?;
+        if let Some(note) = work.warning() {
+            crate::limits::warn(&mie_err(note).to_string());
+        }
         let mut optics = Vec::with_capacity(nch);
         for (c, comps) in channels.iter().zip(&components) {
             let (o, _) = layer_optics(
