@@ -9,7 +9,7 @@
 #   target/mutants/target, release profile made incremental, without debug info, LTO or a
 #   single code-generation unit: a mutant then rebuilds in about 10 s.
 # * The whole test suite runs for every mutant, by cargo-nextest, which stops at the first
-#   failing test; a mutant's tests time out after 300 s.
+#   failing test; a mutant's tests time out after 600 s (the suite takes about 5 min alone on 2 cores).
 # * A file with at most N mutants (default 60) gets all of them; a larger one a round-robin
 #   sample of at least N (the first of k = ⌊mutants/N⌋ shards: every k-th mutant in source
 #   order).
@@ -110,7 +110,7 @@ for line in open(sys.argv[1]):
     fi
     # cargo-mutants exits non-zero when mutants are missed; the outcomes say what happened.
     (cd "$tree" && cargo mutants --in-place -f "$f" --profile release --test-tool nextest \
-        "${select[@]}" --timeout 300 --build-timeout 600 --output "$out") || true
+        "${select[@]}" --timeout 600 --build-timeout 900 --output "$out") || true
     python3 "$root/scripts/mutants_table.py" "$out/mutants.out" "$results/outcomes/$slug.tsv" \
         "$csv" "$f" "$total" "$commit" "$out/sample.txt" ${iterate:+--iterate}
 done
