@@ -36,10 +36,11 @@
 //! scene's path, text and digest ([`scene_digest`]), the seed, photons and batches, the shard
 //! `I/N` and its batch range, and every transport option that changes the numbers.
 //!
-//! A merge reads the scene again from the text stored in the shards (relative paths in it
+//! A merge reads the scene again from the text stored in every shard (relative paths in it
 //! anchored at the scene's absolute path, as on a cluster's shared filesystem), checks that its
-//! digest is still the shards', and runs every stage of [`pipeline::run_with`] with the
-//! Monte Carlo folded from the files.
+//! digest is still each shard's ([`scene_of`]), and runs every stage of [`pipeline::run_with`]
+//! with the Monte Carlo folded from the files, checked finite and energy-conserving
+//! ([`check_folded`]).
 
 use std::fmt::{self, Write as _};
 use std::fs;
@@ -1585,16 +1586,17 @@ pub const CONSERVATION_SIGMAS: f64 = 4.0;
 /// Relative rounding a merge allows the received energy above its bound.
 const CONSERVATION_ROUNDING: f64 = 1e-9;
 
-/// Probability below which a merge takes one batch's received energy for impossible: a batch's
-/// received energy is ≥ 0 with a mean of at most the bound `E`, so by Markov's inequality one of
-/// `B` batches exceeds `B·E/p` with probability at most `p`, whatever its distribution.
-const BATCH_IMPROBABILITY: f64 = 1e-9;
+/// A batch's received energy beyond this many times the bound `E` times the batches `B` is
+/// taken for impossible: it is ≥ 0 with a mean of at most `E`, so by Markov's inequality one
+/// of `B` batches exceeds `B·E·F` with a probability of at most 1/`F`, whatever its
+/// distribution.
+const IMPROBABLE_FACTOR: f64 = 1e9;
 
 /// Refuse a fold whose numbers no run makes, though every shard's numbers were finite and
 /// ≥ 0 one by one. The received energy of a channel (every gate, order and field of view) is at
 /// most what the pulse sends through the receiver, `limit_j` = pulse energy × optical
 /// efficiency (every channel of the transport runs with the lidar's pulse energy); refused:
-/// a batch whose received energy is not finite or exceeds `B·limit_j/`[`BATCH_IMPROBABILITY`]
+/// a batch whose received energy is not finite or exceeds `B·limit_j·`[`IMPROBABLE_FACTOR`]
 /// (a single absurd batch, which would also make the standard error as large as the mean); a
 /// folded energy, standard error, covariance or flux that is not finite (a mean of huge tallies
 /// or a sum of their squares overflows); a mean received energy above `limit_j` by more than
@@ -1633,7 +1635,7 @@ fn check_folded(
             ),
         }
     };
-    let improbable_j = batches as f64 * limit_j / BATCH_IMPROBABILITY;
+    let improbable_j = batches as f64 * limit_j * IMPROBABLE_FACTOR;
     for k in 0..channels {
         if batches == 0 {
             break;
@@ -1644,11 +1646,12 @@ fn check_folded(
             return Err(ShardError::Bad {
                 path: set.file_of_batch(b).to_path_buf(),
                 what: format!(
-                    "channel `{}`: its batch {b} receives {} J over all gates, orders and fields of view, where the pulse sends {} J through the receiver (pulse energy × optical efficiency): in a run that conserves energy one of its {batches} batches exceeds {} J with a probability below {BATCH_IMPROBABILITY:e} (Markov's inequality)",
+                    "channel `{}`: its batch {b} receives {} J over all gates, orders and fields of view, where the pulse sends {} J through the receiver (pulse energy × optical efficiency): in a run that conserves energy one of its {batches} batches exceeds {} J with a probability below {:e} (Markov's inequality)",
                     name(k),
                     number(v),
                     number(limit_j),
-                    number(improbable_j)
+                    number(improbable_j),
+                    1.0 / IMPROBABLE_FACTOR
                 ),
             });
         }
