@@ -498,3 +498,28 @@ fn summary_json(scene: &Scene, run: &RunOutput) -> String {
     }
     serde_json::to_string_pretty(&json).unwrap_or_default()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The summary's numbers: never `NaN` or `inf`; a root sum of squares of finite errors is
+    /// finite even where the squares overflow (√2·1e200 from two errors of 1e200, whose squares
+    /// do), and exact where they do not (3, 4 → 5).
+    #[test]
+    fn summary_numbers_are_finite_or_na() {
+        for v in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+            assert_eq!(sci(v, 4), "n/a");
+            assert_eq!(fixed(v, 1), "n/a");
+            assert_eq!(fixed_with(v, 4, true), "n/a");
+        }
+        assert_eq!(sci(6.0e-2, 4), "6.0000e-2");
+        assert_eq!(fixed_with(0.25, 2, true), "+0.25");
+        assert_eq!(root_sum_square(&[3.0, 4.0]), 5.0);
+        assert_eq!(root_sum_square(&[]), 0.0);
+        let r = root_sum_square(&[1e200, 1e200]);
+        assert!((r / (2f64.sqrt() * 1e200) - 1.0).abs() < 1e-15, "{r}");
+        assert!(root_sum_square(&[1.0, f64::NAN]).is_nan());
+        assert_eq!(sci(root_sum_square(&[f64::MAX, f64::MAX]), 1), "n/a");
+    }
+}
