@@ -36,10 +36,11 @@
 //! scene's path, text and digest ([`scene_digest`]), the seed, photons and batches, the shard
 //! `I/N` and its batch range, and every transport option that changes the numbers.
 //!
-//! A merge reads the scene again from the text stored in the shards (relative paths in it
+//! A merge reads the scene again from the text stored in every shard (relative paths in it
 //! anchored at the scene's absolute path, as on a cluster's shared filesystem), checks that its
-//! digest is still the shards', and runs every stage of [`pipeline::run_with`] with the
-//! Monte Carlo folded from the files.
+//! digest is still each shard's ([`scene_of`]), and runs every stage of [`pipeline::run_with`]
+//! with the Monte Carlo folded from the files, checked finite and energy-conserving
+//! ([`check_folded`]).
 
 use std::fmt::{self, Write as _};
 use std::fs;
@@ -289,18 +290,21 @@ pub enum ShardError {
     /// No shard file among the inputs.
     #[error("no shard files (*.{EXTENSION}) in {}", list_paths(.0))]
     NoShards(Vec<PathBuf>),
-    /// The scene read again for the merge is not the scene the shards ran.
+    /// The scene read again for the merge, from the same text in every shard, is not the
+    /// scene the shards ran.
     #[error(
-        "the scene {} as read now is not the one the shards ran (digest {now}, shards {shards}): a file it reads (phase table, line list, profile) has changed since, or is not at the same path",
-        path
+        "the scene {path} as read now from the text in {} is not the one the shards ran (digest {now}, shards {recorded}): a file it reads (phase table, line list, profile) has changed since, or is not at the same path, or the text was changed in every shard",
+        list_paths(shards)
     )]
     SceneChanged {
         /// The scene's path.
         path: String,
+        /// The shard files.
+        shards: Vec<PathBuf>,
         /// Digest now.
         now: String,
         /// Digest in the shards.
-        shards: String,
+        recorded: String,
     },
     /// A shard cannot be made of this run.
     #[error("--shard {spec}: {what}")]
@@ -371,6 +375,18 @@ pub fn scene_digest(scene: &Scene) -> String {
     let mut s = scene.clone();
     s.simulation.threads = 0;
     debug_digest(&s)
+}
+
+/// The digest of a run shard's scene: [`scene_digest`] of the scene as every shard runs it,
+/// with its Monte Carlo on. A shard traces photons whether `--photons` asked for them or the
+/// scene's own `photons` and `multiple_scattering` did (`--photons` sets
+/// [`MultipleScattering::Always`](crate::scene::MultipleScattering::Always)), so the digest
+/// identifies the scene and the settings it ran with, not how they were given: shards run with
+/// or without `--photons` and `--seed` merge when they traced the same photons.
+pub fn run_scene_digest(scene: &Scene) -> String {
+    let mut s = scene.clone();
+    s.simulation.multiple_scattering = crate::scene::MultipleScattering::Always;
+    scene_digest(&s)
 }
 
 /// FNV-1a 64 of a value's `Debug` text, as 16 hex digits: the digest of a parsed input (a
@@ -593,7 +609,7 @@ fn write_shard(
         lidarsim_version: VERSION.to_string(),
         scene_path: scene.path.to_string_lossy().into_owned(),
         scene_text: scene.text().to_string(),
-        scene_digest: scene_digest(scene),
+        scene_digest: run_scene_digest(scene),
         seed: transport.seed,
         photons: transport.photons,
         batches: total as u64,
@@ -954,18 +970,89 @@ pub(crate) fn whole_set<F: Sharded>(
     Ok(files)
 }
 
-/// Refuse `scene`, read again from the text stored in shards at `path`, if its digest is no
-/// longer the shards' `digest`: a file it reads has changed since they ran.
-pub(crate) fn check_scene(scene: &Scene, path: &str, digest: &str) -> Result<(), ShardError> {
-    let now = scene_digest(scene);
-    if now != digest {
-        return Err(ShardError::SceneChanged {
-            path: path.to_string(),
-            now,
-            shards: digest.to_string(),
-        });
+/// What one shard says of its scene: the shard file, and its header's scene path, text and
+/// digest.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct SceneClaim<'a> {
+    /// The shard file.
+    pub(crate) file: &'a Path,
+    /// The scene's path as the shard recorded it.
+    pub(crate) path: &'a str,
+    /// The scene's text stored in the shard.
+    pub(crate) text: &'a str,
+    /// The digest of the scene as the shard ran it.
+    pub(crate) digest: &'a str,
+}
+
+/// The scene a set of shards ran, read again from the text every shard stores (each distinct
+/// text once), made ready by `prepare` (a run shard's photons and seed) and refused unless its
+/// digest (by `digest`) is the one that shard recorded; the shards' headers have been found to
+/// agree on the path and the digest ([`whole_set`]).
+///
+/// A text that does not parse, or whose digest is not its shard's while another shard's text
+/// differs from it, was damaged in that shard: the error names the shard file. When every
+/// shard holds the same text and its digest is not theirs, a file the scene reads has changed
+/// since (or the text was changed in every shard alike): [`ShardError::SceneChanged`], naming
+/// the shards.
+pub(crate) fn scene_of(
+    claims: &[SceneClaim],
+    prepare: impl Fn(&mut Scene) -> Result<(), String>,
+    digest: impl Fn(&Scene) -> String,
+) -> Result<Scene, ShardError> {
+    let Some(first) = claims.first() else {
+        return Err(ShardError::NoShards(Vec::new()));
+    };
+    let all_alike = claims.iter().all(|c| c.text == first.text);
+    let bad = |c: &SceneClaim, what: String| ShardError::Bad {
+        path: c.file.to_path_buf(),
+        what,
+    };
+    let mut scene: Option<Scene> = None;
+    let mut seen = std::collections::HashSet::new();
+    for c in claims {
+        if !seen.insert(c.text) {
+            continue;
+        }
+        let mut s = Scene::from_toml(Path::new(c.path), c.text).map_err(|e| {
+            if e.path == Path::new(c.path) {
+                bad(c, format!("its scene text does not parse: {e}"))
+            } else {
+                bad(c, format!("its scene cannot be built again: {e}"))
+            }
+        })?;
+        prepare(&mut s).map_err(|what| bad(c, what))?;
+        let now = digest(&s);
+        if now != c.digest {
+            if !all_alike {
+                return Err(bad(
+                    c,
+                    format!(
+                        "its scene text does not match its digest (digest {now} of the text, {} recorded): the text has been changed since the shard was written",
+                        c.digest
+                    ),
+                ));
+            }
+            return Err(ShardError::SceneChanged {
+                path: c.path.to_string(),
+                shards: claims.iter().map(|c| c.file.to_path_buf()).collect(),
+                now,
+                recorded: c.digest.to_string(),
+            });
+        }
+        scene.get_or_insert(s);
     }
-    Ok(())
+    // Every distinct text has its shard's digest, and the digests agree, so the texts do
+    // (the digest holds the text): unless two texts collide in FNV-1a.
+    if let Some(c) = claims.iter().find(|c| c.text != first.text) {
+        return Err(bad(
+            c,
+            format!(
+                "its scene text differs from that of {} under the same digest",
+                first.file.display()
+            ),
+        ));
+    }
+    scene.ok_or_else(|| ShardError::NoShards(Vec::new()))
 }
 
 /// The `kind` of a shard header (JSON): [`KIND_RUN`] when it names none or cannot be read.
@@ -1377,19 +1464,25 @@ impl ShardSet {
         &self.shards[0].1
     }
 
-    /// The scene the shards ran, read again from their text at their path, with their photons
-    /// and seed; refused if its digest is no longer theirs.
+    /// The scene the shards ran, read again from the text of every shard at their path, with
+    /// their photons and seed; refused if its digest is no longer theirs ([`scene_of`]).
     pub fn scene(&self) -> Result<Scene, ShardError> {
         let h = self.first();
-        let mut scene = Scene::from_toml(Path::new(&h.scene_path), &h.scene_text)?;
-        scene
-            .override_simulation(Some(h.photons), Some(h.seed), None)
-            .map_err(|what| ShardError::Bad {
-                path: self.shards[0].0.clone(),
-                what,
-            })?;
-        check_scene(&scene, &h.scene_path, &h.scene_digest)?;
-        Ok(scene)
+        let claims: Vec<SceneClaim> = self
+            .shards
+            .iter()
+            .map(|(file, h)| SceneClaim {
+                file,
+                path: &h.scene_path,
+                text: &h.scene_text,
+                digest: &h.scene_digest,
+            })
+            .collect();
+        scene_of(
+            &claims,
+            |s| s.override_simulation(Some(h.photons), Some(h.seed), None),
+            run_scene_digest,
+        )
     }
 
     /// The transport options the shards ran with (threads: all cores; they do not matter).
@@ -1406,10 +1499,12 @@ impl ShardSet {
     }
 
     /// Fold every shard's batches in batch order into the run's result. Its `wall_s` is the sum
-    /// of the shards' transport times, its `threads` the most any shard used. `polarised`: the
-    /// scene's light is polarised (the returns tallies are co- and cross-polarised), for the
-    /// check of their signs.
-    pub fn fold(&self, plan: &transport::Plan, polarised: bool) -> Result<McResult, ShardError> {
+    /// of the shards' transport times, its `threads` the most any shard used. `scene` is the
+    /// scene the shards ran ([`ShardSet::scene`]): whether its light is polarised (the returns
+    /// tallies are co- and cross-polarised), for the check of their signs, and its lidar, for
+    /// the check of the energy received ([`check_folded`]).
+    pub fn fold(&self, plan: &transport::Plan, scene: &Scene) -> Result<McResult, ShardError> {
+        let polarised = scene.lidar.polarisation != crate::scene::Polarisation::None;
         let h = self.first();
         let (path0, _) = &self.shards[0];
         if plan.batches() as u64 != h.batches || plan.photons_per_batch() != h.photons_per_batch {
@@ -1424,6 +1519,19 @@ impl ShardSet {
                 ),
             });
         }
+        let channels = plan.channels().max(1);
+        // Returns tallies per channel: co- and cross-polarised ones count apart (channel fastest).
+        let tally_channels = if polarised { 2 * channels } else { channels };
+        // A batch's raw tallies in joules, as `Plan` scales them: pulse energy × optical
+        // efficiency × telescope area per photon of the batch (the tallies are weight ×
+        // geometric factor [sr⁻¹ m⁻², per m² of aperture]).
+        let lidar = &scene.lidar;
+        let joules_per_tally =
+            lidar.pulse_energy_j * lidar.optical_efficiency * lidar.telescope_area_m2()
+                / h.photons_per_batch.max(1) as f64;
+        // Each batch's received energy per channel: every gate, order and field of view (the
+        // tally's annuli and exact-order bins do not overlap), co and cross together.
+        let mut received = Vec::with_capacity(h.batches as usize * channels);
         let mut fold = plan.fold();
         let (mut wall_s, mut threads) = (0.0, 0usize);
         for (path, header) in &self.shards {
@@ -1438,6 +1546,11 @@ impl ShardSet {
             }
             for t in f.batches() {
                 check_returns_signs(path, &t, h.channels as usize, polarised)?;
+                let mut sums = vec![0.0; channels];
+                for (i, v) in t.bins.iter().enumerate() {
+                    sums[(i % tally_channels) % channels] += v;
+                }
+                received.extend(sums.iter().map(|v| v * joules_per_tally));
                 fold.add(t).map_err(|e| ShardError::Bad {
                     path: path.clone(),
                     what: e.to_string(),
@@ -1446,11 +1559,236 @@ impl ShardSet {
             wall_s += f.wall_s;
             threads = threads.max(f.threads as usize);
         }
-        fold.finish(wall_s, threads).map_err(|e| ShardError::Bad {
+        let result = fold.finish(wall_s, threads).map_err(|e| ShardError::Bad {
             path: path0.clone(),
             what: e.to_string(),
-        })
+        })?;
+        let limit_j = lidar.pulse_energy_j * lidar.optical_efficiency;
+        check_folded(self, &result, &received, channels, limit_j)?;
+        Ok(result)
     }
+
+    /// The shard file that holds batch `batch`.
+    fn file_of_batch(&self, batch: usize) -> &Path {
+        let h = self.first();
+        let i = ShardSpec::of_batch(batch, h.shard_count as usize, h.batches as usize);
+        self.shards
+            .get(i)
+            .map(|(p, _)| p.as_path())
+            .unwrap_or(&self.shards[0].0)
+    }
+}
+
+/// Standard errors of the mean a merge allows the received energy above its bound
+/// ([`check_folded`]): a sound run exceeds it by chance with probability 3e-5 per channel.
+pub const CONSERVATION_SIGMAS: f64 = 4.0;
+
+/// Relative rounding a merge allows the received energy above its bound.
+const CONSERVATION_ROUNDING: f64 = 1e-9;
+
+/// A batch's received energy beyond this many times the bound `E` times the batches `B` is
+/// taken for impossible: it is ≥ 0 with a mean of at most `E`, so by Markov's inequality one
+/// of `B` batches exceeds `B·E·F` with a probability of at most 1/`F`, whatever its
+/// distribution.
+const IMPROBABLE_FACTOR: f64 = 1e9;
+
+/// Refuse a fold whose numbers no run makes, though every shard's numbers were finite and
+/// ≥ 0 one by one. The received energy of a channel (every gate, order and field of view) is at
+/// most what the pulse sends through the receiver, `limit_j` = pulse energy × optical
+/// efficiency (every channel of the transport runs with the lidar's pulse energy); refused:
+/// a batch whose received energy is not finite or exceeds `B·limit_j·`[`IMPROBABLE_FACTOR`]
+/// (a single absurd batch, which would also make the standard error as large as the mean); a
+/// folded energy, standard error, covariance or flux that is not finite (a mean of huge tallies
+/// or a sum of their squares overflows); a mean received energy above `limit_j` by more than
+/// [`CONSERVATION_SIGMAS`] standard errors and rounding. `received` holds each batch's received
+/// energy per channel \[J\], batch after batch; the standard error is that of their mean, so
+/// it holds the gates' and orders' covariances (with one batch there is none, and the bound
+/// holds as it is). The error names the shard whose batch received the most in the channel at
+/// fault.
+fn check_folded(
+    set: &ShardSet,
+    r: &McResult,
+    received: &[f64],
+    channels: usize,
+    limit_j: f64,
+) -> Result<(), ShardError> {
+    let batches = received.len() / channels.max(1);
+    let names = &r.returns.channels;
+    let name = |k: usize| names.get(k).cloned().unwrap_or_else(|| k.to_string());
+    // The batch that received the most in channel k (a non-finite sum first).
+    let worst = |k: usize| {
+        (0..batches)
+            .max_by(|&a, &b| {
+                let (x, y) = (received[a * channels + k], received[b * channels + k]);
+                let key = |v: f64| if v.is_finite() { v } else { f64::INFINITY };
+                key(x).total_cmp(&key(y))
+            })
+            .unwrap_or(0)
+    };
+    let blame = |k: usize, what: String| {
+        let b = worst(k);
+        ShardError::Bad {
+            path: set.file_of_batch(b).to_path_buf(),
+            what: format!(
+                "channel `{}`: {what} (the largest share comes from its batch {b}; the shards fold into it, each finite and ≥ 0 alone)",
+                name(k)
+            ),
+        }
+    };
+    let improbable_j = batches as f64 * limit_j * IMPROBABLE_FACTOR;
+    for k in 0..channels {
+        if batches == 0 {
+            break;
+        }
+        let b = worst(k);
+        let v = received[b * channels + k];
+        if !v.is_finite() || v > improbable_j {
+            return Err(ShardError::Bad {
+                path: set.file_of_batch(b).to_path_buf(),
+                what: format!(
+                    "channel `{}`: its batch {b} receives {} J over all gates, orders and fields of view, where the pulse sends {} J through the receiver (pulse energy × optical efficiency): in a run that conserves energy one of its {batches} batches exceeds {} J with a probability below {:e} (Markov's inequality)",
+                    name(k),
+                    number(v),
+                    number(limit_j),
+                    number(improbable_j),
+                    1.0 / IMPROBABLE_FACTOR
+                ),
+            });
+        }
+    }
+    // Every set of returns the fold made, with what it is and whether its channels are the
+    // transport's (a combination's blames the transport channel whose batch received most).
+    let mut sets: Vec<(&str, &crate::returns::Returns, bool)> = vec![("returns", &r.returns, true)];
+    if let Some(c) = &r.combined {
+        sets.push(("combined returns", c, false));
+    }
+    if let Some(p) = &r.polarised {
+        sets.push(("co-polarised returns", &p.channels.co, true));
+        sets.push(("cross-polarised returns", &p.channels.cross, true));
+        if let Some(c) = &p.combined {
+            sets.push(("combined co-polarised returns", &c.co, false));
+            sets.push(("combined cross-polarised returns", &c.cross, false));
+        }
+    }
+    let most = (0..channels)
+        .max_by(|&a, &b| {
+            let m = |k: usize| {
+                let v = received[worst(k) * channels + k];
+                if v.is_finite() { v } else { f64::INFINITY }
+            };
+            m(a).total_cmp(&m(b))
+        })
+        .unwrap_or(0);
+    for (what, ret, own) in sets {
+        let per_channel = ret.bins_per_channel().max(1);
+        let channel_of = |i: usize| {
+            if own {
+                (i / per_channel).min(channels - 1)
+            } else {
+                most
+            }
+        };
+        for (values, kind) in [(&ret.energy_j, "energy"), (&ret.stderr_j, "standard error")] {
+            if let Some(i) = values.iter().position(|v| !v.is_finite()) {
+                return Err(blame(
+                    channel_of(i),
+                    format!(
+                        "the merged {what} hold a{} {kind} of {} J in {}: a tally or the sum of its squares is beyond the range of a double",
+                        if kind == "energy" { "n" } else { "" },
+                        number(values[i]),
+                        describe_bin(ret, i)
+                    ),
+                ));
+            }
+        }
+        // NaN stands for a covariance not computed.
+        if let Some(c) = &ret.covariance
+            && let Some(i) = c.cov_j2.iter().position(|v| v.is_infinite())
+        {
+            return Err(blame(
+                channel_of(0),
+                format!(
+                    "the merged {what} hold a covariance of {} J² (value {i}): the products of the tallies are beyond the range of a double",
+                    number(c.cov_j2[i])
+                ),
+            ));
+        }
+    }
+    for (part, values) in ["up", "down", "absorbed", "cut"]
+        .iter()
+        .zip(r.flux.parts().into_iter().zip(r.flux_stderr.parts()))
+    {
+        let (mean, err) = values;
+        if let Some(k) = (0..mean.len()).find(|&k| !(mean[k].is_finite() && err[k].is_finite())) {
+            return Err(blame(
+                k.min(channels - 1),
+                format!(
+                    "the merged flux `{part}` is {} ± {}: not finite",
+                    number(mean[k]),
+                    number(err[k])
+                ),
+            ));
+        }
+    }
+    if batches == 0 {
+        return Ok(());
+    }
+    for k in 0..channels {
+        let values = (0..batches).map(|b| received[b * channels + k]);
+        let n = batches as f64;
+        // Scaled by the largest, so that neither the mean nor the squares overflow.
+        let scale = values.clone().fold(0.0f64, |m, v| m.max(v.abs()));
+        if !scale.is_finite() {
+            return Err(blame(
+                k,
+                "a batch's received energy over all gates, orders and fields of view is not finite"
+                    .into(),
+            ));
+        }
+        if scale == 0.0 {
+            continue;
+        }
+        let mean = values.clone().map(|v| v / scale).sum::<f64>() / n;
+        let stderr = if batches > 1 {
+            let ss: f64 = values.map(|v| (v / scale - mean).powi(2)).sum();
+            (ss / (n - 1.0) / n).sqrt() * scale
+        } else {
+            0.0
+        };
+        let mean = mean * scale;
+        if mean > limit_j * (1.0 + CONSERVATION_ROUNDING) + CONSERVATION_SIGMAS * stderr {
+            return Err(blame(
+                k,
+                format!(
+                    "it receives {} ± {} J over all gates, orders and fields of view, more than the {} J the pulse sends through the receiver (pulse energy × optical efficiency) by {:.3} standard errors; energy is conserved, a run never exceeds it by more than {CONSERVATION_SIGMAS}",
+                    number(mean),
+                    number(stderr),
+                    number(limit_j),
+                    if stderr > 0.0 {
+                        (mean - limit_j) / stderr
+                    } else {
+                        f64::INFINITY
+                    }
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Where bin `i` of `r` lies: its field of view, gate and order.
+fn describe_bin(r: &crate::returns::Returns, i: usize) -> String {
+    let per_channel = r.bins_per_channel().max(1);
+    let j = i % per_channel;
+    let (no, ng) = (r.orders.len().max(1), r.range_m.len().max(1));
+    let (fov, gate, order) = (j / (no * ng), (j / no) % ng, j % no);
+    let or_unknown = |v: Option<f64>| v.map(|v| v.to_string()).unwrap_or_else(|| "?".into());
+    format!(
+        "the FOV of {} mrad, the gate at {} m, order {}",
+        or_unknown(r.fov_full_angle_mrad.get(fov).copied()),
+        or_unknown(r.range_m.get(gate).copied()),
+        r.orders.get(order).map(|o| o.label()).unwrap_or_default()
+    )
 }
 
 /// `b`'s header against `a`'s: the first difference, named.
@@ -1547,9 +1885,8 @@ pub fn merge(inputs: &[PathBuf]) -> Result<Merged, ShardError> {
     let scene = set.scene()?;
     let opts = set.transport_options(&scene);
     let mut failure: Option<ShardError> = None;
-    let polarised = scene.lidar.polarisation != crate::scene::Polarisation::None;
     let result = pipeline::run_with(&scene, &opts, &mut |plan| {
-        set.fold(plan, polarised).map_err(|e| {
+        set.fold(plan, &scene).map_err(|e| {
             failure = Some(e);
             // The real error is `failure`; this one only stops the pipeline.
             TransportError::Options("the shards could not be folded".into())

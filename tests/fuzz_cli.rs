@@ -982,18 +982,6 @@ const KNOWN: &[Known] = &[
         always: true,
     },
     Known {
-        command: "merge",
-        id: "F11",
-        what: "a damaged scene inside a shard blamed on the scene",
-        matches: |why, _| {
-            why.starts_with("exit 2 names none of")
-                && why
-                    .split_once("lidarsim: error: ")
-                    .is_some_and(|(_, e)| !e.contains(".lshard"))
-        },
-        always: true,
-    },
-    Known {
         command: "mie",
         id: "F6",
         what: "distribution errors name the library's fields, not the options",
@@ -2501,7 +2489,6 @@ mod findings {
     }
 
     #[test]
-    #[ignore = "issue 37: F11 merge blames a shard's damaged scene text on the scene file"]
     fn f11_a_damaged_scene_in_a_shard_names_the_shard() {
         let f = Fixtures::get();
         let dir = tempfile::tempdir().unwrap();

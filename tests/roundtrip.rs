@@ -461,7 +461,6 @@ fn shards_from_an_odd_directory_merge_into_the_single_run() {
 
 /// FUZZ_FINDINGS.md F3: shards run with the scene's own photon count (no `--photons`) merge.
 #[test]
-#[ignore = "issue 37: F3 shards run without --photons are refused by merge (scene digest)"]
 fn shards_run_with_the_scenes_own_photons_merge() {
     let root = tempfile::tempdir().unwrap();
     let dir = odd_directory(root.path());

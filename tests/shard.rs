@@ -1400,3 +1400,154 @@ fn merge_refuses_study_shards_with_impossible_values() {
         "{e}"
     );
 }
+
+/// C.1 (absolute phase-table path) with a pulse of 0.5 J, a receiver of efficiency 0.4 and a
+/// telescope of 0.8 m, in `dir`: the receiver gets at most 0.5 × 0.4 = 0.2 J.
+fn c1_weak_receiver(dir: &Path) -> PathBuf {
+    let text = fs::read_to_string(c1_scene()).unwrap();
+    for key in [
+        "pulse_energy_j = 1.0",
+        "optical_efficiency = 1.0",
+        "telescope_diameter_m = 1.0",
+    ] {
+        assert!(text.contains(key), "{key}");
+    }
+    let text = text
+        .replace("pulse_energy_j = 1.0", "pulse_energy_j = 0.5")
+        .replace("optical_efficiency = 1.0", "optical_efficiency = 0.4")
+        .replace("telescope_diameter_m = 1.0", "telescope_diameter_m = 0.8")
+        .replace(
+            "../phase_functions/",
+            &format!("{}/", s(&project_root().join("phase_functions"))),
+        );
+    let scene = dir.join("weak.toml");
+    fs::write(&scene, text).unwrap();
+    scene
+}
+
+/// `bytes` (a run shard) with returns tally `bin` of every batch set to `value`, checksum right.
+fn with_every_batch(bytes: &[u8], bin: usize, value: f64) -> Vec<u8> {
+    let (records, rec, _, _) = run_layout(bytes);
+    let n = (bytes.len() - 24 - records) / rec;
+    let mut out = bytes.to_vec();
+    for b in 0..n {
+        out = with_bits(&out, records + b * rec + 8 * (10 + bin), value.to_bits());
+    }
+    out
+}
+
+/// Issue 37, item 5 (fuzz finding F10's last case): every shard's numbers finite and ≥ 0, their
+/// fold not. A tally of the largest double in one batch (merged before into 3.5e305 J, "± inf
+/// J") is refused, naming the shard, the batch and the channel: a batch of a run that conserves
+/// energy exceeds 1e9 × its batches × the bound with a probability below 1e-9 (Markov).
+/// Energy conservation: a channel's received energy, every gate, order and field of view
+/// summed, never exceeds the pulse energy × the receiver's optical efficiency (0.2 J here, as
+/// the scene's numbers give it): shards whose batches all put 1.1 × 0.2 J into one bin (the
+/// Monte Carlo's own returns are about 1e-6 of it) are refused; 0.9 × 0.2 J merge.
+#[test]
+fn merge_refuses_folds_beyond_a_double_or_beyond_the_pulse() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = c1_weak_receiver(dir.path());
+    let shards = dir.path().join("shards");
+    for i in 0..2 {
+        shard(
+            Some(&s(&scene)),
+            &format!("{i}/2"),
+            &shards,
+            &["--photons", "400", "--threads", "1"],
+        );
+    }
+    let path = shards.join("shard-1-of-2.lshard");
+    let good = fs::read(&path).unwrap();
+    let (records, _, _, _) = run_layout(&good);
+    // Batch 50, returns tally 0 (first gate, order 1, narrowest FOV) = the largest double.
+    fs::write(
+        &path,
+        with_bits(&good, records + 8 * 10, f64::MAX.to_bits()),
+    )
+    .unwrap();
+    let e = merge_refused(std::slice::from_ref(&shards));
+    assert!(
+        e.contains(&s(&path))
+            && e.contains("channel `")
+            && e.contains("its batch 50 receives")
+            && e.contains("Markov's inequality"),
+        "{e}"
+    );
+    // The bound, independently: E·η = 0.5 J × 0.4; a batch's tally t is t·E·η·A/photons J.
+    let h: serde_json::Value = {
+        let len = u64::from_le_bytes(good[20..28].try_into().unwrap()) as usize;
+        serde_json::from_slice(&good[28..28 + len]).unwrap()
+    };
+    let per_batch = h["photons_per_batch"].as_u64().unwrap() as f64;
+    let area_m2 = std::f64::consts::PI * 0.25 * 0.8 * 0.8;
+    let limit_j = 0.5 * 0.4;
+    let tally = |fraction: f64| fraction * limit_j * per_batch / (limit_j * area_m2);
+    let first = shards.join("shard-0-of-2.lshard");
+    let good0 = fs::read(&first).unwrap();
+    let both = |fraction: f64| {
+        fs::write(&first, with_every_batch(&good0, 0, tally(fraction))).unwrap();
+        fs::write(&path, with_every_batch(&good, 0, tally(fraction))).unwrap();
+    };
+    both(1.1);
+    let e = merge_refused(std::slice::from_ref(&shards));
+    assert!(
+        e.contains(".lshard")
+            && e.contains("channel `")
+            && e.contains("more than the 0.2 J the pulse sends through the receiver"),
+        "{e}"
+    );
+    both(0.9);
+    let out = dir.path().join("merged");
+    lidarsim_ok([
+        "merge".to_string(),
+        s(&shards),
+        "--no-plots".into(),
+        "--out".into(),
+        s(&out),
+    ]);
+    crate::output::assert_no_non_finite(&out);
+}
+
+/// Fuzz finding F11: a run shard whose stored scene text was changed (checksum recomputed) is
+/// refused naming that shard, whichever shard it is: every shard's text is checked against its
+/// digest, not only the first's.
+#[test]
+fn merge_names_the_shard_whose_scene_text_was_changed() {
+    let dir = tempfile::tempdir().unwrap();
+    let files = four_shards(&dir.path().join("a"), &[]);
+    let good = fs::read(&files[2]).unwrap();
+    let bad = dir.path().join("bad");
+    fs::create_dir(&bad).unwrap();
+    let edit = |from: &'static str, to: &'static str| {
+        with_header(&good, move |h| {
+            let t = h["scene_text"].as_str().unwrap().to_string();
+            assert!(t.contains(from), "{from}");
+            h["scene_text"] = t.replacen(from, to, 1).into();
+        })
+    };
+    let cases = [
+        (
+            "parse",
+            edit("seed = 1", "seed = 01"),
+            "its scene text does not parse",
+        ),
+        (
+            "digest",
+            edit("seed = 1", "seed = 2"),
+            "its scene text does not match its digest",
+        ),
+    ];
+    for (name, bytes, why) in cases {
+        let p = bad.join(format!("{name}.lshard"));
+        fs::write(&p, bytes).unwrap();
+        let e = merge_refused(&[
+            files[0].clone(),
+            files[1].clone(),
+            p.clone(),
+            files[3].clone(),
+        ]);
+        assert!(e.contains(why) && e.contains(&s(&p)), "{name}: {e}");
+        fs::remove_file(&p).unwrap();
+    }
+}

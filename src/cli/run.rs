@@ -234,7 +234,11 @@ fn print_summary(out: &mut impl Write, scene: &Scene, run: &RunOutput) -> std::i
                     let an: f64 = (0..analytic.range_m.len())
                         .map(|g| analytic.energy(k, f, g, Order::Exactly(1)).unwrap_or(0.0))
                         .sum();
-                    writeln!(out, "  channel {ch}, FOV {fov} mrad: all gates {an:.4e} J")?;
+                    writeln!(
+                        out,
+                        "  channel {ch}, FOV {fov} mrad: all gates {} J",
+                        sci(an, 4)
+                    )?;
                 }
             }
         }
@@ -248,14 +252,16 @@ fn print_summary(out: &mut impl Write, scene: &Scene, run: &RunOutput) -> std::i
 fn print_returns(out: &mut impl Write, r: &Returns, analytic: &Returns) -> std::io::Result<()> {
     for (k, ch) in r.channels.iter().enumerate() {
         for (f, fov) in r.fov_full_angle_mrad.iter().enumerate() {
-            let (mut total, mut single, mut single_var, mut an) = (0.0, 0.0, 0.0, 0.0);
+            let (mut total, mut single, mut an) = (0.0, 0.0, 0.0);
+            let mut single_err = Vec::with_capacity(r.range_m.len());
             for g in 0..r.range_m.len() {
                 total += r.energy(k, f, g, Order::Total).unwrap_or(0.0);
                 single += r.energy(k, f, g, Order::Exactly(1)).unwrap_or(0.0);
-                // Gates are not independent; this sum of variances is only a rough guide.
-                single_var += r.stderr(k, f, g, Order::Exactly(1)).unwrap_or(0.0).powi(2);
+                single_err.push(r.stderr(k, f, g, Order::Exactly(1)).unwrap_or(0.0));
                 an += analytic.energy(k, f, g, Order::Exactly(1)).unwrap_or(0.0);
             }
+            // Gates are not independent; this root sum of variances is only a rough guide.
+            let single_se = root_sum_square(&single_err);
             let share = if total > 0.0 {
                 100.0 * single / total
             } else {
@@ -263,13 +269,54 @@ fn print_returns(out: &mut impl Write, r: &Returns, analytic: &Returns) -> std::
             };
             writeln!(
                 out,
-                "  channel {ch}, FOV {fov} mrad: all gates {total:.4e} J, single scattering {share:.1} % \
-                 (MC {single:.4e} ± {:.1e} J, analytic {an:.4e} J)",
-                single_var.sqrt()
+                "  channel {ch}, FOV {fov} mrad: all gates {} J, single scattering {} % \
+                 (MC {} ± {} J, analytic {} J)",
+                sci(total, 4),
+                fixed(share, 1),
+                sci(single, 4),
+                sci(single_se, 1),
+                sci(an, 4)
             )?;
         }
     }
     Ok(())
+}
+
+/// `v` as `{:.digits$e}`, or `n/a` where it is not a finite number: the summary never prints
+/// `NaN` or `inf` (a sum of huge energies can overflow though each is finite).
+fn sci(v: f64, digits: usize) -> String {
+    if v.is_finite() {
+        format!("{v:.digits$e}")
+    } else {
+        "n/a".into()
+    }
+}
+
+/// `v` as `{:.digits$}` (with its sign when `signed`), or `n/a` where it is not finite.
+fn fixed_with(v: f64, digits: usize, signed: bool) -> String {
+    match (v.is_finite(), signed) {
+        (false, _) => "n/a".into(),
+        (true, true) => format!("{v:+.digits$}"),
+        (true, false) => format!("{v:.digits$}"),
+    }
+}
+
+fn fixed(v: f64, digits: usize) -> String {
+    fixed_with(v, digits, false)
+}
+
+/// √(Σ xᵢ²), scaled by the largest |xᵢ| so that the squares of finite values cannot overflow;
+/// not finite only if some xᵢ is not.
+fn root_sum_square(x: &[f64]) -> f64 {
+    let m = x.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    if m == 0.0 || !m.is_finite() {
+        return if x.iter().all(|v| v.is_finite()) {
+            m
+        } else {
+            f64::NAN
+        };
+    }
+    m * x.iter().map(|v| (v / m).powi(2)).sum::<f64>().sqrt()
 }
 
 fn source_label(p: &Product) -> &'static str {
@@ -302,23 +349,27 @@ fn print_retrieval(
         };
         writeln!(
             out,
-            "  IPDA to {what} at {:.0} m: truth X{} = {:.4} ppm (dry-air column {:.0}–{:.0} m)",
-            t.range_m, c.gas, first.truth, first.altitude_m.0, first.altitude_m.1
+            "  IPDA to {what} at {:.0} m: truth X{} = {} ppm (dry-air column {:.0}–{:.0} m)",
+            t.range_m,
+            c.gas,
+            fixed(first.truth, 4),
+            first.altitude_m.0,
+            first.altitude_m.1
         )?;
         for p in &ipda {
             writeln!(
                 out,
-                "    FOV {} mrad, {}: retrieved {:.4} ppm, bias {:+.4} ppm (MC ± {:.1e}, {:.1e} if on/off were traced apart); random error {:.3} ppm per shot pair (simulated {:.3}), {:.4} ppm averaged (simulated {:.4})",
+                "    FOV {} mrad, {}: retrieved {} ppm, bias {} ppm (MC ± {}, {} if on/off were traced apart); random error {} ppm per shot pair (simulated {}), {} ppm averaged (simulated {})",
                 p.fov_full_angle_mrad,
                 source_label(p),
-                p.retrieved,
-                p.bias(),
-                p.mc_stderr,
-                p.mc_stderr_independent,
-                p.random_error_per_shot_pair,
-                p.simulated_error_per_shot_pair,
-                p.random_error_averaged,
-                p.simulated_error_averaged
+                fixed(p.retrieved, 4),
+                fixed_with(p.bias(), 4, true),
+                sci(p.mc_stderr, 1),
+                sci(p.mc_stderr_independent, 1),
+                fixed(p.random_error_per_shot_pair, 3),
+                fixed(p.simulated_error_per_shot_pair, 3),
+                fixed(p.random_error_averaged, 4),
+                fixed(p.simulated_error_averaged, 4)
             )?;
         }
     }
@@ -349,12 +400,12 @@ fn print_retrieval(
             errs.sort_by(f64::total_cmp);
             writeln!(
                 out,
-                "    FOV {f} mrad, {}: rms bias {:.4} ppm; random error averaged {:.3}–{:.3} ppm (median {:.3})",
+                "    FOV {f} mrad, {}: rms bias {} ppm; random error averaged {}–{} ppm (median {})",
                 source_label(set[0]),
-                rms_bias,
-                errs[0],
-                errs[errs.len() - 1],
-                errs[errs.len() / 2]
+                fixed(rms_bias, 4),
+                fixed(errs[0], 3),
+                fixed(errs[errs.len() - 1], 3),
+                fixed(errs[errs.len() / 2], 3)
             )?;
         }
     }
@@ -446,4 +497,29 @@ fn summary_json(scene: &Scene, run: &RunOutput) -> String {
         });
     }
     serde_json::to_string_pretty(&json).unwrap_or_default()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The summary's numbers: never `NaN` or `inf`; a root sum of squares of finite errors is
+    /// finite even where the squares overflow (√2·1e200 from two errors of 1e200, whose squares
+    /// do), and exact where they do not (3, 4 → 5).
+    #[test]
+    fn summary_numbers_are_finite_or_na() {
+        for v in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+            assert_eq!(sci(v, 4), "n/a");
+            assert_eq!(fixed(v, 1), "n/a");
+            assert_eq!(fixed_with(v, 4, true), "n/a");
+        }
+        assert_eq!(sci(6.0e-2, 4), "6.0000e-2");
+        assert_eq!(fixed_with(0.25, 2, true), "+0.25");
+        assert_eq!(root_sum_square(&[3.0, 4.0]), 5.0);
+        assert_eq!(root_sum_square(&[]), 0.0);
+        let r = root_sum_square(&[1e200, 1e200]);
+        assert!((r / (2f64.sqrt() * 1e200) - 1.0).abs() < 1e-15, "{r}");
+        assert!(root_sum_square(&[1.0, f64::NAN]).is_nan());
+        assert_eq!(sci(root_sum_square(&[f64::MAX, f64::MAX]), 1), "n/a");
+    }
 }

@@ -38,7 +38,6 @@ use serde::{Deserialize, Serialize};
 
 use crate::atmosphere::{SetMember, StandardAtmosphere};
 use crate::output;
-use crate::scene::Scene;
 use crate::shard::{
     self, Body, KIND_SELECT, ShardError, ShardSpec, VERSION, debug_digest, write_str,
 };
@@ -586,8 +585,16 @@ pub fn merge(paths: &[PathBuf]) -> Result<SelectMerged, ShardError> {
         path: files[0].path.clone(),
         what,
     };
-    let scene = Scene::from_toml(Path::new(&h.scene_path), &h.scene_text)?;
-    shard::check_scene(&scene, &h.scene_path, &h.scene_digest)?;
+    let claims: Vec<shard::SceneClaim> = files
+        .iter()
+        .map(|f| shard::SceneClaim {
+            file: &f.path,
+            path: &f.header.scene_path,
+            text: &f.header.scene_text,
+            digest: &f.header.scene_digest,
+        })
+        .collect();
+    let scene = shard::scene_of(&claims, |_| Ok(()), shard::scene_digest)?;
     let study = SelectStudy::build(h.options().map_err(&bad)?, scene)
         .map_err(|e| bad(format!("its study cannot be set up again: {e}")))?;
     let groups = debug_digest(&study.groups);

@@ -675,8 +675,16 @@ pub fn merge(paths: &[PathBuf]) -> Result<DialMerged, ShardError> {
     let count = files.len();
     let h = files[0].header.clone();
     let path0 = files[0].path.clone();
-    let scene = Scene::from_toml(Path::new(&h.scene_path), &h.scene_text)?;
-    shard::check_scene(&scene, &h.scene_path, &h.scene_digest)?;
+    let claims: Vec<shard::SceneClaim> = files
+        .iter()
+        .map(|f| shard::SceneClaim {
+            file: &f.path,
+            path: &f.header.scene_path,
+            text: &f.header.scene_text,
+            digest: &f.header.scene_digest,
+        })
+        .collect();
+    let scene = shard::scene_of(&claims, |_| Ok(()), shard::scene_digest)?;
     let source = match (&h.profiles_path, h.ensemble) {
         (Some(p), None) => ProfileSource::Set(PathBuf::from(p)),
         (None, Some(n)) => ProfileSource::Ensemble(n as usize),
