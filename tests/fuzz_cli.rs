@@ -957,15 +957,6 @@ struct Known {
     always: bool,
 }
 
-/// Whether a reason reports a NaN or an infinity (or a null, a NaN in JSON) in one of `files`.
-fn non_finite_in(why: &str, files: &[&str]) -> bool {
-    files.iter().any(|f| why.starts_with(f))
-        && (why.contains("= NaN")
-            || why.contains("= inf")
-            || why.contains("= -inf")
-            || why.contains("is null"))
-}
-
 const KNOWN: &[Known] = &[
     Known {
         command: "dial",

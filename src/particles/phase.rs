@@ -1071,7 +1071,8 @@ mod tests {
         let c1 = crate::particles::builtin_table("bissonnette_c1_1064nm").unwrap();
         let table = PhaseFunction::Tabulated(Box::new(TabulatedPhase::from_table(&c1).unwrap()));
         let c1_cdf = table_cdf(&c1);
-        let mut cases: Vec<(&str, PhaseFunction, Box<dyn Fn(f64) -> f64>)> = vec![
+        type Cdf<'a> = Box<dyn Fn(f64) -> f64 + 'a>;
+        let mut cases: Vec<(&str, PhaseFunction, Cdf<'_>)> = vec![
             (
                 "isotropic",
                 PhaseFunction::Isotropic,
@@ -1222,7 +1223,7 @@ mod tests {
         ),
         (
             0.999999999999,
-            1.5707963267948966,
+            std::f64::consts::FRAC_PI_2,
             2.0710219962850597e-13,
             0.9999999999997929,
         ),
@@ -1243,7 +1244,7 @@ mod tests {
         (-0.999999999999, 0.001, 1.0, 6.249862390282821e-20),
         (
             -0.999999999999,
-            1.5707963267948966,
+            std::f64::consts::FRAC_PI_2,
             0.9999999999997929,
             2.0710219962850592e-13,
         ),
@@ -1264,7 +1265,7 @@ mod tests {
         (0.99999999, 0.001, 9.995000566339156e-06, 0.9999900049994337),
         (
             0.99999999,
-            1.5707963267948966,
+            std::f64::consts::FRAC_PI_2,
             2.071067842982771e-09,
             0.9999999979289321,
         ),
@@ -1275,7 +1276,7 @@ mod tests {
         (-0.99999999, 0.001, 0.9999999999999993, 6.25000074494649e-16),
         (
             -0.99999999,
-            1.5707963267948966,
+            std::f64::consts::FRAC_PI_2,
             0.9999999979289321,
             2.0710678429827705e-09,
         ),
@@ -1296,7 +1297,7 @@ mod tests {
         (0.9999, 0.001, 0.09946362034819116, 0.9005363796518089),
         (
             0.9999,
-            1.5707963267948966,
+            std::f64::consts::FRAC_PI_2,
             2.0712749305185805e-05,
             0.9999792872506948,
         ),
