@@ -968,20 +968,6 @@ fn non_finite_in(why: &str, files: &[&str]) -> bool {
 
 const KNOWN: &[Known] = &[
     Known {
-        command: "dial",
-        id: "F8",
-        what: "--class refused without naming the option",
-        matches: |why, _| why.contains("unknown latitude class"),
-        always: true,
-    },
-    Known {
-        command: "select-lines",
-        id: "F8",
-        what: "--class refused without naming the option",
-        matches: |why, _| why.contains("unknown latitude class"),
-        always: true,
-    },
-    Known {
         command: "merge",
         id: "F11",
         what: "a damaged scene inside a shard blamed on the scene",
@@ -2435,7 +2421,6 @@ mod findings {
     }
 
     #[test]
-    #[ignore = "issue 37: F8 --class refused without naming the option"]
     fn f8_class_is_named() {
         let dir = tempfile::tempdir().unwrap();
         let ran = run_in(
@@ -2472,7 +2457,6 @@ mod findings {
     }
 
     #[test]
-    #[ignore = "issue 37: F9 dial --threads 1000 takes 27 s for 2 profiles"]
     fn f9_threads_beyond_the_work_cost_nothing() {
         let dir = tempfile::tempdir().unwrap();
         let ran = run_in(

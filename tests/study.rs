@@ -795,8 +795,8 @@ fn set_with_failures(dir: &Path, keep_good: bool) -> std::path::PathBuf {
 /// Issue 37, item 5: failures that say so. Of four profiles, two supersaturated and one too
 /// short: exit 0, each reason said once with its count and first profile (not a line per
 /// profile), failed.csv lists the three, and the statistics are of the one left. With the
-/// fourth supersaturated too, every profile has failed: exit 2, one line on stderr with the
-/// counts by reason, and nothing written (an earlier study's files in the directory stay as
+/// fourth supersaturated too, every profile has failed: exit 2, one line on stderr naming the
+/// set and the scene, with the counts by reason, and nothing written (an earlier study's files in the directory stay as
 /// they were).
 #[test]
 fn a_study_whose_profiles_fail_says_so() {
@@ -876,8 +876,9 @@ fn a_study_whose_profiles_fail_says_so() {
     assert_eq!(stderr.lines().count(), 1, "{stderr}");
     assert!(
         stderr.starts_with(&format!(
-            "lidarsim: error: every profile of {} failed (4 of 4): 3 profiles: supersaturated: relative humidity ",
-            none.display()
+            "lidarsim: error: every profile of {} through the scene {} failed (4 of 4): 3 profiles: supersaturated: relative humidity ",
+            none.display(),
+            scene_path.display()
         )) && stderr.contains(" (profile mid-0001 and 2 more); 1 profile: ")
             && stderr.trim_end().ends_with(" (profile mid-0002); nothing was written"),
         "{stderr}"
