@@ -125,3 +125,31 @@ pub fn netcdf_history() -> String {
         command.join(" ")
     )
 }
+
+#[cfg(test)]
+mod study_thread_tests {
+    use super::*;
+
+    /// `--threads 0` is every core; more than the cores is capped at them; fewer are kept.
+    #[test]
+    fn a_study_runs_on_at_most_the_cores() {
+        assert_eq!(study_threads(0, 8), 8);
+        assert_eq!(study_threads(3, 8), 3);
+        assert_eq!(study_threads(1000, 2), 2);
+        assert_eq!(study_threads(1024, 64), 64);
+        // An unknown core count is one.
+        assert_eq!(study_threads(0, 0), 1);
+        assert_eq!(study_threads(4, 0), 1);
+    }
+
+    #[test]
+    fn a_latitude_class_is_refused_with_the_names_known() {
+        for c in ["tropical", "mid", "high", "all"] {
+            assert_eq!(latitude_class(c).as_deref(), Ok(c));
+        }
+        assert_eq!(
+            latitude_class("a"),
+            Err("a: unknown latitude class (known: tropical, mid, high, all)".to_string())
+        );
+    }
+}

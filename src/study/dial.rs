@@ -1197,9 +1197,8 @@ pub fn summarise(outcomes: &[ProfileOutcome]) -> Vec<Summary> {
             // photons a window may hold none), so that every budget row and the total are
             // over the same profiles.
             let defined: Vec<&Record> = recs.iter().copied().filter(|r| r.is_defined()).collect();
-            let col = |f: &dyn Fn(&Record) -> f64| -> Vec<f64> {
-                defined.iter().map(|r| f(r)).collect()
-            };
+            let col =
+                |f: &dyn Fn(&Record) -> f64| -> Vec<f64> { defined.iter().map(|r| f(r)).collect() };
             let (bias_ppm, sd_ppm) = mean_sd(&col(&|r| r.error_ppm()));
             // The noisy statistics over those whose noisy measurement was retrieved too (a
             // far DIAL cell from space often has no positive noisy signal).

@@ -143,7 +143,10 @@ impl StudyHeader for DialShardHeader {
         let Ok(records) = &o.records else {
             return Ok(());
         };
-        match records.iter().find(|r| self.photons == 0 && !r.is_defined()) {
+        match records
+            .iter()
+            .find(|r| self.photons == 0 && !r.is_defined())
+        {
             Some(r) => Err(format!(
                 "profile {}, {} {} {}–{} m: a noise-free value is not a finite number, which the analytic lidar equation (photons 0) never gives",
                 o.id,
