@@ -959,20 +959,6 @@ struct Known {
 
 const KNOWN: &[Known] = &[
     Known {
-        command: "dial",
-        id: "F8",
-        what: "--class refused without naming the option",
-        matches: |why, _| why.contains("unknown latitude class"),
-        always: true,
-    },
-    Known {
-        command: "select-lines",
-        id: "F8",
-        what: "--class refused without naming the option",
-        matches: |why, _| why.contains("unknown latitude class"),
-        always: true,
-    },
-    Known {
         command: "mie",
         id: "F6",
         what: "distribution errors name the library's fields, not the options",
@@ -2414,7 +2400,6 @@ mod findings {
     }
 
     #[test]
-    #[ignore = "issue 37: F8 --class refused without naming the option"]
     fn f8_class_is_named() {
         let dir = tempfile::tempdir().unwrap();
         let ran = run_in(
@@ -2451,7 +2436,6 @@ mod findings {
     }
 
     #[test]
-    #[ignore = "issue 37: F9 dial --threads 1000 takes 27 s for 2 profiles"]
     fn f9_threads_beyond_the_work_cost_nothing() {
         let dir = tempfile::tempdir().unwrap();
         let ran = run_in(

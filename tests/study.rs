@@ -795,8 +795,8 @@ fn set_with_failures(dir: &Path, keep_good: bool) -> std::path::PathBuf {
 /// Issue 37, item 5: failures that say so. Of four profiles, two supersaturated and one too
 /// short: exit 0, each reason said once with its count and first profile (not a line per
 /// profile), failed.csv lists the three, and the statistics are of the one left. With the
-/// fourth supersaturated too, every profile has failed: exit 2, one line on stderr with the
-/// counts by reason, and nothing written (an earlier study's files in the directory stay as
+/// fourth supersaturated too, every profile has failed: exit 2, one line on stderr naming the
+/// set and the scene, with the counts by reason, and nothing written (an earlier study's files in the directory stay as
 /// they were).
 #[test]
 fn a_study_whose_profiles_fail_says_so() {
@@ -876,12 +876,132 @@ fn a_study_whose_profiles_fail_says_so() {
     assert_eq!(stderr.lines().count(), 1, "{stderr}");
     assert!(
         stderr.starts_with(&format!(
-            "lidarsim: error: every profile of {} failed (4 of 4): 3 profiles: supersaturated: relative humidity ",
-            none.display()
+            "lidarsim: error: every profile of {} through the scene {} failed (4 of 4): 3 profiles: supersaturated: relative humidity ",
+            none.display(),
+            scene_path.display()
         )) && stderr.contains(" (profile mid-0001 and 2 more); 1 profile: ")
             && stderr.trim_end().ends_with(" (profile mid-0002); nothing was written"),
         "{stderr}"
     );
     assert_eq!(std::fs::read(out.join("summary.csv")).unwrap(), before);
     assert_eq!(names(&out), listed);
+}
+
+/// Issue 37: a Monte Carlo study with few photons (`airborne_co2_dial.toml`, a cloud, 200
+/// photons per profile) leaves most DIAL cells without energy in a window, where the noise-free
+/// retrieval has no logarithm. Such values are empty fields, not failed profiles (every profile
+/// failed with "retrieved_ppm … is NaN" before): exit 0, no `NaN` or `inf` in any file, and
+/// summary.csv's noise-free statistics over the `retrieved_profiles` whose record is whole,
+/// checked against the same counts and means computed here from profiles.csv. Shards merge to
+/// the same files (a merge accepts the undefined values of a Monte Carlo shard).
+#[test]
+fn a_monte_carlo_study_without_energy_in_a_window_writes_empty_fields() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let scene = crate::util::project_root().join("scenes/airborne_co2_dial.toml");
+    let dial = |extra: &[&str], out: &Path| {
+        let mut args: Vec<std::ffi::OsString> = vec![
+            "dial".into(),
+            scene.clone().into(),
+            "--ensemble".into(),
+            "2".into(),
+            "--class".into(),
+            "mid".into(),
+            "--photons".into(),
+            "200".into(),
+            "--threads".into(),
+            "1".into(),
+            "--out".into(),
+            out.into(),
+        ];
+        args.extend(extra.iter().map(Into::into));
+        lidarsim_ok(args)
+    };
+    let out = d.join("study");
+    dial(&["--no-plots"], &out);
+    crate::output::assert_no_non_finite(&out);
+    let (_, failed) = read_csv(&out.join("failed.csv"));
+    assert!(failed.is_empty(), "{failed:?}");
+    let (ph, profiles) = read_csv(&out.join("profiles.csv"));
+    let pc = |name: &str| ph.iter().position(|h| h == name).unwrap();
+    let (sh, summary) = read_csv(&out.join("summary.csv"));
+    let sc = |name: &str| sh.iter().position(|h| h == name).unwrap();
+    let num = |s: &str| -> f64 { s.parse().unwrap() };
+    // A record is whole when its noise-free retrieval and every budget row are there (the
+    // columns from retrieved_ppm on).
+    let whole = |r: &Vec<String>| {
+        r[pc("retrieved_ppm")..].iter().enumerate().all(|(i, f)| {
+            // The noisy pair may be empty alone.
+            let c = pc("retrieved_ppm") + i;
+            c == pc("retrieved_noisy_ppm") || c == pc("error_noisy_ppm") || !f.is_empty()
+        })
+    };
+    let (mut partial, mut empty) = (0, 0);
+    for row in &summary {
+        let members: Vec<&Vec<String>> = profiles
+            .iter()
+            .filter(|r| {
+                r[pc("method")] == row[sc("method")]
+                    && r[pc("altitude_bottom_m")] == row[sc("altitude_bottom_m")]
+            })
+            .collect();
+        assert_eq!(num(&row[sc("profiles")]) as usize, members.len(), "{row:?}");
+        // The truth is always there.
+        assert!(members.iter().all(|r| !r[pc("truth_ppm")].is_empty()));
+        let defined: Vec<&&Vec<String>> = members.iter().filter(|r| whole(r)).collect();
+        let n = defined.len();
+        assert_eq!(num(&row[sc("retrieved_profiles")]) as usize, n, "{row:?}");
+        let noisy = defined
+            .iter()
+            .filter(|r| !r[pc("retrieved_noisy_ppm")].is_empty())
+            .count();
+        assert_eq!(num(&row[sc("noisy_profiles")]) as usize, noisy, "{row:?}");
+        if n == 0 {
+            empty += 1;
+            for c in [
+                "bias_ppm",
+                "sd_ppm",
+                "random_error_rms_ppm",
+                "total_budget_ppm",
+            ] {
+                assert!(row[sc(c)].is_empty(), "{c}: {row:?}");
+            }
+        } else {
+            if n < members.len() {
+                partial += 1;
+            }
+            let bias = defined
+                .iter()
+                .map(|r| num(&r[pc("error_ppm")]))
+                .sum::<f64>()
+                / n as f64;
+            let b = num(&row[sc("bias_ppm")]);
+            assert!((b - bias).abs() <= 1e-9 * bias.abs().max(1.0), "{b} {bias}");
+        }
+    }
+    // The case is the one meant: the column is retrieved, far cells are not, one cell partly.
+    assert_eq!(summary[0][sc("method")], "ipda");
+    assert_eq!(summary[0][sc("retrieved_profiles")], "2");
+    assert!(empty > 0 && partial > 0, "{empty} {partial}");
+
+    // Two shards, merged: the same files.
+    let shards = d.join("shards");
+    for i in 0..2 {
+        dial(&["--shard", &format!("{i}/2")], &shards);
+    }
+    let merged = d.join("merged");
+    lidarsim_ok([
+        "merge".as_ref(),
+        shards.as_os_str(),
+        "--no-plots".as_ref(),
+        "--out".as_ref(),
+        merged.as_os_str(),
+    ]);
+    for f in ["profiles.csv", "summary.csv", "budget.csv", "failed.csv"] {
+        assert_eq!(
+            std::fs::read(out.join(f)).unwrap(),
+            std::fs::read(merged.join(f)).unwrap(),
+            "{f}"
+        );
+    }
 }

@@ -41,7 +41,7 @@ pub struct Args {
     #[arg(long)]
     pub seed: Option<u64>,
     /// Latitude class to run: tropical, mid, high or all.
-    #[arg(long, default_value = "all")]
+    #[arg(long, default_value = "all", value_parser = super::latitude_class)]
     pub class: String,
     /// On-lines (scene channel names, comma-separated), each paired with the retrieval's
     /// off-line; default the retrieval's own on-line.
@@ -51,7 +51,7 @@ pub struct Args {
     /// lidar equation. Default with particle layers: the scene's `simulation.photons`.
     #[arg(long, allow_negative_numbers = true, value_parser = super::count(0, lidarsim::limits::MAX_PHOTONS))]
     pub photons: Option<u64>,
-    /// Worker threads, 0 for all cores.
+    /// Worker threads, 0 for all cores; at most the cores available.
     #[arg(long, default_value_t = 0, allow_negative_numbers = true, value_parser = super::threads())]
     pub threads: usize,
     /// Budget: temperature knowledge error [K].
@@ -111,10 +111,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // Before the work: a study must not fail at its end on a name it could have refused now.
     output::check_paths(&out_files)?;
     let inputs = study_inputs(&args)?;
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(args.threads)
-        .build()
-        .with_context(|| format!("cannot start {} threads", args.threads))?;
+    let pool = super::study_pool(args.threads)?;
     if let Some(spec) = args.shard {
         let n = spec.batches(inputs.set.len()).len();
         return super::merge::study_shard(spec, n, "dial shard", &pool, |tick| {
@@ -236,10 +233,12 @@ pub fn write_outputs(
     let failures = failure_groups(&result.outcomes);
     if !result.outcomes.is_empty() && result.outcomes.iter().all(|o| o.records.is_err()) {
         // Nothing to report: no file is written as if the study had succeeded.
+        // The profiles and the scene they ran through: either may be the cause.
         let of = match &inputs.source {
             ProfileSource::Set(p) => p.display().to_string(),
             ProfileSource::Ensemble(_) => format!("the ensemble ({})", set.name),
         };
+        let of = format!("{of} through the scene {}", scene.path.display());
         bail!("{}", study::all_failed_message(&of, &failures));
     }
     let summaries = dial::summarise(&result.outcomes);
@@ -332,7 +331,7 @@ fn profiles_csv(result: &StudyResult) -> String {
 }
 
 /// Header of `summary.csv`, one row per class (and `all`), pair and retrieved quantity.
-pub const SUMMARY_HEADER: &str = "class,pair,method,altitude_bottom_m,altitude_top_m,profiles,noisy_profiles,truth_mean_ppm,bias_ppm,sd_ppm,noisy_bias_ppm,noisy_sd_ppm,random_error_rms_ppm,noise_ratio,total_budget_ppm";
+pub const SUMMARY_HEADER: &str = "class,pair,method,altitude_bottom_m,altitude_top_m,profiles,retrieved_profiles,noisy_profiles,truth_mean_ppm,bias_ppm,sd_ppm,noisy_bias_ppm,noisy_sd_ppm,random_error_rms_ppm,noise_ratio,total_budget_ppm";
 
 fn summary_csv(summaries: &[Summary]) -> String {
     let mut s = String::from(SUMMARY_HEADER);
@@ -340,13 +339,14 @@ fn summary_csv(summaries: &[Summary]) -> String {
     for m in summaries {
         let _ = writeln!(
             s,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
             csv_field(&m.class),
             csv_field(&m.pair),
             m.method.label(),
             num(m.altitude_m.0),
             num(m.altitude_m.1),
             m.profiles,
+            m.retrieved_profiles,
             m.noisy_profiles,
             num(m.truth_mean_ppm),
             num(m.bias_ppm),

@@ -50,7 +50,7 @@ pub struct Args {
     seed: u64,
     /// Latitude class of --profiles or --ensemble: high, mid, tropical, or all (one group per
     /// class).
-    #[arg(long, default_value = "all")]
+    #[arg(long, default_value = "all", value_parser = super::latitude_class)]
     class: String,
     /// With --profiles: also one row per profile id (atmosphere = the id).
     #[arg(long)]
@@ -114,7 +114,7 @@ pub struct Args {
     /// Do not draw figures.
     #[arg(long)]
     no_plots: bool,
-    /// Worker threads, 0 for all cores.
+    /// Worker threads, 0 for all cores; at most the cores available.
     #[arg(long, default_value_t = 0, allow_negative_numbers = true, value_parser = super::threads())]
     threads: usize,
     /// Study only shard I of N (0 ≤ I < N) of the profiles and write their results raw to
@@ -146,10 +146,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     };
     output::check_paths(&out_files)?;
     print_setup(&study)?;
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(a.threads)
-        .build()
-        .with_context(|| format!("cannot start {} threads", a.threads))?;
+    let pool = super::study_pool(a.threads)?;
     if let Some(spec) = a.shard {
         let n = spec.batches(study.len()).len();
         return super::merge::study_shard(spec, n, "select-lines shard", &pool, |tick| {

@@ -258,7 +258,10 @@ pub struct Record {
     /// The profile's own value.
     pub truth_ppm: f64,
     /// Retrieved from the noise-free signals with the class-mean virtual σ (the study's
-    /// retrieval).
+    /// retrieval). With Monte Carlo returns (`photons` > 0) NaN where it cannot be retrieved
+    /// (a window of the photons' signal holds no energy: its logarithm is undefined), as are
+    /// then `retrieved_own_ppm` and the budget rows that need it ([`Record::is_defined`]);
+    /// from the analytic lidar equation always finite, or the profile fails.
     pub retrieved_ppm: f64,
     /// The same from one noisy averaged measurement; NaN when it cannot be retrieved (the
     /// noisy signal of a window is not positive: its logarithm is undefined), written as an
@@ -279,6 +282,15 @@ impl Record {
     /// Retrieved − truth with noise.
     pub fn error_noisy_ppm(&self) -> f64 {
         self.retrieved_noisy_ppm - self.truth_ppm
+    }
+    /// Whether every noise-free value (retrieved, own-reference retrieval, every budget row)
+    /// is defined: always from the analytic lidar equation; from Monte Carlo returns not where
+    /// a window of the photons' signal holds no energy. Only such records enter the noise-free
+    /// statistics ([`Summary::retrieved_profiles`]).
+    pub fn is_defined(&self) -> bool {
+        self.retrieved_ppm.is_finite()
+            && self.retrieved_own_ppm.is_finite()
+            && self.budget_ppm.iter().all(|v| v.is_finite())
     }
 }
 
@@ -872,7 +884,7 @@ impl Study<'_> {
             let exact = exact_p.as_ref().map(|e| e[p].as_slice());
             records.extend(pair_records(&paper[p], &own_p[p], exact, &know_p, &las_p));
         }
-        check_records(&records)?;
+        check_records(&mut records, self.options.photons > 0)?;
         Ok(records)
     }
 }
@@ -892,11 +904,28 @@ fn check_dry_air(p: &Profile, factor: f64) -> Result<(), String> {
     }
 }
 
-/// Every value of a profile's records but the noisy one (NaN where it cannot be retrieved)
-/// is finite, or the profile fails with the value named: no number a study reports as
-/// computed is NaN or infinite.
-fn check_records(records: &[Record]) -> Result<(), String> {
-    for r in records {
+/// Which values of a profile's records must be defined, and what an undefined one is written
+/// as: the truth always (it is the profile's own column); the noise-free retrievals and the
+/// budget rows when the returns are analytic (`monte_carlo` false: a noise-free lidar
+/// equation has energy in every window, so a value that is not finite is a failure, and the
+/// profile fails with it named). From Monte Carlo returns, as from one noisy measurement, a
+/// window may hold no energy (a few photons, a far cell behind a cloud): the retrieval has no
+/// logarithm there, and the value is honestly undefined, set to NaN (an infinity too: a ratio
+/// over no energy), written as an empty field and left out of the statistics with its count
+/// ([`Summary::retrieved_profiles`], [`Summary::noisy_profiles`]).
+fn check_records(records: &mut [Record], monte_carlo: bool) -> Result<(), String> {
+    let undefined = |v: &mut f64| {
+        if !v.is_finite() {
+            *v = f64::NAN;
+        }
+    };
+    for r in records.iter_mut() {
+        undefined(&mut r.retrieved_noisy_ppm);
+        if monte_carlo {
+            undefined(&mut r.retrieved_ppm);
+            undefined(&mut r.retrieved_own_ppm);
+            r.budget_ppm.iter_mut().for_each(undefined);
+        }
         let values = [
             ("truth_ppm", r.truth_ppm),
             ("retrieved_ppm", r.retrieved_ppm),
@@ -906,10 +935,11 @@ fn check_records(records: &[Record]) -> Result<(), String> {
             .iter()
             .zip(&r.budget_ppm)
             .map(|(s, v)| (s.column(), *v));
+        let must = |name: &str| !monte_carlo || name == "truth_ppm";
         if let Some((name, v)) = values
             .into_iter()
             .chain(budget)
-            .find(|(_, v)| !v.is_finite())
+            .find(|(name, v)| must(name) && !v.is_finite())
         {
             return Err(format!(
                 "{name} of {} {} {:.0}–{:.0} m is {v}: it cannot be computed",
@@ -1080,13 +1110,19 @@ pub struct Summary {
     pub altitude_m: (f64, f64),
     /// Profiles in the group (failed ones excluded).
     pub profiles: usize,
-    /// Of those, the profiles whose noisy measurement could be retrieved: the members of
+    /// Of those, the profiles whose noise-free values could all be computed
+    /// ([`Record::is_defined`]): the members of `bias_ppm`, `sd_ppm`, the budget rows and
+    /// `total_ppm`. `profiles` from the analytic lidar equation; from Monte Carlo returns the
+    /// profiles with energy in the quantity's windows.
+    pub retrieved_profiles: usize,
+    /// Of those, the profiles whose noisy measurement could be retrieved too: the members of
     /// `noisy_bias_ppm`, `noisy_sd_ppm` and `noise_ratio`.
     pub noisy_profiles: usize,
     /// Mean truth \[ppm\].
     pub truth_mean_ppm: f64,
-    /// Mean and standard deviation of retrieved − truth, noise-free \[ppm\] (the standard
-    /// deviation NaN, an empty field, for one profile).
+    /// Mean and standard deviation of retrieved − truth, noise-free, over the
+    /// `retrieved_profiles` \[ppm\] (NaN, an empty field, for none; the standard deviation
+    /// also for one).
     pub bias_ppm: f64,
     /// See `bias_ppm`.
     pub sd_ppm: f64,
@@ -1156,10 +1192,17 @@ pub fn summarise(outcomes: &[ProfileOutcome]) -> Vec<Summary> {
             let col =
                 |f: &dyn Fn(&Record) -> f64| -> Vec<f64> { recs.iter().map(|r| f(r)).collect() };
             let (truth_mean_ppm, _) = mean_sd(&col(&|r| r.truth_ppm));
+            // The noise-free statistics over the profiles whose noise-free values are all
+            // defined (always from the analytic lidar equation; from a Monte Carlo with few
+            // photons a window may hold none), so that every budget row and the total are
+            // over the same profiles.
+            let defined: Vec<&Record> = recs.iter().copied().filter(|r| r.is_defined()).collect();
+            let col =
+                |f: &dyn Fn(&Record) -> f64| -> Vec<f64> { defined.iter().map(|r| f(r)).collect() };
             let (bias_ppm, sd_ppm) = mean_sd(&col(&|r| r.error_ppm()));
-            // The noisy statistics over the profiles whose noisy measurement was retrieved
-            // (a far DIAL cell from space often has no positive noisy signal).
-            let noisy: Vec<&Record> = recs
+            // The noisy statistics over those whose noisy measurement was retrieved too (a
+            // far DIAL cell from space often has no positive noisy signal).
+            let noisy: Vec<&Record> = defined
                 .iter()
                 .copied()
                 .filter(|r| r.retrieved_noisy_ppm.is_finite())
@@ -1180,14 +1223,15 @@ pub fn summarise(outcomes: &[ProfileOutcome]) -> Vec<Summary> {
                 if j == 0 {
                     let rms = rms(&v);
                     *s = SourceStats {
-                        bias_ppm: 0.0,
+                        bias_ppm: if v.is_empty() { f64::NAN } else { 0.0 },
                         sd_ppm: rms,
                         rms_ppm: rms,
                         share: 0.0,
                     };
                 } else {
                     let (m, sd) = mean_sd(&v);
-                    let sd = if sd.is_nan() { 0.0 } else { sd };
+                    // One profile: no spread (none: nothing, NaN, empty fields).
+                    let sd = if v.len() == 1 { 0.0 } else { sd };
                     *s = SourceStats {
                         bias_ppm: m,
                         sd_ppm: sd,
@@ -1200,6 +1244,8 @@ pub fn summarise(outcomes: &[ProfileOutcome]) -> Vec<Summary> {
             for s in &mut sources {
                 s.share = if total2 > 0.0 {
                     s.rms_ppm * s.rms_ppm / total2
+                } else if defined.is_empty() {
+                    f64::NAN
                 } else {
                     0.0
                 };
@@ -1210,6 +1256,7 @@ pub fn summarise(outcomes: &[ProfileOutcome]) -> Vec<Summary> {
                 method: r0.method,
                 altitude_m: r0.altitude_m,
                 profiles: recs.len(),
+                retrieved_profiles: defined.len(),
                 noisy_profiles: noisy.len(),
                 truth_mean_ppm,
                 bias_ppm,
@@ -1368,8 +1415,14 @@ pub fn summary_netcdf(
             |m| m.profiles as f64,
         ),
         num(
+            "retrieved_profiles",
+            "profiles whose noise-free values could all be computed (the members of bias_ppm, sd_ppm and the budget; fewer than profiles only from Monte Carlo returns with windows that hold no energy)",
+            "1",
+            |m| m.retrieved_profiles as f64,
+        ),
+        num(
             "noisy_profiles",
-            "profiles whose noisy measurement could be retrieved (the members of noisy_bias_ppm, noisy_sd_ppm and noise_ratio)",
+            "of the retrieved_profiles, those whose noisy measurement could be retrieved (the members of noisy_bias_ppm, noisy_sd_ppm and noise_ratio)",
             "1",
             |m| m.noisy_profiles as f64,
         ),

@@ -136,6 +136,28 @@ impl StudyHeader for DialShardHeader {
         ];
         (names.into_iter().zip(self.timing_s).collect(), self.threads)
     }
+
+    /// From the analytic lidar equation (photons 0) every noise-free value is defined: a
+    /// NaN there is one the study cannot have made (`dial::check_records`).
+    fn check_outcome(&self, o: &ProfileOutcome) -> Result<(), String> {
+        let Ok(records) = &o.records else {
+            return Ok(());
+        };
+        match records
+            .iter()
+            .find(|r| self.photons == 0 && !r.is_defined())
+        {
+            Some(r) => Err(format!(
+                "profile {}, {} {} {}–{} m: a noise-free value is not a finite number, which the analytic lidar equation (photons 0) never gives",
+                o.id,
+                r.pair,
+                r.method.label(),
+                r.altitude_m.0,
+                r.altitude_m.1
+            )),
+            None => Ok(()),
+        }
+    }
 }
 
 impl DialShardHeader {
@@ -434,6 +456,11 @@ pub trait StudyHeader: DeserializeOwned {
     /// The times it records, named \[s\], and the threads it ran on: checked on reading
     /// ([`shard::check_wall_and_threads`]).
     fn times(&self) -> (Vec<(&'static str, f64)>, u64);
+    /// Checks of one outcome that need the header ([`ReadOutcome::check`] has done the
+    /// others): none but a dial shard's.
+    fn check_outcome(&self, _outcome: &Self::Outcome) -> Result<(), String> {
+        Ok(())
+    }
 }
 
 /// The outcome of one profile as a study shard's body holds it.
@@ -450,8 +477,9 @@ impl ReadOutcome for ProfileOutcome {
         read_outcome(body)
     }
 
-    /// Every value of a record finite but the noisy one (NaN where it could not be retrieved,
-    /// never infinite), the truth a mixing ratio in (0, 10⁶] ppm, the random error ≥ 0.
+    /// The altitudes and the truth finite, the truth a mixing ratio in (0, 10⁶] ppm; every
+    /// other value finite or NaN (undefined: a noisy measurement, or with Monte Carlo returns
+    /// a window without energy, `dial::check_records`), never infinite; the random error ≥ 0.
     fn check(&self) -> Result<(), String> {
         let Ok(records) = &self.records else {
             return Ok(());
@@ -471,27 +499,30 @@ impl ReadOutcome for ProfileOutcome {
                 ("altitude_bottom_m", r.altitude_m.0),
                 ("altitude_top_m", r.altitude_m.1),
                 ("truth_ppm", r.truth_ppm),
+            ];
+            let undefined_or_finite = [
                 ("retrieved_ppm", r.retrieved_ppm),
+                ("retrieved_noisy_ppm", r.retrieved_noisy_ppm),
                 ("retrieved_own_profile_ppm", r.retrieved_own_ppm),
             ];
             let budget = crate::study::dial::Source::ALL
                 .iter()
                 .zip(&r.budget_ppm)
                 .map(|(s, v)| (s.column(), *v));
-            for (name, v) in finite.into_iter().chain(budget) {
-                if !v.is_finite() {
-                    return Err(format!(
-                        "{}: {name} is {}: not a finite number",
-                        at(),
-                        shard::number(v)
-                    ));
-                }
-            }
-            if r.retrieved_noisy_ppm.is_infinite() {
+            let bad = finite
+                .into_iter()
+                .find(|(_, v)| !v.is_finite())
+                .or_else(|| {
+                    undefined_or_finite
+                        .into_iter()
+                        .chain(budget)
+                        .find(|(_, v)| v.is_infinite())
+                });
+            if let Some((name, v)) = bad {
                 return Err(format!(
-                    "{}: retrieved_noisy_ppm is {}: not a finite number",
+                    "{}: {name} is {}: not a finite number",
                     at(),
-                    r.retrieved_noisy_ppm
+                    shard::number(v)
                 ));
             }
             if !(r.truth_ppm > 0.0 && r.truth_ppm <= 1e6) {
@@ -579,7 +610,9 @@ impl<H: StudyHeader> StudyShardFile<H> {
         let mut outcomes = Vec::with_capacity(range.len().min(1 << 20));
         for _ in range {
             let o = H::Outcome::read(&mut body).map_err(&bad)?;
-            o.check().map_err(&bad)?;
+            o.check()
+                .and_then(|()| header.check_outcome(&o))
+                .map_err(&bad)?;
             outcomes.push(o);
         }
         if body.left() != 0 {
