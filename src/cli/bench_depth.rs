@@ -145,37 +145,58 @@ pub fn write_reference(path: &Path, cells: &[Cell], photons: u64) -> anyhow::Res
     Ok(())
 }
 
-/// Read a reference written by [`write_reference`]: its cells and photon count.
+/// Read a reference written by [`write_reference`]: its cells and photon count. Every refusal
+/// names the file, the line and the column.
 pub fn read_reference(path: &Path) -> anyhow::Result<(Vec<Cell>, u64)> {
     let text = std::fs::read_to_string(path).with_context(|| format!("{}", path.display()))?;
+    let columns: Vec<&str> = HEADER.split(',').collect();
     let mut out = Vec::new();
     let mut photons = 0;
     for (i, line) in text.lines().enumerate() {
         if line.starts_with('#') || line.starts_with("fov") || line.trim().is_empty() {
             continue;
         }
+        let at = format!("{}:{}", path.display(), i + 1);
         let f: Vec<&str> = line.split(',').collect();
+        anyhow::ensure!(
+            f.len() == columns.len(),
+            "{at}: {} fields, expected {} ({HEADER})",
+            f.len(),
+            columns.len()
+        );
         let num = |j: usize| -> anyhow::Result<f64> {
-            f.get(j)
-                .and_then(|v| v.trim().parse::<f64>().ok())
+            let v = f[j].trim();
+            v.parse::<f64>()
+                .ok()
                 .filter(|v| v.is_finite())
-                .with_context(|| {
-                    format!(
-                        "{}:{}: column {} is not a finite number",
-                        path.display(),
-                        i + 1,
-                        j + 1
-                    )
-                })
+                .with_context(|| format!("{at}: {} `{v}` is not a finite number", columns[j]))
         };
-        photons = num(5)? as u64;
-        out.push(Cell {
+        // Photons ≥ 1 (a whole number), variances and energies ≥ 0, time per photon > 0: else a
+        // figure of merit or a standard error would be infinite or NaN.
+        let n = num(5)?;
+        anyhow::ensure!(
+            n >= 1.0 && n.fract() == 0.0 && n <= u64::MAX as f64,
+            "{at}: {} = {n} must be a whole number ≥ 1",
+            columns[5]
+        );
+        photons = n as u64;
+        let cell = Cell {
             fov_mrad: num(0)?,
             depth_m: num(1)?,
             mean_j: num(2)?,
             var_per_photon: num(3)?,
             s_per_photon: num(4)?,
-        });
+        };
+        for (j, v) in [(2, cell.mean_j), (3, cell.var_per_photon)] {
+            anyhow::ensure!(v >= 0.0, "{at}: {} = {v} must be ≥ 0", columns[j]);
+        }
+        anyhow::ensure!(
+            cell.s_per_photon > 0.0,
+            "{at}: {} = {} must be > 0",
+            columns[4],
+            cell.s_per_photon
+        );
+        out.push(cell);
     }
     anyhow::ensure!(!out.is_empty(), "{}: no cells", path.display());
     Ok((out, photons))
@@ -195,15 +216,33 @@ pub fn run(
     let mut scene = scene()?;
     scene.simulation.photons = photons;
     scene.simulation.seed = seed;
+    // The reference is read, and checked to hold every cell of the scan, before any work.
+    let reference = match reference {
+        Some(p) => {
+            let (cells, photons) = read_reference(p)?;
+            for (fov, (_, depth)) in FOVS_MRAD
+                .iter()
+                .flat_map(|f| gates(&scene).into_iter().map(move |g| (f, g)))
+            {
+                anyhow::ensure!(
+                    cells
+                        .iter()
+                        .any(|c| c.fov_mrad == *fov && c.depth_m == depth),
+                    "plain reference {} has no cell at {fov} mrad, {depth} m (write it with --write-plain)",
+                    p.display()
+                );
+            }
+            Some((cells, photons))
+        }
+        None => None,
+    };
     let atm = OpticalAtmosphere::build(&scene)?;
     let ours = fastest(&scene, &atm, threads, repeat, method)?;
     let plain_run = fastest(&scene, &atm, threads, repeat, plain)?;
     let mine = cells(&scene, &ours);
     let short = cells(&scene, &plain_run);
-    let (long, long_photons) = match reference {
-        Some(p) => read_reference(p)?,
-        None => (short.clone(), plain_run.photons),
-    };
+    let (long, long_photons) = reference.unwrap_or_else(|| (short.clone(), plain_run.photons));
+
     let mut csv = format!(
         "# C.1 multiple scattering (orders >= 2): lidarsim {} photons in {:.2} s and the plain local \
          estimate {} photons in {:.2} s on {} thread(s); plain variance from {} photons\n\
@@ -219,8 +258,10 @@ pub fn run(
         print!("  {f:>6} mrad");
     }
     println!();
+    // Over the cells where both estimates have a signal (the others print `—`).
     let mut worst = f64::INFINITY;
     let mut z2 = 0.0;
+    let mut n_z = 0usize;
     for (i, c) in mine.iter().enumerate() {
         let p = long
             .iter()
@@ -237,14 +278,19 @@ pub fn run(
             ..*p
         };
         let ratio = c.fom() / p.fom();
-        worst = worst.min(ratio);
+        if ratio.is_finite() {
+            worst = worst.min(ratio);
+        }
         let rel = (c.var_per_photon / ours.photons as f64).sqrt() / c.mean_j;
         // The two means' difference in combined standard errors (the long run's with its own
         // number of photons): no bias shows as z of order 1.
         let z = (c.mean_j - p.mean_j)
             / (c.var_per_photon / ours.photons as f64 + p.var_per_photon / long_photons as f64)
                 .sqrt();
-        z2 += z * z;
+        if z.is_finite() {
+            z2 += z * z;
+            n_z += 1;
+        }
         // A cell without signal has no error, FOM or z: empty fields, never `NaN` or `inf`.
         let n = lidarsim::output::csv_number;
         writeln!(
@@ -266,14 +312,33 @@ pub fn run(
     for d in 0..n_depth {
         print!("{:>7}", rows[d].0.depth_m);
         for f in 0..FOVS_MRAD.len() {
-            print!("  {:>11.1}", rows[f * n_depth + d].2);
+            let ratio = rows[f * n_depth + d].2;
+            if ratio.is_finite() {
+                print!("  {ratio:>11.1}");
+            } else {
+                print!("  {:>11}", "—");
+            }
         }
         println!();
     }
+    let no_signal = rows.iter().filter(|r| !r.2.is_finite()).count();
+    if no_signal > 0 {
+        println!(
+            "—: no signal in one of the estimates ({no_signal} cells; empty in fom_depth.csv)"
+        );
+    }
+    let least = if worst.is_finite() {
+        format!("{worst:.1}")
+    } else {
+        "— (no cell with a signal in both)".to_string()
+    };
+    let rms_z = if n_z > 0 {
+        format!("{:.2}", (z2 / n_z as f64).sqrt())
+    } else {
+        "—".to_string()
+    };
     println!(
-        "least ratio {worst:.1}; means against the plain estimate's: rms z {:.2} over {} cells",
-        (z2 / mine.len() as f64).sqrt(),
-        mine.len()
+        "least ratio {least}; means against the plain estimate's: rms z {rms_z} over {n_z} cells"
     );
     let mut files = OutputSet::new();
     files.write(out.join("fom_depth.csv"), csv)?;
@@ -403,7 +468,13 @@ pub fn scatter(
     for d in 0..n_depth {
         print!("{:>7}", runs[0][d].depth_m);
         for f in 0..FOVS_MRAD.len() {
-            print!("  {:>11.2}", ratios[f * n_depth + d]);
+            // A cell without signal in any run has no ratio: `—`, never NaN.
+            let ratio = ratios[f * n_depth + d];
+            if ratio.is_finite() {
+                print!("  {ratio:>11.2}");
+            } else {
+                print!("  {:>11}", "—");
+            }
         }
         println!();
     }
