@@ -77,8 +77,8 @@ pub struct Args {
     /// One OPAC component (dry): inso, waso, soot, ssam, sscm.
     #[arg(long)]
     opac_component: Option<String>,
-    /// Log-normal median (number mode) radius [um].
-    #[arg(long, allow_negative_numbers = true, value_parser = super::real(Bounds::positive(1e4)))]
+    /// Log-normal median (number mode) radius [um], in [1e-4, 1e4] ([`MEDIAN_RADIUS_UM`]).
+    #[arg(long, allow_negative_numbers = true, value_parser = super::real(MEDIAN_RADIUS_UM))]
     median_radius_um: Option<f64>,
     /// Log-normal geometric standard deviation (> 1).
     #[arg(long, allow_negative_numbers = true, value_parser = super::real(Bounds::above(1.0, 10.0)))]
@@ -122,6 +122,11 @@ pub struct Args {
     meta: Vec<String>,
 }
 
+/// Range of a log-normal median radius \[µm\]: 0.1 nm (a molecule) to 1 cm. The integration
+/// range is sought within 1e-7 … 1e7 µm; a median far below it (1e-301 µm) was refused as
+/// "r_max_um = 1e-7: the truncation range holds none of the distribution".
+const MEDIAN_RADIUS_UM: Bounds = Bounds::closed(1e-4, 1e4);
+
 /// `--refractive-index`'s value parser: [`parse_refractive_index`], with a hint when the value
 /// looks like the next option (the value was forgotten).
 fn refractive_index(text: &str) -> Result<Complex64, String> {
@@ -145,7 +150,7 @@ fn parse_mode(text: &str) -> anyhow::Result<SizeDistribution> {
     // The same ranges as --number-density-per-cm3, --median-radius-um and --sigma-g.
     let bounds = [
         ("N_per_cm3", Bounds::positive(1e10)),
-        ("r_g_um", Bounds::positive(1e4)),
+        ("r_g_um", MEDIAN_RADIUS_UM),
         ("sigma_g", Bounds::above(1.0, 10.0)),
     ];
     let v: Vec<f64> = parts
