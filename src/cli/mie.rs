@@ -258,7 +258,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             args.r_min_um.unwrap_or(0.0),
             args.r_max_um.unwrap_or(f64::INFINITY),
         );
-        if !(hi > lo) {
+        if hi <= lo {
             bail!("--r-max-um {hi} must exceed --r-min-um {lo}");
         }
         dist = dist.truncated(lo, hi)?;
