@@ -23,6 +23,14 @@ use lidarsim::transport::{self, McResult, TransportOptions};
 
 use super::plot::{FONT, draw_legend, init_font};
 
+/// `print!` that returns a closed stdout (`| head`) as an error instead of panicking.
+macro_rules! out {
+    ($($t:tt)*) => {{
+        use std::io::Write as _;
+        write!(std::io::stdout().lock(), $($t)*)?;
+    }};
+}
+
 /// Fields of view of the scan [mrad, full angle].
 pub const FOVS_MRAD: [f64; 5] = [0.5, 1.0, 2.0, 5.0, 10.0];
 /// Depths into the cloud of the first and last gate starts [m].
@@ -250,14 +258,14 @@ pub fn run(
         ours.photons, ours.wall_s, plain_run.photons, plain_run.wall_s, ours.threads, long_photons
     );
     let mut rows = Vec::new();
-    println!(
+    outln!(
         "C.1, orders ≥ 2: FOM ratio lidarsim / plain local estimate (plain variance from {long_photons} photons)"
     );
-    print!("depth_m");
+    out!("depth_m");
     for f in FOVS_MRAD {
-        print!("  {f:>6} mrad");
+        out!("  {f:>6} mrad");
     }
-    println!();
+    outln!();
     // Over the cells where both estimates have a signal (the others print `—`).
     let mut worst = f64::INFINITY;
     let mut z2 = 0.0;
@@ -310,22 +318,20 @@ pub fn run(
     }
     let n_depth = gates(&scene).len();
     for d in 0..n_depth {
-        print!("{:>7}", rows[d].0.depth_m);
+        out!("{:>7}", rows[d].0.depth_m);
         for f in 0..FOVS_MRAD.len() {
             let ratio = rows[f * n_depth + d].2;
             if ratio.is_finite() {
-                print!("  {ratio:>11.1}");
+                out!("  {ratio:>11.1}");
             } else {
-                print!("  {:>11}", "—");
+                out!("  {:>11}", "—");
             }
         }
-        println!();
+        outln!();
     }
     let no_signal = rows.iter().filter(|r| !r.2.is_finite()).count();
     if no_signal > 0 {
-        println!(
-            "—: no signal in one of the estimates ({no_signal} cells; empty in fom_depth.csv)"
-        );
+        outln!("—: no signal in one of the estimates ({no_signal} cells; empty in fom_depth.csv)");
     }
     let least = if worst.is_finite() {
         format!("{worst:.1}")
@@ -337,14 +343,14 @@ pub fn run(
     } else {
         "—".to_string()
     };
-    println!(
+    outln!(
         "least ratio {least}; means against the plain estimate's: rms z {rms_z} over {n_z} cells"
     );
     let mut files = OutputSet::new();
     files.write(out.join("fom_depth.csv"), csv)?;
     files.write_via(out.join("fom_depth.png"), |path| draw(path, &rows))?;
     files.commit()?;
-    println!("wrote {}", out.join("fom_depth.{csv,png}").display());
+    outln!("wrote {}", out.join("fom_depth.{csv,png}").display());
     Ok(())
 }
 
@@ -432,12 +438,12 @@ pub fn scatter(
          fov_full_angle_mrad,depth_m,mean_j,sd_of_means_j,rms_stderr_j,ratio\n",
         1.0 / (2.0 * (k - 1.0)).sqrt()
     );
-    println!("scatter of {seeds} runs' means / their standard errors (orders ≥ 2)");
-    print!("depth_m");
+    outln!("scatter of {seeds} runs' means / their standard errors (orders ≥ 2)");
+    out!("depth_m");
     for f in FOVS_MRAD {
-        print!("  {f:>6} mrad");
+        out!("  {f:>6} mrad");
     }
-    println!();
+    outln!();
     let n_cells = runs[0].len();
     let mut ratios = vec![0.0; n_cells];
     for (i, ratio) in ratios.iter_mut().enumerate() {
@@ -466,17 +472,17 @@ pub fn scatter(
     }
     let n_depth = n_cells / FOVS_MRAD.len();
     for d in 0..n_depth {
-        print!("{:>7}", runs[0][d].depth_m);
+        out!("{:>7}", runs[0][d].depth_m);
         for f in 0..FOVS_MRAD.len() {
             // A cell without signal in any run has no ratio: `—`, never NaN.
             let ratio = ratios[f * n_depth + d];
             if ratio.is_finite() {
-                print!("  {ratio:>11.2}");
+                out!("  {ratio:>11.2}");
             } else {
-                print!("  {:>11}", "—");
+                out!("  {:>11}", "—");
             }
         }
-        println!();
+        outln!();
     }
     let mut files = OutputSet::new();
     files.write(out.join("scatter.csv"), csv)?;
@@ -557,7 +563,7 @@ pub fn ladder(
         draw_ladder(path, &series)
     })?;
     files.commit()?;
-    println!("wrote {}", out.join("error_time.{csv,png}").display());
+    outln!("wrote {}", out.join("error_time.{csv,png}").display());
     Ok(())
 }
 
