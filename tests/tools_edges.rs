@@ -168,3 +168,46 @@ fn mie_distribution_without_contrast_ends() {
     let (a, b) = (cext("1.00001"), cext("1.0001"));
     assert!((b / a / 100.0 - 1.0).abs() < 0.01, "{a} {b}");
 }
+
+/// F16 in a scene: a particle layer without index contrast is refused at its file and line,
+/// naming the refractive index, before any work.
+#[test]
+fn scene_particles_without_contrast_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = crate::util::project_root();
+    let text = std::fs::read_to_string(root.join("scenes/ground_rayleigh_aerosol_cloud.toml"))
+        .unwrap()
+        .replace(
+            "single_scattering_albedo = 0.95\nphase = { kind = \"henyey_greenstein\", g = 0.7 }",
+            "particles = { distribution = \"lognormal\", median_radius_um = 0.3, sigma_g = 1.8, \
+             refractive_index = \"1\" }",
+        )
+        .replace(
+            "../phase_functions/",
+            &format!("{}/phase_functions/", root.display()),
+        );
+    assert!(text.contains("refractive_index = \"1\""));
+    let scene = dir.path().join("s.toml");
+    std::fs::write(&scene, text).unwrap();
+    let out = dir.path().join("o");
+    let t = Instant::now();
+    let o = lidarsim([
+        "run",
+        scene.to_str().unwrap(),
+        "--photons",
+        "1000",
+        "--threads",
+        "1",
+        "--no-plots",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("s.toml:") && err.contains("|refractive_index − 1| = 0"),
+        "{err}"
+    );
+    assert!(t.elapsed() < Duration::from_secs(2));
+    assert!(!out.join("returns.csv").exists());
+}

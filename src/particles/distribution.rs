@@ -1387,9 +1387,9 @@ fn check_inputs(
         let contrast = (c.refractive_index - 1.0).norm();
         if contrast < MIN_INDEX_CONTRAST {
             return Err(param(
-                "refractive_index",
+                "|refractive_index − 1|",
                 contrast,
-                "|m − 1| must be ≥ 1e-6: particles with (nearly) the medium's index scatter \
+                "must be ≥ 1e-6: particles with (nearly) the medium's index scatter \
                  (nearly) nothing, no phase function or lidar ratio follows, and their Mie sums \
                  are rounding noise",
             ));
