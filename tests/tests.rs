@@ -55,6 +55,8 @@ mod spectroscopy;
 mod stress;
 /// Ensemble studies: `lidarsim dial` and its error budget.
 mod study;
+/// `bench --depth`'s plain reference and `mie` without index contrast (issue 37: F4, F16).
+mod tools_edges;
 /// Monte Carlo transport against the analytic lidar equation and conservation laws.
 mod transport;
 /// Every input validated: hostile scene values, options and file fields refused at their file,

@@ -322,7 +322,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             o.progress = true;
         })?;
         d::write_reference(path, &d::cells(&scene, &r), r.photons)?;
-        println!(
+        outln!(
             "plain local estimate, {} photons in {:.1} s on {} threads: wrote {}",
             r.photons,
             r.wall_s,

@@ -23,6 +23,14 @@ use lidarsim::transport::{self, McResult, TransportOptions};
 
 use super::plot::{FONT, draw_legend, init_font};
 
+/// `print!` that returns a closed stdout (`| head`) as an error instead of panicking.
+macro_rules! out {
+    ($($t:tt)*) => {{
+        use std::io::Write as _;
+        write!(std::io::stdout().lock(), $($t)*)?;
+    }};
+}
+
 /// Fields of view of the scan [mrad, full angle].
 pub const FOVS_MRAD: [f64; 5] = [0.5, 1.0, 2.0, 5.0, 10.0];
 /// Depths into the cloud of the first and last gate starts [m].
@@ -145,37 +153,58 @@ pub fn write_reference(path: &Path, cells: &[Cell], photons: u64) -> anyhow::Res
     Ok(())
 }
 
-/// Read a reference written by [`write_reference`]: its cells and photon count.
+/// Read a reference written by [`write_reference`]: its cells and photon count. Every refusal
+/// names the file, the line and the column.
 pub fn read_reference(path: &Path) -> anyhow::Result<(Vec<Cell>, u64)> {
     let text = std::fs::read_to_string(path).with_context(|| format!("{}", path.display()))?;
+    let columns: Vec<&str> = HEADER.split(',').collect();
     let mut out = Vec::new();
     let mut photons = 0;
     for (i, line) in text.lines().enumerate() {
         if line.starts_with('#') || line.starts_with("fov") || line.trim().is_empty() {
             continue;
         }
+        let at = format!("{}:{}", path.display(), i + 1);
         let f: Vec<&str> = line.split(',').collect();
+        anyhow::ensure!(
+            f.len() == columns.len(),
+            "{at}: {} fields, expected {} ({HEADER})",
+            f.len(),
+            columns.len()
+        );
         let num = |j: usize| -> anyhow::Result<f64> {
-            f.get(j)
-                .and_then(|v| v.trim().parse::<f64>().ok())
+            let v = f[j].trim();
+            v.parse::<f64>()
+                .ok()
                 .filter(|v| v.is_finite())
-                .with_context(|| {
-                    format!(
-                        "{}:{}: column {} is not a finite number",
-                        path.display(),
-                        i + 1,
-                        j + 1
-                    )
-                })
+                .with_context(|| format!("{at}: {} `{v}` is not a finite number", columns[j]))
         };
-        photons = num(5)? as u64;
-        out.push(Cell {
+        // Photons ≥ 1 (a whole number), variances and energies ≥ 0, time per photon > 0: else a
+        // figure of merit or a standard error would be infinite or NaN.
+        let n = num(5)?;
+        anyhow::ensure!(
+            n >= 1.0 && n.fract() == 0.0 && n <= u64::MAX as f64,
+            "{at}: {} = {n} must be a whole number ≥ 1",
+            columns[5]
+        );
+        photons = n as u64;
+        let cell = Cell {
             fov_mrad: num(0)?,
             depth_m: num(1)?,
             mean_j: num(2)?,
             var_per_photon: num(3)?,
             s_per_photon: num(4)?,
-        });
+        };
+        for (j, v) in [(2, cell.mean_j), (3, cell.var_per_photon)] {
+            anyhow::ensure!(v >= 0.0, "{at}: {} = {v} must be ≥ 0", columns[j]);
+        }
+        anyhow::ensure!(
+            cell.s_per_photon > 0.0,
+            "{at}: {} = {} must be > 0",
+            columns[4],
+            cell.s_per_photon
+        );
+        out.push(cell);
     }
     anyhow::ensure!(!out.is_empty(), "{}: no cells", path.display());
     Ok((out, photons))
@@ -195,15 +224,33 @@ pub fn run(
     let mut scene = scene()?;
     scene.simulation.photons = photons;
     scene.simulation.seed = seed;
+    // The reference is read, and checked to hold every cell of the scan, before any work.
+    let reference = match reference {
+        Some(p) => {
+            let (cells, photons) = read_reference(p)?;
+            for (fov, (_, depth)) in FOVS_MRAD
+                .iter()
+                .flat_map(|f| gates(&scene).into_iter().map(move |g| (f, g)))
+            {
+                anyhow::ensure!(
+                    cells
+                        .iter()
+                        .any(|c| c.fov_mrad == *fov && c.depth_m == depth),
+                    "plain reference {} has no cell at {fov} mrad, {depth} m (write it with --write-plain)",
+                    p.display()
+                );
+            }
+            Some((cells, photons))
+        }
+        None => None,
+    };
     let atm = OpticalAtmosphere::build(&scene)?;
     let ours = fastest(&scene, &atm, threads, repeat, method)?;
     let plain_run = fastest(&scene, &atm, threads, repeat, plain)?;
     let mine = cells(&scene, &ours);
     let short = cells(&scene, &plain_run);
-    let (long, long_photons) = match reference {
-        Some(p) => read_reference(p)?,
-        None => (short.clone(), plain_run.photons),
-    };
+    let (long, long_photons) = reference.unwrap_or_else(|| (short.clone(), plain_run.photons));
+
     let mut csv = format!(
         "# C.1 multiple scattering (orders >= 2): lidarsim {} photons in {:.2} s and the plain local \
          estimate {} photons in {:.2} s on {} thread(s); plain variance from {} photons\n\
@@ -211,16 +258,18 @@ pub fn run(
         ours.photons, ours.wall_s, plain_run.photons, plain_run.wall_s, ours.threads, long_photons
     );
     let mut rows = Vec::new();
-    println!(
+    outln!(
         "C.1, orders ≥ 2: FOM ratio lidarsim / plain local estimate (plain variance from {long_photons} photons)"
     );
-    print!("depth_m");
+    out!("depth_m");
     for f in FOVS_MRAD {
-        print!("  {f:>6} mrad");
+        out!("  {f:>6} mrad");
     }
-    println!();
+    outln!();
+    // Over the cells where both estimates have a signal (the others print `—`).
     let mut worst = f64::INFINITY;
     let mut z2 = 0.0;
+    let mut n_z = 0usize;
     for (i, c) in mine.iter().enumerate() {
         let p = long
             .iter()
@@ -237,14 +286,19 @@ pub fn run(
             ..*p
         };
         let ratio = c.fom() / p.fom();
-        worst = worst.min(ratio);
+        if ratio.is_finite() {
+            worst = worst.min(ratio);
+        }
         let rel = (c.var_per_photon / ours.photons as f64).sqrt() / c.mean_j;
         // The two means' difference in combined standard errors (the long run's with its own
         // number of photons): no bias shows as z of order 1.
         let z = (c.mean_j - p.mean_j)
             / (c.var_per_photon / ours.photons as f64 + p.var_per_photon / long_photons as f64)
                 .sqrt();
-        z2 += z * z;
+        if z.is_finite() {
+            z2 += z * z;
+            n_z += 1;
+        }
         // A cell without signal has no error, FOM or z: empty fields, never `NaN` or `inf`.
         let n = lidarsim::output::csv_number;
         writeln!(
@@ -264,22 +318,39 @@ pub fn run(
     }
     let n_depth = gates(&scene).len();
     for d in 0..n_depth {
-        print!("{:>7}", rows[d].0.depth_m);
+        out!("{:>7}", rows[d].0.depth_m);
         for f in 0..FOVS_MRAD.len() {
-            print!("  {:>11.1}", rows[f * n_depth + d].2);
+            let ratio = rows[f * n_depth + d].2;
+            if ratio.is_finite() {
+                out!("  {ratio:>11.1}");
+            } else {
+                out!("  {:>11}", "—");
+            }
         }
-        println!();
+        outln!();
     }
-    println!(
-        "least ratio {worst:.1}; means against the plain estimate's: rms z {:.2} over {} cells",
-        (z2 / mine.len() as f64).sqrt(),
-        mine.len()
+    let no_signal = rows.iter().filter(|r| !r.2.is_finite()).count();
+    if no_signal > 0 {
+        outln!("—: no signal in one of the estimates ({no_signal} cells; empty in fom_depth.csv)");
+    }
+    let least = if worst.is_finite() {
+        format!("{worst:.1}")
+    } else {
+        "— (no cell with a signal in both)".to_string()
+    };
+    let rms_z = if n_z > 0 {
+        format!("{:.2}", (z2 / n_z as f64).sqrt())
+    } else {
+        "—".to_string()
+    };
+    outln!(
+        "least ratio {least}; means against the plain estimate's: rms z {rms_z} over {n_z} cells"
     );
     let mut files = OutputSet::new();
     files.write(out.join("fom_depth.csv"), csv)?;
     files.write_via(out.join("fom_depth.png"), |path| draw(path, &rows))?;
     files.commit()?;
-    println!("wrote {}", out.join("fom_depth.{csv,png}").display());
+    outln!("wrote {}", out.join("fom_depth.{csv,png}").display());
     Ok(())
 }
 
@@ -367,12 +438,12 @@ pub fn scatter(
          fov_full_angle_mrad,depth_m,mean_j,sd_of_means_j,rms_stderr_j,ratio\n",
         1.0 / (2.0 * (k - 1.0)).sqrt()
     );
-    println!("scatter of {seeds} runs' means / their standard errors (orders ≥ 2)");
-    print!("depth_m");
+    outln!("scatter of {seeds} runs' means / their standard errors (orders ≥ 2)");
+    out!("depth_m");
     for f in FOVS_MRAD {
-        print!("  {f:>6} mrad");
+        out!("  {f:>6} mrad");
     }
-    println!();
+    outln!();
     let n_cells = runs[0].len();
     let mut ratios = vec![0.0; n_cells];
     for (i, ratio) in ratios.iter_mut().enumerate() {
@@ -401,11 +472,17 @@ pub fn scatter(
     }
     let n_depth = n_cells / FOVS_MRAD.len();
     for d in 0..n_depth {
-        print!("{:>7}", runs[0][d].depth_m);
+        out!("{:>7}", runs[0][d].depth_m);
         for f in 0..FOVS_MRAD.len() {
-            print!("  {:>11.2}", ratios[f * n_depth + d]);
+            // A cell without signal in any run has no ratio: `—`, never NaN.
+            let ratio = ratios[f * n_depth + d];
+            if ratio.is_finite() {
+                out!("  {ratio:>11.2}");
+            } else {
+                out!("  {:>11}", "—");
+            }
         }
-        println!();
+        outln!();
     }
     let mut files = OutputSet::new();
     files.write(out.join("scatter.csv"), csv)?;
@@ -486,7 +563,7 @@ pub fn ladder(
         draw_ladder(path, &series)
     })?;
     files.commit()?;
-    println!("wrote {}", out.join("error_time.{csv,png}").display());
+    outln!("wrote {}", out.join("error_time.{csv,png}").display());
     Ok(())
 }
 

@@ -7,11 +7,14 @@ use anyhow::{Context, bail};
 use clap::ValueEnum;
 use lidarsim::input::{Bounds, check_finite_range};
 use lidarsim::particles::distribution::{
-    BulkOptions, Component, MieWork, SizeDistribution, bulk_optics, format_refractive_index,
-    mie_work,
+    BulkOptions, Component, MIN_INDEX_CONTRAST, MieWork, SizeDistribution, bulk_optics,
+    format_refractive_index, mie_work,
 };
-use lidarsim::particles::mie::{MAX_SIZE_PARAMETER, MieCoefficients, parse_refractive_index};
+use lidarsim::particles::mie::{
+    MAX_SIZE_PARAMETER, MieCoefficients, MieError, parse_refractive_index,
+};
 use lidarsim::particles::opac::{OpacComponent, OpacType};
+use num_complex::Complex64;
 use serde_json::json;
 
 /// Kind of size distribution.
@@ -45,8 +48,12 @@ pub struct Args {
     /// Complex refractive index relative to the medium, n+ki: 1.33, 1.33+0.0i, 1.5+1e-3i. A
     /// POSITIVE imaginary part means ABSORPTION (MIEV0 and miepython write the same as n-ki).
     /// Not used with --distribution opac (OPAC's own indices are built in).
-    #[arg(long, allow_hyphen_values = true)]
-    refractive_index: Option<String>,
+    /// No `allow_hyphen_values`: with it the next option was taken for the value
+    /// (`--refractive-index --wavelength-nm 1064`, the value forgotten: "unexpected argument
+    /// '1064'"); no index starts with `-` (its real part is > 0) and `-1.5` still reaches the
+    /// parser, which names the bound.
+    #[arg(long, allow_negative_numbers = true, value_parser = refractive_index)]
+    refractive_index: Option<Complex64>,
     /// Size parameter x = 2 pi r / lambda of a single sphere.
     #[arg(long, conflicts_with = "distribution", allow_negative_numbers = true, value_parser = super::real(Bounds::positive(MAX_SIZE_PARAMETER)))]
     size_parameter: Option<f64>,
@@ -56,8 +63,9 @@ pub struct Args {
     /// Size distribution (instead of --size-parameter).
     #[arg(long, value_enum)]
     distribution: Option<Distribution>,
-    /// Wavelength in the medium \[nm\] (distributions).
-    #[arg(long, allow_negative_numbers = true, value_parser = super::real(Bounds::positive(1e7)))]
+    /// Wavelength in the medium \[nm\] (distributions), in (10, 1e6): the size integration's
+    /// range (10 nm to 1 mm), checked here so that a refusal names this option.
+    #[arg(long, allow_negative_numbers = true, value_parser = super::real(Bounds::open(10.0, 1e6)))]
     wavelength_nm: Option<f64>,
     /// Log-normal (or single OPAC component) total number density [cm^-3].
     #[arg(long, default_value_t = 1.0, allow_negative_numbers = true, value_parser = super::real(Bounds::positive(1e10)))]
@@ -69,8 +77,8 @@ pub struct Args {
     /// One OPAC component (dry): inso, waso, soot, ssam, sscm.
     #[arg(long)]
     opac_component: Option<String>,
-    /// Log-normal median (number mode) radius [um].
-    #[arg(long, allow_negative_numbers = true, value_parser = super::real(Bounds::positive(1e4)))]
+    /// Log-normal median (number mode) radius [um], in [1e-4, 1e4] ([`MEDIAN_RADIUS_UM`]).
+    #[arg(long, allow_negative_numbers = true, value_parser = super::real(MEDIAN_RADIUS_UM))]
     median_radius_um: Option<f64>,
     /// Log-normal geometric standard deviation (> 1).
     #[arg(long, allow_negative_numbers = true, value_parser = super::real(Bounds::above(1.0, 10.0)))]
@@ -114,6 +122,22 @@ pub struct Args {
     meta: Vec<String>,
 }
 
+/// Range of a log-normal median radius \[µm\]: 0.1 nm (a molecule) to 1 cm. The integration
+/// range is sought within 1e-7 … 1e7 µm; a median far below it (1e-301 µm) was refused as
+/// "r_max_um = 1e-7: the truncation range holds none of the distribution".
+const MEDIAN_RADIUS_UM: Bounds = Bounds::closed(1e-4, 1e4);
+
+/// `--refractive-index`'s value parser: [`parse_refractive_index`], with a hint when the value
+/// looks like the next option (the value was forgotten).
+fn refractive_index(text: &str) -> Result<Complex64, String> {
+    if text.starts_with("--") {
+        return Err(format!(
+            "`{text}` is not a refractive index (its value missing?): write n or n+ki, e.g. 1.33, 1.5+1e-3i"
+        ));
+    }
+    parse_refractive_index(text)
+}
+
 fn need(v: Option<f64>, flag: &str) -> anyhow::Result<f64> {
     v.with_context(|| format!("{flag} is required for this distribution"))
 }
@@ -126,7 +150,7 @@ fn parse_mode(text: &str) -> anyhow::Result<SizeDistribution> {
     // The same ranges as --number-density-per-cm3, --median-radius-um and --sigma-g.
     let bounds = [
         ("N_per_cm3", Bounds::positive(1e10)),
-        ("r_g_um", Bounds::positive(1e4)),
+        ("r_g_um", MEDIAN_RADIUS_UM),
         ("sigma_g", Bounds::above(1.0, 10.0)),
     ];
     let v: Vec<f64> = parts
@@ -151,12 +175,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if args.aerosol_type.is_some() || args.opac_component.is_some() {
         bail!("--aerosol-type and --opac-component need --distribution opac");
     }
-    let Some(m_text) = &args.refractive_index else {
+    let Some(m) = args.refractive_index else {
         bail!("--refractive-index is required (except with --distribution opac)");
     };
-    let m = parse_refractive_index(m_text)
-        .map_err(anyhow::Error::msg)
-        .context("--refractive-index")?;
     if let Some(x) = args.size_parameter {
         let k = MieCoefficients::compute(m, x).context("--size-parameter")?;
         let e = k.efficiencies();
@@ -192,6 +213,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         bail!("give either --size-parameter (one sphere) or --distribution (a size distribution)");
     };
     let wavelength_nm = need(args.wavelength_nm, "--wavelength-nm")?;
+    if (m - 1.0).norm() < MIN_INDEX_CONTRAST {
+        bail!(
+            "--refractive-index {}: |m − 1| = {:e} must be ≥ {MIN_INDEX_CONTRAST:e} for a size \
+             distribution (particles with the medium's index scatter nothing: no phase function or \
+             lidar ratio follows)",
+            format_refractive_index(m),
+            (m - 1.0).norm()
+        );
+    }
     let mut dist = match kind {
         Distribution::Opac => unreachable!("handled by run_opac"),
         Distribution::C1 => SizeDistribution::deirmendjian_c1(),
@@ -224,10 +254,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     };
     if args.r_min_um.is_some() || args.r_max_um.is_some() {
-        dist = dist.truncated(
+        let (lo, hi) = (
             args.r_min_um.unwrap_or(0.0),
             args.r_max_um.unwrap_or(f64::INFINITY),
-        )?;
+        );
+        if hi <= lo {
+            bail!("--r-max-um {hi} must exceed --r-min-um {lo}");
+        }
+        dist = dist.truncated(lo, hi)?;
     }
     let opts = bulk_opts(&args);
     let work = check_work(
@@ -238,7 +272,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }],
         wavelength_nm * 1e-9,
         &opts,
-    )?;
+    )
+    .map_err(|e| match e.downcast_ref::<MieError>() {
+        // The library names its own field; say which options made the range empty.
+        Some(MieError::Parameter {
+            name: "r_max_um",
+            reason,
+            ..
+        }) if args.r_min_um.is_some() || args.r_max_um.is_some() => anyhow::anyhow!(
+            "--r-min-um {} --r-max-um {}: {reason} (it is integrated where all but --tail-fraction {} of its cross-section lies)",
+            args.r_min_um.unwrap_or(0.0),
+            args.r_max_um.map_or("(none)".to_string(), |v| v.to_string()),
+            args.tail_fraction
+        ),
+        _ => e,
+    })?;
     let mut b = bulk_optics(&dist, m, wavelength_nm * 1e-9, &opts)?;
     add_meta(&mut b, &args.meta)?;
     finish(

@@ -9,9 +9,14 @@
 //! `ψ_n = ψ_(n−1) / (D_n(x) + n/x)` (which follows from `ψ_(n−1) = ψ_n' + (n/x) ψ_n`), with the real
 //! `D_n(x)` also from the downward recurrence, started from the larger of `ψ_0`, `ψ_1`: every
 //! `ψ_n` then has full relative precision, even for `n ≫ x`, for `x = 10⁻³` where the plain
-//! upward recurrence loses all digits, and at `x ≈ jπ` where `sin x` itself is inexact. No
-//! separate small-particle formula is needed: the series is accurate from `x = 10⁻⁶` up (tested
-//! against Wiscombe's small-particle values, which are themselves accurate to ~10⁻⁷ there).
+//! upward recurrence loses all digits, and at `x ≈ jπ` where `sin x` itself is inexact. The
+//! series is accurate from `x = 10⁻⁶` up (tested against Wiscombe's small-particle values, which
+//! are themselves accurate to ~10⁻⁷ there). Below [`SMALL_X`] (where `1/x^n` overflows as x → 0)
+//! the coefficients come from their small-particle expansions (Bohren & Huffman 1983, §5.1), with
+//! a relative error of order `x²` (< 10⁻¹²), and the efficiencies from the same expansions
+//! divided by `x³` beforehand, so that nothing underflows into 0/0: amplitudes of order `x³`
+//! underflow to a correct 0 below `x ≈ 10⁻¹⁰³`, efficiencies stay finite down to the smallest
+//! positive `x`.
 //!
 //! # Conventions
 //!
@@ -47,6 +52,11 @@ pub const MAX_REFRACTIVE_INDEX_PART: f64 = 100.0;
 
 /// Largest size parameter accepted (the solver is tested to 2·10⁴; memory and time grow as x).
 pub const MAX_SIZE_PARAMETER: f64 = 1.0e5;
+
+/// Below this size parameter the coefficients come from the small-particle expansions (see the
+/// module documentation): their error, of relative order `x²` and `(mx)²`, is below 2·10⁻⁸ there
+/// for any accepted index, and the series' `1/x^n` would overflow further down.
+pub const SMALL_X: f64 = 1e-6;
 
 /// Why a Mie calculation was refused.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -114,6 +124,9 @@ pub struct MieCoefficients {
     /// `b_n` for n = 1..N (index n−1).
     pub b: Vec<Complex64>,
     lossless: bool,
+    /// Below [`SMALL_X`]: `a_1/x³, b_1/x³, a_2/x³` (`b_2` = O(x⁷) is 0), from which the
+    /// efficiencies and the normalised matrix are formed without dividing underflowed numbers.
+    small: Option<[Complex64; 3]>,
 }
 
 /// Wiscombe's number of terms, `N = x + 4.05 x^(1/3) + 2` (Wiscombe 1980, Eq. 5), at least 1.
@@ -234,6 +247,9 @@ impl MieCoefficients {
     pub fn compute(m: Complex64, x: f64) -> Result<Self, MieError> {
         check_x(x)?;
         check_refractive_index(m)?;
+        if x < SMALL_X {
+            return Ok(Self::small(m, x));
+        }
         let n = n_terms(x);
         let mut dmx = Vec::new();
         d_downward(m * x, n, &mut dmx);
@@ -269,7 +285,35 @@ impl MieCoefficients {
             a,
             b,
             lossless: m.im == 0.0,
+            small: None,
         })
+    }
+
+    /// The small-particle expansions (Bohren & Huffman 1983, §5.1, to order x⁶):
+    ///
+    /// ```text
+    /// a_1 = −(2i x³/3) K − (2i x⁵/5) (m²−2)/(m²+2) K + (4x⁶/9) K²,   K = (m²−1)/(m²+2)
+    /// b_1 = −(i x⁵/45) (m²−1),   a_2 = −(i x⁵/15) (m²−1)/(2m²+3),   b_2 = O(x⁷)
+    /// ```
+    ///
+    /// (the x⁶ term is the leading real part of `a_1` for a lossless sphere: Qext = Qsca).
+    fn small(m: Complex64, x: f64) -> Self {
+        let i = Complex64::new(0.0, 1.0);
+        let m2 = m * m;
+        let k = (m2 - 1.0) / (m2 + 2.0);
+        let x2 = x * x;
+        let alpha1 = -i * (2.0 / 3.0) * k - i * (2.0 / 5.0) * x2 * (m2 - 2.0) / (m2 + 2.0) * k
+            + (4.0 / 9.0) * x2 * x * k * k;
+        let beta1 = -i * x2 / 45.0 * (m2 - 1.0);
+        let alpha2 = -i * x2 / 15.0 * (m2 - 1.0) / (2.0 * m2 + 3.0);
+        let x3 = x2 * x;
+        MieCoefficients {
+            x,
+            a: vec![alpha1 * x3, alpha2 * x3],
+            b: vec![beta1 * x3, Complex64::new(0.0, 0.0)],
+            lossless: m.im == 0.0,
+            small: Some([alpha1, beta1, alpha2]),
+        }
     }
 
     /// Coefficients of a perfectly conducting sphere (the limit |m| → ∞, MIEV0's `PERFCT`):
@@ -305,6 +349,7 @@ impl MieCoefficients {
             a,
             b,
             lossless: true,
+            small: None,
         })
     }
 
@@ -327,6 +372,9 @@ impl MieCoefficients {
     /// g Qsca = (4/x²) Σ [ n(n+2)/(n+1) Re(a_n a*_(n+1) + b_n b*_(n+1)) + (2n+1)/(n(n+1)) Re(a_n b*_n) ]
     /// ```
     pub fn efficiencies(&self) -> MieResult {
+        if let Some(s) = self.small {
+            return self.small_efficiencies(s);
+        }
         let n = self.a.len();
         let mut ext = 0.0;
         let mut sca = 0.0;
@@ -365,6 +413,42 @@ impl MieCoefficients {
         }
     }
 
+    /// The sums above with `a_1 = x³α_1`, `b_1 = x³β_1`, `a_2 = x³α_2`, `b_2 = 0`, the powers of
+    /// x taken out: Qext = 2x Σ, Qsca = 2x⁴ Σ, Qback = x⁴ |…|², g free of x.
+    fn small_efficiencies(&self, [alpha1, beta1, alpha2]: [Complex64; 3]) -> MieResult {
+        let x = self.x;
+        let sca = 3.0 * (alpha1.norm_sqr() + beta1.norm_sqr()) + 5.0 * alpha2.norm_sqr();
+        let x4 = x * x * x * x;
+        let qsca = 2.0 * x4 * sca;
+        // A lossless sphere's Re a_1 is its x⁶ term; |a_1|² is as accurate and the same number.
+        let qext = if self.lossless {
+            qsca
+        } else {
+            2.0 * x * (3.0 * (alpha1.re + beta1.re) + 5.0 * alpha2.re)
+        };
+        let back = -3.0 * (alpha1 - beta1) + 5.0 * alpha2;
+        let gsum = 1.5 * (alpha1 * (alpha2 + beta1).conj()).re;
+        MieResult {
+            qext,
+            qsca,
+            qback: x4 * back.norm_sqr(),
+            g: if sca > 0.0 { 2.0 * gsum / sca } else { 0.0 },
+            // From the scaled sums: Qsca/Qext = x³ Σ|·|² / Σ Re(·), which underflows to the
+            // correct 0 for an absorbing sphere where Qext itself would be 0.
+            ssa: if self.lossless {
+                1.0
+            } else {
+                let ext = 3.0 * (alpha1.re + beta1.re) + 5.0 * alpha2.re;
+                if ext > 0.0 {
+                    (x * x * x * sca / ext).min(1.0)
+                } else {
+                    1.0
+                }
+            },
+            n_terms: self.a.len(),
+        }
+    }
+
     /// Amplitude functions `S1(μ)`, `S2(μ)` (Wiscombe's convention, see the module doc) at the
     /// cosines `mu` of the scattering angle:
     ///
@@ -379,31 +463,33 @@ impl MieCoefficients {
         let mut s1 = Vec::with_capacity(mu.len());
         let mut s2 = Vec::with_capacity(mu.len());
         for &u in mu {
-            let (p, q) = self.amplitude_at(u);
+            let (p, q) = amplitude_at(&self.a, &self.b, u);
             s1.push(p);
             s2.push(q);
         }
         Ok((s1, s2))
     }
+}
 
-    fn amplitude_at(&self, mu: f64) -> (Complex64, Complex64) {
-        let mut s1 = Complex64::new(0.0, 0.0);
-        let mut s2 = Complex64::new(0.0, 0.0);
-        let mut pi_prev = 0.0;
-        let mut pi = 1.0;
-        for i in 0..self.a.len() {
-            let nf = (i + 1) as f64;
-            let tau = nf * mu * pi - (nf + 1.0) * pi_prev;
-            let c = (2.0 * nf + 1.0) / (nf * (nf + 1.0));
-            let (an, bn) = (self.a[i], self.b[i]);
-            s1 += c * (an * pi + bn * tau);
-            s2 += c * (an * tau + bn * pi);
-            let pi_next = ((2.0 * nf + 1.0) * mu * pi - (nf + 1.0) * pi_prev) / nf;
-            pi_prev = pi;
-            pi = pi_next;
-        }
-        (s1.conj(), s2.conj())
+/// `S1(μ)`, `S2(μ)` (Wiscombe's) from the coefficients `a`, `b` (BH's): see
+/// [`MieCoefficients::amplitudes`].
+fn amplitude_at(a: &[Complex64], b: &[Complex64], mu: f64) -> (Complex64, Complex64) {
+    let mut s1 = Complex64::new(0.0, 0.0);
+    let mut s2 = Complex64::new(0.0, 0.0);
+    let mut pi_prev = 0.0;
+    let mut pi = 1.0;
+    for i in 0..a.len() {
+        let nf = (i + 1) as f64;
+        let tau = nf * mu * pi - (nf + 1.0) * pi_prev;
+        let c = (2.0 * nf + 1.0) / (nf * (nf + 1.0));
+        let (an, bn) = (a[i], b[i]);
+        s1 += c * (an * pi + bn * tau);
+        s2 += c * (an * tau + bn * pi);
+        let pi_next = ((2.0 * nf + 1.0) * mu * pi - (nf + 1.0) * pi_prev) / nf;
+        pi_prev = pi;
+        pi = pi_next;
     }
+    (s1.conj(), s2.conj())
 }
 
 impl MieCoefficients {
@@ -414,7 +500,20 @@ impl MieCoefficients {
     /// F44 = F33.
     pub fn matrix(&self, mu: &[f64]) -> Result<Vec<MatrixElements>, MieError> {
         let (s1, s2) = self.amplitudes(mu)?;
-        let norm = 1.0 / (self.x * self.x * self.efficiencies().qsca);
+        let mut norm = 1.0 / (self.x * self.x * self.efficiencies().qsca);
+        // A small sphere: the amplitudes divided by x³ and x² Qsca by x⁶, which underflow
+        // neither (F does not depend on the scale).
+        let (s1, s2) = match self.small {
+            Some([alpha1, beta1, alpha2]) => {
+                let sca = 3.0 * (alpha1.norm_sqr() + beta1.norm_sqr()) + 5.0 * alpha2.norm_sqr();
+                norm = 1.0 / (2.0 * sca);
+                let zero = Complex64::new(0.0, 0.0);
+                mu.iter()
+                    .map(|&u| amplitude_at(&[alpha1, alpha2], &[beta1, zero], u))
+                    .unzip()
+            }
+            None => (s1, s2),
+        };
         Ok(s1
             .iter()
             .zip(&s2)
@@ -611,6 +710,94 @@ mod tests {
             "1..3",
         ] {
             assert!(parse_refractive_index(bad).is_err(), "{bad}");
+        }
+    }
+
+    /// The Rayleigh limit (Bohren & Huffman 1983, §5.2): with K = (m²−1)/(m²+2),
+    /// S1 = −i x³ K, S2 = −i x³ K cos θ in their convention (Wiscombe's are the conjugates),
+    /// Qext = 4x Im K, Qsca = (8/3) x⁴ |K|², Qback = 4 x⁴ |K|², and the Rayleigh matrix
+    /// F11 = ¾(1+μ²), F12 = −¾(1−μ²), F33 = 3μ/2, F34 = 0. At x = 10⁻²⁰⁰, x³ and x⁴ underflow:
+    /// amplitudes, Qsca and Qback are a correct 0, Qext and the matrix stay finite.
+    #[test]
+    fn tiny_spheres_reach_the_rayleigh_limit() {
+        for m in [c(1.33, 0.01), c(1.5, 0.0), c(3.0, 4.0)] {
+            let k = (m * m - 1.0) / (m * m + 2.0);
+            for x in [1e-6 * 0.999, 1e-9, 1e-200, 5e-324] {
+                let coef = MieCoefficients::compute(m, x).unwrap();
+                let mu = [1.0, 0.5, 0.0, -1.0];
+                let (s1, s2) = coef.amplitudes(&mu).unwrap();
+                let x3 = x * x * x;
+                for (j, u) in mu.iter().enumerate() {
+                    let want1 = (-Complex64::i() * x3 * k).conj();
+                    let want2 = want1 * *u;
+                    for (got, want) in [(s1[j], want1), (s2[j], want2)] {
+                        assert!(got.re.is_finite() && got.im.is_finite(), "{m} {x}: {got}");
+                        assert!(
+                            (got - want).norm() <= 1e-9 * want1.norm(),
+                            "{m} x={x} mu={u}: {got} vs {want}"
+                        );
+                    }
+                }
+                let e = coef.efficiencies();
+                let x4 = x * x * x * x;
+                let qsca = 8.0 / 3.0 * x4 * k.norm_sqr();
+                let qext = if m.im > 0.0 { 4.0 * x * k.im } else { qsca };
+                for (got, want, what) in [
+                    (e.qext, qext, "qext"),
+                    (e.qsca, qsca, "qsca"),
+                    (e.qback, 4.0 * x4 * k.norm_sqr(), "qback"),
+                ] {
+                    assert!(
+                        // (+1e-320: at x = 5e-324 Qext is a subnormal number, a few ulp.)
+                        got.is_finite() && (got - want).abs() <= 1e-9 * want + 1e-320,
+                        "{m} x={x} {what}: {got} vs {want}"
+                    );
+                }
+                assert!(e.g.abs() <= 1e-9 && e.ssa.is_finite(), "{m} {x}: {e:?}");
+                for (f, u) in coef.matrix(&mu).unwrap().iter().zip(mu) {
+                    let want = [0.75 * (1.0 + u * u), -0.75 * (1.0 - u * u), 1.5 * u, 0.0];
+                    for (got, want) in [f.f11, f.f12, f.f33, f.f34].iter().zip(want) {
+                        assert!((got - want).abs() <= 1e-9, "{m} x={x} mu={u}: {f:?}");
+                    }
+                }
+            }
+        }
+    }
+
+    /// The small-particle expansions against the series where both hold (x = 10⁻⁴: the
+    /// expansions' error is of order x², the series' ~10⁻¹² there), and for a lossless sphere's
+    /// Qext = Qsca (the x⁶ term) at x = 10⁻², where the expansion is good to ~x² = 10⁻⁴.
+    #[test]
+    fn small_particle_expansions_match_the_series() {
+        for m in [c(1.33, 0.01), c(1.5, 0.0), c(3.0, 4.0), c(0.75, 0.0)] {
+            let x = 1e-4;
+            let (series, small) = (
+                MieCoefficients::compute(m, x).unwrap(),
+                MieCoefficients::small(m, x),
+            );
+            assert!(series.small.is_none());
+            let mu = [1.0, 0.3, -1.0];
+            let (a1, a2) = series.amplitudes(&mu).unwrap();
+            let (b1, b2) = small.amplitudes(&mu).unwrap();
+            for j in 0..mu.len() {
+                assert!((a1[j] - b1[j]).norm() <= 1e-7 * a1[0].norm(), "{m}");
+                assert!((a2[j] - b2[j]).norm() <= 1e-7 * a1[0].norm(), "{m}");
+            }
+            let (es, ep) = (series.efficiencies(), small.efficiencies());
+            for (p, q) in [(es.qext, ep.qext), (es.qsca, ep.qsca), (es.qback, ep.qback)] {
+                assert!((p - q).abs() <= 1e-6 * p, "{m}: {es:?} vs {ep:?}");
+            }
+            if m.im == 0.0 {
+                let x = 1e-2;
+                let (es, ep) = (
+                    MieCoefficients::compute(m, x).unwrap().efficiencies(),
+                    MieCoefficients::small(m, x).efficiencies(),
+                );
+                assert!(
+                    (es.qext - ep.qext).abs() <= 1e-3 * es.qext,
+                    "{es:?} vs {ep:?}"
+                );
+            }
         }
     }
 
