@@ -1624,12 +1624,11 @@ fn mie_templates() -> Vec<Template> {
     ]
 }
 
-/// Photons per profile and profiles per class above these are valid but large work; threads
-/// beyond 8 cost seconds each (finding F9, `findings::f9_…`).
+/// Photons per profile and profiles per class above these are valid but large work (threads
+/// beyond the cores are capped since finding F9, `findings::f9_…`, so any count is run).
 fn dial_too_large(c: &Case) -> bool {
     c.num_or("--photons", 0.0) > 500.0
         || c.num_or("--ensemble", 2.0) > 4.0
-        || c.num_or("--threads", 1.0) > 8.0
 }
 
 /// A study that ran has at least one profile that did not fail (item 5: a study where every
@@ -1744,7 +1743,7 @@ fn dial_templates() -> Vec<Template> {
 }
 
 /// Layers of the select-lines grid and on-line positions above these are valid but large
-/// work; threads beyond 8 cost seconds each (finding F9).
+/// work (threads beyond the cores are capped since finding F9, so any count is run).
 fn select_too_large(c: &Case) -> bool {
     let layers = c.num_or("--top-km", 30.0) * 1e3 / c.num_or("--layer-m", 1000.0).abs().max(1e-9);
     let positions = match c.text("--on-cm1") {
@@ -1757,7 +1756,6 @@ fn select_too_large(c: &Case) -> bool {
     layers > 2000.0
         || layers * positions > 2e4
         || c.num_or("--ensemble", 2.0) > 4.0
-        || c.num_or("--threads", 1.0) > 8.0
 }
 
 fn select_templates() -> Vec<Template> {
