@@ -133,6 +133,22 @@ mod tests {
     use super::*;
     use std::f64::consts::PI;
 
+    /// A mixture that scatters nothing (every class absorbing only, as in a layer of
+    /// single-scattering albedo 0) has a band mean of 0, not 0/0: the lidar equation multiplies
+    /// it by the layer's scattering coefficient, 0, and a NaN would survive that.
+    #[test]
+    fn a_mixture_without_scattering_has_no_band_mean() {
+        let iso = PhaseFunction::Isotropic;
+        let parts = || [(0.0, &iso), (0.0, &iso)].into_iter();
+        assert_eq!(mixture_band_mean(parts(), 0.0, (PI - 1e-3, PI)), 0.0);
+        let hg = PhaseFunction::HenyeyGreenstein(
+            crate::particles::phase::HenyeyGreenstein::new(0.5).unwrap(),
+        );
+        let mixed = mixture_band_mean([(1.0, &iso), (3.0, &hg)].into_iter(), 4.0, (0.0, PI));
+        // Over the whole sphere every normalised phase function averages to 1.
+        assert!((mixed - 1.0).abs() < 1e-12, "{mixed}");
+    }
+
     /// The solid angle of a disk seen from its axis, against 2π(1 − cos α) from its half-angle.
     #[test]
     fn solid_angle_of_a_disk() {

@@ -1627,8 +1627,7 @@ fn mie_templates() -> Vec<Template> {
 /// Photons per profile and profiles per class above these are valid but large work (threads
 /// beyond the cores are capped since finding F9, `findings::f9_…`, so any count is run).
 fn dial_too_large(c: &Case) -> bool {
-    c.num_or("--photons", 0.0) > 500.0
-        || c.num_or("--ensemble", 2.0) > 4.0
+    c.num_or("--photons", 0.0) > 500.0 || c.num_or("--ensemble", 2.0) > 4.0
 }
 
 /// A study that ran has at least one profile that did not fail (item 5: a study where every
@@ -1753,9 +1752,7 @@ fn select_too_large(c: &Case) -> bool {
                 * c.text("--offsets-ghz").map_or(13, |l| l.split(',').count()) as f64
         }
     };
-    layers > 2000.0
-        || layers * positions > 2e4
-        || c.num_or("--ensemble", 2.0) > 4.0
+    layers > 2000.0 || layers * positions > 2e4 || c.num_or("--ensemble", 2.0) > 4.0
 }
 
 fn select_templates() -> Vec<Template> {
