@@ -38,9 +38,9 @@
 //!
 //! A merge reads the scene again from the text stored in every shard (relative paths in it
 //! anchored at the scene's absolute path, as on a cluster's shared filesystem), checks that its
-//! digest is still each shard's ([`scene_of`]), and runs every stage of [`pipeline::run_with`]
-//! with the Monte Carlo folded from the files, checked finite and energy-conserving
-//! ([`check_folded`]).
+//! digest is still each shard's ([`scene_of`]), and runs the pipeline ([`pipeline::prepare`],
+//! [`pipeline::Prepared::finish`]) with the Monte Carlo folded from the files, checked finite
+//! and energy-conserving ([`check_folded`]).
 
 use std::fmt::{self, Write as _};
 use std::fs;
@@ -539,11 +539,12 @@ fn write_record(w: &mut impl Write, t: &BatchTally) -> io::Result<()> {
 /// Run shard `spec` of `scene` with `transport` and write it as `out_dir/`[`ShardSpec::file_name`]
 /// (whole or not at all).
 ///
-/// The shard runs [`pipeline::run_with`] up to the Monte Carlo, so that everything checked
-/// before it in a single run (the optics, the analytic returns, the retrieval's set-up and its
-/// analytic products) is checked here too: a scene a merge would refuse is refused before any
-/// photon is traced. The Monte Carlo step traces the shard's batches on `transport.threads`
-/// threads and writes them; the stages after it are the merge's.
+/// The shard runs [`pipeline::prepare`], so that everything checked before the Monte Carlo in a
+/// single run (the optics, the analytic returns, the retrieval's set-up and its analytic
+/// products, the Monte Carlo's work) is checked here too: a scene a merge would refuse is
+/// refused before any photon is traced. It then traces the shard's batches of the plan on
+/// `transport.threads` threads and writes them; [`Prepared::finish`](pipeline::Prepared::finish)
+/// is the merge's.
 pub fn run(
     scene: &Scene,
     transport: &TransportOptions,
@@ -558,19 +559,18 @@ pub fn run(
     }
     let path = out_dir.join(spec.file_name());
     output::check_paths(&[&path])?;
-    let mut outcome: Option<Result<ShardReport, ShardError>> = None;
-    let result = pipeline::run_with(scene, transport, &mut |plan| {
-        outcome = Some(write_shard(scene, transport, plan, spec, &path));
-        // Stop the pipeline here: the stages after the Monte Carlo belong to the merge.
-        Err(TransportError::Options("shard written".into()))
-    });
-    match (outcome, result) {
-        (Some(done), _) => done,
-        (None, Err(e)) => Err(e.into()),
-        // `run_with` calls the Monte Carlo whenever photons > 0.
-        (None, Ok(_)) => Err(ShardError::Spec {
+    let prepared = pipeline::prepare(scene, transport)?;
+    if let Some(note) = prepared.warning() {
+        crate::limits::warn(&note);
+    }
+    match prepared.plan()? {
+        Some(plan) => write_shard(scene, transport, &plan, spec, &path),
+        None => Err(ShardError::Spec {
             spec,
-            what: "the scene runs no Monte Carlo".into(),
+            what: format!(
+                "the scene runs no Monte Carlo ({})",
+                prepared.decision().reason
+            ),
         }),
     }
 }
@@ -1884,22 +1884,14 @@ pub fn merge(inputs: &[PathBuf]) -> Result<Merged, ShardError> {
     let set = ShardSet::open(&shard_paths(inputs)?)?;
     let scene = set.scene()?;
     let opts = set.transport_options(&scene);
-    let mut failure: Option<ShardError> = None;
-    let result = pipeline::run_with(&scene, &opts, &mut |plan| {
-        set.fold(plan, &scene).map_err(|e| {
-            failure = Some(e);
-            // The real error is `failure`; this one only stops the pipeline.
-            TransportError::Options("the shards could not be folded".into())
-        })
-    });
-    if let Some(e) = failure {
-        return Err(e);
-    }
-    Ok(Merged {
-        scene,
-        run: result?,
-        shards: set.shards.len(),
-    })
+    let prepared = pipeline::prepare(&scene, &opts)?;
+    let mc = match prepared.plan()? {
+        Some(plan) => Some(set.fold(&plan, &scene)?),
+        None => None,
+    };
+    let run = prepared.finish(mc)?;
+    let shards = set.shards.len();
+    Ok(Merged { scene, run, shards })
 }
 
 #[cfg(test)]

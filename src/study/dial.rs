@@ -46,17 +46,17 @@ use crate::atmosphere::humidity::{SaturationOver, saturation_vapour_pressure_pa}
 use crate::atmosphere::{LatitudeClass, Profile, ProfileSet, SetMember, StateShift, shift_member};
 use crate::instrument::laser::{Filter, Laser, LineReturns};
 use crate::instrument::line_shape::LineShape;
-use crate::instrument::signals::{Signals, Telescope};
+use crate::instrument::signals::Signals;
 use crate::lidar_eq;
 use crate::optics::OpticalAtmosphere;
+use crate::pipeline;
 use crate::retrieval::{
-    AssumedInstrument, LayerColumns, Method, Product, Quantity, ReferenceState, Retrieval,
-    RetrievalConfig,
+    AssumedInstrument, LayerColumns, Method, Product, Quantity, ReferenceState, RetrievalConfig,
 };
 use crate::returns::{Order, Returns};
 use crate::rng::{self, Stream};
 use crate::scene::Scene;
-use crate::transport::{self, TransportOptions};
+use crate::transport::TransportOptions;
 
 /// A relative humidity above this (over liquid water) makes a profile unphysical for the study:
 /// 100 % plus rounding of the files it came from.
@@ -670,11 +670,9 @@ impl Study<'_> {
                 let mut opts = TransportOptions::from_scene(&scene);
                 opts.photons = self.options.photons;
                 opts.seed = seed;
-                opts.combinations = scene.sampling.combinations();
-                opts.combination_pairs = scene.sampling.covariance_pairs();
-                let mc = transport::run(&scene, &optics, &opts).map_err(|e| e.to_string())?;
-                let combined = mc.combined.as_ref().ok_or("no combined returns")?;
-                (None, scene.sampling.split(combined), Order::Total)
+                let (_, lines) =
+                    pipeline::trace_lines(&scene, &optics, &opts).map_err(|e| e.to_string())?;
+                (None, lines.ok_or("no combined returns")?, Order::Total)
             } else {
                 let analytic = lidar_eq::single_scatter(&scene, &optics);
                 let lines = scene.sampling.combine(&analytic);
@@ -711,7 +709,7 @@ impl Study<'_> {
     }
 
     /// The products of every pair retrieved from `m` with `reference` (one retrieval set-up,
-    /// its paths shared by the pairs: [`Retrieval::set_pair`]).
+    /// its paths shared by the pairs: [`Retrieval::set_pair`](crate::retrieval::Retrieval::set_pair)).
     fn retrieve(
         &self,
         m: &Measured,
@@ -722,26 +720,11 @@ impl Study<'_> {
         Clock::time(&self.clock.retrievals, || {
             let mut config = self.config.clone();
             config.realisations = 1;
-            let lines = &m.scene.lines;
-            let name =
-                |(on, off): (usize, usize)| format!("{}/{}", lines[on].name, lines[off].name);
-            let (on, off) = self.options.pairs[0];
-            config.on = on;
-            config.off = off;
-            let mut r = Retrieval::new(
-                config,
-                m.scene.laser.clone(),
-                reference.clone(),
-                truth.clone(),
-                m.scene.lidar.altitude_m,
-                m.scene.lidar.axis().z,
-                (0..m.scene.gates.count)
-                    .map(|g| m.scene.gates.centre_m(g))
-                    .collect(),
-                name((on, off)),
-                seed,
-            )
-            .map_err(|e| e.to_string())?;
+            (config.on, config.off) = self.options.pairs[0];
+            let mut r =
+                pipeline::retrieval_of(&m.scene, config, reference.clone(), truth.clone(), seed)
+                    .map_err(|e| e.to_string())?;
+            let name = |(on, off): (usize, usize)| pipeline::pair_name(&m.scene, on, off);
             let mut out = Vec::with_capacity(self.options.pairs.len());
             for &(on, off) in &self.options.pairs {
                 r.set_pair(on, off, name((on, off)))
@@ -960,20 +943,10 @@ fn with_signals(
     lines: LineReturns,
     order: Order,
 ) -> Result<Measured, String> {
-    let receiver = scene.receiver.as_ref().ok_or("no receiver")?;
-    let telescope = Telescope {
-        area_m2: scene.lidar.telescope_area_m2(),
-        optical_efficiency: scene.lidar.optical_efficiency,
-    };
-    let signals = Signals::new(
-        &lines,
-        order,
-        &scene.sampling.lines,
-        receiver,
-        telescope,
-        scene.gates.width_m,
-    )
-    .ok_or("no signals of the returns")?;
+    if scene.receiver.is_none() {
+        return Err("no receiver".into());
+    }
+    let signals = pipeline::signals_of(&scene, &lines, order).ok_or("no signals of the returns")?;
     Ok(Measured {
         scene,
         channels,
@@ -982,7 +955,7 @@ fn with_signals(
     })
 }
 
-/// The records of one pair from its products (in [`Retrieval`]'s target order: IPDA mixing
+/// The records of one pair from its products (in [`Retrieval`](crate::retrieval::Retrieval)'s target order: IPDA mixing
 /// ratio and slant column, then per DIAL cell density and mixing ratio).
 ///
 /// `exact` holds the products with the own reference in the truth's spectroscopy, where the
