@@ -37,167 +37,218 @@ pub(super) fn check_folded(
     limit_j: f64,
 ) -> Result<(), ShardError> {
     let batches = received.len() / channels.max(1);
-    let names = &r.returns.channels;
-    let name = |k: usize| names.get(k).cloned().unwrap_or_else(|| k.to_string());
-    // The batch that received the most in channel k (a non-finite sum first).
-    let worst = |k: usize| {
-        (0..batches)
+    let fold = Received {
+        set,
+        names: &r.returns.channels,
+        received,
+        channels,
+        batches,
+    };
+    fold.check_batches(limit_j)?;
+    fold.check_finite(r)?;
+    fold.check_conservation(limit_j)
+}
+
+/// Each batch's received energy per channel, and the shards they came from: what the checks of
+/// [`check_folded`] blame.
+struct Received<'a> {
+    set: &'a ShardSet,
+    names: &'a [String],
+    /// Batch after batch, `channels` values each \[J\].
+    received: &'a [f64],
+    channels: usize,
+    batches: usize,
+}
+
+impl Received<'_> {
+    fn name(&self, k: usize) -> String {
+        self.names.get(k).cloned().unwrap_or_else(|| k.to_string())
+    }
+
+    fn at(&self, b: usize, k: usize) -> f64 {
+        self.received[b * self.channels + k]
+    }
+
+    /// The batch that received the most in channel k (a non-finite sum first).
+    fn worst(&self, k: usize) -> usize {
+        (0..self.batches)
             .max_by(|&a, &b| {
-                let (x, y) = (received[a * channels + k], received[b * channels + k]);
                 let key = |v: f64| if v.is_finite() { v } else { f64::INFINITY };
-                key(x).total_cmp(&key(y))
+                key(self.at(a, k)).total_cmp(&key(self.at(b, k)))
             })
             .unwrap_or(0)
-    };
-    let blame = |k: usize, what: String| {
-        let b = worst(k);
+    }
+
+    /// The error of channel `k`, naming the shard of its largest batch.
+    fn blame(&self, k: usize, what: String) -> ShardError {
+        let b = self.worst(k);
         ShardError::Bad {
-            path: set.file_of_batch(b).to_path_buf(),
+            path: self.set.file_of_batch(b).to_path_buf(),
             what: format!(
                 "channel `{}`: {what} (the largest share comes from its batch {b}; the shards fold into it, each finite and ≥ 0 alone)",
-                name(k)
+                self.name(k)
             ),
         }
-    };
-    let improbable_j = batches as f64 * limit_j * IMPROBABLE_FACTOR;
-    for k in 0..channels {
-        if batches == 0 {
-            break;
-        }
-        let b = worst(k);
-        let v = received[b * channels + k];
-        if !v.is_finite() || v > improbable_j {
-            return Err(ShardError::Bad {
-                path: set.file_of_batch(b).to_path_buf(),
-                what: format!(
-                    "channel `{}`: its batch {b} receives {} J over all gates, orders and fields of view, where the pulse sends {} J through the receiver (pulse energy × optical efficiency): in a run that conserves energy one of its {batches} batches exceeds {} J with a probability below {:e} (Markov's inequality)",
-                    name(k),
-                    number(v),
-                    number(limit_j),
-                    number(improbable_j),
-                    1.0 / IMPROBABLE_FACTOR
-                ),
-            });
-        }
     }
-    // Every set of returns the fold made, with what it is and whether its channels are the
-    // transport's (a combination's blames the transport channel whose batch received most).
-    let mut sets: Vec<(&str, &crate::returns::Returns, bool)> = vec![("returns", &r.returns, true)];
-    if let Some(c) = &r.combined {
-        sets.push(("combined returns", c, false));
-    }
-    if let Some(p) = &r.polarised {
-        sets.push(("co-polarised returns", &p.channels.co, true));
-        sets.push(("cross-polarised returns", &p.channels.cross, true));
-        if let Some(c) = &p.combined {
-            sets.push(("combined co-polarised returns", &c.co, false));
-            sets.push(("combined cross-polarised returns", &c.cross, false));
-        }
-    }
-    let most = (0..channels)
-        .max_by(|&a, &b| {
-            let m = |k: usize| {
-                let v = received[worst(k) * channels + k];
-                if v.is_finite() { v } else { f64::INFINITY }
-            };
-            m(a).total_cmp(&m(b))
-        })
-        .unwrap_or(0);
-    for (what, ret, own) in sets {
-        let per_channel = ret.bins_per_channel().max(1);
-        let channel_of = |i: usize| {
-            if own {
-                (i / per_channel).min(channels - 1)
-            } else {
-                most
+
+    /// No single batch receives an impossible energy (Markov's inequality).
+    fn check_batches(&self, limit_j: f64) -> Result<(), ShardError> {
+        let batches = self.batches;
+        let improbable_j = batches as f64 * limit_j * IMPROBABLE_FACTOR;
+        for k in 0..self.channels {
+            if batches == 0 {
+                break;
             }
-        };
-        for (values, kind) in [(&ret.energy_j, "energy"), (&ret.stderr_j, "standard error")] {
-            if let Some(i) = values.iter().position(|v| !v.is_finite()) {
-                return Err(blame(
-                    channel_of(i),
+            let b = self.worst(k);
+            let v = self.at(b, k);
+            if !v.is_finite() || v > improbable_j {
+                return Err(ShardError::Bad {
+                    path: self.set.file_of_batch(b).to_path_buf(),
+                    what: format!(
+                        "channel `{}`: its batch {b} receives {} J over all gates, orders and fields of view, where the pulse sends {} J through the receiver (pulse energy × optical efficiency): in a run that conserves energy one of its {batches} batches exceeds {} J with a probability below {:e} (Markov's inequality)",
+                        self.name(k),
+                        number(v),
+                        number(limit_j),
+                        number(improbable_j),
+                        1.0 / IMPROBABLE_FACTOR
+                    ),
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// Every folded energy, standard error, covariance and flux is finite.
+    fn check_finite(&self, r: &McResult) -> Result<(), ShardError> {
+        let channels = self.channels;
+        // Every set of returns the fold made, with what it is and whether its channels are the
+        // transport's (a combination's blames the transport channel whose batch received most).
+        let mut sets: Vec<(&str, &crate::returns::Returns, bool)> =
+            vec![("returns", &r.returns, true)];
+        if let Some(c) = &r.combined {
+            sets.push(("combined returns", c, false));
+        }
+        if let Some(p) = &r.polarised {
+            sets.push(("co-polarised returns", &p.channels.co, true));
+            sets.push(("cross-polarised returns", &p.channels.cross, true));
+            if let Some(c) = &p.combined {
+                sets.push(("combined co-polarised returns", &c.co, false));
+                sets.push(("combined cross-polarised returns", &c.cross, false));
+            }
+        }
+        let most = (0..channels)
+            .max_by(|&a, &b| {
+                let m = |k: usize| {
+                    let v = self.at(self.worst(k), k);
+                    if v.is_finite() { v } else { f64::INFINITY }
+                };
+                m(a).total_cmp(&m(b))
+            })
+            .unwrap_or(0);
+        for (what, ret, own) in sets {
+            let per_channel = ret.bins_per_channel().max(1);
+            let channel_of = |i: usize| {
+                if own {
+                    (i / per_channel).min(channels - 1)
+                } else {
+                    most
+                }
+            };
+            for (values, kind) in [(&ret.energy_j, "energy"), (&ret.stderr_j, "standard error")] {
+                if let Some(i) = values.iter().position(|v| !v.is_finite()) {
+                    return Err(self.blame(
+                        channel_of(i),
+                        format!(
+                            "the merged {what} hold a{} {kind} of {} J in {}: a tally or the sum of its squares is beyond the range of a double",
+                            if kind == "energy" { "n" } else { "" },
+                            number(values[i]),
+                            describe_bin(ret, i)
+                        ),
+                    ));
+                }
+            }
+            // NaN stands for a covariance not computed.
+            if let Some(c) = &ret.covariance
+                && let Some(i) = c.cov_j2.iter().position(|v| v.is_infinite())
+            {
+                return Err(self.blame(
+                    channel_of(0),
                     format!(
-                        "the merged {what} hold a{} {kind} of {} J in {}: a tally or the sum of its squares is beyond the range of a double",
-                        if kind == "energy" { "n" } else { "" },
-                        number(values[i]),
-                        describe_bin(ret, i)
+                        "the merged {what} hold a covariance of {} J² (value {i}): the products of the tallies are beyond the range of a double",
+                        number(c.cov_j2[i])
                     ),
                 ));
             }
         }
-        // NaN stands for a covariance not computed.
-        if let Some(c) = &ret.covariance
-            && let Some(i) = c.cov_j2.iter().position(|v| v.is_infinite())
+        for (part, values) in ["up", "down", "absorbed", "cut"]
+            .iter()
+            .zip(r.flux.parts().into_iter().zip(r.flux_stderr.parts()))
         {
-            return Err(blame(
-                channel_of(0),
-                format!(
-                    "the merged {what} hold a covariance of {} J² (value {i}): the products of the tallies are beyond the range of a double",
-                    number(c.cov_j2[i])
-                ),
-            ));
+            let (mean, err) = values;
+            if let Some(k) = (0..mean.len()).find(|&k| !(mean[k].is_finite() && err[k].is_finite()))
+            {
+                return Err(self.blame(
+                    k.min(channels - 1),
+                    format!(
+                        "the merged flux `{part}` is {} ± {}: not finite",
+                        number(mean[k]),
+                        number(err[k])
+                    ),
+                ));
+            }
         }
+        Ok(())
     }
-    for (part, values) in ["up", "down", "absorbed", "cut"]
-        .iter()
-        .zip(r.flux.parts().into_iter().zip(r.flux_stderr.parts()))
-    {
-        let (mean, err) = values;
-        if let Some(k) = (0..mean.len()).find(|&k| !(mean[k].is_finite() && err[k].is_finite())) {
-            return Err(blame(
-                k.min(channels - 1),
-                format!(
-                    "the merged flux `{part}` is {} ± {}: not finite",
-                    number(mean[k]),
-                    number(err[k])
-                ),
-            ));
+
+    /// The mean received energy of every channel at most what the pulse sends through the
+    /// receiver, within [`CONSERVATION_SIGMAS`] standard errors and rounding.
+    fn check_conservation(&self, limit_j: f64) -> Result<(), ShardError> {
+        let batches = self.batches;
+        if batches == 0 {
+            return Ok(());
         }
+        for k in 0..self.channels {
+            let values = (0..batches).map(|b| self.at(b, k));
+            let n = batches as f64;
+            // Scaled by the largest, so that neither the mean nor the squares overflow.
+            let scale = values.clone().fold(0.0f64, |m, v| m.max(v.abs()));
+            if !scale.is_finite() {
+                return Err(self.blame(
+                    k,
+                    "a batch's received energy over all gates, orders and fields of view is not finite"
+                        .into(),
+                ));
+            }
+            if scale == 0.0 {
+                continue;
+            }
+            let mean = values.clone().map(|v| v / scale).sum::<f64>() / n;
+            let stderr = if batches > 1 {
+                let ss: f64 = values.map(|v| (v / scale - mean).powi(2)).sum();
+                (ss / (n - 1.0) / n).sqrt() * scale
+            } else {
+                0.0
+            };
+            let mean = mean * scale;
+            if mean > limit_j * (1.0 + CONSERVATION_ROUNDING) + CONSERVATION_SIGMAS * stderr {
+                return Err(self.blame(
+                    k,
+                    format!(
+                        "it receives {} ± {} J over all gates, orders and fields of view, more than the {} J the pulse sends through the receiver (pulse energy × optical efficiency) by {:.3} standard errors; energy is conserved, a run never exceeds it by more than {CONSERVATION_SIGMAS}",
+                        number(mean),
+                        number(stderr),
+                        number(limit_j),
+                        if stderr > 0.0 {
+                            (mean - limit_j) / stderr
+                        } else {
+                            f64::INFINITY
+                        }
+                    ),
+                ));
+            }
+        }
+        Ok(())
     }
-    if batches == 0 {
-        return Ok(());
-    }
-    for k in 0..channels {
-        let values = (0..batches).map(|b| received[b * channels + k]);
-        let n = batches as f64;
-        // Scaled by the largest, so that neither the mean nor the squares overflow.
-        let scale = values.clone().fold(0.0f64, |m, v| m.max(v.abs()));
-        if !scale.is_finite() {
-            return Err(blame(
-                k,
-                "a batch's received energy over all gates, orders and fields of view is not finite"
-                    .into(),
-            ));
-        }
-        if scale == 0.0 {
-            continue;
-        }
-        let mean = values.clone().map(|v| v / scale).sum::<f64>() / n;
-        let stderr = if batches > 1 {
-            let ss: f64 = values.map(|v| (v / scale - mean).powi(2)).sum();
-            (ss / (n - 1.0) / n).sqrt() * scale
-        } else {
-            0.0
-        };
-        let mean = mean * scale;
-        if mean > limit_j * (1.0 + CONSERVATION_ROUNDING) + CONSERVATION_SIGMAS * stderr {
-            return Err(blame(
-                k,
-                format!(
-                    "it receives {} ± {} J over all gates, orders and fields of view, more than the {} J the pulse sends through the receiver (pulse energy × optical efficiency) by {:.3} standard errors; energy is conserved, a run never exceeds it by more than {CONSERVATION_SIGMAS}",
-                    number(mean),
-                    number(stderr),
-                    number(limit_j),
-                    if stderr > 0.0 {
-                        (mean - limit_j) / stderr
-                    } else {
-                        f64::INFINITY
-                    }
-                ),
-            ));
-        }
-    }
-    Ok(())
 }
 
 /// Where bin `i` of `r` lies: its field of view, gate and order.
