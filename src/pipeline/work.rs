@@ -37,7 +37,7 @@ use crate::scene::Scene;
 /// between 0.03 and 0.83 times the estimate (`tests/validation_inputs.rs` checks ten of them).
 /// `max_order` does not enter: orders above it are tallied together, not cut. Not covered: the
 /// cost of detector-directed sampling and splitting on phase functions with a strong backward
-/// peak (issue 37).
+/// peak (bounded on its own: `docs/transport.md`, step 7).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct McWork {
     /// Photon packets.
