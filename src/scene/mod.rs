@@ -14,15 +14,17 @@
 //!    surface against the lidar and the gates, the problem's size), with no file read and no
 //!    physics. A problem is named at its file, line and key (`source.rs`), or at its field path
 //!    (`layer[2].particles`) for a description built in code, with the same message.
-//! 3. **resolve** ([`SceneDescription::resolve`], `resolve.rs`, `resolve_instrument.rs`): the
-//!    profile sets, phase, matrix and line-shape tables and line lists read, Mie theory run
-//!    (and cached), the laser lines sampled; the checks that need what those give.
+//! 3. **resolve** ([`SceneDescription::resolve`], `resolve.rs`, `resolve_gas.rs`,
+//!    `resolve_instrument.rs`): the profile sets, phase, matrix and line-shape tables and line
+//!    lists read, Mie theory run (and cached), the laser lines sampled; the checks that need
+//!    what those give.
 //!
 //! [`Scene::read`] and [`Scene::from_toml`] do all three.
 
 mod description;
 mod ranges;
 mod resolve;
+mod resolve_gas;
 mod resolve_instrument;
 mod source;
 mod validate;
