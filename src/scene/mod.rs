@@ -480,6 +480,11 @@ impl Scene {
     /// scene file's own is: the scene's `co2_ppm` rescales its CO2 column, and it must cover
     /// the scene's surface and top of the atmosphere. Errors name the scene key that the
     /// profile does not fit.
+    ///
+    /// An edit of the resolved scene, not of its description: a profile given as values (with
+    /// its gases) has no form in the description (whose inline profile is air density only),
+    /// and re-resolving would read the line lists and run Mie theory again for every ensemble
+    /// member. The description ([`Self::as_description`]) keeps the scene's own atmosphere.
     pub fn with_profile(&self, mut profile: Profile) -> Result<Scene, InputError> {
         let Some(a) = &self.atmosphere else {
             return Err(self.input_error(
@@ -544,6 +549,10 @@ impl Scene {
     /// The scene with another laser on the same lines (another frequency offset, jitter, line
     /// width or purity): its channels are sampled anew and per-channel values follow the lines.
     /// The laser must have one entry per line in its per-line vectors.
+    ///
+    /// An edit of the resolved scene, as [`Self::with_profile`] is: a laser whose line shape
+    /// is a table read from a file has no description of its own, and the layers and lines are
+    /// kept as they are (only the sampling of the lines changes).
     pub fn with_laser(&self, laser: Laser) -> Result<Scene, InputError> {
         let n = self.lines.len();
         if laser.pulse_energy_j.len() != n
