@@ -406,6 +406,63 @@ pub fn parse_f64_in(
     check_finite_range(v, bounds).map_err(|m| InputError::at(path, line, field, m))
 }
 
+/// The names scene files and the command line use for the built-in choices, kept here, below
+/// the modules that implement them, so that a scene is checked against them without those
+/// modules (each module's enum lists its variants in the order of its names here).
+pub mod names {
+    /// AFGL standard atmospheres (`crate::atmosphere::StandardAtmosphere`).
+    pub const STANDARD_ATMOSPHERES: [&str; 6] = [
+        "tropical",
+        "midlatitude_summer",
+        "midlatitude_winter",
+        "subarctic_summer",
+        "subarctic_winter",
+        "us_standard",
+    ];
+    /// OPAC aerosol types (`crate::particles::opac::OpacType`), in kebab case.
+    pub const OPAC_TYPES: [&str; 8] = [
+        "continental-clean",
+        "continental-average",
+        "continental-polluted",
+        "urban",
+        "maritime-clean",
+        "maritime-polluted",
+        "maritime-tropical",
+        "arctic",
+    ];
+    /// Line shapes of the line-by-line computation (`crate::spectroscopy::LineShapeModel`).
+    pub const GAS_LINE_SHAPES: [&str; 3] = ["voigt", "sdvoigt", "ht"];
+
+    /// The index of a standard atmosphere's name, or the message naming the known ones.
+    pub fn standard_atmosphere(s: &str) -> Result<usize, String> {
+        STANDARD_ATMOSPHERES
+            .iter()
+            .position(|n| *n == s)
+            .ok_or_else(|| {
+                format!(
+                    "unknown standard atmosphere `{s}` (known: {})",
+                    STANDARD_ATMOSPHERES.join(", ")
+                )
+            })
+    }
+
+    /// The index of an OPAC type's name (kebab or snake case, case-insensitive), if known.
+    pub fn opac_type(name: &str) -> Option<usize> {
+        let n = name.trim().to_ascii_lowercase().replace('_', "-");
+        OPAC_TYPES.iter().position(|t| *t == n)
+    }
+
+    /// The index of a gas line shape's name, or the message naming the known ones.
+    pub fn gas_line_shape(s: &str) -> Result<usize, String> {
+        GAS_LINE_SHAPES.iter().position(|n| *n == s).ok_or_else(|| {
+            format!(
+                "unknown line shape `{s}` (known: {})",
+                GAS_LINE_SHAPES.join(", ")
+            )
+        })
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -235,3 +235,74 @@ fn with_profile_keeps_its_checks() {
         .with_profile(StandardAtmosphere::Tropical.profile())
         .unwrap();
 }
+
+/// The instrument and retrieval sections are checked by validation alone, with the messages of
+/// the file: a bad laser, receiver, retrieval or name is refused before anything is resolved.
+#[test]
+fn validation_alone_refuses_bad_laser_receiver_and_retrieval_values() {
+    let full = BASE.replacen("pulse_energy_j = 0.1\n", "", 1)
+        + "[laser]\npulse_energy_j = 0.05\nrepetition_rate_hz = 50.0\n\
+           [receiver]\nquantum_efficiency = 0.8\n\
+           [gas_absorption]\n\
+           [retrieval]\non = \"on\"\noff = \"off\"\naveraging_shots = 100\ndial_cell_m = 100.0\n";
+    let path = Path::new("full.toml");
+    let d = Scene::check_toml(path, &full).unwrap();
+    d.validate().unwrap();
+    let cases: [(&str, &str, &str, fn(&mut SceneDescription)); 6] = [
+        (
+            "repetition_rate_hz = 50.0",
+            "repetition_rate_hz = -3.0",
+            "laser.repetition_rate_hz",
+            |d| d.laser.as_mut().unwrap().repetition_rate_hz = -3.0,
+        ),
+        (
+            "repetition_rate_hz = 50.0",
+            "repetition_rate_hz = 50.0\nline_shape = \"gaussian\"",
+            "laser.line_shape",
+            |d| d.laser.as_mut().unwrap().line_shape = Some("gaussian".into()),
+        ),
+        (
+            "quantum_efficiency = 0.8",
+            "quantum_efficiency = 1.5",
+            "receiver.quantum_efficiency",
+            |d| d.receiver.as_mut().unwrap().quantum_efficiency = 1.5,
+        ),
+        ("on = \"on\"", "on = \"online\"", "retrieval.on", |d| {
+            d.retrieval.as_mut().unwrap().on = Some("online".into())
+        }),
+        (
+            "averaging_shots = 100",
+            "averaging_shots = 0",
+            "retrieval.averaging_shots",
+            |d| d.retrieval.as_mut().unwrap().averaging_shots = Some(0),
+        ),
+        (
+            "standard = \"us_standard\"",
+            "standard = \"us_standart\"",
+            "atmosphere.standard",
+            |d| d.atmosphere.as_mut().unwrap().standard = Some("us_standart".into()),
+        ),
+    ];
+    for (from, to, field, edit) in cases {
+        let text = full.replacen(from, to, 1);
+        assert_ne!(text, full, "{from}");
+        let file = Scene::check_toml(path, &text).unwrap_err();
+        let mut code = d.clone();
+        edit(&mut code);
+        let e = code.validate().unwrap_err();
+        same_message(&file, &e, field);
+        let line = text
+            .lines()
+            .position(|l| l.starts_with(to.lines().last().unwrap()));
+        assert_eq!(file.line, line.map(|i| i + 1), "{file}");
+    }
+    // The messages themselves say what is wrong.
+    let mut code = d.clone();
+    code.retrieval.as_mut().unwrap().on = Some("online".into());
+    let e = code.validate().unwrap_err();
+    assert!(
+        e.message
+            .contains("no channel named `online` (channels: on, off)"),
+        "{e}"
+    );
+}

@@ -350,14 +350,7 @@ impl StandardAtmosphere {
 
     /// The name used in scenes and on the command line.
     pub fn name(self) -> &'static str {
-        match self {
-            Self::Tropical => "tropical",
-            Self::MidlatitudeSummer => "midlatitude_summer",
-            Self::MidlatitudeWinter => "midlatitude_winter",
-            Self::SubarcticSummer => "subarctic_summer",
-            Self::SubarcticWinter => "subarctic_winter",
-            Self::UsStandard => "us_standard",
-        }
+        crate::input::names::STANDARD_ATMOSPHERES[self as usize]
     }
 
     /// The latitude the atmosphere represents [°N] (Anderson et al. 1986, Table 1): 15, 45, 60;
@@ -410,17 +403,7 @@ impl StandardAtmosphere {
 impl FromStr for StandardAtmosphere {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
-        Self::ALL
-            .iter()
-            .copied()
-            .find(|a| a.name() == s)
-            .ok_or_else(|| {
-                let names: Vec<_> = Self::ALL.iter().map(|a| a.name()).collect();
-                format!(
-                    "unknown standard atmosphere `{s}` (known: {})",
-                    names.join(", ")
-                )
-            })
+        crate::input::names::standard_atmosphere(s).map(|i| Self::ALL[i])
     }
 }
 

@@ -267,22 +267,12 @@ impl OpacType {
 
     /// Name in kebab case (`continental-average`, …), as the CLI takes it.
     pub fn name(self) -> &'static str {
-        match self {
-            OpacType::ContinentalClean => "continental-clean",
-            OpacType::ContinentalAverage => "continental-average",
-            OpacType::ContinentalPolluted => "continental-polluted",
-            OpacType::Urban => "urban",
-            OpacType::MaritimeClean => "maritime-clean",
-            OpacType::MaritimePolluted => "maritime-polluted",
-            OpacType::MaritimeTropical => "maritime-tropical",
-            OpacType::Arctic => "arctic",
-        }
+        crate::input::names::OPAC_TYPES[self as usize]
     }
 
     /// The type named `name` (kebab or snake case, case-insensitive).
     pub fn from_name(name: &str) -> Option<Self> {
-        let n = name.trim().to_ascii_lowercase().replace('_', "-");
-        Self::ALL.into_iter().find(|t| t.name() == n)
+        crate::input::names::opac_type(name).map(|i| Self::ALL[i])
     }
 
     /// Components and their number densities [cm⁻³] (Hess et al. 1998, Table 4).

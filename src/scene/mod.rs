@@ -9,10 +9,11 @@
 //! 1. **parse** ([`SceneDescription::parse`], `description.rs`): serde reads the TOML into the
 //!    plain [`SceneDescription`] (types, unknown keys, missing keys; byte spans become line
 //!    numbers). A description may as well be built in Rust code.
-//! 2. **validate** ([`SceneDescription::validate`], `validate.rs`): every check that needs only
-//!    the description's values (ranges, one-of keys, per-channel lengths, layer order, the
-//!    surface against the lidar and the gates, the problem's size), with no file read and no
-//!    physics. A problem is named at its file, line and key (`source.rs`), or at its field path
+//! 2. **validate** ([`SceneDescription::validate`], `validate.rs`, `validate_instrument.rs`,
+//!    `validate_retrieval.rs`): every check that needs only the description's values (ranges,
+//!    one-of keys, per-channel lengths, names, layer order, the surface against the lidar and
+//!    the gates, the laser, receiver and background, the retrieval's lines, target and cells,
+//!    the problem's size), with no file read and no physics. A problem is named at its file, line and key (`source.rs`), or at its field path
 //!    (`layer[2].particles`) for a description built in code, with the same message.
 //! 3. **resolve** ([`SceneDescription::resolve`], `resolve.rs`, `resolve_gas.rs`,
 //!    `resolve_instrument.rs`): the profile sets, phase, matrix and line-shape tables and line
@@ -28,6 +29,8 @@ mod resolve_gas;
 mod resolve_instrument;
 mod source;
 mod validate;
+mod validate_instrument;
+mod validate_retrieval;
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;

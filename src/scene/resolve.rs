@@ -43,15 +43,17 @@ impl Resolver<'_> {
     pub fn scene(&self, d: SceneDescription, c: Checked) -> Result<Scene, InputError> {
         let Checked {
             mut lidar,
-            lidar_pulse_energy_j,
             lines,
             gates,
             mut simulation,
             surface,
+            laser,
+            receiver,
+            retrieval,
         } = c;
         simulation.cache_dir = simulation.cache_dir.map(|p| self.base_dir.join(p));
         // Until the channels are expanded at the end, every per-channel value is per line.
-        let laser = self.laser(&d, &lines, lidar_pulse_energy_j)?;
+        let laser = self.laser(&laser, lines.len())?;
         // The transport runs with the first line's energy; combinations scale the others.
         lidar.pulse_energy_j = laser.pulse_energy_j[0];
         let atmosphere = match &d.atmosphere {
@@ -66,7 +68,7 @@ impl Resolver<'_> {
         if let (Some(s), Some(a)) = (&surface, &atmosphere) {
             self.surface_in_profile(s, a)?;
         }
-        let receiver = self.receiver(&d, &lines, surface.as_ref().map(|s| s.albedo[0]))?;
+        let receiver = self.receiver(receiver.as_ref(), &lines)?;
         let (sampling, sampled) = sample_lines(&laser, &lines, receiver.as_ref());
         if let Some(c) = sampled.iter().find(|c| !(c.wavenumber_cm1 > 0.0)) {
             return Err(self.err(
@@ -90,20 +92,8 @@ impl Resolver<'_> {
                 n_particle_layers: layers.len(),
             },
         )?;
-        let retrieval = self.retrieval(
-            &d,
-            &super::resolve_instrument::Resolved {
-                lines: &lines,
-                lidar: &lidar,
-                laser: &laser,
-                gates: &gates,
-                surface: surface.as_ref(),
-                layers: &layers,
-                atmosphere: atmosphere.as_ref(),
-                gas: gas.as_ref(),
-                has_receiver: receiver.is_some(),
-            },
-        )?;
+        let retrieval =
+            self.retrieval(&d, retrieval.as_ref(), atmosphere.as_ref(), gas.as_ref())?;
         let mut scene = Scene {
             path: self.path.clone(),
             description: d.description.clone().unwrap_or_default(),

@@ -12,11 +12,13 @@ use super::description::{
 };
 use super::ranges::*;
 use super::source::{KeyPath, Source};
+use super::validate_instrument::{LaserValues, ReceiverValues};
+use super::validate_retrieval::{Known, RetrievalValues};
 use super::{
     BeamProfile, Channel, Gates, Lidar, MULTIPLE_SCATTERING_TOLERANCE, MultipleScattering,
     Polarisation, Simulation, Surface,
 };
-use crate::input::{Bounds, InputError, check_count, check_finite_range};
+use crate::input::{Bounds, InputError, check_count, check_finite_range, names};
 
 /// Checks a description against the rules of a scene; its errors are named by the source.
 pub(super) struct Validator<'a> {
@@ -34,14 +36,18 @@ impl Deref for Validator<'_> {
 pub(super) struct Checked {
     /// The lidar; its pulse energy is set from the laser by resolve.
     pub lidar: Lidar,
-    /// `[lidar] pulse_energy_j`, if given (else it comes from `[laser]`).
-    pub lidar_pulse_energy_j: Option<f64>,
     /// The laser lines (`[[channel]]`).
     pub lines: Vec<Channel>,
     pub gates: Gates,
     /// The Monte Carlo settings, `cache_dir` as written.
     pub simulation: Simulation,
     pub surface: Option<Surface>,
+    /// The laser's values (`[laser]`, or the ideal laser of `[lidar] pulse_energy_j`).
+    pub laser: LaserValues,
+    /// The receiver's values (`[receiver]`, `[background]`), if any.
+    pub receiver: Option<ReceiverValues>,
+    /// What to retrieve (`[retrieval]`), if anything.
+    pub retrieval: Option<RetrievalValues>,
 }
 
 /// What the size of the problem depends on, as far as it is known.
@@ -89,13 +95,27 @@ impl Validator<'_> {
         if let Some(g) = &d.gas_absorption {
             self.gas(g, d.atmosphere.is_some())?;
         }
+        let laser = self.laser(d, &lines, lidar_pulse_energy_j)?;
+        let receiver = self.receiver(d, surface.as_ref().map(|s| s.albedo[0]))?;
+        let retrieval = self.retrieval(
+            d,
+            &Known {
+                lines: &lines,
+                lidar: &lidar,
+                laser: &laser,
+                gates: &gates,
+                surface: surface.as_ref(),
+            },
+        )?;
         Ok(Checked {
             lidar,
-            lidar_pulse_energy_j,
             lines,
             gates,
             simulation,
             surface,
+            laser,
+            receiver,
+            retrieval,
         })
     }
 
@@ -399,6 +419,9 @@ impl Validator<'_> {
                 }
             }
         }
+        if let Some(name) = &a.standard {
+            names::standard_atmosphere(name).map_err(|m| self.err(&sec.key("standard"), m))?;
+        }
         if a.profile_id.is_some() && a.profile_file.is_none() {
             return Err(self.err(&sec.key("profile_id"), "goes with `profile_file`"));
         }
@@ -598,8 +621,17 @@ impl Validator<'_> {
             if p.refractive_index.is_some() {
                 return Err(self.err(&at, "OPAC aerosol types carry their own refractive indices: remove `refractive_index`"));
             }
-            if p.aerosol_type.is_none() {
+            let Some(name) = &p.aerosol_type else {
                 return Err(self.err(&at, "`opac` needs `aerosol_type`"));
+            };
+            if names::opac_type(name).is_none() {
+                return Err(self.err(
+                    &at,
+                    format!(
+                        "unknown OPAC aerosol type `{name}` (known: {})",
+                        names::OPAC_TYPES.join(", ")
+                    ),
+                ));
             }
         } else {
             if p.aerosol_type.is_some() {
@@ -723,6 +755,9 @@ impl Validator<'_> {
         }
         if let Some(w) = g.wing_cm1 {
             self.range(&sec.key("wing_cm1"), w, WING_CM1)?;
+        }
+        if let Some(shape) = &g.line_shape {
+            names::gas_line_shape(shape).map_err(|m| self.err(&sec.key("line_shape"), m))?;
         }
         for (k, v) in [
             ("table_start_cm1", g.table_start_cm1),

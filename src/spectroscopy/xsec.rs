@@ -99,25 +99,19 @@ pub enum LineShapeModel {
 impl LineShapeModel {
     /// The name the command line and scene files use.
     pub fn name(self) -> &'static str {
-        match self {
-            LineShapeModel::Voigt => "voigt",
-            LineShapeModel::SdVoigt => "sdvoigt",
-            LineShapeModel::HartmannTran => "ht",
-        }
+        crate::input::names::GAS_LINE_SHAPES[self as usize]
     }
 }
 
 impl std::str::FromStr for LineShapeModel {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
-        match s {
-            "voigt" => Ok(LineShapeModel::Voigt),
-            "sdvoigt" => Ok(LineShapeModel::SdVoigt),
-            "ht" => Ok(LineShapeModel::HartmannTran),
-            _ => Err(format!(
-                "unknown line shape `{s}` (known: voigt, sdvoigt, ht)"
-            )),
-        }
+        const ALL: [LineShapeModel; 3] = [
+            LineShapeModel::Voigt,
+            LineShapeModel::SdVoigt,
+            LineShapeModel::HartmannTran,
+        ];
+        crate::input::names::gas_line_shape(s).map(|i| ALL[i])
     }
 }
 
