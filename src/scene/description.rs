@@ -58,8 +58,11 @@ pub struct LaserDescription {
     pub line_shape: Option<String>,
     /// Full width at half maximum of a gaussian or lorentzian line \[MHz\].
     pub linewidth_fwhm_mhz: Option<f64>,
-    /// The line-shape table of `line_shape = "table"` (relative to the scene).
+    /// The line-shape table of `line_shape = "table"` (relative to the scene), or
+    /// `line_shape_table`.
     pub line_shape_file: Option<String>,
+    /// The line-shape table of `line_shape = "table"` given by values, or `line_shape_file`.
+    pub line_shape_table: Option<LineShapeTableDescription>,
     /// Quadrature nodes over the line shape.
     pub line_shape_nodes: Option<usize>,
     /// Offset of each line from its channel's wavenumber \[MHz\].
@@ -245,6 +248,8 @@ pub struct AtmosphereDescription {
     pub profile_id: Option<String>,
     /// Dry-air column average of CO2 to rescale the profile to \[ppm\].
     pub co2_ppm: Option<f64>,
+    /// A profile given by values, with its gases.
+    pub profile: Option<ProfileDescription>,
     /// Altitudes of an air-density profile \[m\].
     pub altitude_m: Option<Vec<f64>>,
     /// Air number density at `altitude_m` \[1/m³\].
@@ -257,6 +262,46 @@ pub struct AtmosphereDescription {
     pub rayleigh: Option<bool>,
     /// Molecular depolarisation factor per channel (Bucholtz 1995 if absent).
     pub depolarization_factor: Option<PerChannel>,
+}
+
+/// A profile given by values (`[atmosphere] profile = { … }`): the levels of
+/// [`crate::atmosphere::Profile`], bottom up.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ProfileDescription {
+    /// Name for messages (default `scene profile`).
+    pub name: Option<String>,
+    /// Altitude of each level \[m\], strictly increasing.
+    pub altitude_m: Vec<f64>,
+    /// Pressure at each level \[Pa\], strictly decreasing.
+    pub pressure_pa: Vec<f64>,
+    /// Temperature at each level \[K\].
+    pub temperature_k: Vec<f64>,
+    /// The gases, each a volume mixing ratio per level, in order.
+    #[serde(default)]
+    pub gases: Vec<GasDescription>,
+}
+
+/// One gas of a profile given by values.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GasDescription {
+    /// Formula as HITRAN writes it (`CO2`, `H2O`, …).
+    pub name: String,
+    /// Volume mixing ratio at each level \[mol/mol\].
+    pub vmr: Vec<f64>,
+}
+
+/// A laser line shape given by values (`[laser] line_shape_table = { … }`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LineShapeTableDescription {
+    /// Where the values came from, for messages (default: the description).
+    pub name: Option<String>,
+    /// Frequency offset from the line centre \[MHz\], strictly increasing.
+    pub offset_mhz: Vec<f64>,
+    /// Relative intensity at each offset, ≥ 0, not normalised.
+    pub relative_intensity: Vec<f64>,
 }
 
 /// `[[layer]]`: particles given by their optics or by a size distribution, and/or extra

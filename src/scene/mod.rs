@@ -27,6 +27,7 @@ mod ranges;
 mod resolve;
 mod resolve_gas;
 mod resolve_instrument;
+mod reuse;
 mod source;
 mod validate;
 mod validate_instrument;
@@ -42,13 +43,14 @@ use crate::instrument::signals::Receiver;
 use crate::particles::matrix::ScatteringMatrix;
 use crate::particles::phase::PhaseFunction;
 use crate::retrieval::RetrievalConfig;
-use crate::spectroscopy::{LblOptions, LineList, isotopologues};
+use crate::spectroscopy::{LblOptions, LineList};
 
 pub use description::{
     AtmosphereDescription, BackgroundDescription, ChannelDescription, GasAbsorptionDescription,
-    GatesDescription, LaserDescription, LayerDescription, LidarDescription, OneOrMany,
-    ParticlesDescription, PerChannel, PhaseDescription, ReceiverDescription, RetrievalDescription,
-    SceneDescription, SimulationDescription, SurfaceDescription,
+    GasDescription, GatesDescription, LaserDescription, LayerDescription, LidarDescription,
+    LineShapeTableDescription, OneOrMany, ParticlesDescription, PerChannel, PhaseDescription,
+    ProfileDescription, ReceiverDescription, RetrievalDescription, SceneDescription,
+    SimulationDescription, SurfaceDescription,
 };
 use source::{KeyPath, Source};
 
@@ -97,6 +99,8 @@ pub struct Scene {
     pub simulation: Simulation,
     /// The description it was resolved from.
     spec: Arc<SceneDescription>,
+    /// The directory its relative paths are anchored at.
+    base_dir: PathBuf,
     /// Where the description came from: names the line (or field path) of a key in errors
     /// found after resolving, and holds the scene text.
     source: Arc<Source>,
@@ -437,7 +441,7 @@ impl Scene {
             src: &source,
             base_dir,
         }
-        .scene(d, checked)
+        .scene_reusing(d, checked, None)
     }
 
     /// The description this scene was resolved from.
@@ -477,113 +481,6 @@ impl Scene {
         if let Some(s) = &mut self.surface {
             remap(&mut s.albedo, index);
         }
-    }
-
-    /// The scene with another atmospheric profile (an ensemble member, say), checked as the
-    /// scene file's own is: the scene's `co2_ppm` rescales its CO2 column, and it must cover
-    /// the scene's surface and top of the atmosphere. Errors name the scene key that the
-    /// profile does not fit.
-    ///
-    /// An edit of the resolved scene, not of its description: a profile given as values (with
-    /// its gases) has no form in the description (whose inline profile is air density only),
-    /// and re-resolving would read the line lists and run Mie theory again for every ensemble
-    /// member. The description ([`Self::as_description`]) keeps the scene's own atmosphere.
-    pub fn with_profile(&self, mut profile: Profile) -> Result<Scene, InputError> {
-        let Some(a) = &self.atmosphere else {
-            return Err(self.input_error(
-                "atmosphere",
-                "",
-                "the scene has no atmosphere to swap a profile into",
-            ));
-        };
-        profile
-            .validate()
-            .map_err(|e| self.input_error("atmosphere", "", e.to_string()))?;
-        if let Some(ppm) = a.co2_ppm {
-            profile
-                .rescale_gas("CO2", ppm * 1e-6)
-                .map_err(|e| self.input_error("atmosphere", "co2_ppm", e.to_string()))?;
-        }
-        let (bottom, top) = (profile.altitude_m[0], profile.altitude_m[profile.len() - 1]);
-        if top < a.top_m {
-            return Err(self.input_error(
-                "atmosphere",
-                "top_m",
-                format!(
-                    "profile `{}` ends at {top:.0} m, below the scene's top of the atmosphere ({:.0} m)",
-                    profile.name, a.top_m
-                ),
-            ));
-        }
-        if let Some(s) = &self.surface
-            && s.altitude_m < bottom
-        {
-            return Err(self.input_error(
-                "surface",
-                "altitude_m",
-                format!(
-                    "profile `{}` starts at {bottom:.0} m, above the scene's surface ({:.0} m)",
-                    profile.name, s.altitude_m
-                ),
-            ));
-        }
-        if let Some(g) = &self.gas {
-            for id in g.lines.molecules() {
-                let name = isotopologues::molecule_name(id).unwrap_or("?");
-                if profile.gas(name).is_none() {
-                    return Err(self.input_error(
-                        "gas_absorption",
-                        "",
-                        format!(
-                            "profile `{}` has no {name}, which the lines absorb",
-                            profile.name
-                        ),
-                    ));
-                }
-            }
-        }
-        let mut scene = self.clone();
-        if let Some(a) = &mut scene.atmosphere {
-            a.profile = profile;
-        }
-        Ok(scene)
-    }
-
-    /// The scene with another laser on the same lines (another frequency offset, jitter, line
-    /// width or purity): its channels are sampled anew and per-channel values follow the lines.
-    /// The laser must have one entry per line in its per-line vectors.
-    ///
-    /// An edit of the resolved scene, as [`Self::with_profile`] is: a laser whose line shape
-    /// is a table read from a file has no description of its own, and the layers and lines are
-    /// kept as they are (only the sampling of the lines changes).
-    pub fn with_laser(&self, laser: Laser) -> Result<Scene, InputError> {
-        let n = self.lines.len();
-        if laser.pulse_energy_j.len() != n
-            || laser.frequency_offset_mhz.len() != n
-            || laser.impurity_wavenumber_cm1.len() != n
-        {
-            return Err(self.input_error(
-                "laser",
-                "",
-                format!("a laser for {n} lines needs {n} values per line"),
-            ));
-        }
-        let mut scene = self.clone();
-        scene.collapse_per_channel_values();
-        let (sampling, channels) = sample_lines(&laser, &scene.lines, scene.receiver.as_ref());
-        scene.sampling = sampling;
-        scene.channels = channels;
-        if let Some(c) = scene.channels.iter().find(|c| !(c.wavenumber_cm1 > 0.0)) {
-            return Err(self.input_error(
-                "laser",
-                "frequency_offset_mhz",
-                format!("channel `{}` falls at {} cm⁻¹", c.name, c.wavenumber_cm1),
-            ));
-        }
-        scene.lidar.pulse_energy_j = laser.pulse_energy_j[0];
-        scene.laser = laser;
-        scene.expand_per_channel_values();
-        Ok(scene)
     }
 
     /// The inverse of [`Self::expand_per_channel_values`]: one value per line again, each

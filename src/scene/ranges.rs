@@ -109,3 +109,8 @@ pub(super) const SPEED_M_PER_S: Bounds = Bounds::positive(1e5);
 /// `simulation.multiple_scattering_tolerance`: a share of the single-scatter return, (0, 1).
 /// Above 1 "auto" would call any multiple scattering negligible.
 pub(super) const MS_TOLERANCE: Bounds = Bounds::open(0.0, 1.0);
+/// Pressure of a profile given by values \[Pa\] (generous: the profile's own check, when
+/// resolved, holds it to the atmosphere's range).
+pub(super) const PROFILE_PRESSURE_PA: Bounds = Bounds::positive(1e8);
+/// Temperature of a profile given by values \[K\] (generous, as the pressure).
+pub(super) const PROFILE_TEMPERATURE_K: Bounds = Bounds::positive(1e5);

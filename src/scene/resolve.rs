@@ -11,12 +11,13 @@ use super::description::{
     AtmosphereDescription, LayerDescription, OneOrMany, ParticlesDescription, PerChannel,
     PhaseDescription, SceneDescription,
 };
+use super::reuse::Reuse;
 use super::source::{KeyPath, Source};
 use super::validate::{Checked, ProblemSize, Validator};
 use super::{
     Atmosphere, Channel, Layer, Polarisation, Scene, Surface, molecular_layer_count, sample_lines,
 };
-use crate::atmosphere::{Profile, StandardAtmosphere};
+use crate::atmosphere::{GasProfile, Profile, StandardAtmosphere};
 use crate::input::InputError;
 use crate::particles::distribution::{BulkOptions, Component, SizeDistribution};
 use crate::particles::matrix::ScatteringMatrix;
@@ -39,8 +40,15 @@ impl<'a> Deref for Resolver<'a> {
 }
 
 impl Resolver<'_> {
-    /// The scene of a description that has passed [`Validator::check`], given what it found.
-    pub fn scene(&self, d: SceneDescription, c: Checked) -> Result<Scene, InputError> {
+    /// The scene of a description that has passed [`Validator::check`], given what it found,
+    /// keeping what `reuse` holds of a previous scene.
+    pub fn scene_reusing(
+        &self,
+        d: SceneDescription,
+        c: Checked,
+        reuse: Option<Reuse>,
+    ) -> Result<Scene, InputError> {
+        let mut reuse = reuse.unwrap_or_default();
         let Checked {
             mut lidar,
             lines,
@@ -56,12 +64,19 @@ impl Resolver<'_> {
         let laser = self.laser(&laser, lines.len())?;
         // The transport runs with the first line's energy; combinations scale the others.
         lidar.pulse_energy_j = laser.pulse_energy_j[0];
-        let atmosphere = match &d.atmosphere {
-            Some(a) => Some(self.atmosphere(a, &lines)?),
-            None => None,
+        let atmosphere = match (&d.atmosphere, reuse.atmosphere.take()) {
+            (Some(_), Some(kept)) => Some(kept),
+            (Some(a), None) => {
+                Some(self.atmosphere(a, &lines, reuse.depolarisation_factor.take())?)
+            }
+            (None, _) => None,
         };
         let mut layers = Vec::new();
         for (i, l) in d.layer.iter().enumerate() {
+            if let Some(kept) = reuse.layers.get_mut(i).and_then(Option::take) {
+                layers.push(kept);
+                continue;
+            }
             let cache_dir = simulation.cache_dir.as_deref();
             layers.push(self.layer(i, l, &lines, cache_dir, lidar.polarisation)?);
         }
@@ -76,8 +91,12 @@ impl Resolver<'_> {
                 format!("channel `{}` falls at {} cm⁻¹", c.name, c.wavenumber_cm1),
             ));
         }
-        let gas = match (&d.gas_absorption, &atmosphere) {
-            (Some(g), Some(a)) => Some(self.gas(g, &sampled, a)?),
+        let gas = match (&d.gas_absorption, &atmosphere, reuse.gas.take()) {
+            (Some(g), Some(a), Some(kept)) => {
+                self.gas_in_profile(g, &kept, a)?;
+                Some(kept)
+            }
+            (Some(g), Some(a), None) => Some(self.gas(g, &sampled, a)?),
             _ => None,
         };
         Validator { src: self.src }.problem_size(
@@ -92,8 +111,13 @@ impl Resolver<'_> {
                 n_particle_layers: layers.len(),
             },
         )?;
-        let retrieval =
-            self.retrieval(&d, retrieval.as_ref(), atmosphere.as_ref(), gas.as_ref())?;
+        let retrieval = self.retrieval(
+            &d,
+            retrieval.as_ref(),
+            atmosphere.as_ref(),
+            gas.as_ref(),
+            reuse.spectroscopy.take(),
+        )?;
         let mut scene = Scene {
             path: self.path.clone(),
             description: d.description.clone().unwrap_or_default(),
@@ -111,6 +135,7 @@ impl Resolver<'_> {
             gas,
             simulation,
             spec: Arc::new(d),
+            base_dir: self.base_dir.to_path_buf(),
             source: Arc::new(self.src.clone()),
         };
         scene.expand_per_channel_values();
@@ -132,10 +157,13 @@ impl Resolver<'_> {
     }
 
     /// The molecular atmosphere: its profile, rescaled to the scene's CO2, cut at its top.
+    /// `kept_depolarisation`: the factors of a previous scene with the same lines and
+    /// Rayleigh keys, which need neither computing nor checking again.
     fn atmosphere(
         &self,
         a: &AtmosphereDescription,
         channels: &[Channel],
+        kept_depolarisation: Option<Vec<f64>>,
     ) -> Result<Atmosphere, InputError> {
         let sec = KeyPath::table("atmosphere");
         let mut profile = if let Some(name) = &a.standard {
@@ -144,6 +172,25 @@ impl Resolver<'_> {
                 .profile()
         } else if let Some(file) = &a.profile_file {
             self.set_profile(&sec, file, a.profile_id.as_deref())?
+        } else if let Some(p) = &a.profile {
+            let profile = Profile {
+                name: p.name.clone().unwrap_or_else(|| "scene profile".into()),
+                altitude_m: p.altitude_m.clone(),
+                pressure_pa: p.pressure_pa.clone(),
+                temperature_k: p.temperature_k.clone(),
+                gases: p
+                    .gases
+                    .iter()
+                    .map(|g| GasProfile {
+                        name: g.name.clone(),
+                        vmr: g.vmr.clone(),
+                    })
+                    .collect(),
+            };
+            profile
+                .validate()
+                .map_err(|e| self.err(&sec.key("profile"), e.to_string()))?;
+            profile
         } else {
             let (z, n) = (
                 a.altitude_m.as_deref(),
@@ -183,6 +230,16 @@ impl Resolver<'_> {
         let rayleigh_on = a.rayleigh.unwrap_or(true);
         // Bucholtz's depolarisation and cross-section are needed only with Rayleigh scattering
         // on; a channel outside their range is an error then, and only then.
+        if let Some(depolarisation_factor) = kept_depolarisation {
+            return Ok(Atmosphere {
+                profile,
+                layer_thickness_m,
+                top_m,
+                rayleigh: rayleigh_on,
+                depolarisation_factor,
+                co2_ppm: a.co2_ppm,
+            });
+        }
         let depolarisation_factor = match &a.depolarization_factor {
             Some(v) => self.per_channel(&sec.key("depolarization_factor"), v, channels.len())?,
             None if rayleigh_on => channels

@@ -194,4 +194,33 @@ impl Resolver<'_> {
         }
         Ok(())
     }
+
+    /// The checks of [`Self::gas`] against the atmosphere's gases, for gas absorption kept from
+    /// a previous scene whose profile this one replaces.
+    pub(super) fn gas_in_profile(
+        &self,
+        g: &GasAbsorptionDescription,
+        gas: &GasAbsorption,
+        atm: &Atmosphere,
+    ) -> Result<(), InputError> {
+        let sec = KeyPath::table("gas_absorption");
+        for n in g.molecules.iter().flatten() {
+            if atm.profile.gas(n).is_none() {
+                return Err(self.err(
+                    &sec.key("molecules"),
+                    format!("the atmosphere has no `{n}` profile"),
+                ));
+            }
+        }
+        for id in gas.lines.molecules() {
+            let name = isotopologues::molecule_name(id).unwrap_or("?");
+            if atm.profile.gas(name).is_none() {
+                return Err(self.err(
+                    &sec.key("lines"),
+                    format!("the lines include {name}, which the atmosphere profile does not carry (restrict `molecules`)"),
+                ));
+            }
+        }
+        Ok(())
+    }
 }

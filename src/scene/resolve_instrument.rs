@@ -44,7 +44,21 @@ impl Resolver<'_> {
             LaserLineShape::Lorentzian(w) => {
                 LineShape::lorentzian(*w).map_err(|m| self.err(&width_at, m))?
             }
-            LaserLineShape::Table(f) => {
+            LaserLineShape::TableValues(t) => {
+                let table = LineShapeTable {
+                    source: t.name.as_deref().unwrap_or(super::DESCRIPTION_NAME).into(),
+                    offset_mhz: t.offset_mhz.clone(),
+                    relative_intensity: t.relative_intensity.clone(),
+                };
+                table.validate().map_err(|m| {
+                    self.err(
+                        &sec.key("line_shape_table"),
+                        format!("line-shape table: {m}"),
+                    )
+                })?;
+                LineShape::Table(table)
+            }
+            LaserLineShape::TableFile(f) => {
                 let p = self.base_dir.join(f);
                 LineShape::Table(LineShapeTable::read(&p).map_err(|e| {
                     self.err(
@@ -136,6 +150,7 @@ impl Resolver<'_> {
         v: Option<&RetrievalValues>,
         atmosphere: Option<&Atmosphere>,
         gas: Option<&GasAbsorption>,
+        kept_spectroscopy: Option<Option<AssumedSpectroscopy>>,
     ) -> Result<Option<RetrievalConfig>, InputError> {
         let (Some(r), Some(v)) = (&raw.retrieval, v) else {
             return Ok(None);
@@ -187,7 +202,10 @@ impl Resolver<'_> {
             gates_per_cell: d.gates_per_cell,
             cells: d.cells,
         });
-        let spectroscopy = self.assumed_spectroscopy(r, g)?;
+        let spectroscopy = match kept_spectroscopy {
+            Some(kept) => kept,
+            None => self.assumed_spectroscopy(r, g)?,
+        };
         Ok(Some(RetrievalConfig {
             gas: gas_name,
             on: v.on,

@@ -8,7 +8,7 @@ use std::path::PathBuf;
 
 use super::description::{
     AtmosphereDescription, GasAbsorptionDescription, LayerDescription, OneOrMany, PerChannel,
-    PhaseDescription, SceneDescription,
+    PhaseDescription, ProfileDescription, SceneDescription,
 };
 use super::ranges::*;
 use super::source::{KeyPath, Source};
@@ -400,13 +400,22 @@ impl Validator<'_> {
     fn atmosphere(&self, a: &AtmosphereDescription, n_lines: usize) -> Result<(), InputError> {
         let sec = KeyPath::table("atmosphere");
         let explicit = a.altitude_m.is_some() || a.air_number_density_per_m3.is_some();
-        let sources = [a.standard.is_some(), a.profile_file.is_some(), explicit];
+        let sources = [
+            a.standard.is_some(),
+            a.profile_file.is_some(),
+            a.profile.is_some(),
+            explicit,
+        ];
         if sources.iter().filter(|x| **x).count() != 1 {
             return Err(self.err(
                 &sec,
                 "needs exactly one of `standard` (an AFGL atmosphere), `profile_file` (a profile \
-                 set, with `profile_id`), or `altitude_m` with `air_number_density_per_m3`",
+                 set, with `profile_id`), `profile` (a profile given by values), or `altitude_m` \
+                 with `air_number_density_per_m3`",
             ));
+        }
+        if let Some(p) = &a.profile {
+            self.inline_profile(&sec.key("profile"), p)?;
         }
         if explicit {
             match (&a.altitude_m, &a.air_number_density_per_m3) {
@@ -438,6 +447,40 @@ impl Validator<'_> {
             let at = sec.key("depolarization_factor");
             let d = self.per_channel(&at, v, n_lines)?;
             self.range_all(&at, &d, DEPOLARISATION)?;
+        }
+        Ok(())
+    }
+
+    /// A profile given by values: as many values of each quantity as levels, each finite and in
+    /// its range (the profile's own order and range are checked when resolved).
+    fn inline_profile(&self, at: &KeyPath, p: &ProfileDescription) -> Result<(), InputError> {
+        let n = p.altitude_m.len();
+        if n < 2 {
+            return Err(self.err(at, format!("has {n} levels, at least 2 are needed")));
+        }
+        let mut quantities = vec![
+            ("altitude_m", &p.altitude_m, ALTITUDE_M),
+            ("pressure_pa", &p.pressure_pa, PROFILE_PRESSURE_PA),
+            ("temperature_k", &p.temperature_k, PROFILE_TEMPERATURE_K),
+        ];
+        for g in &p.gases {
+            quantities.push((g.name.as_str(), &g.vmr, FRACTION));
+        }
+        for (name, v, bounds) in quantities {
+            if v.len() != n {
+                return Err(self.err(
+                    at,
+                    format!("`{name}` has {} values, `altitude_m` {n}", v.len()),
+                ));
+            }
+            for x in v.iter() {
+                check_finite_range(*x, bounds)
+                    .map_err(|m| self.err(at, format!("`{name}`: {m}")))?;
+            }
+        }
+        let mut names = std::collections::HashSet::new();
+        if let Some(g) = p.gases.iter().find(|g| !names.insert(g.name.as_str())) {
+            return Err(self.err(at, format!("gas `{}` is given twice", g.name)));
         }
         Ok(())
     }

@@ -3,11 +3,11 @@
 //! handed to resolve as plain values, which builds the instrument's types from them.
 
 use super::Channel;
-use super::description::{BackgroundDescription, SceneDescription};
+use super::description::{BackgroundDescription, LineShapeTableDescription, SceneDescription};
 use super::ranges::*;
 use super::source::KeyPath;
 use super::validate::Validator;
-use crate::input::{Bounds, InputError};
+use crate::input::{Bounds, InputError, check_finite_range};
 
 /// Default number of line-shape quadrature nodes (odd, so the line centre is a node).
 const DEFAULT_LINE_SHAPE_NODES: usize = 5;
@@ -22,7 +22,9 @@ pub(super) enum LaserLineShape {
     /// A lorentzian line of this full width at half maximum \[MHz\].
     Lorentzian(f64),
     /// A table read from this file (relative to the scene).
-    Table(String),
+    TableFile(String),
+    /// A table given by values.
+    TableValues(LineShapeTableDescription),
 }
 
 /// The laser's checked values: an ideal monochromatic laser, or the `[laser]` section's.
@@ -167,15 +169,35 @@ impl Validator<'_> {
             "monochromatic" => LaserLineShape::Monochromatic,
             "gaussian" => LaserLineShape::Gaussian(width(l.linewidth_fwhm_mhz)?),
             "lorentzian" => LaserLineShape::Lorentzian(width(l.linewidth_fwhm_mhz)?),
-            "table" => {
-                let f = l.line_shape_file.as_ref().ok_or_else(|| {
-                    self.err(
+            "table" => match (&l.line_shape_file, &l.line_shape_table) {
+                (Some(f), None) => LaserLineShape::TableFile(f.clone()),
+                (None, Some(t)) => {
+                    let at = sec.key("line_shape_table");
+                    if t.offset_mhz.len() != t.relative_intensity.len() {
+                        return Err(self.err(
+                            &at,
+                            "needs as many `relative_intensity` values as `offset_mhz`",
+                        ));
+                    }
+                    for x in t.offset_mhz.iter().chain(&t.relative_intensity) {
+                        check_finite_range(*x, Bounds::closed(-f64::MAX, f64::MAX))
+                            .map_err(|m| self.err(&at, m))?;
+                    }
+                    LaserLineShape::TableValues(t.clone())
+                }
+                (Some(_), Some(_)) => {
+                    return Err(self.err(
+                        &sec.key("line_shape_table"),
+                        "give `line_shape_file` or `line_shape_table`, not both",
+                    ));
+                }
+                (None, None) => {
+                    return Err(self.err(
                         &shape_at,
                         "`table` needs `line_shape_file` (relative to the scene)",
-                    )
-                })?;
-                LaserLineShape::Table(f.clone())
-            }
+                    ));
+                }
+            },
             other => {
                 return Err(self.err(
                     &shape_at,
@@ -187,6 +209,12 @@ impl Validator<'_> {
         };
         if kind != "table" && l.line_shape_file.is_some() {
             return Err(self.err(&file_at, "goes with line_shape = \"table\""));
+        }
+        if kind != "table" && l.line_shape_table.is_some() {
+            return Err(self.err(
+                &sec.key("line_shape_table"),
+                "goes with line_shape = \"table\"",
+            ));
         }
         let nodes_at = sec.key("line_shape_nodes");
         let monochromatic = line_shape == LaserLineShape::Monochromatic;
