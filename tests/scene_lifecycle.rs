@@ -239,6 +239,15 @@ fn with_profile_keeps_its_checks() {
         .unwrap();
 }
 
+/// A bad value: the file's text to replace and its replacement, the field path, and the same
+/// edit of the description.
+type Case = (
+    &'static str,
+    &'static str,
+    &'static str,
+    fn(&mut SceneDescription),
+);
+
 /// The instrument and retrieval sections are checked by validation alone, with the messages of
 /// the file: a bad laser, receiver, retrieval or name is refused before anything is resolved.
 #[test]
@@ -251,7 +260,7 @@ fn validation_alone_refuses_bad_laser_receiver_and_retrieval_values() {
     let path = Path::new("full.toml");
     let d = Scene::check_toml(path, &full).unwrap();
     d.validate().unwrap();
-    let cases: [(&str, &str, &str, fn(&mut SceneDescription)); 6] = [
+    let cases: [Case; 6] = [
         (
             "repetition_rate_hz = 50.0",
             "repetition_rate_hz = -3.0",

@@ -9,8 +9,8 @@
 //! 1. **parse** ([`SceneDescription::parse`], `description.rs`): serde reads the TOML into the
 //!    plain [`SceneDescription`] (types, unknown keys, missing keys; byte spans become line
 //!    numbers). A description may as well be built in Rust code.
-//! 2. **validate** ([`SceneDescription::validate`], `validate.rs`, `validate_instrument.rs`,
-//!    `validate_retrieval.rs`): every check that needs only the description's values (ranges,
+//! 2. **validate** ([`SceneDescription::validate`], `validate.rs`, `validate_atmosphere.rs`,
+//!    `validate_instrument.rs`, `validate_retrieval.rs`): every check that needs only the description's values (ranges,
 //!    one-of keys, per-channel lengths, names, layer order, the surface against the lidar and
 //!    the gates, the laser, receiver and background, the retrieval's lines, target and cells,
 //!    the problem's size), with no file read and no physics. A problem is named at its file, line and key (`source.rs`), or at its field path
@@ -20,7 +20,10 @@
 //!    lists read, Mie theory run (and cached), the laser lines sampled; the checks that need
 //!    what those give.
 //!
-//! [`Scene::read`] and [`Scene::from_toml`] do all three.
+//! [`Scene::read`] and [`Scene::from_toml`] do all three. [`SceneDescription::resolve_reusing`]
+//! (`reuse.rs`) resolves an edited description keeping what a previous scene resolved from the
+//! parts the edit left unchanged; [`Scene::with_profile`] and [`Scene::with_laser`] are such
+//! edits.
 
 mod description;
 mod ranges;
@@ -30,6 +33,7 @@ mod resolve_instrument;
 mod reuse;
 mod source;
 mod validate;
+mod validate_atmosphere;
 mod validate_instrument;
 mod validate_retrieval;
 

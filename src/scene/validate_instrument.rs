@@ -3,7 +3,9 @@
 //! handed to resolve as plain values, which builds the instrument's types from them.
 
 use super::Channel;
-use super::description::{BackgroundDescription, LineShapeTableDescription, SceneDescription};
+use super::description::{
+    BackgroundDescription, LaserDescription, LineShapeTableDescription, SceneDescription,
+};
 use super::ranges::*;
 use super::source::KeyPath;
 use super::validate::Validator;
@@ -149,6 +151,70 @@ impl Validator<'_> {
             l.repetition_rate_hz,
             REPETITION_RATE_HZ,
         )?;
+        let (line_shape, nodes) = self.laser_line_shape(l)?;
+        let frequency_offset_mhz = match &l.frequency_offset_mhz {
+            Some(v) => {
+                let at = sec.key("frequency_offset_mhz");
+                let o = self.per_channel(&at, v, n)?;
+                self.range_all(&at, &o, FREQUENCY_OFFSET_MHZ)?;
+                o
+            }
+            None => vec![0.0; n],
+        };
+        let frequency_jitter_rms_mhz = self.range(
+            &sec.key("frequency_jitter_rms_mhz"),
+            l.frequency_jitter_rms_mhz.unwrap_or(0.0),
+            FREQUENCY_JITTER_MHZ,
+        )?;
+        let purity_at = sec.key("spectral_purity");
+        let spectral_purity = self.range(&purity_at, l.spectral_purity.unwrap_or(1.0), PURITY)?;
+        let imp_at = sec.key("impurity_wavenumber_cm1");
+        let impurity_wavenumber_cm1 = match (&l.impurity_wavenumber_cm1, spectral_purity < 1.0) {
+            (Some(v), true) => {
+                let w = self.per_channel(&imp_at, v, n)?;
+                self.range_all(&imp_at, &w, WAVENUMBER_CM1)?;
+                w
+            }
+            (None, true) => {
+                return Err(self.err(
+                    &purity_at,
+                    "spectral purity below 1 needs `impurity_wavenumber_cm1` (where the rest of the energy goes)",
+                ));
+            }
+            (Some(_), false) => {
+                return Err(self.err(&imp_at, "goes with `spectral_purity` below 1"));
+            }
+            (None, false) => vec![f64::NAN; n],
+        };
+        let fraction = |key: &str, v: Option<f64>| -> Result<f64, InputError> {
+            self.range(&sec.key(key), v.unwrap_or(0.0), FRACTION_BELOW_1)
+        };
+        Ok(LaserValues::Given(GivenLaser {
+            line_shape,
+            nodes,
+            frequency_offset_mhz,
+            frequency_jitter_rms_mhz,
+            spectral_purity,
+            impurity_wavenumber_cm1,
+            pulse_energy_j,
+            repetition_rate_hz,
+            pulse_energy_jitter_fraction: fraction(
+                "pulse_energy_jitter_fraction",
+                l.pulse_energy_jitter_fraction,
+            )?,
+            energy_monitor_error_fraction: fraction(
+                "energy_monitor_error_fraction",
+                l.energy_monitor_error_fraction,
+            )?,
+        }))
+    }
+
+    /// `[laser]`'s line shape and its quadrature nodes.
+    fn laser_line_shape(
+        &self,
+        l: &LaserDescription,
+    ) -> Result<(LaserLineShape, usize), InputError> {
+        let sec = KeyPath::table("laser");
         let shape_at = sec.key("line_shape");
         let width_at = sec.key("linewidth_fwhm_mhz");
         let file_at = sec.key("line_shape_file");
@@ -229,61 +295,7 @@ impl Validator<'_> {
             (None, true) => 1,
             (None, false) => DEFAULT_LINE_SHAPE_NODES,
         };
-        let frequency_offset_mhz = match &l.frequency_offset_mhz {
-            Some(v) => {
-                let at = sec.key("frequency_offset_mhz");
-                let o = self.per_channel(&at, v, n)?;
-                self.range_all(&at, &o, FREQUENCY_OFFSET_MHZ)?;
-                o
-            }
-            None => vec![0.0; n],
-        };
-        let frequency_jitter_rms_mhz = self.range(
-            &sec.key("frequency_jitter_rms_mhz"),
-            l.frequency_jitter_rms_mhz.unwrap_or(0.0),
-            FREQUENCY_JITTER_MHZ,
-        )?;
-        let purity_at = sec.key("spectral_purity");
-        let spectral_purity = self.range(&purity_at, l.spectral_purity.unwrap_or(1.0), PURITY)?;
-        let imp_at = sec.key("impurity_wavenumber_cm1");
-        let impurity_wavenumber_cm1 = match (&l.impurity_wavenumber_cm1, spectral_purity < 1.0) {
-            (Some(v), true) => {
-                let w = self.per_channel(&imp_at, v, n)?;
-                self.range_all(&imp_at, &w, WAVENUMBER_CM1)?;
-                w
-            }
-            (None, true) => {
-                return Err(self.err(
-                    &purity_at,
-                    "spectral purity below 1 needs `impurity_wavenumber_cm1` (where the rest of the energy goes)",
-                ));
-            }
-            (Some(_), false) => {
-                return Err(self.err(&imp_at, "goes with `spectral_purity` below 1"));
-            }
-            (None, false) => vec![f64::NAN; n],
-        };
-        let fraction = |key: &str, v: Option<f64>| -> Result<f64, InputError> {
-            self.range(&sec.key(key), v.unwrap_or(0.0), FRACTION_BELOW_1)
-        };
-        Ok(LaserValues::Given(GivenLaser {
-            line_shape,
-            nodes,
-            frequency_offset_mhz,
-            frequency_jitter_rms_mhz,
-            spectral_purity,
-            impurity_wavenumber_cm1,
-            pulse_energy_j,
-            repetition_rate_hz,
-            pulse_energy_jitter_fraction: fraction(
-                "pulse_energy_jitter_fraction",
-                l.pulse_energy_jitter_fraction,
-            )?,
-            energy_monitor_error_fraction: fraction(
-                "energy_monitor_error_fraction",
-                l.energy_monitor_error_fraction,
-            )?,
-        }))
+        Ok((line_shape, nodes))
     }
 
     /// The `[receiver]` and `[background]` sections.
