@@ -38,6 +38,7 @@ pub mod optics;
 pub mod output;
 pub mod particles;
 pub mod pipeline;
+pub mod products;
 pub mod retrieval;
 pub mod returns;
 pub mod rng;

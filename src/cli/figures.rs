@@ -16,7 +16,8 @@ use lidarsim::scene::Scene;
 
 type DrawResult = Result<(), Box<dyn std::error::Error>>;
 
-/// Draw every figure the run has data for into `files`, for the directory `dir`.
+/// Draw every figure the run has data for into `files`, for the directory `dir`: with a
+/// retrieval its returns and DIAL profile, with polarised light its depolarisation.
 pub fn draw(
     files: &mut OutputSet,
     dir: &Path,
@@ -24,6 +25,24 @@ pub fn draw(
     run: &RunOutput,
 ) -> Result<(), OutputError> {
     init_font();
+    if scene.retrieval.is_some() {
+        draw_retrieval(files, dir, scene, run)?;
+    }
+    if run.polarised.is_some() {
+        files.write_via(dir.join("depolarisation.png"), |p| {
+            depolarisation_figure(p, run)
+        })?;
+    }
+    Ok(())
+}
+
+/// `returns.png` and, with a DIAL retrieval, `dial.png`.
+fn draw_retrieval(
+    files: &mut OutputSet,
+    dir: &Path,
+    scene: &Scene,
+    run: &RunOutput,
+) -> Result<(), OutputError> {
     let mc = run.mc_lines.as_ref().map(|m| &m.mean);
     files.write_via(dir.join("returns.png"), |p| {
         returns_figure(p, scene, &run.analytic_lines.mean, mc)
@@ -42,7 +61,7 @@ pub fn draw(
 /// The depolarisation ratio δ = cross/co of the first line against range, one colour per field
 /// of view: Monte Carlo (all orders) as points with ±1 standard error, analytic single
 /// scattering as a line.
-pub fn depolarisation_figure(path: &Path, run: &RunOutput) -> DrawResult {
+fn depolarisation_figure(path: &Path, run: &RunOutput) -> DrawResult {
     let Some(pol) = &run.polarised else {
         return Err("not a polarised run".into());
     };

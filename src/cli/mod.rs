@@ -20,10 +20,14 @@ pub mod plot;
 pub mod profiles;
 pub mod progress;
 pub mod run;
+pub mod select_figures;
 pub mod select_lines;
 pub mod study_figures;
+pub mod write;
 
 use lidarsim::input::{Bounds, check_count, check_finite_range};
+use lidarsim::shard::{ShardError, ShardSpec};
+use lidarsim::study::shard::StudyShardReport;
 
 /// A clap value parser for a real option: a finite number inside `bounds` (unit as the
 /// option's name says), so that a bad value is refused by the parser with the option named.
@@ -124,6 +128,32 @@ pub fn netcdf_history() -> String {
         lidarsim::netcdf::utc_timestamp(std::time::SystemTime::now()),
         command.join(" ")
     )
+}
+
+/// `lidarsim dial … --shard I/N` and `lidarsim select-lines … --shard I/N`: run `shard` (which
+/// studies the `n` profiles of shard `spec` and writes its file) on `pool` with a progress bar
+/// labelled `what`, and print what it did.
+pub fn run_study_shard(
+    spec: ShardSpec,
+    n: usize,
+    what: &str,
+    pool: &rayon::ThreadPool,
+    shard: impl FnOnce(&(dyn Fn() + Sync)) -> Result<StudyShardReport, ShardError> + Send,
+) -> anyhow::Result<()> {
+    let bar = progress::Progress::new(n, what, "profiles");
+    let r = pool.install(|| shard(&|| bar.tick()))?;
+    bar.finish();
+    outln!(
+        "shard {spec}: profiles {}..{} of {} ({} failed) in {:.2} s on {} threads; wrote {}",
+        r.profiles.start,
+        r.profiles.end,
+        r.total_profiles,
+        r.failed,
+        r.wall_s,
+        r.threads,
+        r.path.display()
+    );
+    Ok(())
 }
 
 #[cfg(test)]
