@@ -26,6 +26,7 @@
 
 pub mod aperture;
 pub mod atmosphere;
+pub mod benchmark;
 pub mod constants;
 #[cfg(feature = "mpi")]
 pub mod distributed;

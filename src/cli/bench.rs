@@ -1,32 +1,26 @@
 //! `lidarsim bench`: speed and Monte Carlo efficiency of the transport on a fixed workload, or
 //! (`--study N`) the speed of the seed paper's clear-sky ensemble study, or (`--scenes FILE…`)
-//! what skipping saves on whole scene runs (`lidarsim::skip::compare`).
-//!
-//! The study workload is `scenes/study_co2_ipda.toml` (compiled in) run by `lidarsim dial` over
-//! N generated profiles per latitude class (3N in all), every one of its 10 on-lines against the
-//! off-line, IPDA and DIAL, with the whole error budget, analytic lidar equation.
-//!
-//! The workload is the Bissonnette et al. (1995) case C.1 (`scenes/bissonnette_c1.toml`, compiled
-//! in) with one 1 mrad field of view. The figure of merit is FOM = 1/(rel_err² · t) of the
-//! multiple-scattering return (orders ≥ 2) in the gate starting 100 m into the cloud
-//! (1100–1110 m), t the wall-clock time of the transport at the given thread count.
+//! what skipping saves on whole scene runs, or (`--depth DIR`) the figure of merit of C.1's
+//! multiple scattering at every gate and field of view. The workloads and measurements are
+//! [`lidarsim::benchmark`]'s; this prints them and draws.
 
 use std::io::Write;
-
-use anyhow::Context;
 use std::path::{Path, PathBuf};
 
+use lidarsim::benchmark::{self, FORCED_PHOTONS, depth, depth::Cell};
 use lidarsim::input::Bounds;
-use lidarsim::optics::OpticalAtmosphere;
-use lidarsim::output::write_file;
-use lidarsim::returns::Order;
-use lidarsim::scene::Scene;
-use lidarsim::stats;
-use lidarsim::transport::{self, TransportOptions};
+use lidarsim::output::{OutputSet, write_file};
+use lidarsim::transport::TransportOptions;
 
-const C1_SCENE: &str = include_str!("../../scenes/bissonnette_c1.toml");
-const C1_TABLE_FILE: &str = r#"file = "../phase_functions/bissonnette_c1_1064nm.txt""#;
-const C1_TABLE_BUILTIN: &str = r#"builtin = "bissonnette_c1_1064nm""#;
+use super::plot::{FONT, draw_legend, init_font};
+
+/// `print!` that returns a closed stdout (`| head`) as an error instead of panicking.
+macro_rules! out {
+    ($($t:tt)*) => {{
+        use std::io::Write as _;
+        write!(std::io::stdout().lock(), $($t)*)?;
+    }};
+}
 
 /// Arguments of `lidarsim bench`.
 #[derive(clap::Args, Debug)]
@@ -104,10 +98,7 @@ pub struct Args {
     pub scenes: Vec<PathBuf>,
 }
 
-/// Photons of a forced Monte Carlo for a scene that asks for none (the default scene's count).
-const FORCED_PHOTONS: u64 = 200_000;
-
-/// What skipping saves on whole scene runs (module docs).
+/// What skipping saves on whole scene runs ([`lidarsim::skip::compare`]).
 fn scenes_bench(args: &Args) -> anyhow::Result<()> {
     use lidarsim::skip;
     let mut out = std::io::stdout().lock();
@@ -123,14 +114,7 @@ fn scenes_bench(args: &Args) -> anyhow::Result<()> {
     writeln!(out, "|---|---|---|---|---|---|---|---|---|")?;
     let mut rows = Vec::new();
     for path in &args.scenes {
-        let scene = Scene::read(path)?;
-        let mut variants = vec![(path.display().to_string(), scene.clone())];
-        if !scene.layers.is_empty() {
-            let mut clear = scene.clone();
-            clear.layers.clear();
-            variants.push((format!("{} without its layers", path.display()), clear));
-        }
-        for (name, scene) in &variants {
+        for (name, scene) in &benchmark::scene_variants(path)? {
             for &threads in &args.threads {
                 let c = skip::compare(scene, FORCED_PHOTONS, threads, args.repeat)?;
                 let saved = c.forced_s - c.auto_s;
@@ -165,59 +149,19 @@ fn scenes_bench(args: &Args) -> anyhow::Result<()> {
     Ok(())
 }
 
-const STUDY_SCENE: &str = include_str!("../../scenes/study_co2_ipda.toml");
-
-/// The ensemble study benchmark (module docs).
+/// The ensemble study benchmark ([`benchmark::StudyWorkload`]).
 fn study_bench(n: usize, args: &Args) -> anyhow::Result<()> {
-    use lidarsim::atmosphere::{LatitudeClass, ProfileSet, class_ensemble};
-    use lidarsim::study::dial::{self, StudyOptions};
-    use std::time::Instant;
-    let scene = Scene::from_toml(
-        Path::new("<embedded scenes/study_co2_ipda.toml>"),
-        STUDY_SCENE,
-    )?;
-    let retrieval = scene
-        .retrieval
-        .as_ref()
-        .context("study scene has a retrieval")?;
-    let pairs: Vec<(usize, usize)> = (0..scene.lines.len())
-        .filter(|&k| k != retrieval.off)
-        .map(|k| (k, retrieval.off))
-        .collect();
-    // Every thread count runs the study `repeat` times: its size before the ensemble is drawn
-    // (README, "Limits").
-    let runs = (3 * n as u64)
-        .saturating_mul(args.threads.len() as u64)
-        .saturating_mul(args.repeat as u64);
-    let work = lidarsim::pipeline::study_work(&scene, runs, 0)?;
-    work.check()
-        .map_err(|m| anyhow::anyhow!("--study {n} (× --threads, × --repeat): {m}"))?;
-    work.warnings()
-        .iter()
-        .for_each(|w| lidarsim::limits::warn(w));
-    let t = Instant::now();
-    let mut set = ProfileSet::default();
-    for (i, c) in LatitudeClass::ALL.iter().enumerate() {
-        set.members.extend(
-            class_ensemble(*c, n, args.seed.wrapping_add(i as u64))?
-                .0
-                .members,
-        );
-    }
-    let generate_s = t.elapsed().as_secs_f64();
-    let options = StudyOptions {
-        pairs,
-        seed: args.seed,
-        ..StudyOptions::from_scene(&scene).context("study scene has a retrieval")?
-    };
+    let runs = (args.threads.len() as u64).saturating_mul(args.repeat as u64);
+    let w = benchmark::StudyWorkload::new(n, args.seed, runs)?;
     let mut out = std::io::stdout().lock();
     writeln!(
         out,
-        "ensemble study: {} profiles (3 classes × {n}), {} on-lines × IPDA and {} DIAL cells, error budget of {} rows; ensemble generated in {generate_s:.2} s",
-        set.len(),
-        options.pairs.len(),
-        retrieval.dial.map_or(0, |d| d.cells),
-        lidarsim::study::dial::N_SOURCES
+        "ensemble study: {} profiles (3 classes × {n}), {} on-lines × IPDA and {} DIAL cells, error budget of {} rows; ensemble generated in {:.2} s",
+        w.set.len(),
+        w.options.pairs.len(),
+        w.dial_cells(),
+        lidarsim::study::dial::N_SOURCES,
+        w.generate_s
     )?;
     writeln!(
         out,
@@ -228,30 +172,23 @@ fn study_bench(n: usize, args: &Args) -> anyhow::Result<()> {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
             .build()?;
-        let mut best: Option<dial::Timing> = None;
-        for _ in 0..args.repeat {
-            let r = pool.install(|| dial::run(&scene, &set, &options, &|| {}))?;
-            let failed = r.outcomes.iter().filter(|o| o.records.is_err()).count();
-            anyhow::ensure!(failed == 0, "{failed} profiles failed");
-            if best.is_none_or(|b| r.timing.wall_s < b.wall_s) {
-                best = Some(r.timing);
-            }
-        }
-        let Some(t) = best else { continue };
+        let Some(t) = w.measure(&pool, args.repeat)? else {
+            continue;
+        };
         writeln!(
             out,
             "{:>7} {:>7.2} {:>11.1} {:>15.2} {:>10.2} {:>13.2} {:>13.2}",
             pool.current_num_threads(),
             t.wall_s,
-            set.len() as f64 / t.wall_s,
+            w.set.len() as f64 / t.wall_s,
             t.truth_optics_s,
             t.returns_s,
             t.references_s + t.mean_references_s,
             t.retrievals_s
         )?;
         rows.push(serde_json::json!({
-            "threads": pool.current_num_threads(), "profiles": set.len(), "wall_s": t.wall_s,
-            "generate_s": generate_s, "truth_optics_s": t.truth_optics_s, "returns_s": t.returns_s,
+            "threads": pool.current_num_threads(), "profiles": w.set.len(), "wall_s": t.wall_s,
+            "generate_s": w.generate_s, "truth_optics_s": t.truth_optics_s, "returns_s": t.returns_s,
             "references_s": t.references_s + t.mean_references_s, "retrievals_s": t.retrievals_s,
         }));
     }
@@ -259,19 +196,6 @@ fn study_bench(n: usize, args: &Args) -> anyhow::Result<()> {
         write_file(path, serde_json::to_string_pretty(&rows)?.as_bytes())?;
     }
     Ok(())
-}
-
-/// The C.1 scene with a single 1 mrad field of view, orders split into 1 and 2+.
-pub fn c1_scene() -> anyhow::Result<Scene> {
-    anyhow::ensure!(
-        C1_SCENE.contains(C1_TABLE_FILE),
-        "the C.1 scene no longer names its table"
-    );
-    let text = C1_SCENE.replace(C1_TABLE_FILE, C1_TABLE_BUILTIN);
-    let mut scene = Scene::from_toml(Path::new("<embedded scenes/bissonnette_c1.toml>"), &text)?;
-    scene.lidar.fov_full_angle_mrad = vec![1.0];
-    scene.simulation.max_order = 1;
-    Ok(scene)
 }
 
 /// Run the subcommand.
@@ -293,35 +217,25 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         o.ddis_crossing = args.ddis_crossing;
     };
     if let (Some(dir), Some(k)) = (&args.depth, args.seeds) {
-        return super::bench_depth::scatter(dir, args.photons, first_threads, k, method);
+        return scatter(dir, args.photons, first_threads, k, method);
     }
     if let (Some(dir), Some(plain), true) = (&args.depth, &args.plain, args.ladder) {
-        return super::bench_depth::ladder(dir, args.photons, first_threads, plain, method);
+        let (csv, series) = depth::ladder(args.photons, first_threads, plain, method)?;
+        let mut files = OutputSet::new();
+        files.write(dir.join("error_time.csv"), csv)?;
+        files.write_via(dir.join("error_time.png"), |path| {
+            draw_ladder(path, &series)
+        })?;
+        files.commit()?;
+        outln!("wrote {}", dir.join("error_time.{csv,png}").display());
+        return Ok(());
     }
     if let Some(dir) = &args.depth {
-        return super::bench_depth::run(
-            dir,
-            args.photons,
-            first_threads,
-            args.repeat,
-            args.seed,
-            args.plain.as_ref(),
-            method,
-        );
+        return depth_scan(dir, &args, first_threads, method);
     }
     if let Some(path) = &args.write_plain {
-        use super::bench_depth as d;
-        let mut scene = d::scene()?;
-        scene.simulation.photons = args.photons;
-        scene.simulation.seed = args.seed;
-        let atm = OpticalAtmosphere::build(&scene)?;
         let threads = args.threads.iter().copied().max().unwrap_or(0);
-        let r = d::fastest(&scene, &atm, threads, 1, |o| {
-            d::plain(o);
-            o.batches = args.batches;
-            o.progress = true;
-        })?;
-        d::write_reference(path, &d::cells(&scene, &r), r.photons)?;
+        let r = depth::write_plain(path, args.photons, args.seed, threads, args.batches)?;
         outln!(
             "plain local estimate, {} photons in {:.1} s on {} threads: wrote {}",
             r.photons,
@@ -334,22 +248,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if !args.scenes.is_empty() {
         return scenes_bench(&args);
     }
-    let mut scene = c1_scene()?;
-    scene.simulation.photons = args.photons;
-    scene.simulation.seed = args.seed;
-    let atm = OpticalAtmosphere::build(&scene)?;
-    let gate = scene
-        .gates
-        .count
-        .min(((1100.0 - scene.gates.start_m) / scene.gates.width_m).round() as usize);
-
+    let w = benchmark::TransportWorkload::new(args.photons, args.seed)?;
+    let (gate_start_m, gate_end_m) = w.gate_m();
     let mut out = std::io::stdout().lock();
     writeln!(
         out,
-        "Bissonnette C.1, 1064 nm, FOV 1 mrad, {} photons; FOM of the multiple-scattering return at {}–{} m",
+        "Bissonnette C.1, 1064 nm, FOV 1 mrad, {} photons; FOM of the multiple-scattering return at {gate_start_m}–{gate_end_m} m",
         args.photons,
-        scene.gates.start_m + gate as f64 * scene.gates.width_m,
-        scene.gates.start_m + (gate + 1) as f64 * scene.gates.width_m
     )?;
     writeln!(
         out,
@@ -357,44 +262,232 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     )?;
     let mut rows = Vec::new();
     for &threads in &args.threads {
-        let mut best: Option<transport::McResult> = None;
-        for _ in 0..args.repeat {
-            let mut opts = TransportOptions::from_scene(&scene);
-            opts.threads = threads;
-            method(&mut opts);
-            let r = transport::run(&scene, &atm, &opts)?;
-            if best.as_ref().is_none_or(|b| r.wall_s < b.wall_s) {
-                best = Some(r);
-            }
-        }
-        let Some(r) = best else { continue };
-        let ms = Order::AtLeast(2);
-        let e = r.returns.energy(0, 0, gate, ms).unwrap_or(0.0);
-        let se = r.returns.stderr(0, 0, gate, ms).unwrap_or(f64::NAN);
-        let rel = stats::rel_err(e, se);
-        let fom = stats::figure_of_merit(rel, r.wall_s);
-        let pps = r.photons as f64 / r.wall_s;
-        let eps = r.stats.collisions as f64 / r.wall_s;
+        let r = w.measure(threads, args.repeat, method)?;
         writeln!(
             out,
             "{:>7} {:>7.2} {:>11.3e} {:>10.3e} {:>16.3e} {:>10.4e} {:>11.3e} {:>11.3e}",
             r.threads,
             r.wall_s,
-            pps,
-            eps,
-            eps / r.threads as f64,
-            e,
-            rel,
-            fom
+            r.photons_per_s,
+            r.events_per_s,
+            r.events_per_s / r.threads as f64,
+            r.multiple_scattering_j,
+            r.rel_err,
+            r.fom_per_s
         )?;
-        rows.push(serde_json::json!({
-            "threads": r.threads, "wall_s": r.wall_s, "photons": r.photons,
-            "photons_per_s": pps, "events_per_s": eps, "events_per_s_per_thread": eps / r.threads as f64,
-            "multiple_scattering_j": e, "rel_err": rel, "fom_per_s": fom,
-        }));
+        rows.push(r.json());
     }
     if let Some(path) = &args.json {
         write_file(path, serde_json::to_string_pretty(&rows)?.as_bytes())?;
     }
+    Ok(())
+}
+
+/// The depth scan ([`depth::scan`]): its table of FOM ratios, `fom_depth.csv` and
+/// `fom_depth.png` into `dir`.
+fn depth_scan(
+    dir: &Path,
+    args: &Args,
+    threads: usize,
+    method: impl Fn(&mut TransportOptions),
+) -> anyhow::Result<()> {
+    let s = depth::scan(
+        args.photons,
+        threads,
+        args.repeat,
+        args.seed,
+        args.plain.as_deref(),
+        method,
+    )?;
+    outln!(
+        "C.1, orders ≥ 2: FOM ratio lidarsim / plain local estimate (plain variance from {} photons)",
+        s.long_photons
+    );
+    let depths: Vec<f64> = s.rows[..s.n_depth].iter().map(|r| r.0.depth_m).collect();
+    let ratios: Vec<f64> = s.rows.iter().map(|r| r.2).collect();
+    print_table(&depths, &ratios, 1)?;
+    let no_signal = s.rows.iter().filter(|r| !r.2.is_finite()).count();
+    if no_signal > 0 {
+        outln!("—: no signal in one of the estimates ({no_signal} cells; empty in fom_depth.csv)");
+    }
+    let least = if s.worst.is_finite() {
+        format!("{:.1}", s.worst)
+    } else {
+        "— (no cell with a signal in both)".to_string()
+    };
+    let (rms_z, n_z) = match s.rms_z {
+        Some((z, n)) => (format!("{z:.2}"), n),
+        None => ("—".to_string(), 0),
+    };
+    outln!(
+        "least ratio {least}; means against the plain estimate's: rms z {rms_z} over {n_z} cells"
+    );
+    let mut files = OutputSet::new();
+    files.write(dir.join("fom_depth.csv"), s.csv)?;
+    files.write_via(dir.join("fom_depth.png"), |path| draw(path, &s.rows))?;
+    files.commit()?;
+    outln!("wrote {}", dir.join("fom_depth.{csv,png}").display());
+    Ok(())
+}
+
+/// The spikes ([`depth::scatter`]): their table and `scatter.csv` into `dir`.
+fn scatter(
+    dir: &Path,
+    photons: u64,
+    threads: usize,
+    seeds: u64,
+    method: impl Fn(&mut TransportOptions),
+) -> anyhow::Result<()> {
+    let s = depth::scatter(photons, threads, seeds, method)?;
+    outln!("scatter of {seeds} runs' means / their standard errors (orders ≥ 2)");
+    print_table(&s.depths_m, &s.ratios, 2)?;
+    let mut files = OutputSet::new();
+    files.write(dir.join("scatter.csv"), s.csv)?;
+    files.commit()?;
+    Ok(())
+}
+
+/// A table of `values` (FOV-major) by depth and FOV with `digits` decimals; `—` where a value
+/// is not finite (a cell without signal), never NaN.
+fn print_table(depths_m: &[f64], values: &[f64], digits: usize) -> anyhow::Result<()> {
+    out!("depth_m");
+    for f in depth::FOVS_MRAD {
+        out!("  {f:>6} mrad");
+    }
+    outln!();
+    let n_depth = depths_m.len();
+    for (d, depth_m) in depths_m.iter().enumerate() {
+        out!("{:>7}", depth_m);
+        for f in 0..depth::FOVS_MRAD.len() {
+            let v = values[f * n_depth + d];
+            if v.is_finite() {
+                out!("  {v:>11.digits$}");
+            } else {
+                out!("  {:>11}", "—");
+            }
+        }
+        outln!();
+    }
+    Ok(())
+}
+
+/// FOM against depth, one colour per FOV: lidarsim solid, plain dashed (as points).
+fn draw(path: &Path, rows: &[(Cell, Cell, f64)]) -> Result<(), Box<dyn std::error::Error>> {
+    use plotters::prelude::*;
+    init_font();
+    let root = BitMapBackend::new(path, (1000, 650)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let foms = rows.iter().flat_map(|(a, b, _)| [a.fom(), b.fom()]);
+    let (lo, hi) = foms
+        .filter(|v| *v > 0.0)
+        .fold((f64::INFINITY, 0.0f64), |(l, h), v| (l.min(v), h.max(v)));
+    let mut chart = ChartBuilder::on(&root)
+        .caption(
+            "C.1 multiple scattering: figure of merit against depth (solid lidarsim, dashed plain)",
+            (FONT, 20),
+        )
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(70)
+        .build_cartesian_2d(40.0..300.0, (lo / 2.0..hi * 2.0).log_scale())?;
+    chart
+        .configure_mesh()
+        .x_desc("depth into the cloud [m] (gate start)")
+        .y_desc("FOM = 1/(rel. error² · s)")
+        .label_style((FONT, 15))
+        .axis_desc_style((FONT, 17))
+        .draw()?;
+    for (i, fov) in depth::FOVS_MRAD.iter().enumerate() {
+        let colour = Palette99::pick(i).to_rgba();
+        let mine: Vec<(f64, f64)> = rows
+            .iter()
+            .filter(|r| r.0.fov_mrad == *fov && r.0.fom() > 0.0)
+            .map(|r| (r.0.depth_m + 5.0, r.0.fom()))
+            .collect();
+        let plain: Vec<(f64, f64)> = rows
+            .iter()
+            .filter(|r| r.1.fov_mrad == *fov && r.1.fom() > 0.0)
+            .map(|r| (r.1.depth_m + 5.0, r.1.fom()))
+            .collect();
+        chart
+            .draw_series(LineSeries::new(
+                mine,
+                ShapeStyle::from(&colour).stroke_width(2),
+            ))?
+            .label(format!("{fov} mrad"))
+            .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], colour.stroke_width(2)));
+        chart.draw_series(DashedLineSeries::new(
+            plain,
+            6,
+            4,
+            ShapeStyle::from(&colour).stroke_width(1),
+        ))?;
+    }
+    draw_legend(&mut chart)?;
+    root.present()?;
+    Ok(())
+}
+
+/// Relative error against seconds, log-log: lidarsim solid, plain (expected) dashed.
+fn draw_ladder(
+    path: &Path,
+    series: &[(String, Vec<(f64, f64)>)],
+) -> Result<(), Box<dyn std::error::Error>> {
+    use plotters::prelude::*;
+    init_font();
+    let root = BitMapBackend::new(path, (1000, 650)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let pts = series
+        .iter()
+        .flat_map(|s| s.1.iter())
+        .filter(|(t, e)| *t > 0.0 && *e > 0.0 && e.is_finite());
+    let (t0, t1, e0, e1) = pts.fold(
+        (f64::INFINITY, 0.0f64, f64::INFINITY, 0.0f64),
+        |a, (t, e)| (a.0.min(*t), a.1.max(*t), a.2.min(*e), a.3.max(*e)),
+    );
+    let mut chart = ChartBuilder::on(&root)
+        .caption(
+            "C.1 orders ≥ 2: relative error against time (solid lidarsim, dashed plain, expected)",
+            (FONT, 20),
+        )
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(70)
+        .build_cartesian_2d(
+            (t0 / 1.5..t1 * 1.5).log_scale(),
+            (e0 / 1.5..e1 * 1.5).log_scale(),
+        )?;
+    chart
+        .configure_mesh()
+        .x_desc("wall-clock seconds, 1 thread")
+        .y_desc("relative standard error")
+        .label_style((FONT, 15))
+        .axis_desc_style((FONT, 17))
+        .draw()?;
+    let half = series.len() / 2;
+    for (i, (label, pts)) in series.iter().enumerate() {
+        let colour = Palette99::pick(i % half).to_rgba();
+        let pts: Vec<(f64, f64)> = pts.iter().copied().filter(|(_, e)| e.is_finite()).collect();
+        if i < half {
+            chart
+                .draw_series(LineSeries::new(
+                    pts,
+                    ShapeStyle::from(&colour).stroke_width(2),
+                ))?
+                .label(label.trim_start_matches("lidarsim ").to_string())
+                .legend(move |(x, y)| {
+                    PathElement::new([(x, y), (x + 20, y)], colour.stroke_width(2))
+                });
+        } else {
+            chart.draw_series(DashedLineSeries::new(
+                pts,
+                6,
+                4,
+                ShapeStyle::from(&colour).stroke_width(1),
+            ))?;
+        }
+    }
+    draw_legend(&mut chart)?;
+    root.present()?;
     Ok(())
 }

@@ -10,7 +10,6 @@ macro_rules! outln {
 }
 
 pub mod bench;
-pub mod bench_depth;
 pub mod dial;
 pub mod figures;
 pub mod lbl;
