@@ -6,6 +6,7 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 
 mod cli;
+mod figures;
 
 /// Simulation testbed for atmospheric lidars (DIAL, IPDA): line-by-line gas absorption, Mie and
 /// Rayleigh scattering, time-resolved Monte Carlo transport and the analytic lidar equation.

@@ -11,17 +11,13 @@ macro_rules! outln {
 
 pub mod bench;
 pub mod dial;
-pub mod figures;
 pub mod lbl;
 pub mod merge;
 pub mod mie;
-pub mod plot;
 pub mod profiles;
 pub mod progress;
 pub mod run;
-pub mod select_figures;
 pub mod select_lines;
-pub mod study_figures;
 pub mod write;
 
 use lidarsim::input::{Bounds, check_count, check_finite_range};

@@ -12,7 +12,7 @@ use lidarsim::study::dial::StudyResult;
 use lidarsim::study::select_study::{MemberOutcome, SelectStudy};
 use lidarsim::study::shard::StudyInputs;
 
-use super::plot::init_font;
+use crate::figures::init_font;
 
 /// Write the files of a run into `out` (all together or none, [`products::run::write`]) with
 /// its figures unless `no_plots`, and print its report.
@@ -32,7 +32,7 @@ pub fn run(
             history.as_deref(),
             |files| match no_plots {
                 true => Ok(()),
-                false => super::figures::draw(files, out_dir, scene, run),
+                false => crate::figures::run::draw(files, out_dir, scene, run),
             },
         )?;
     products::run::report(&mut std::io::stdout().lock(), scene, run, &written)?;
@@ -52,7 +52,7 @@ pub fn dial(
     let history = netcdf.then(super::netcdf_history);
     let written = p.write(dir, history.as_deref(), |files| match no_plots {
         true => Ok(()),
-        false => super::study_figures::draw(files, dir, &inputs.set, result, &p.summaries),
+        false => crate::figures::dial::draw(files, dir, &inputs.set, result, &p.summaries),
     })?;
     p.report(&mut std::io::stdout().lock(), &written)?;
     Ok(())
@@ -78,7 +78,7 @@ pub fn select(
         if study.options.plots && !no_plots {
             init_font();
             for g in &p.summaries {
-                super::select_figures::draw_figures(
+                crate::figures::select::draw_figures(
                     files,
                     dir,
                     g,

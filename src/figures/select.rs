@@ -9,7 +9,7 @@ use lidarsim::output::{OutputError, OutputSet};
 use lidarsim::study::select::{Row, StudyConfig, Uncertainties};
 use lidarsim::study::select_study::{GroupSummary, SPECTRUM_HALF_GHZ};
 
-use super::plot::{FONT, draw_legend};
+use super::{FONT, draw_legend};
 
 /// Half width of the laser's spectral window marked in Figure 4 \[GHz\].
 const WINDOW_HALF_GHZ: f64 = 0.5;

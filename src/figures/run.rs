@@ -7,7 +7,7 @@ use std::path::Path;
 
 use plotters::prelude::*;
 
-use super::plot::{FONT, init_font};
+use super::{FONT, init_font};
 use lidarsim::output::{OutputError, OutputSet};
 use lidarsim::pipeline::RunOutput;
 use lidarsim::retrieval::{Method, Product, Quantity};
@@ -142,7 +142,7 @@ fn depolarisation_figure(path: &Path, run: &RunOutput) -> DrawResult {
             c.stroke_width(1),
         ))?;
     }
-    super::plot::draw_legend(&mut chart)?;
+    super::draw_legend(&mut chart)?;
     root.present()?;
     Ok(())
 }
@@ -227,7 +227,7 @@ fn returns_figure(
                 .legend(move |(x, y)| Circle::new((x + 10, y), 3, c.filled()));
         }
     }
-    super::plot::draw_legend(&mut chart)?;
+    super::draw_legend(&mut chart)?;
     root.present()?;
     Ok(())
 }
@@ -335,7 +335,7 @@ fn dial_figure(path: &Path, products: &[&Product]) -> DrawResult {
             .label(format!("{name} ± random error"))
             .legend(move |(x, y)| Circle::new((x + 10, y), 3, c.filled()));
     }
-    super::plot::draw_legend(&mut chart)?;
+    super::draw_legend(&mut chart)?;
     root.present()?;
     Ok(())
 }
