@@ -14,6 +14,7 @@ use lidarsim::atmosphere::{Profile, StandardAtmosphere, parse_afgl};
 use lidarsim::input::Bounds;
 use lidarsim::limits::{MAX_LBL_ROWS, MAX_PATH_LAYERS, check_product};
 use lidarsim::output::{self, OutputSet};
+use lidarsim::products;
 use lidarsim::spectroscopy::isotopologues::molecule_name;
 use lidarsim::spectroscopy::xsec::GasState;
 use lidarsim::spectroscopy::{
@@ -194,30 +195,14 @@ fn run_cross_sections(
         let name = molecule_name(m).unwrap_or("?").to_string();
         columns.push((name, cross_section(lines, m, &state, grid, opts)?));
     }
-    let mut text = String::new();
-    text.push_str(&format!(
-        "# lidarsim lbl: absorption cross-sections [cm^2/molecule], self-broadening mole fraction {}\n# lines: {}\n\
-         # line shape {}{}; pressure_atm = {p_atm}, temperature_k = {t_k}, wing_cm1 = {} around the {} centre, Voigt {}\n",
-        args.vmr,
-        lines.source,
-        opts.line_shape.name(),
-        if opts.line_mixing { " with line mixing" } else { "" },
-        opts.wing_cm1,
-        if opts.wing_centre == WingCentre::Shifted { "shifted" } else { "unshifted" },
-        if args.exact { "exact" } else { "fast (multigrid)" },
-    ));
-    text.push_str("wavenumber_cm1");
-    for (name, _) in &columns {
-        text.push_str(&format!(",sigma_{name}_cm2"));
-    }
-    text.push('\n');
-    for i in 0..grid.len {
-        text.push_str(&format!("{:.6}", grid.at(i)));
-        for (_, s) in &columns {
-            text.push_str(&format!(",{:.12e}", s[i]));
-        }
-        text.push('\n');
-    }
+    let text = products::lbl::cross_section_csv(
+        lines,
+        grid,
+        opts,
+        (p_atm, t_k, args.vmr),
+        args.exact,
+        &columns,
+    );
     let mut files = OutputSet::new();
     files.write(&args.out, text)?;
     if let Some(png) = &args.plot {
@@ -310,29 +295,8 @@ fn run_layers(
             .with_context(|| format!("cannot write {}", path.display()))?;
         files.write(path, bytes)?;
     }
-    let mut text = format!(
-        "# lidarsim lbl: gas absorption optical depth per layer (vertical, and slant = vertical/|cos zenith|, plane-parallel)\n\
-         # lines: {}\n# profile: {}\n# sensor_altitude_m = {sensor}, zenith_deg = {zenith}, surface_altitude_m = {}, wing_cm1 = {}\n\
-         wavenumber_cm1,bottom_m,top_m,pressure_pa,temperature_k,tau_vertical,tau_slant\n",
-        lines.source, prof.name, args.layer.surface_altitude_m, opts.wing_cm1
-    );
-    let mut column_slant = vec![0.0; grid.len];
-    for (i, col) in column_slant.iter_mut().enumerate() {
-        for (l, layer) in table.layers.iter().enumerate() {
-            let tau = table.tau_at_grid(l, i);
-            *col += tau / mu;
-            text.push_str(&format!(
-                "{:.6},{},{},{:.6e},{:.4},{:.12e},{:.12e}\n",
-                grid.at(i),
-                layer.bottom_m,
-                layer.top_m,
-                layer.pressure_pa,
-                layer.temperature_k,
-                tau,
-                tau / mu
-            ));
-        }
-    }
+    let (text, column_slant) =
+        products::lbl::layer_csv(&table, lines, &prof.name, &los, mu, grid, opts.wing_cm1);
     files.write(&args.out, text)?;
     if let Some(png) = &args.plot {
         crate::figures::lbl::plot(

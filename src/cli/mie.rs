@@ -14,6 +14,7 @@ use lidarsim::particles::mie::{
     MAX_SIZE_PARAMETER, MieCoefficients, MieError, parse_refractive_index,
 };
 use lidarsim::particles::opac::{OpacComponent, OpacType};
+use lidarsim::products;
 use num_complex::Complex64;
 use serde_json::json;
 
@@ -180,32 +181,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     if let Some(x) = args.size_parameter {
         let k = MieCoefficients::compute(m, x).context("--size-parameter")?;
-        let e = k.efficiencies();
-        let mut out = json!({
-            "refractive_index": format_refractive_index(m),
-            "size_parameter": x,
-            "qext": e.qext,
-            "qsca": e.qsca,
-            "qback": e.qback,
-            "g": e.g,
-            "ssa": e.ssa,
-            "n_terms": e.n_terms,
-        });
-        if !args.angles_deg.is_empty() {
-            let mu: Vec<f64> = args
-                .angles_deg
-                .iter()
-                .map(|t| t.to_radians().cos())
-                .collect();
-            let (s1, s2) = k.amplitudes(&mu)?;
-            out["amplitudes"] = json!(
-                args.angles_deg
-                    .iter()
-                    .zip(s1.iter().zip(&s2))
-                    .map(|(t, (a, b))| json!({"theta_deg": t, "s1": [a.re, a.im], "s2": [b.re, b.im]}))
-                    .collect::<Vec<_>>()
-            );
-        }
+        let out = products::mie::sphere_json(&k, m, x, &args.angles_deg)?;
         outln!("{}", serde_json::to_string_pretty(&out)?);
         return Ok(());
     }
@@ -431,32 +407,14 @@ fn finish(
     if let Some(path) = &args.matrix_out {
         b.matrix.write(path)?;
     }
-    let out = json!({
-        "wavelength_nm": wavelength_nm,
-        "refractive_index": refractive_index,
-        "distribution": distribution,
-        "number_density_per_cm3": b.number_density_per_m3 * 1e-6,
-        "extinction_cross_section_um2": b.extinction_cross_section_m2 * 1e12,
-        "scattering_cross_section_um2": b.scattering_cross_section_m2 * 1e12,
-        "backscatter_cross_section_um2": b.backscatter_cross_section_m2 * 1e12,
-        "extinction_per_km": b.extinction_per_m(b.number_density_per_m3) * 1e3,
-        "single_scattering_albedo": b.single_scattering_albedo,
-        "asymmetry": b.asymmetry,
-        "lidar_ratio_sr": b.lidar_ratio_sr,
-        "phase_180": b.phase_180(),
-        "effective_radius_um": b.effective_radius_um,
-        "size_grid": b.convergence.iter().map(|c| json!({
-            "component": c.component,
-            "r_min_um": c.r_range_um.0, "r_max_um": c.r_range_um.1, "step_x": c.step_x,
-            "points": c.points, "last_rel_change": c.last_rel_change, "converged": c.converged,
-        })).collect::<Vec<_>>(),
-        "mie_work": json!({
-            "term_angles": work.work, "radii_bound": work.radii, "terms": work.terms,
-            "angles": work.angles, "estimated_seconds_one_core": work.seconds(),
-        }),
-        "table": args.out.as_ref().map(|p| p.display().to_string()),
-        "matrix_table": args.matrix_out.as_ref().map(|p| p.display().to_string()),
-    });
+    let out = products::mie::bulk_json(
+        b,
+        wavelength_nm,
+        refractive_index,
+        distribution,
+        work,
+        (args.out.as_deref(), args.matrix_out.as_deref()),
+    );
     outln!("{}", serde_json::to_string_pretty(&out)?);
     Ok(())
 }

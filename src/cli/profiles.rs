@@ -386,29 +386,9 @@ fn info(a: InfoArgs) -> anyhow::Result<()> {
         (None, None) => bail!("give a profile set or --atmosphere"),
     };
     outln!(
-        "id,latitude_deg,class,levels,surface_p_hPa,top_altitude_km,air_column_per_cm2,precipitable_water_mm,xco2_ppm"
+        "{}",
+        lidarsim::products::profiles::info_csv(&set).trim_end()
     );
-    for m in &set.members {
-        let p = &m.profile;
-        let pw = p
-            .precipitable_water_kg_per_m2()
-            .map(|v| format!("{v:.3}"))
-            .unwrap_or_default();
-        let xco2 = p
-            .column_average_dry_vmr("CO2")
-            .map(|v| format!("{:.3}", v * 1e6))
-            .unwrap_or_default();
-        outln!(
-            "{},{},{},{},{:.2},{:.2},{:.5e},{pw},{xco2}",
-            output::csv_field(&m.meta.id),
-            m.meta.latitude_deg,
-            m.meta.class(),
-            p.len(),
-            p.surface_pressure_pa() / 100.0,
-            p.altitude_m[p.len() - 1] / 1e3,
-            p.air_column_per_m2() * 1e-4
-        );
-    }
     let [t, mi, h] = set.class_counts();
     eprintln!("{} profiles: {t} tropical, {mi} mid, {h} high", set.len());
     Ok(())

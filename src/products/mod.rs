@@ -11,9 +11,15 @@
 //! | `dial` | [`dial`] | `profiles.csv`, `summary.csv`, `budget.csv`, `failed.csv`, `profiles.nc`, `summary.nc`, `summary.json` |
 //! | `select-lines` | [`select`] | `sensitivities.csv`, `sensitivities.nc`, `failed.csv` |
 //! | `merge` | [`merge`] | those of the command whose shards it folds |
+//! | `lbl` | [`lbl`] | the cross-section and layer optical-depth tables |
+//! | `mie` | [`mie`] | the JSON it prints |
+//! | `profiles info` | [`profiles`] | the table it prints |
 
 pub mod dial;
+pub mod lbl;
 pub mod merge;
+pub mod mie;
+pub mod profiles;
 pub mod run;
 pub mod select;
 
