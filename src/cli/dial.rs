@@ -3,14 +3,12 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Context, bail};
-
 use lidarsim::input::Bounds;
 use lidarsim::output;
-use lidarsim::products::{self, dial::FILES};
+use lidarsim::products::dial::{DialRequest, FILES};
 use lidarsim::shard::ShardSpec;
-use lidarsim::study::dial::{self, BudgetSteps, ProfileSource, StudyOptions};
-use lidarsim::study::shard::{self as study_shard, StudyInputs};
+use lidarsim::study::dial::{self, BudgetSteps};
+use lidarsim::study::shard as study_shard;
 
 /// Arguments of `lidarsim dial`.
 #[derive(clap::Args, Debug)]
@@ -89,7 +87,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     // Before the work: a study must not fail at its end on a name it could have refused now.
     output::check_paths(&out_files)?;
-    let inputs = study_inputs(&args)?;
+    let inputs = request(&args).resolve()?;
     let pool = super::study_pool(args.threads)?;
     if let Some(spec) = args.shard {
         let n = spec.batches(inputs.set.len()).len();
@@ -104,45 +102,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     super::write::dial(&args.out, args.no_plots, !args.no_netcdf, &inputs, &result)
 }
 
-/// The scene, profiles and options of a study from the command line (a shard reads the scene
-/// and the profile set by their absolute paths, so that shards started anywhere agree).
-fn study_inputs(args: &Args) -> anyhow::Result<StudyInputs> {
-    let scene = products::read_scene(args.scene.as_deref(), args.shard.is_some())?;
-    let retrieval = scene
-        .retrieval
-        .as_ref()
-        .context("the scene has no [retrieval]: nothing to study")?;
-    let seed = args.seed.unwrap_or(scene.simulation.seed);
-    let source = match (&args.profiles, args.ensemble) {
-        (Some(p), _) if args.shard.is_some() => ProfileSource::Set(
-            std::fs::canonicalize(p).with_context(|| format!("cannot read {}", p.display()))?,
-        ),
-        (Some(p), _) => ProfileSource::Set(p.clone()),
-        (None, Some(n)) => ProfileSource::Ensemble(n),
-        (None, None) => bail!("give --profiles SET or --ensemble N"),
-    };
-    let photons = args.photons.unwrap_or(if scene.layers.is_empty() {
-        0
-    } else {
-        scene.simulation.photons
-    });
-    // The study's size, before its first profile and before an ensemble is drawn (N per class;
-    // a set's size is known once read) (README, "Limits").
-    let check_size = |profiles: usize| -> anyhow::Result<()> {
-        let work = lidarsim::pipeline::study_work(&scene, profiles as u64, photons)?;
-        work.check().map_err(anyhow::Error::msg)?;
-        work.warnings()
-            .iter()
-            .for_each(|w| lidarsim::limits::warn(w));
-        Ok(())
-    };
-    if let ProfileSource::Ensemble(n) = source {
-        check_size(n.saturating_mul(if args.class == "all" { 3 } else { 1 }))?;
-    }
-    let set = dial::profile_set(&source, &args.class, seed)?;
-    if let ProfileSource::Set(_) = source {
-        check_size(set.len())?;
-    }
+/// The request of the command line ([`DialRequest::resolve`] makes the study's inputs).
+fn request(args: &Args) -> DialRequest {
     // Each step was checked by the argument parser (finite, signed where a sign means a
     // direction of the error).
     let steps = BudgetSteps {
@@ -152,44 +113,15 @@ fn study_inputs(args: &Args) -> anyhow::Result<StudyInputs> {
         frequency_offset_mhz: args.budget_frequency_offset_mhz,
         linewidth_fraction: args.budget_linewidth_percent / 100.0,
     };
-    let line = |name: &str| -> anyhow::Result<usize> {
-        scene
-            .lines
-            .iter()
-            .position(|c| c.name == name)
-            .with_context(|| {
-                let names: Vec<&str> = scene.lines.iter().map(|c| c.name.as_str()).collect();
-                format!(
-                    "--on {name}: the scene has no line `{name}` (lines: {})",
-                    names.join(", ")
-                )
-            })
-    };
-    let pairs = if args.on.is_empty() {
-        vec![(retrieval.on, retrieval.off)]
-    } else {
-        let mut p = Vec::new();
-        for name in &args.on {
-            let on = line(name)?;
-            if on == retrieval.off {
-                bail!("--on {name} is the retrieval's off-line");
-            }
-            p.push((on, retrieval.off));
-        }
-        p
-    };
-    let options = StudyOptions {
-        photons,
-        seed,
-        pairs,
-        steps,
-        fov: 0,
-    };
-    Ok(StudyInputs {
-        scene,
-        source,
+    DialRequest {
+        scene: args.scene.clone(),
+        profiles: args.profiles.clone(),
+        ensemble: args.ensemble,
+        seed: args.seed,
         class: args.class.clone(),
-        set,
-        options,
-    })
+        on: args.on.clone(),
+        photons: args.photons,
+        steps,
+        shard: args.shard.is_some(),
+    }
 }

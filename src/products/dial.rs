@@ -31,6 +31,126 @@ pub const FILES: [&str; 10] = [
     "summary.json",
 ];
 
+/// What a `dial` command asks for, before anything is read: the scene (or the embedded
+/// default), the profiles (a set or a generated ensemble), the lines, the photons and the
+/// budget's steps. [`Self::resolve`] makes the study's inputs.
+#[derive(Debug, Clone)]
+pub struct DialRequest {
+    /// Scene file; the embedded default scene without one.
+    pub scene: Option<PathBuf>,
+    /// A profile set.
+    pub profiles: Option<PathBuf>,
+    /// Instead of a set: N generated members per class.
+    pub ensemble: Option<usize>,
+    /// Seed of the ensemble and the noise; the scene's without one.
+    pub seed: Option<u64>,
+    /// Latitude class: tropical, mid, high or all.
+    pub class: String,
+    /// On-lines by name, each paired with the retrieval's off-line; the retrieval's own
+    /// on-line if empty.
+    pub on: Vec<String>,
+    /// Photons per profile; without: 0 (the analytic lidar equation) for a scene without
+    /// particle layers, else the scene's.
+    pub photons: Option<u64>,
+    /// The budget's steps.
+    pub steps: BudgetSteps,
+    /// For a shard: the scene and the set are read by their absolute paths.
+    pub shard: bool,
+}
+
+impl DialRequest {
+    /// The scene, profiles and options of the study (a shard reads the scene and the profile
+    /// set by their absolute paths, so that shards started anywhere agree). Refused before
+    /// any work: a study beyond the limits (README, "Limits"), an unknown on-line.
+    pub fn resolve(&self) -> Result<StudyInputs, ProductError> {
+        let args = self;
+        let scene = super::read_scene(args.scene.as_deref(), args.shard)?;
+        let retrieval = scene.retrieval.as_ref().ok_or_else(|| {
+            ProductError::Request("the scene has no [retrieval]: nothing to study".into())
+        })?;
+        let seed = args.seed.unwrap_or(scene.simulation.seed);
+        let source = match (&args.profiles, args.ensemble) {
+            (Some(p), _) if args.shard => {
+                ProfileSource::Set(std::fs::canonicalize(p).map_err(|e| {
+                    ProductError::Request(format!("cannot read {}: {e}", p.display()))
+                })?)
+            }
+            (Some(p), _) => ProfileSource::Set(p.clone()),
+            (None, Some(n)) => ProfileSource::Ensemble(n),
+            (None, None) => {
+                return Err(ProductError::Request(
+                    "give --profiles SET or --ensemble N".into(),
+                ));
+            }
+        };
+        let photons = args.photons.unwrap_or(if scene.layers.is_empty() {
+            0
+        } else {
+            scene.simulation.photons
+        });
+        // The study's size, before its first profile and before an ensemble is drawn (N per class;
+        // a set's size is known once read) (README, "Limits").
+        let check_size = |profiles: usize| -> Result<(), ProductError> {
+            let work = crate::pipeline::study_work(&scene, profiles as u64, photons)?;
+            work.check().map_err(ProductError::Request)?;
+            work.warnings().iter().for_each(|w| crate::limits::warn(w));
+            Ok(())
+        };
+        if let ProfileSource::Ensemble(n) = source {
+            check_size(n.saturating_mul(if args.class == "all" { 3 } else { 1 }))?;
+        }
+        let set = dial::profile_set(&source, &args.class, seed)?;
+        if let ProfileSource::Set(_) = source {
+            check_size(set.len())?;
+        }
+        // Each step was checked by the argument parser (finite, signed where a sign means a
+        // direction of the error).
+        let steps = args.steps;
+        let line = |name: &str| -> Result<usize, ProductError> {
+            scene
+                .lines
+                .iter()
+                .position(|c| c.name == name)
+                .ok_or_else(|| {
+                    let names: Vec<&str> = scene.lines.iter().map(|c| c.name.as_str()).collect();
+                    ProductError::Request(format!(
+                        "--on {name}: the scene has no line `{name}` (lines: {})",
+                        names.join(", ")
+                    ))
+                })
+        };
+        let pairs = if args.on.is_empty() {
+            vec![(retrieval.on, retrieval.off)]
+        } else {
+            let mut p = Vec::new();
+            for name in &args.on {
+                let on = line(name)?;
+                if on == retrieval.off {
+                    return Err(ProductError::Request(format!(
+                        "--on {name} is the retrieval's off-line"
+                    )));
+                }
+                p.push((on, retrieval.off));
+            }
+            p
+        };
+        let options = StudyOptions {
+            photons,
+            seed,
+            pairs,
+            steps,
+            fov: 0,
+        };
+        Ok(StudyInputs {
+            scene,
+            source,
+            class: args.class.clone(),
+            set,
+            options,
+        })
+    }
+}
+
 /// A study's results ready to be written and reported: its inputs, its results, the
 /// statistics of its classes and its failures grouped by reason.
 pub struct DialProducts<'a> {

@@ -45,6 +45,16 @@ pub enum ProductError {
     /// A study's results that cannot be reported (a group that fails its checks).
     #[error(transparent)]
     Select(#[from] crate::study::select::SelectError),
+    /// A request that cannot be resolved (an option that names nothing, a study beyond the
+    /// limits), with the reason.
+    #[error("{0}")]
+    Request(String),
+    /// Sizing a study.
+    #[error(transparent)]
+    Optics(#[from] crate::optics::OpticsError),
+    /// Setting up a study.
+    #[error(transparent)]
+    Study(#[from] crate::study::dial::StudyError),
     /// Every profile of a study failed: nothing is written as if it had succeeded.
     #[error("{0}")]
     AllFailed(String),
