@@ -65,6 +65,10 @@ fn main() -> ExitCode {
         // A closed pipe (`lidarsim run | head`) is not an error (as in ripgrep).
         Err(e)
             if e.downcast_ref::<std::io::Error>()
+                .or(match e.downcast_ref::<lidarsim::products::ProductError>() {
+                    Some(lidarsim::products::ProductError::Io(io)) => Some(io),
+                    _ => None,
+                })
                 .is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe) =>
         {
             ExitCode::SUCCESS

@@ -55,6 +55,12 @@ pub enum ProductError {
     /// Setting up a study.
     #[error(transparent)]
     Study(#[from] crate::study::dial::StudyError),
+    /// The atmosphere (a profile, a covariance, an ensemble).
+    #[error(transparent)]
+    Atmosphere(#[from] crate::atmosphere::AtmosphereError),
+    /// Writing a report (a closed pipe: `lidarsim … | head`).
+    #[error(transparent)]
+    Io(#[from] std::io::Error),
     /// Every profile of a study failed: nothing is written as if it had succeeded.
     #[error("{0}")]
     AllFailed(String),
