@@ -210,6 +210,20 @@ pub fn table_file(
     nc.finish()
 }
 
+/// The CF `history` attribute of a NetCDF file written now by `command` (the command line,
+/// `args_os`, so that a path that is not UTF-8 does not panic): the UTC time and the command.
+pub fn history(command: impl IntoIterator<Item = std::ffi::OsString>) -> String {
+    let command: Vec<String> = command
+        .into_iter()
+        .map(|a| a.to_string_lossy().into_owned())
+        .collect();
+    format!(
+        "{}: {}",
+        utc_timestamp(SystemTime::now()),
+        command.join(" ")
+    )
+}
+
 /// `t` as an ISO 8601 UTC time to the second (`2026-11-23T20:30:03Z`), for `history`.
 pub fn utc_timestamp(t: SystemTime) -> String {
     let s = t.duration_since(UNIX_EPOCH).map_or(0, |d| d.as_secs());

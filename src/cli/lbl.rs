@@ -10,7 +10,7 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, bail};
-use lidarsim::atmosphere::{Profile, StandardAtmosphere, parse_afgl};
+use lidarsim::atmosphere::StandardAtmosphere;
 use lidarsim::input::Bounds;
 use lidarsim::limits::{MAX_LBL_ROWS, MAX_PATH_LAYERS, check_product};
 use lidarsim::output::{self, OutputSet};
@@ -223,39 +223,17 @@ fn run_cross_sections(
     Ok(())
 }
 
-fn load_profile(args: &Args) -> anyhow::Result<Profile> {
-    let mut prof = match (&args.layer.atmosphere, &args.layer.profile) {
-        (Some(a), None) => a.profile(),
-        (None, Some(p)) => {
-            let text = std::fs::read_to_string(p)
-                .with_context(|| format!("cannot read the profile {}", p.display()))?;
-            parse_afgl(&p.display().to_string(), &text)?
-        }
-        _ => bail!("give one of --atmosphere or --profile"),
-    };
-    if let Some(ppmv) = args.layer.co2_ppmv {
-        let g = prof
-            .gases
-            .iter_mut()
-            .find(|g| g.name == "CO2")
-            .context("--co2-ppmv: the profile has no CO2 column")?;
-        let surface = g.vmr.first().copied().unwrap_or(0.0);
-        if surface <= 0.0 || surface.is_nan() {
-            bail!("--co2-ppmv: the profile's surface CO2 is zero, nothing to scale");
-        }
-        let f = ppmv * 1e-6 / surface;
-        g.vmr.iter_mut().for_each(|v| *v *= f);
-    }
-    Ok(prof)
-}
-
 fn run_layers(
     args: &Args,
     lines: &LineList,
     grid: &WavenumberGrid,
     opts: &LblOptions,
 ) -> anyhow::Result<()> {
-    let prof = load_profile(args)?;
+    let prof = products::lbl::profile(
+        args.layer.atmosphere,
+        args.layer.profile.as_deref(),
+        args.layer.co2_ppmv,
+    )?;
     let (Some(sensor), Some(zenith)) = (args.layer.sensor_altitude_m, args.layer.zenith_deg) else {
         bail!("layer mode needs --sensor-altitude-m and --zenith-deg");
     };

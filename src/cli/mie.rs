@@ -8,13 +8,12 @@ use clap::ValueEnum;
 use lidarsim::input::{Bounds, check_finite_range};
 use lidarsim::particles::distribution::{
     BulkOptions, Component, MIN_INDEX_CONTRAST, MieWork, SizeDistribution, bulk_optics,
-    format_refractive_index, mie_work,
+    format_refractive_index,
 };
 use lidarsim::particles::mie::{
     MAX_SIZE_PARAMETER, MieCoefficients, MieError, parse_refractive_index,
 };
-use lidarsim::particles::opac::{OpacComponent, OpacType};
-use lidarsim::products;
+use lidarsim::products::{self, ProductError, mie::Opac};
 use num_complex::Complex64;
 use serde_json::json;
 
@@ -240,7 +239,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         dist = dist.truncated(lo, hi)?;
     }
     let opts = bulk_opts(&args);
-    let work = check_work(
+    let work = products::mie::check_work(
         &[Component {
             name: "particles".into(),
             distribution: dist.clone(),
@@ -249,9 +248,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         wavelength_nm * 1e-9,
         &opts,
     )
-    .map_err(|e| match e.downcast_ref::<MieError>() {
+    .map_err(|e| match &e {
         // The library names its own field; say which options made the range empty.
-        Some(MieError::Parameter {
+        ProductError::Mie(MieError::Parameter {
             name: "r_max_um",
             reason,
             ..
@@ -261,10 +260,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             args.r_max_um.map_or("(none)".to_string(), |v| v.to_string()),
             args.tail_fraction
         ),
-        _ => e,
+        _ => e.into(),
     })?;
     let mut b = bulk_optics(&dist, m, wavelength_nm * 1e-9, &opts)?;
-    add_meta(&mut b, &args.meta)?;
+    products::mie::add_meta(&mut b, &args.meta)?;
     finish(
         &b,
         &args,
@@ -300,96 +299,15 @@ fn run_opac(args: &Args) -> anyhow::Result<()> {
         bail!("--size-parameter and --distribution are exclusive");
     }
     let wavelength_nm = need(args.wavelength_nm, "--wavelength-nm")?;
-    let wavelength_m = wavelength_nm * 1e-9;
-    let opts = bulk_opts(args);
-    let (mut b, indices, description, work) = match (&args.aerosol_type, &args.opac_component) {
-        (Some(t), None) => {
-            let t = OpacType::from_name(t).with_context(|| {
-                format!(
-                    "--aerosol-type `{t}`: unknown OPAC type (known: {})",
-                    OpacType::ALL.map(|t| t.name()).join(", ")
-                )
-            })?;
-            let comps = t.components(wavelength_m).context("--wavelength-nm")?;
-            let work = check_work(&comps, wavelength_m, &opts)?;
-            let b = t.bulk_optics(wavelength_m, &opts)?;
-            let indices: serde_json::Map<String, serde_json::Value> = comps
-                .iter()
-                .map(|c| {
-                    (
-                        c.name.clone(),
-                        json!(format_refractive_index(c.refractive_index)),
-                    )
-                })
-                .collect();
-            let desc = b.phase.meta("distribution").unwrap_or_default().to_string();
-            (b, serde_json::Value::Object(indices), desc, work)
-        }
-        (None, Some(c)) => {
-            let c = OpacComponent::from_name(c).with_context(|| {
-                format!(
-                    "--opac-component `{c}`: unknown OPAC component (known: {})",
-                    OpacComponent::ALL.map(|c| c.name()).join(", ")
-                )
-            })?;
-            let m = c
-                .refractive_index(wavelength_m)
-                .context("--wavelength-nm")?;
-            let work = check_work(
-                &[c.component(args.number_density_per_cm3, wavelength_m)?],
-                wavelength_m,
-                &opts,
-            )?;
-            let b = c.bulk_optics(args.number_density_per_cm3, wavelength_m, &opts)?;
-            let desc = c
-                .size_distribution(args.number_density_per_cm3)?
-                .to_string();
-            (b, json!(format_refractive_index(m)), desc, work)
-        }
+    let which = match (&args.aerosol_type, &args.opac_component) {
+        (Some(t), None) => Opac::Type(t),
+        (None, Some(c)) => Opac::Component(c, args.number_density_per_cm3),
         _ => bail!("--distribution opac needs --aerosol-type TYPE or --opac-component NAME"),
     };
-    add_meta(&mut b, &args.meta)?;
-    finish(&b, args, wavelength_nm, indices, description, &work)
-}
-
-/// Refuse, in milliseconds, a size integration beyond the limit of Mie work (README, "Limits"),
-/// and say how long one above a minute will take before starting it.
-fn check_work(
-    components: &[Component],
-    wavelength_m: f64,
-    opts: &BulkOptions,
-) -> anyhow::Result<MieWork> {
-    let w = mie_work(components, wavelength_m, opts)?;
-    w.check().map_err(anyhow::Error::msg)?;
-    if let Some(note) = w.warning() {
-        eprintln!("lidarsim: warning: {note}");
-    }
-    Ok(w)
-}
-
-/// Add the --meta KEY=VALUE lines before the final `source` line.
-fn add_meta(
-    b: &mut lidarsim::particles::distribution::BulkOptics,
-    meta: &[String],
-) -> anyhow::Result<()> {
-    for kv in meta {
-        let Some((k, v)) = kv.split_once('=') else {
-            bail!("--meta `{kv}`: expected KEY=VALUE");
-        };
-        let k = k.trim();
-        if k.is_empty() || !k.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
-            bail!("--meta `{kv}`: the key must be letters, digits and _");
-        }
-        if b.phase.meta(k).is_some() {
-            bail!("--meta `{kv}`: key `{k}` is already set");
-        }
-        // Keep `source` last (the matrix table carries the same metadata).
-        for meta in [&mut b.phase.meta, &mut b.matrix.meta] {
-            let at = meta.len().saturating_sub(1);
-            meta.insert(at, (k.to_string(), v.trim().to_string()));
-        }
-    }
-    Ok(())
+    let mut o = products::mie::opac(which, wavelength_nm * 1e-9, &bulk_opts(args))?;
+    products::mie::add_meta(&mut o.bulk, &args.meta)?;
+    let (indices, description) = (o.indices, o.description);
+    finish(&o.bulk, args, wavelength_nm, indices, description, &o.work)
 }
 
 /// Write the table (if --out) and print the bulk properties as JSON.

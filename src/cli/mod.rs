@@ -112,17 +112,9 @@ pub fn latitude_class(text: &str) -> Result<String, String> {
         .map_err(|_| format!("{text}: unknown latitude class (known: tropical, mid, high, all)"))
 }
 
-/// The CF `history` attribute of a NetCDF file written now: the UTC time and the command line
-/// (`args_os`, so a path that is not UTF-8 does not panic).
+/// The CF `history` attribute of a NetCDF file written now by this command line.
 pub fn netcdf_history() -> String {
-    let command: Vec<String> = std::env::args_os()
-        .map(|a| a.to_string_lossy().into_owned())
-        .collect();
-    format!(
-        "{}: {}",
-        lidarsim::netcdf::utc_timestamp(std::time::SystemTime::now()),
-        command.join(" ")
-    )
+    lidarsim::netcdf::history(std::env::args_os())
 }
 
 /// `lidarsim dial … --shard I/N` and `lidarsim select-lines … --shard I/N`: run `shard` (which

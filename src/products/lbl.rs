@@ -1,6 +1,10 @@
-//! The tables of `lidarsim lbl`: absorption cross-sections on a grid, and layer optical depths
-//! along a line of sight.
+//! `lidarsim lbl`: the profile of its layer mode, and its tables: absorption cross-sections on
+//! a grid, and layer optical depths along a line of sight.
 
+use std::path::Path;
+
+use super::ProductError;
+use crate::atmosphere::{Profile, StandardAtmosphere, parse_afgl};
 use crate::spectroscopy::{
     GasOpticalDepthTable, LblOptions, LineList, LineOfSight, WavenumberGrid, WingCentre,
 };
@@ -85,4 +89,45 @@ pub fn layer_csv(
         }
     }
     (text, column_slant)
+}
+
+/// The profile of the layer mode: a built-in AFGL atmosphere or an AFGL-format file, with its
+/// CO2 scaled so that its surface value is `co2_ppmv` (the shape kept).
+pub fn profile(
+    atmosphere: Option<StandardAtmosphere>,
+    file: Option<&Path>,
+    co2_ppmv: Option<f64>,
+) -> Result<Profile, ProductError> {
+    let mut prof = match (atmosphere, file) {
+        (Some(a), None) => a.profile(),
+        (None, Some(p)) => {
+            let text = std::fs::read_to_string(p).map_err(|e| {
+                ProductError::context(&format!("cannot read the profile {}", p.display()), e)
+            })?;
+            parse_afgl(&p.display().to_string(), &text)?
+        }
+        _ => {
+            return Err(ProductError::Request(
+                "give one of --atmosphere or --profile".into(),
+            ));
+        }
+    };
+    if let Some(ppmv) = co2_ppmv {
+        let g = prof
+            .gases
+            .iter_mut()
+            .find(|g| g.name == "CO2")
+            .ok_or_else(|| {
+                ProductError::Request("--co2-ppmv: the profile has no CO2 column".into())
+            })?;
+        let surface = g.vmr.first().copied().unwrap_or(0.0);
+        if surface <= 0.0 || surface.is_nan() {
+            return Err(ProductError::Request(
+                "--co2-ppmv: the profile's surface CO2 is zero, nothing to scale".into(),
+            ));
+        }
+        let f = ppmv * 1e-6 / surface;
+        g.vmr.iter_mut().for_each(|v| *v *= f);
+    }
+    Ok(prof)
 }

@@ -61,9 +61,34 @@ pub enum ProductError {
     /// Writing a report (a closed pipe: `lidarsim … | head`).
     #[error(transparent)]
     Io(#[from] std::io::Error),
+    /// Mie scattering.
+    #[error(transparent)]
+    Mie(#[from] crate::particles::mie::MieError),
+    /// An error and the option or value it concerns.
+    #[error("{context}")]
+    Context {
+        /// The option or value.
+        context: String,
+        /// The error.
+        #[source]
+        source: Box<dyn std::error::Error + Send + Sync>,
+    },
     /// Every profile of a study failed: nothing is written as if it had succeeded.
     #[error("{0}")]
     AllFailed(String),
+}
+
+impl ProductError {
+    /// `source` with the option or value it concerns (as `anyhow`'s `context`).
+    pub fn context(
+        context: &str,
+        source: impl std::error::Error + Send + Sync + 'static,
+    ) -> ProductError {
+        ProductError::Context {
+            context: context.to_string(),
+            source: Box::new(source),
+        }
+    }
 }
 
 /// The scene of a command: the file at `path`, or the embedded default scene without one. A
