@@ -144,6 +144,16 @@ impl TransportWorkload {
         )
     }
 
+    /// The title and the columns of the table of [`TransportRow::line`].
+    pub fn header(&self) -> String {
+        let (start_m, end_m) = self.gate_m();
+        format!(
+            "Bissonnette C.1, 1064 nm, FOV 1 mrad, {} photons; FOM of the multiple-scattering return at {start_m}–{end_m} m\n\
+             threads  wall_s   photons/s   events/s  events/s/thread   E_ms [J]      rel_err     FOM [1/s]",
+            self.scene.simulation.photons
+        )
+    }
+
     /// The fastest of `repeat` runs on `threads` threads with `configure`, measured.
     pub fn measure(
         &self,
@@ -192,6 +202,22 @@ pub struct TransportRow {
 }
 
 impl TransportRow {
+    /// The row of the table [`TransportWorkload::header`] begins.
+    pub fn line(&self) -> String {
+        let r = self;
+        format!(
+            "{:>7} {:>7.2} {:>11.3e} {:>10.3e} {:>16.3e} {:>10.4e} {:>11.3e} {:>11.3e}",
+            r.threads,
+            r.wall_s,
+            r.photons_per_s,
+            r.events_per_s,
+            r.events_per_s / r.threads as f64,
+            r.multiple_scattering_j,
+            r.rel_err,
+            r.fom_per_s
+        )
+    }
+
     /// The row as JSON (`--json`).
     pub fn json(&self) -> serde_json::Value {
         let eps = self.events_per_s;
@@ -214,6 +240,47 @@ pub fn scene_variants(path: &Path) -> Result<Vec<(String, Scene)>, BenchError> {
         variants.push((format!("{} without its layers", path.display()), clear));
     }
     Ok(variants)
+}
+
+/// The title and the columns of the table of the skipping benchmark, fastest of `repeat`.
+pub fn scenes_header(repeat: usize) -> String {
+    format!(
+        "whole runs (`lidarsim run`, no figures), fastest of {repeat}; forced = multiple_scattering \"always\" ({FORCED_PHOTONS} photons if the scene asks for none)\n\
+         | scene | threads | Monte Carlo (auto) | optics s | auto s | forced s | forced transport s | saved s | why |\n\
+         |---|---|---|---|---|---|---|---|---|"
+    )
+}
+
+/// The row of the skipping benchmark's table of the scene `name` on `threads` threads, and the
+/// same as JSON.
+pub fn scene_row(
+    name: &str,
+    threads: usize,
+    c: &crate::skip::Comparison,
+) -> (String, serde_json::Value) {
+    let saved = c.forced_s - c.auto_s;
+    // Both run the Monte Carlo: their difference is only the noise of the machine.
+    let saved_text = if c.decision.run {
+        "— (both run it)".to_string()
+    } else {
+        format!("{saved:.3}")
+    };
+    let line = format!(
+        "| {name} | {threads} | {} | {:.3} | {:.3} | {:.3} | {:.3} | {saved_text} | {} |",
+        if c.decision.run { "run" } else { "skipped" },
+        c.optics_s,
+        c.auto_s,
+        c.forced_s,
+        c.forced_transport_s,
+        c.decision.reason
+    );
+    let json = serde_json::json!({
+        "scene": name, "threads": threads, "monte_carlo_run": c.decision.run,
+        "reason": c.decision.reason, "optics_s": c.optics_s, "auto_s": c.auto_s,
+        "forced_s": c.forced_s, "forced_photons": c.forced_photons,
+        "forced_transport_s": c.forced_transport_s, "saved_s": saved,
+    });
+    (line, json)
 }
 
 /// The ensemble study benchmark's workload (module docs).
@@ -272,13 +339,43 @@ impl StudyWorkload {
         })
     }
 
-    /// DIAL cells of the study's retrieval.
-    pub fn dial_cells(&self) -> usize {
-        self.scene
+    /// The title (of N profiles per class) and the columns of the table of [`Self::row`].
+    pub fn header(&self, n: usize) -> String {
+        let cells = self
+            .scene
             .retrieval
             .as_ref()
             .and_then(|r| r.dial)
-            .map_or(0, |d| d.cells)
+            .map_or(0, |d| d.cells);
+        format!(
+            "ensemble study: {} profiles (3 classes × {n}), {} on-lines × IPDA and {} DIAL cells, error budget of {} rows; ensemble generated in {:.2} s\n\
+             threads  wall_s  profiles/s  truth_optics_s  returns_s  references_s  retrievals_s  (thread-summed)",
+            self.set.len(),
+            self.options.pairs.len(),
+            cells,
+            dial::N_SOURCES,
+            self.generate_s
+        )
+    }
+
+    /// The row of the table of the timing `t` on `threads` threads, and the same as JSON.
+    pub fn row(&self, threads: usize, t: &dial::Timing) -> (String, serde_json::Value) {
+        let line = format!(
+            "{:>7} {:>7.2} {:>11.1} {:>15.2} {:>10.2} {:>13.2} {:>13.2}",
+            threads,
+            t.wall_s,
+            self.set.len() as f64 / t.wall_s,
+            t.truth_optics_s,
+            t.returns_s,
+            t.references_s + t.mean_references_s,
+            t.retrievals_s
+        );
+        let json = serde_json::json!({
+            "threads": threads, "profiles": self.set.len(), "wall_s": t.wall_s,
+            "generate_s": self.generate_s, "truth_optics_s": t.truth_optics_s, "returns_s": t.returns_s,
+            "references_s": t.references_s + t.mean_references_s, "retrievals_s": t.retrievals_s,
+        });
+        (line, json)
     }
 
     /// The fastest of `repeat` studies on `pool`: its timing; an error if a profile failed.

@@ -4,7 +4,6 @@
 //! multiple scattering at every gate and field of view. The workloads and measurements are
 //! [`lidarsim::benchmark`]'s; this prints them and draws.
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use lidarsim::benchmark::{self, FORCED_PHOTONS, depth};
@@ -98,73 +97,26 @@ pub struct Args {
 
 /// What skipping saves on whole scene runs ([`lidarsim::skip::compare`]).
 fn scenes_bench(args: &Args) -> anyhow::Result<()> {
-    use lidarsim::skip;
-    let mut out = std::io::stdout().lock();
-    writeln!(
-        out,
-        "whole runs (`lidarsim run`, no figures), fastest of {}; forced = multiple_scattering \"always\" ({FORCED_PHOTONS} photons if the scene asks for none)",
-        args.repeat
-    )?;
-    writeln!(
-        out,
-        "| scene | threads | Monte Carlo (auto) | optics s | auto s | forced s | forced transport s | saved s | why |"
-    )?;
-    writeln!(out, "|---|---|---|---|---|---|---|---|---|")?;
+    outln!("{}", benchmark::scenes_header(args.repeat));
     let mut rows = Vec::new();
     for path in &args.scenes {
         for (name, scene) in &benchmark::scene_variants(path)? {
             for &threads in &args.threads {
-                let c = skip::compare(scene, FORCED_PHOTONS, threads, args.repeat)?;
-                let saved = c.forced_s - c.auto_s;
-                // Both run the Monte Carlo: their difference is only the noise of the machine.
-                let saved_text = if c.decision.run {
-                    "— (both run it)".to_string()
-                } else {
-                    format!("{saved:.3}")
-                };
-                writeln!(
-                    out,
-                    "| {name} | {threads} | {} | {:.3} | {:.3} | {:.3} | {:.3} | {saved_text} | {} |",
-                    if c.decision.run { "run" } else { "skipped" },
-                    c.optics_s,
-                    c.auto_s,
-                    c.forced_s,
-                    c.forced_transport_s,
-                    c.decision.reason
-                )?;
-                rows.push(serde_json::json!({
-                    "scene": name, "threads": threads, "monte_carlo_run": c.decision.run,
-                    "reason": c.decision.reason, "optics_s": c.optics_s, "auto_s": c.auto_s,
-                    "forced_s": c.forced_s, "forced_photons": c.forced_photons,
-                    "forced_transport_s": c.forced_transport_s, "saved_s": saved,
-                }));
+                let c = lidarsim::skip::compare(scene, FORCED_PHOTONS, threads, args.repeat)?;
+                let (line, json) = benchmark::scene_row(name, threads, &c);
+                outln!("{line}");
+                rows.push(json);
             }
         }
     }
-    if let Some(path) = &args.json {
-        write_file(path, serde_json::to_string_pretty(&rows)?.as_bytes())?;
-    }
-    Ok(())
+    write_json(args, &rows)
 }
 
 /// The ensemble study benchmark ([`benchmark::StudyWorkload`]).
 fn study_bench(n: usize, args: &Args) -> anyhow::Result<()> {
     let runs = (args.threads.len() as u64).saturating_mul(args.repeat as u64);
     let w = benchmark::StudyWorkload::new(n, args.seed, runs)?;
-    let mut out = std::io::stdout().lock();
-    writeln!(
-        out,
-        "ensemble study: {} profiles (3 classes × {n}), {} on-lines × IPDA and {} DIAL cells, error budget of {} rows; ensemble generated in {:.2} s",
-        w.set.len(),
-        w.options.pairs.len(),
-        w.dial_cells(),
-        lidarsim::study::dial::N_SOURCES,
-        w.generate_s
-    )?;
-    writeln!(
-        out,
-        "threads  wall_s  profiles/s  truth_optics_s  returns_s  references_s  retrievals_s  (thread-summed)"
-    )?;
+    outln!("{}", w.header(n));
     let mut rows = Vec::new();
     for &threads in &args.threads {
         let pool = rayon::ThreadPoolBuilder::new()
@@ -173,25 +125,17 @@ fn study_bench(n: usize, args: &Args) -> anyhow::Result<()> {
         let Some(t) = w.measure(&pool, args.repeat)? else {
             continue;
         };
-        writeln!(
-            out,
-            "{:>7} {:>7.2} {:>11.1} {:>15.2} {:>10.2} {:>13.2} {:>13.2}",
-            pool.current_num_threads(),
-            t.wall_s,
-            w.set.len() as f64 / t.wall_s,
-            t.truth_optics_s,
-            t.returns_s,
-            t.references_s + t.mean_references_s,
-            t.retrievals_s
-        )?;
-        rows.push(serde_json::json!({
-            "threads": pool.current_num_threads(), "profiles": w.set.len(), "wall_s": t.wall_s,
-            "generate_s": w.generate_s, "truth_optics_s": t.truth_optics_s, "returns_s": t.returns_s,
-            "references_s": t.references_s + t.mean_references_s, "retrievals_s": t.retrievals_s,
-        }));
+        let (line, json) = w.row(pool.current_num_threads(), &t);
+        outln!("{line}");
+        rows.push(json);
     }
+    write_json(args, &rows)
+}
+
+/// The rows as JSON into `--json`, if given.
+fn write_json(args: &Args, rows: &[serde_json::Value]) -> anyhow::Result<()> {
     if let Some(path) = &args.json {
-        write_file(path, serde_json::to_string_pretty(&rows)?.as_bytes())?;
+        write_file(path, serde_json::to_string_pretty(rows)?.as_bytes())?;
     }
     Ok(())
 }
@@ -247,38 +191,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         return scenes_bench(&args);
     }
     let w = benchmark::TransportWorkload::new(args.photons, args.seed)?;
-    let (gate_start_m, gate_end_m) = w.gate_m();
-    let mut out = std::io::stdout().lock();
-    writeln!(
-        out,
-        "Bissonnette C.1, 1064 nm, FOV 1 mrad, {} photons; FOM of the multiple-scattering return at {gate_start_m}–{gate_end_m} m",
-        args.photons,
-    )?;
-    writeln!(
-        out,
-        "threads  wall_s   photons/s   events/s  events/s/thread   E_ms [J]      rel_err     FOM [1/s]"
-    )?;
+    outln!("{}", w.header());
     let mut rows = Vec::new();
     for &threads in &args.threads {
         let r = w.measure(threads, args.repeat, method)?;
-        writeln!(
-            out,
-            "{:>7} {:>7.2} {:>11.3e} {:>10.3e} {:>16.3e} {:>10.4e} {:>11.3e} {:>11.3e}",
-            r.threads,
-            r.wall_s,
-            r.photons_per_s,
-            r.events_per_s,
-            r.events_per_s / r.threads as f64,
-            r.multiple_scattering_j,
-            r.rel_err,
-            r.fom_per_s
-        )?;
+        outln!("{}", r.line());
         rows.push(r.json());
     }
-    if let Some(path) = &args.json {
-        write_file(path, serde_json::to_string_pretty(&rows)?.as_bytes())?;
-    }
-    Ok(())
+    write_json(&args, &rows)
 }
 
 /// The depth scan ([`depth::scan`]): its table of FOM ratios, `fom_depth.csv` and
