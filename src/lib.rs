@@ -15,8 +15,10 @@
 //! | the aperture seen from close by | [`aperture`] | the factors both estimators share |
 //! | what a scene does not need | [`skip`] | whether the Monte Carlo runs, and why |
 //!
-//! Beside the stages: [`output`] writes a command's files whole or not at all, and [`netcdf`]
-//! makes `run.nc`, the CF NetCDF file of a run's returns, signals and retrievals.
+//! Beside the stages: [`products`] makes every file and report of the commands from their
+//! in-memory results (`returns.csv`, `summary.json`, `run.nc`, the study tables), [`output`]
+//! writes a command's files whole or not at all, [`netcdf`] makes the CF NetCDF files, and
+//! [`benchmark`] holds the workloads and measurements of `lidarsim bench`.
 
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]

@@ -1,5 +1,7 @@
 //! The `lidarsim` command line: parses arguments, dispatches to a subcommand, maps errors to an
-//! exit code (0 success, 2 error). Each subcommand lives in its own file under `src/cli/`.
+//! exit code (0 success, 2 error). Each subcommand lives in its own file under `src/cli/`, which
+//! calls the library (its products in `lidarsim::products`) and prints; the figures it draws
+//! are in `src/figures/`, one file per command.
 
 use std::process::ExitCode;
 
