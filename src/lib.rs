@@ -21,8 +21,11 @@
 //! | batches traced elsewhere | [`shard`], `distributed` (feature `mpi`) | shard files, merged runs |
 //! | ensemble studies | [`study`] | `dial` and `select-lines` results |
 //!
-//! Beside the stages: [`input`] and [`limits`] check what a user gives, [`output`] writes a
-//! command's files whole or not at all, and [`netcdf`] makes the CF NetCDF files.
+//! Beside the stages: [`input`] and [`limits`] check what a user gives, [`products`] makes
+//! every file and report of the commands from their in-memory results (`returns.csv`,
+//! `summary.json`, `run.nc`, the study tables), [`output`] writes a command's files whole or not
+//! at all, [`netcdf`] makes the CF NetCDF files, and [`benchmark`] holds the workloads and
+//! measurements of `lidarsim bench`.
 
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
@@ -32,6 +35,7 @@
 
 pub mod aperture;
 pub mod atmosphere;
+pub mod benchmark;
 pub mod constants;
 #[cfg(feature = "mpi")]
 pub mod distributed;
@@ -44,6 +48,7 @@ pub mod optics;
 pub mod output;
 pub mod particles;
 pub mod pipeline;
+pub mod products;
 pub mod retrieval;
 pub mod returns;
 pub mod rng;

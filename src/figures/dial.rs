@@ -6,7 +6,7 @@ use std::path::Path;
 
 use plotters::prelude::*;
 
-use super::plot::{FONT, draw_legend, init_font};
+use super::{FONT, draw_legend, init_font};
 use lidarsim::atmosphere::{LatitudeClass, ProfileSet};
 use lidarsim::output::{OutputError, OutputSet};
 use lidarsim::retrieval::Method;
