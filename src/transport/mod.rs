@@ -38,7 +38,6 @@ pub use fold::Fold;
 use fold::PolarisedLayout;
 pub use plan::{BatchTally, Plan};
 pub(crate) use setup::Setup;
-use setup::{ScatterClass, backward_max, forward_half_width, scatter_classes};
 pub use tally::Flux;
 use tally::{Accumulator, TallyShape};
 

@@ -72,6 +72,228 @@ pub(crate) struct Setup<'a> {
     pub(super) aperture: Aperture,
 }
 
+impl<'a> Setup<'a> {
+    /// The set-up of a run of `scene` with `opts` (checked), its fields of view's cosines
+    /// `fov_cos` (narrowest first) and tally `shape`: the geometry, gates and scattering
+    /// classes, then the layers where DDIS is used and the regions of the cone and crossing
+    /// estimates.
+    pub(super) fn new(
+        scene: &Scene,
+        atm: &'a OpticalAtmosphere,
+        opts: &TransportOptions,
+        fov_cos: Vec<f64>,
+        shape: TallyShape,
+    ) -> Self {
+        let lidar = &scene.lidar;
+        let nch = scene.channels.len();
+        let axis = lidar.axis();
+        let (axis_e1, axis_e2) = axis.any_orthonormal_pair();
+        let receiver = DVec3::new(0.0, 0.0, lidar.altitude_m);
+
+        let n_layers = atm.n_layers();
+        let widest = fov_cos.last().copied().unwrap_or(1.0);
+        let widest_fov_mrad = lidar
+            .fov_full_angle_mrad
+            .iter()
+            .fold(0.0f64, |m, f| m.max(*f));
+        let mut setup = Setup {
+            atm,
+            fov_cos_widest: widest,
+            has_layers: atm.n_layers() > 0,
+            bottom_m: atm.bottom_m(),
+            top_m: atm.top_m(),
+            receiver,
+            axis,
+            axis_e1,
+            axis_e2,
+            beam_half_angle_rad: 0.5e-3 * lidar.beam_divergence_full_angle_mrad,
+            beam_profile: lidar.beam_profile,
+            fov_cos,
+            shape,
+            gate_start_m: scene.gates.start_m,
+            gate_width_m: scene.gates.width_m,
+            r_end_m: scene.gates.end_m(),
+            max_order: opts.max_order,
+            surface: scene.surface.as_ref().map(|s| s.albedo.clone()),
+            flux_tally: opts.flux_tally,
+            tau_rx: (0..nch)
+                .map(|k| {
+                    let (s, a) = atm.cumulative_tau(receiver.z, k);
+                    s + a
+                })
+                .collect(),
+            classes: scatter_classes(atm)
+                .into_iter()
+                .map(|k| ScatterClass::of_channel(atm, k))
+                .collect(),
+            ddis_epsilon: opts.ddis_epsilon,
+            forward_peaked: vec![false; n_layers],
+            ddis_cos: vec![1.0; n_layers],
+            backward_max: vec![f64::INFINITY; n_layers],
+            align_split: opts.alignment_splitting,
+            roulette_align: opts.roulette_alignment,
+            stratify: opts.range_stratification,
+            cone: false,
+            cone_annuli: Vec::new(),
+            annulus_sr: Vec::new(),
+            cone_tan: 0.0,
+            crossing_from: 0,
+            crossing_tan2: [0.0; 2],
+            ddis_crossing: opts.ddis_crossing,
+            analyser: match lidar.polarisation {
+                Polarisation::None => None,
+                Polarisation::Linear => Some(stokes::Analyser::Linear(axis_e1)),
+                Polarisation::Circular => Some(stokes::Analyser::Circular),
+            },
+            matrices: atm.matrices.iter().map(|m| (**m).clone()).collect(),
+            aperture: Aperture::new(lidar.telescope_diameter_m, atm),
+        };
+        setup.place_ddis(widest_fov_mrad);
+        setup.place_estimates(opts);
+        setup
+    }
+
+    /// Which layers get DDIS, the cone around the receiver's axis where it is used in each, and
+    /// the layers' backward bounds of the phase function it samples (for alignment).
+    fn place_ddis(&mut self, widest_fov_mrad: f64) {
+        let setup = self;
+        let atm = setup.atm;
+        let n_layers = atm.n_layers();
+        // Which layers get DDIS: a forward-peaked scatterer mixture (in any class).
+        setup.forward_peaked = (0..n_layers)
+            .map(|l| {
+                !atm.components[l].is_empty()
+                    && setup
+                        .classes
+                        .iter()
+                        .any(|c| setup.mixture_phase(l, c.channel, 1.0) > DDIS_FORWARD_PEAK)
+            })
+            .collect();
+        // Per phase function (once: a profile of thousands of thin layers shares a few), its
+        // forward half-width and its backward bound; then per layer from its scatterers.
+        let half_width: Vec<f64> = atm
+            .phases
+            .iter()
+            .map(|p| forward_half_width(|mu| p.eval(mu)))
+            .collect();
+        let back_bound: Vec<f64> = atm
+            .phases
+            .iter()
+            .map(|p| backward_max(|mu| p.eval(mu)))
+            .collect();
+        // A layer's backward bound: per class, its scatterers' bounds weighted by their shares
+        // of the class's scattering (a bound on the mixture, whose largest value cannot exceed
+        // that sum); the largest over the classes bounds their mean, `mean_phase`.
+        setup.backward_max = (0..n_layers)
+            .map(|l| {
+                setup
+                    .classes
+                    .iter()
+                    .filter(|c| c.sigma[l] > 0.0)
+                    .map(|c| {
+                        let k = c.channel;
+                        atm.components[l]
+                            .iter()
+                            .map(|comp| comp.sigma_s_per_m[k] * back_bound[comp.phase[k] as usize])
+                            .sum::<f64>()
+                            * c.inv_sigma[l]
+                    })
+                    .fold(0.0f64, f64::max)
+            })
+            .collect();
+        // DDIS's margin in a layer: the widest forward half-width among its forward-peaked
+        // scatterers (a droplet's, not the air's around it), at least DDIS_MARGIN_MIN_RAD.
+        setup.ddis_cos = (0..n_layers)
+            .map(|l| {
+                let margin = if setup.forward_peaked[l] {
+                    setup
+                        .classes
+                        .iter()
+                        .flat_map(|c| {
+                            atm.components[l]
+                                .iter()
+                                .map(move |comp| comp.phase[c.channel])
+                        })
+                        .filter(|&i| atm.phases[i as usize].eval(1.0) > DDIS_FORWARD_PEAK)
+                        .map(|i| half_width[i as usize])
+                        .fold(DDIS_MARGIN_MIN_RAD, f64::max)
+                } else {
+                    DDIS_MARGIN_MIN_RAD
+                };
+                (0.5e-3 * widest_fov_mrad + margin)
+                    .min(std::f64::consts::PI)
+                    .cos()
+            })
+            .collect();
+    }
+
+    /// The FOV annuli's solid angles, and which annuli the cone estimate and the crossing
+    /// estimate serve.
+    fn place_estimates(&mut self, opts: &TransportOptions) {
+        let setup = self;
+        let atm = setup.atm;
+        let n_layers = atm.n_layers();
+        let (receiver, axis) = (setup.receiver, setup.axis);
+        setup.annulus_sr = (0..setup.fov_cos.len())
+            .map(|a| {
+                let inner = if a == 0 { 1.0 } else { setup.fov_cos[a - 1] };
+                2.0 * std::f64::consts::PI * (inner - setup.fov_cos[a])
+            })
+            .collect();
+        // The cone estimate for the annuli whose footprint on every forward-peaked layer is
+        // optically narrow: there collisions inside the field of view are rare (clouds,
+        // aerosol seen with narrow fields of view); in Rayleigh air and wide fields of view the
+        // walk's own local estimates do well.
+        if opts.cone_estimate {
+            let footprint = |cos_outer: f64| -> f64 {
+                let tan_a = (1.0 - cos_outer * cos_outer).max(0.0).sqrt() / cos_outer;
+                (0..n_layers)
+                    .filter(|l| setup.forward_peaked[*l])
+                    .map(|l| {
+                        // Farthest range of the layer along the axis (slant: /|axis.z|).
+                        let far = [atm.edges_m[l], atm.edges_m[l + 1]]
+                            .iter()
+                            .map(|z| ((z - receiver.z) / axis.z.abs().max(1e-6)).abs())
+                            .fold(0.0f64, f64::max);
+                        let sigma = setup.classes[0].sigma[l];
+                        tan_a * far * sigma
+                    })
+                    .fold(0.0f64, f64::max)
+            };
+            setup.cone_annuli = (0..setup.fov_cos.len())
+                .filter(|&a| {
+                    setup.annulus_sr[a] > 0.0
+                        && setup.forward_peaked.iter().any(|f| *f)
+                        && footprint(setup.fov_cos[a]) <= CONE_MAX_FOOTPRINT_TAU
+                })
+                .collect();
+        }
+        setup.cone = !setup.cone_annuli.is_empty();
+        if let Some(&a) = setup.cone_annuli.iter().max() {
+            let c = setup.fov_cos[a];
+            setup.cone_tan = (1.0 - c * c).max(0.0).sqrt() / c;
+        }
+        // The crossing estimate for every annulus wider than the cone estimate's.
+        let n_fov = setup.fov_cos.len();
+        setup.crossing_from = if opts.crossing_estimate && setup.has_layers {
+            setup.cone_annuli.iter().map(|a| a + 1).max().unwrap_or(0)
+        } else {
+            n_fov
+        };
+        if setup.crossing_from < n_fov {
+            let tan2 = |c: f64| (1.0 - c * c).max(0.0) / (c * c);
+            setup.crossing_tan2 = [
+                if setup.crossing_from == 0 {
+                    0.0
+                } else {
+                    tan2(setup.fov_cos[setup.crossing_from - 1])
+                },
+                tan2(setup.fov_cos[n_fov - 1]),
+            ];
+        }
+    }
+}
+
 /// The free-path density of one scattering class: its cumulative vertical scattering optical
 /// depth at the layer edges and its σ_s per layer (those of its first channel).
 pub(crate) struct ScatterClass {

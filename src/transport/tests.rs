@@ -1,4 +1,4 @@
-use super::setup::similar_phase;
+use super::setup::{backward_max, forward_half_width, scatter_classes, similar_phase};
 use super::*;
 use crate::particles::phase::{HenyeyGreenstein, PhaseFunction};
 use crate::transport::testing::{CLOUD, edited, with_setup};
