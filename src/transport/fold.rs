@@ -100,11 +100,6 @@ pub struct Fold<'p> {
 }
 
 impl Fold<'_> {
-    /// Index of the batch expected next.
-    pub fn next_index(&self) -> usize {
-        self.next
-    }
-
     /// Fold the next batch. Batches must come in order, each once, with this plan's shape.
     pub fn add(&mut self, mut batch: BatchTally) -> Result<(), TransportError> {
         let shape = self.plan.setup.shape;
