@@ -185,7 +185,7 @@ impl Returns {
     /// Energies combine exactly. Standard errors combine through the covariances where they are
     /// known (σ² = Σ_ab c_a c_b cov_ab); they are 0 where every term has zero error and NaN where
     /// a needed covariance is unknown. A Monte Carlo run that should report combined channels
-    /// with proper errors combines batch by batch instead (`TransportOptions::combinations`).
+    /// with proper errors combines batch by batch instead (`transport::TallyLayout::combinations`).
     pub fn combine(&self, combos: &[Combination]) -> Returns {
         let mut out = Returns::zeros(
             self.source,

@@ -18,7 +18,8 @@ use crate::optics::OpticalAtmosphere;
 use crate::output::{OutputSet, csv_number};
 use crate::returns::Order;
 use crate::scene::Scene;
-use crate::transport::{McResult, TransportOptions};
+use crate::scene::{Simulation, VarianceReduction};
+use crate::transport::{McResult, Progress};
 
 /// Fields of view of the scan [mrad, full angle].
 pub const FOVS_MRAD: [f64; 5] = [0.5, 1.0, 2.0, 5.0, 10.0];
@@ -93,15 +94,9 @@ pub fn cells(scene: &Scene, r: &McResult) -> Vec<Cell> {
     out
 }
 
-/// Transport options of the plain local estimate.
-pub fn plain(opts: &mut TransportOptions) {
-    opts.ddis_epsilon = 0.0;
-    opts.range_stratification = 0.0;
-    opts.alignment_splitting = 0.0;
-    opts.roulette_alignment = 0.0;
-    opts.cone_estimate = false;
-    opts.crossing_estimate = false;
-    opts.ddis_crossing = false;
+/// The settings of the plain local estimate: no variance reduction.
+pub fn plain(sim: &mut Simulation) {
+    sim.variance_reduction = VarianceReduction::none();
 }
 
 const HEADER: &str =
@@ -215,7 +210,7 @@ pub fn scan(
     repeat: usize,
     seed: u64,
     reference: Option<&Path>,
-    method: impl Fn(&mut TransportOptions),
+    method: impl Fn(&mut Simulation),
 ) -> Result<Scan, BenchError> {
     let mut scene = scene()?;
     scene.simulation.photons = photons;
@@ -333,7 +328,7 @@ pub fn scatter(
     photons: u64,
     threads: usize,
     seeds: u64,
-    method: impl Fn(&mut TransportOptions),
+    method: impl Fn(&mut Simulation),
 ) -> Result<Scatter, BenchError> {
     ensure!(seeds >= 3, "--seeds needs at least 3 runs");
     let mut scene = scene()?;
@@ -394,7 +389,7 @@ pub fn ladder(
     photons: u64,
     threads: usize,
     reference: &Path,
-    method: impl Fn(&mut TransportOptions),
+    method: impl Fn(&mut Simulation),
 ) -> Result<(String, Vec<(String, Vec<(f64, f64)>)>), BenchError> {
     let (long, _) = read_reference(reference)?;
     let mut scene = scene()?;
@@ -456,23 +451,31 @@ pub fn ladder(
 }
 
 /// `--write-plain`: the plain local estimate of C.1 with `photons` on `threads` threads, in
-/// `batches`, with a progress bar; its cells written to `path` as the reference of the scan.
+/// `batches`, reporting its batches to `progress`; its cells written to `path` as the reference
+/// of the scan.
 pub fn write_plain(
     path: &Path,
     photons: u64,
     seed: u64,
     threads: usize,
     batches: usize,
+    progress: Progress,
 ) -> Result<McResult, BenchError> {
     let mut scene = scene()?;
     scene.simulation.photons = photons;
     scene.simulation.seed = seed;
     let atm = OpticalAtmosphere::build(&scene)?;
-    let r = fastest(&scene, &atm, threads, 1, |o| {
-        plain(o);
-        o.batches = batches;
-        o.progress = true;
-    })?;
+    let r = super::fastest_with(
+        &scene,
+        &atm,
+        threads,
+        1,
+        |o| {
+            plain(o);
+            o.batches = batches;
+        },
+        progress,
+    )?;
     write_reference(path, &cells(&scene, &r), r.photons)?;
     Ok(r)
 }

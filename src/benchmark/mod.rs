@@ -22,9 +22,10 @@ use crate::atmosphere::{LatitudeClass, ProfileSet, class_ensemble};
 use crate::optics::OpticalAtmosphere;
 use crate::returns::Order;
 use crate::scene::Scene;
+use crate::scene::Simulation;
 use crate::stats;
 use crate::study::dial::{self, StudyOptions};
-use crate::transport::{self, McResult, TransportOptions};
+use crate::transport::{self, McResult, Progress, TallyLayout};
 
 const C1_SCENE: &str = include_str!("../../scenes/bissonnette_c1.toml");
 const C1_TABLE_FILE: &str = r#"file = "../phase_functions/bissonnette_c1_1064nm.txt""#;
@@ -89,20 +90,34 @@ pub fn c1_scene() -> Result<Scene, BenchError> {
     Ok(scene)
 }
 
-/// Run `scene` `repeat` times with `configure`; the fastest run (least disturbed by other load).
+/// Run `scene` `repeat` times with its settings changed by `configure`; the fastest run (least
+/// disturbed by other load).
 pub fn fastest(
     scene: &Scene,
     atm: &OpticalAtmosphere,
     threads: usize,
     repeat: usize,
-    configure: impl Fn(&mut TransportOptions),
+    configure: impl Fn(&mut Simulation),
+) -> Result<McResult, BenchError> {
+    fastest_with(scene, atm, threads, repeat, configure, &transport::quiet)
+}
+
+/// [`fastest`], reporting each run's batches to `progress`.
+pub fn fastest_with(
+    scene: &Scene,
+    atm: &OpticalAtmosphere,
+    threads: usize,
+    repeat: usize,
+    configure: impl Fn(&mut Simulation),
+    progress: Progress,
 ) -> Result<McResult, BenchError> {
     let mut best: Option<McResult> = None;
     for _ in 0..repeat.max(1) {
-        let mut opts = TransportOptions::from_scene(scene);
-        opts.threads = threads;
-        configure(&mut opts);
-        let r = transport::run(scene, atm, &opts)?;
+        let mut s = scene.clone();
+        s.simulation.threads = threads;
+        configure(&mut s.simulation);
+        let plan = transport::Plan::new(&s, atm, &TallyLayout::default())?;
+        let r = transport::run_plan(&plan, progress)?;
         if best.as_ref().is_none_or(|b| r.wall_s < b.wall_s) {
             best = Some(r);
         }
@@ -159,7 +174,7 @@ impl TransportWorkload {
         &self,
         threads: usize,
         repeat: usize,
-        configure: impl Fn(&mut TransportOptions),
+        configure: impl Fn(&mut Simulation),
     ) -> Result<TransportRow, BenchError> {
         let r = fastest(&self.scene, &self.atm, threads, repeat, configure)?;
         let ms = Order::AtLeast(2);

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use lidarsim::benchmark::{self, FORCED_PHOTONS, depth};
 use lidarsim::input::Bounds;
 use lidarsim::output::{OutputSet, write_file};
-use lidarsim::transport::TransportOptions;
+use lidarsim::scene::{Simulation, VarianceReduction};
 
 /// `print!` that returns a closed stdout (`| head`) as an error instead of panicking.
 macro_rules! out {
@@ -149,15 +149,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         return study_bench(n, &args);
     }
     let first_threads = args.threads.first().copied().unwrap_or(1);
-    let method = |o: &mut TransportOptions| {
+    let method = |o: &mut Simulation| {
         o.batches = args.batches;
-        o.ddis_epsilon = args.ddis_epsilon;
-        o.range_stratification = args.range_stratification;
-        o.alignment_splitting = args.alignment_splitting;
-        o.roulette_alignment = args.roulette_alignment;
-        o.cone_estimate = args.cone_estimate;
-        o.crossing_estimate = args.crossing_estimate;
-        o.ddis_crossing = args.ddis_crossing;
+        o.variance_reduction = VarianceReduction {
+            ddis_epsilon: args.ddis_epsilon,
+            range_stratification: args.range_stratification,
+            alignment_splitting: args.alignment_splitting,
+            roulette_alignment: args.roulette_alignment,
+            cone_estimate: args.cone_estimate,
+            crossing_estimate: args.crossing_estimate,
+            ddis_crossing: args.ddis_crossing,
+        };
     };
     if let (Some(dir), Some(k)) = (&args.depth, args.seeds) {
         return scatter(dir, args.photons, first_threads, k, method);
@@ -178,7 +180,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     if let Some(path) = &args.write_plain {
         let threads = args.threads.iter().copied().max().unwrap_or(0);
-        let r = depth::write_plain(path, args.photons, args.seed, threads, args.batches)?;
+        let bar = super::progress::Progress::new(0, "transport", "batches");
+        let r = depth::write_plain(
+            path,
+            args.photons,
+            args.seed,
+            threads,
+            args.batches,
+            &|done, total| bar.reach(done, total),
+        )?;
+        bar.finish();
         outln!(
             "plain local estimate, {} photons in {:.1} s on {} threads: wrote {}",
             r.photons,
@@ -208,7 +219,7 @@ fn depth_scan(
     dir: &Path,
     args: &Args,
     threads: usize,
-    method: impl Fn(&mut TransportOptions),
+    method: impl Fn(&mut Simulation),
 ) -> anyhow::Result<()> {
     let s = depth::scan(
         args.photons,
@@ -257,7 +268,7 @@ fn scatter(
     photons: u64,
     threads: usize,
     seeds: u64,
-    method: impl Fn(&mut TransportOptions),
+    method: impl Fn(&mut Simulation),
 ) -> anyhow::Result<()> {
     let s = depth::scatter(photons, threads, seeds, method)?;
     outln!("scatter of {seeds} runs' means / their standard errors (orders ≥ 2)");

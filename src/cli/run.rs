@@ -6,7 +6,6 @@ use lidarsim::input::Bounds;
 use lidarsim::output;
 use lidarsim::products::{self, run::FILES};
 use lidarsim::shard::{self, ShardSpec};
-use lidarsim::transport::TransportOptions;
 
 /// Arguments of `lidarsim run`.
 #[derive(clap::Args, Debug)]
@@ -54,14 +53,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .map_err(anyhow::Error::msg)?;
     // Before the work: a run must not fail at its end on a name it could have refused now.
     output::check_paths(&FILES.map(|f| args.out.join(f)))?;
-    let mut opts = TransportOptions::from_scene(&scene);
-    opts.progress = true;
-    opts.ddis_epsilon = args.ddis_epsilon;
+    scene.simulation.variance_reduction.ddis_epsilon = args.ddis_epsilon;
     #[cfg(not(feature = "mpi"))]
-    let run = lidarsim::pipeline::run(&scene, &opts)?;
+    let run = {
+        let prepared = lidarsim::pipeline::prepare(&scene)?;
+        if let Some(note) = prepared.warning() {
+            lidarsim::limits::warn(&note);
+        }
+        let bar = super::progress::Progress::new(0, "transport", "batches");
+        let mc = prepared.trace(&|done, total| bar.reach(done, total))?;
+        bar.finish();
+        prepared.finish(mc)?
+    };
     // Under `mpirun` the ranks share the batches; rank 0 alone writes (`lidarsim::distributed`).
     #[cfg(feature = "mpi")]
-    let run = match lidarsim::distributed::run(&scene, &opts)? {
+    let run = match lidarsim::distributed::run(&scene)? {
         lidarsim::distributed::Outcome::Root(run) => run,
         // Other ranks: rank 0 writes the files, or reports why the run stopped and ends with
         // status 2 (mpirun's status); a rank that ended with 2 first could cut its message off.
@@ -78,9 +84,8 @@ fn run_shard(args: &Args, spec: ShardSpec) -> anyhow::Result<()> {
     scene
         .override_simulation(args.photons, args.seed, args.threads)
         .map_err(anyhow::Error::msg)?;
-    let mut opts = TransportOptions::from_scene(&scene);
-    opts.ddis_epsilon = args.ddis_epsilon;
-    let r = shard::run(&scene, &opts, spec, &args.out)?;
+    scene.simulation.variance_reduction.ddis_epsilon = args.ddis_epsilon;
+    let r = shard::run(&scene, spec, &args.out)?;
     outln!(
         "shard {spec}: batches {}..{} of {} ({} photons each) in {:.2} s on {} threads; wrote {}",
         r.batches.start,

@@ -28,6 +28,7 @@ mod resolve_gas;
 mod resolve_instrument;
 mod source;
 mod validate;
+mod variance;
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -48,6 +49,9 @@ pub use description::{
     SceneDescription, SimulationDescription, SurfaceDescription,
 };
 use source::{KeyPath, Source};
+pub use variance::{
+    ALIGNMENT_SPLITTING, DDIS_EPSILON, RANGE_STRATIFICATION, ROULETTE_ALIGNMENT, VarianceReduction,
+};
 
 /// The scene run when `lidarsim run` gets no file.
 pub const DEFAULT_SCENE_TOML: &str = include_str!("../../scenes/spaceborne_co2_ipda.toml");
@@ -90,7 +94,9 @@ pub struct Scene {
     pub surface: Option<Surface>,
     /// Line-by-line gas absorption, if any.
     pub gas: Option<GasAbsorption>,
-    /// Monte Carlo settings.
+    /// The run settings: everything that says how a scene is run rather than what it is (photons,
+    /// seed, batches, threads, orders, when the Monte Carlo runs, its variance reductions). The one
+    /// settings type: the transport, the pipeline, shards and MPI read them from here.
     pub simulation: Simulation,
     /// The description it was resolved from.
     spec: Arc<SceneDescription>,
@@ -298,7 +304,9 @@ pub struct Surface {
     pub albedo: Vec<f64>,
 }
 
-/// Monte Carlo settings.
+/// The run settings: everything that says how a scene is run rather than what it is (photons,
+/// seed, batches, threads, orders, when the Monte Carlo runs, its variance reductions). The one
+/// settings type: the transport, the pipeline, shards and MPI read them from here.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Simulation {
     /// Number of photon packets (0: analytic single scattering only, no Monte Carlo).
@@ -319,6 +327,9 @@ pub struct Simulation {
     /// The multiple-scattering share of a return below which `"auto"` skips the Monte Carlo
     /// (`multiple_scattering_tolerance`, default [`MULTIPLE_SCATTERING_TOLERANCE`]).
     pub multiple_scattering_tolerance: f64,
+    /// The Monte Carlo's variance reductions (not in the scene file: defaults, which the
+    /// command line and the benchmarks may change).
+    pub variance_reduction: VarianceReduction,
 }
 
 /// When the Monte Carlo runs (`[simulation] multiple_scattering`). Single scattering always

@@ -59,9 +59,7 @@ use crate::input::InputError;
 use crate::output::{self, OutputError, OutputSet};
 use crate::pipeline::{self, RunError, RunOutput};
 use crate::scene::Scene;
-use crate::transport::{
-    self, BatchTally, Flux, McResult, RunStats, TransportError, TransportOptions,
-};
+use crate::transport::{self, BatchTally, Flux, McResult, RunStats, TallyLayout, TransportError};
 
 mod check;
 mod file;
@@ -469,8 +467,7 @@ pub struct Merged {
 pub fn merge(inputs: &[PathBuf]) -> Result<Merged, ShardError> {
     let set = ShardSet::open(&shard_paths(inputs)?)?;
     let scene = set.scene()?;
-    let opts = set.transport_options(&scene);
-    let prepared = pipeline::prepare(&scene, &opts)?;
+    let prepared = pipeline::prepare(&scene)?;
     let mc = match prepared.plan()? {
         Some(plan) => Some(set.fold(&plan, &scene)?),
         None => None,

@@ -20,8 +20,7 @@ mod tally;
 #[cfg(test)]
 mod testing;
 
-use std::io::IsTerminal;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use glam::DVec3;
 use rayon::prelude::*;
@@ -41,16 +40,9 @@ pub(crate) use setup::Setup;
 pub use tally::Flux;
 use tally::{Accumulator, TallyShape};
 
-/// Default probability of detector-directed importance sampling.
-pub const DDIS_EPSILON: f64 = 0.3;
-/// Default probability of drawing the first collision uniformly in range.
-pub const RANGE_STRATIFICATION: f64 = 0.5;
-/// Default reference phase-function value of alignment splitting
-/// ([`TransportOptions::alignment_splitting`]).
-pub const ALIGNMENT_SPLITTING: f64 = 1.0;
-/// Default reference phase-function value of Russian roulette's alignment importance
-/// ([`TransportOptions::roulette_alignment`]).
-pub const ROULETTE_ALIGNMENT: f64 = 10.0;
+pub use crate::scene::{
+    ALIGNMENT_SPLITTING, DDIS_EPSILON, RANGE_STRATIFICATION, ROULETTE_ALIGNMENT, VarianceReduction,
+};
 /// Most copies alignment splitting makes of a photon at one collision.
 pub(crate) const ALIGNMENT_MAX_COPIES: usize = 64;
 /// DDIS is used where the scattering point is seen from the receiver within the widest field
@@ -129,52 +121,14 @@ impl RunStats {
     }
 }
 
-/// How to run the transport.
-#[derive(Debug, Clone)]
-pub struct TransportOptions {
-    /// Photon packets (rounded up to a whole number per batch).
-    pub photons: u64,
-    /// Random seed.
-    pub seed: u64,
-    /// Number of batches (≥ 2).
-    pub batches: usize,
-    /// Worker threads (0: all cores).
-    pub threads: usize,
-    /// Highest order tallied separately.
-    pub max_order: u32,
+/// What the transport tallies besides the returns of the scene's channels, fields of view,
+/// gates and orders: the layout of its tallies. How it runs (photons, seed, batches, threads,
+/// orders, variance reduction) is the scene's [`Simulation`](crate::scene::Simulation).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct TallyLayout {
     /// Also tally the energy leaving the scene and absorbed in it (costs a layer walk per
     /// flight).
-    pub flux_tally: bool,
-    /// Show a progress bar on a terminal for runs longer than about a second.
-    pub progress: bool,
-    /// Probability ε of detector-directed importance sampling at a scattering near the
-    /// receiver's line of sight (0 turns it off).
-    pub ddis_epsilon: f64,
-    /// Probability β of drawing the first collision uniformly in range over the gated window
-    /// instead of from the exponential (0 turns it off).
-    pub range_stratification: f64,
-    /// Alignment splitting: where DDIS applies, a photon whose weight times the phase
-    /// function toward the receiver, w·P(Θ_rx) (P per 4π sr), exceeds twice this value is
-    /// split before it scatters into n = ⌈w·P(Θ_rx)/value⌉ copies (at most 64), each drawing
-    /// its own new direction (0 turns it off; unbiased either way).
-    pub alignment_splitting: f64,
-    /// Russian roulette's alignment importance: where DDIS applies, a photon travelling toward
-    /// the receiver with P(Θ_rx) (per 4π sr) above this value is played at the weight
-    /// w·P(Θ_rx)/value instead of w, so that photons heading for the fields of view are spared
-    /// (0 plays every photon at its weight; unbiased either way; `docs/transport.md` step 7).
-    pub roulette_alignment: f64,
-    /// Score orders ≥ 2 in optically narrow fields of view also by the cone estimate (a last
-    /// scattering drawn inside the field of view, `docs/transport.md` step 6a), not only when
-    /// collisions happen to land there.
-    pub cone_estimate: bool,
-    /// Score orders ≥ 2 in the fields of view the cone estimate does not serve by the crossing
-    /// estimate: at every flight from a scattering, the walk's next local estimate in expectation
-    /// over where along the flight it collides inside them (`docs/transport.md` step 6b), not
-    /// only when it happens to collide there.
-    pub crossing_estimate: bool,
-    /// Where DDIS applies, also the DDIS crossing: a direction drawn about the receiver's at
-    /// every such scattering and the crossing estimate along it (`docs/transport.md` step 6c).
-    pub ddis_crossing: bool,
+    pub flux: bool,
     /// Linear combinations of channels to report as well (laser lines from their quadrature
     /// nodes), folded batch by batch so that their standard errors are right.
     pub combinations: Vec<Combination>,
@@ -183,30 +137,12 @@ pub struct TransportOptions {
     pub combination_pairs: Vec<(usize, usize)>,
 }
 
-impl TransportOptions {
-    /// The scene's own settings.
-    pub fn from_scene(scene: &Scene) -> Self {
-        let s = &scene.simulation;
-        TransportOptions {
-            photons: s.photons,
-            seed: s.seed,
-            batches: s.batches,
-            threads: s.threads,
-            max_order: s.max_order,
-            flux_tally: false,
-            progress: false,
-            ddis_epsilon: DDIS_EPSILON,
-            range_stratification: RANGE_STRATIFICATION,
-            alignment_splitting: ALIGNMENT_SPLITTING,
-            roulette_alignment: ROULETTE_ALIGNMENT,
-            cone_estimate: true,
-            crossing_estimate: true,
-            ddis_crossing: true,
-            combinations: Vec::new(),
-            combination_pairs: Vec::new(),
-        }
-    }
-}
+/// A caller's report of progress: batches folded, of all the run's ([`run_plan`]). Called from
+/// the thread that folds, after each chunk of batches; the command line draws a bar with it.
+pub type Progress<'a> = &'a dyn Fn(usize, usize);
+
+/// A [`Progress`] that reports nothing.
+pub fn quiet(_done: usize, _total: usize) {}
 
 /// A problem running the transport.
 #[derive(Debug, Error)]
@@ -225,8 +161,8 @@ pub enum TransportError {
 pub struct McResult {
     /// Received energy by channel, FOV, gate and order, with standard errors.
     pub returns: Returns,
-    /// The combined channels of [`TransportOptions::combinations`], with standard errors and the
-    /// covariances of [`TransportOptions::combination_pairs`] (`None` without combinations).
+    /// The combined channels of [`TallyLayout::combinations`], with standard errors and the
+    /// covariances of [`TallyLayout::combination_pairs`] (`None` without combinations).
     pub combined: Option<Returns>,
     /// Energy leaving the scene per channel, as a fraction of the emitted energy (zero unless
     /// the flux tally was on).
@@ -262,21 +198,23 @@ pub struct Polarised {
 pub struct PolarisedMc {
     /// The monochromatic channels.
     pub channels: Polarised,
-    /// The combinations of [`TransportOptions::combinations`], if any.
+    /// The combinations of [`TallyLayout::combinations`], if any.
     pub combined: Option<Polarised>,
 }
 
-/// Run the Monte Carlo transport of a scene through its optical atmosphere.
+/// Run the Monte Carlo transport of a scene (its settings: `scene.simulation`) through its
+/// optical atmosphere, tallying `layout`, quietly.
 pub fn run(
     scene: &Scene,
     atm: &OpticalAtmosphere,
-    opts: &TransportOptions,
+    layout: &TallyLayout,
 ) -> Result<McResult, TransportError> {
-    run_plan(&Plan::new(scene, atm, opts)?)
+    run_plan(&Plan::new(scene, atm, layout)?, &quiet)
 }
 
-/// Trace every batch of a plan on its thread pool and fold them in order.
-pub fn run_plan(plan: &Plan) -> Result<McResult, TransportError> {
+/// Trace every batch of a plan on its thread pool and fold them in order, reporting the
+/// batches folded to `progress`.
+pub fn run_plan(plan: &Plan, progress: Progress) -> Result<McResult, TransportError> {
     let batches = plan.batches;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(plan.threads)
@@ -286,16 +224,6 @@ pub fn run_plan(plan: &Plan) -> Result<McResult, TransportError> {
 
     let mut fold = plan.fold();
     let started = Instant::now();
-    let bar = indicatif::ProgressBar::hidden();
-    bar.set_length(batches as u64);
-    bar.set_style(
-        indicatif::ProgressStyle::with_template(
-            "{spinner} transport {bar:40} {pos}/{len} batches, {elapsed} (eta {eta})",
-        )
-        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-    );
-    let show_bar = plan.progress && std::io::stderr().is_terminal();
-
     // Chunks keep at most a few batch buffers alive, and no more than the memory limit allows;
     // their size does not change the numbers.
     let chunk = (4 * threads)
@@ -307,22 +235,15 @@ pub fn run_plan(plan: &Plan) -> Result<McResult, TransportError> {
         let results: Vec<BatchTally> = pool.install(|| {
             (start..end)
                 .into_par_iter()
-                .map(|b| {
-                    let t = plan.trace_batch(b);
-                    bar.inc(1);
-                    t
-                })
+                .map(|b| plan.trace_batch(b))
                 .collect()
         });
         for t in results {
             fold.add(t)?;
         }
-        if show_bar && bar.is_hidden() && started.elapsed() > Duration::from_secs(1) {
-            bar.set_draw_target(indicatif::ProgressDrawTarget::stderr());
-        }
         start = end;
+        progress(start, batches);
     }
-    bar.finish_and_clear();
     fold.finish(started.elapsed().as_secs_f64(), threads)
 }
 

@@ -29,7 +29,6 @@ pub struct Plan<'a> {
     /// The random stream each batch starts from (computed once: batch b's is b jumps on).
     pub(super) streams: Vec<rng::Rng>,
     pub(super) threads: usize,
-    pub(super) progress: bool,
     /// Energy per photon reaching the detector, per unit weight × geometric factor.
     pub(super) scale: f64,
     pub(super) flux_scale: f64,
@@ -48,9 +47,10 @@ impl<'a> Plan<'a> {
     pub fn new(
         scene: &Scene,
         atm: &'a OpticalAtmosphere,
-        opts: &TransportOptions,
+        layout: &TallyLayout,
     ) -> Result<Self, TransportError> {
-        check_options(scene, opts)?;
+        check_options(scene, layout)?;
+        let sim = &scene.simulation;
         let lidar = &scene.lidar;
         let nch = scene.channels.len();
         // FOV annuli: narrowest first.
@@ -67,23 +67,23 @@ impl<'a> Plan<'a> {
         let polarised_run = lidar.polarisation != Polarisation::None;
         let shape = TallyShape {
             n_gates: scene.gates.count,
-            n_order_bins: opts.max_order as usize + 1,
+            n_order_bins: sim.max_order as usize + 1,
             n_fov: fov_order.len(),
             n_channels: if polarised_run { 2 * nch } else { nch },
         };
-        let setup = Setup::new(scene, atm, opts, fov_cos, shape);
+        let setup = Setup::new(scene, atm, layout, fov_cos, shape);
 
-        let batches = opts.batches;
-        let per_batch = opts.photons.div_ceil(batches as u64);
+        let batches = sim.batches;
+        let per_batch = sim.photons.div_ceil(batches as u64);
         let (polarised, combinations, combination_pairs) = if polarised_run {
             let (layout, c, p) =
-                PolarisedLayout::combinations(nch, &opts.combinations, &opts.combination_pairs);
+                PolarisedLayout::combinations(nch, &layout.combinations, &layout.combination_pairs);
             (Some(layout), c, p)
         } else {
             (
                 None,
-                opts.combinations.clone(),
-                opts.combination_pairs.clone(),
+                layout.combinations.clone(),
+                layout.combination_pairs.clone(),
             )
         };
         Ok(Plan {
@@ -91,15 +91,14 @@ impl<'a> Plan<'a> {
             fov_order,
             batches,
             per_batch,
-            streams: rng::streams(opts.seed, Stream::Transport, batches),
-            threads: opts.threads,
-            progress: opts.progress,
+            streams: rng::streams(sim.seed, Stream::Transport, batches),
+            threads: sim.threads,
             scale: lidar.pulse_energy_j * lidar.optical_efficiency * lidar.telescope_area_m2()
                 / per_batch as f64,
             flux_scale: 1.0 / per_batch as f64,
             combinations,
             combination_pairs,
-            combination_names: opts.combinations.iter().map(|c| c.name.clone()).collect(),
+            combination_names: layout.combinations.iter().map(|c| c.name.clone()).collect(),
             polarised,
             channels: scene.channels.iter().map(|c| c.name.clone()).collect(),
             fov_full_angle_mrad: lidar.fov_full_angle_mrad.clone(),
@@ -181,14 +180,16 @@ impl<'a> Plan<'a> {
 
 /// The options checked against the scene: the limits a scene is validated against, the
 /// variance reductions' settings, and the combinations of channels and their pairs.
-fn check_options(scene: &Scene, opts: &TransportOptions) -> Result<(), TransportError> {
+fn check_options(scene: &Scene, layout: &TallyLayout) -> Result<(), TransportError> {
+    let opts = &scene.simulation;
+    let vr = &opts.variance_reduction;
     if opts.batches < 2 || opts.photons < opts.batches as u64 {
         return Err(TransportError::Options(format!(
             "{} photons in {} batches: need at least 2 batches and one photon per batch",
             opts.photons, opts.batches
         )));
     }
-    // The limits a scene is validated against, again for options built by hand.
+    // The limits a scene is validated against, again for settings changed in code.
     use crate::input::check_count;
     use crate::limits::{MAX_BATCHES, MAX_PHOTONS, MAX_RETURN_BINS, MAX_THREADS, check_product};
     check_count(opts.batches as u64, 2, MAX_BATCHES)
@@ -197,12 +198,12 @@ fn check_options(scene: &Scene, opts: &TransportOptions) -> Result<(), Transport
         .and_then(|_| check_count(opts.max_order.into(), 1, 1000))
         .map_err(TransportError::Options)?;
     // The variance reductions' settings (the command line checks its own; these are for
-    // options built in code): probabilities below 1, reference values finite and ≥ 0.
+    // settings changed in code): probabilities below 1, reference values finite and ≥ 0.
     for (name, value, below_one) in [
-        ("ddis_epsilon", opts.ddis_epsilon, true),
-        ("range_stratification", opts.range_stratification, true),
-        ("alignment_splitting", opts.alignment_splitting, false),
-        ("roulette_alignment", opts.roulette_alignment, false),
+        ("ddis_epsilon", vr.ddis_epsilon, true),
+        ("range_stratification", vr.range_stratification, true),
+        ("alignment_splitting", vr.alignment_splitting, false),
+        ("roulette_alignment", vr.roulette_alignment, false),
     ] {
         if !(value >= 0.0 && value.is_finite() && (!below_one || value < 1.0)) {
             return Err(TransportError::Options(format!(
@@ -218,7 +219,7 @@ fn check_options(scene: &Scene, opts: &TransportOptions) -> Result<(), Transport
         3
     };
     let n_series = n_pol_series
-        * (scene.channels.len() + opts.combinations.len() + opts.combination_pairs.len());
+        * (scene.channels.len() + layout.combinations.len() + layout.combination_pairs.len());
     check_product(
         "the returns",
         &[
@@ -234,7 +235,7 @@ fn check_options(scene: &Scene, opts: &TransportOptions) -> Result<(), Transport
     )
     .map_err(TransportError::Options)?;
     let nch = scene.channels.len();
-    if let Some(c) = opts
+    if let Some(c) = layout
         .combinations
         .iter()
         .find(|c| c.terms.iter().any(|(k, w)| *k >= nch || !w.is_finite()))
@@ -244,8 +245,8 @@ fn check_options(scene: &Scene, opts: &TransportOptions) -> Result<(), Transport
             c.name
         )));
     }
-    let n_combos = opts.combinations.len();
-    if let Some((a, b)) = opts
+    let n_combos = layout.combinations.len();
+    if let Some((a, b)) = layout
         .combination_pairs
         .iter()
         .find(|(a, b)| !(a < b && *b < n_combos))

@@ -73,18 +73,19 @@ pub(crate) struct Setup<'a> {
 }
 
 impl<'a> Setup<'a> {
-    /// The set-up of a run of `scene` with `opts` (checked), its fields of view's cosines
+    /// The set-up of a run of `scene` (its settings checked), tallying `layout`, its fields of view's cosines
     /// `fov_cos` (narrowest first) and tally `shape`: the geometry, gates and scattering
     /// classes, then the layers where DDIS is used and the regions of the cone and crossing
     /// estimates.
     pub(super) fn new(
         scene: &Scene,
         atm: &'a OpticalAtmosphere,
-        opts: &TransportOptions,
+        layout: &TallyLayout,
         fov_cos: Vec<f64>,
         shape: TallyShape,
     ) -> Self {
         let lidar = &scene.lidar;
+        let vr = &scene.simulation.variance_reduction;
         let nch = scene.channels.len();
         let axis = lidar.axis();
         let (axis_e1, axis_e2) = axis.any_orthonormal_pair();
@@ -113,9 +114,9 @@ impl<'a> Setup<'a> {
             gate_start_m: scene.gates.start_m,
             gate_width_m: scene.gates.width_m,
             r_end_m: scene.gates.end_m(),
-            max_order: opts.max_order,
+            max_order: scene.simulation.max_order,
             surface: scene.surface.as_ref().map(|s| s.albedo.clone()),
-            flux_tally: opts.flux_tally,
+            flux_tally: layout.flux,
             tau_rx: (0..nch)
                 .map(|k| {
                     let (s, a) = atm.cumulative_tau(receiver.z, k);
@@ -126,20 +127,20 @@ impl<'a> Setup<'a> {
                 .into_iter()
                 .map(|k| ScatterClass::of_channel(atm, k))
                 .collect(),
-            ddis_epsilon: opts.ddis_epsilon,
+            ddis_epsilon: vr.ddis_epsilon,
             forward_peaked: vec![false; n_layers],
             ddis_cos: vec![1.0; n_layers],
             backward_max: vec![f64::INFINITY; n_layers],
-            align_split: opts.alignment_splitting,
-            roulette_align: opts.roulette_alignment,
-            stratify: opts.range_stratification,
+            align_split: vr.alignment_splitting,
+            roulette_align: vr.roulette_alignment,
+            stratify: vr.range_stratification,
             cone: false,
             cone_annuli: Vec::new(),
             annulus_sr: Vec::new(),
             cone_tan: 0.0,
             crossing_from: 0,
             crossing_tan2: [0.0; 2],
-            ddis_crossing: opts.ddis_crossing,
+            ddis_crossing: vr.ddis_crossing,
             analyser: match lidar.polarisation {
                 Polarisation::None => None,
                 Polarisation::Linear => Some(stokes::Analyser::Linear(axis_e1)),
@@ -149,7 +150,7 @@ impl<'a> Setup<'a> {
             aperture: Aperture::new(lidar.telescope_diameter_m, atm),
         };
         setup.place_ddis(widest_fov_mrad);
-        setup.place_estimates(opts);
+        setup.place_estimates(vr);
         setup
     }
 
@@ -229,7 +230,7 @@ impl<'a> Setup<'a> {
 
     /// The FOV annuli's solid angles, and which annuli the cone estimate and the crossing
     /// estimate serve.
-    fn place_estimates(&mut self, opts: &TransportOptions) {
+    fn place_estimates(&mut self, vr: &VarianceReduction) {
         let setup = self;
         let atm = setup.atm;
         let n_layers = atm.n_layers();
@@ -244,7 +245,7 @@ impl<'a> Setup<'a> {
         // optically narrow: there collisions inside the field of view are rare (clouds,
         // aerosol seen with narrow fields of view); in Rayleigh air and wide fields of view the
         // walk's own local estimates do well.
-        if opts.cone_estimate {
+        if vr.cone_estimate {
             let footprint = |cos_outer: f64| -> f64 {
                 let tan_a = (1.0 - cos_outer * cos_outer).max(0.0).sqrt() / cos_outer;
                 (0..n_layers)
@@ -275,7 +276,7 @@ impl<'a> Setup<'a> {
         }
         // The crossing estimate for every annulus wider than the cone estimate's.
         let n_fov = setup.fov_cos.len();
-        setup.crossing_from = if opts.crossing_estimate && setup.has_layers {
+        setup.crossing_from = if vr.crossing_estimate && setup.has_layers {
             setup.cone_annuli.iter().map(|a| a + 1).max().unwrap_or(0)
         } else {
             n_fov

@@ -210,12 +210,11 @@ fn one_channel_tracer_is_the_general_one() {
         ],
     ) + "[surface]\naltitude_m = 0.0\nalbedo = 0.3\n";
     for text in [CLOUD.to_string(), polarised, from_above] {
-        let scene = Scene::from_toml(std::path::Path::new("scene.toml"), &text).unwrap();
+        let mut scene = Scene::from_toml(std::path::Path::new("scene.toml"), &text).unwrap();
+        scene.simulation.photons = 6000;
+        scene.simulation.batches = 3;
         let atm = OpticalAtmosphere::build(&scene).unwrap();
-        let mut opts = TransportOptions::from_scene(&scene);
-        opts.photons = 6000;
-        opts.batches = 3;
-        let plan = Plan::new(&scene, &atm, &opts).unwrap();
+        let plan = Plan::new(&scene, &atm, &TallyLayout::default()).unwrap();
         assert_eq!(plan.setup.atm.n_channels, 1);
         // Copies made by splitting follow the copy paths too.
         let (mut splits, mut reflections) = (0, 0);

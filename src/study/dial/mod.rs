@@ -56,7 +56,6 @@ use crate::retrieval::{
 use crate::returns::{Order, Returns};
 use crate::rng::{self, Stream};
 use crate::scene::Scene;
-use crate::transport::TransportOptions;
 
 mod netcdf;
 mod profile;
