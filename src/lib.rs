@@ -27,6 +27,7 @@
 pub mod aperture;
 pub mod atmosphere;
 pub mod constants;
+pub mod digest;
 #[cfg(feature = "mpi")]
 pub mod distributed;
 pub mod input;

@@ -625,12 +625,9 @@ pub fn fingerprint(components: &[Component], wavelength_m: f64, opts: &BulkOptio
 
 /// 64-bit FNV-1a hash of [`fingerprint`] as 16 hex digits (stable across platforms and runs).
 pub fn fingerprint_hash(components: &[Component], wavelength_m: f64, opts: &BulkOptions) -> String {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for b in fingerprint(components, wavelength_m, opts).bytes() {
-        h ^= b as u64;
-        h = h.wrapping_mul(0x0000_0100_0000_01b3);
-    }
-    format!("{h:016x}")
+    let mut h = crate::digest::Fnv::new();
+    h.update(fingerprint(components, wavelength_m, opts).as_bytes());
+    format!("{:016x}", h.finish())
 }
 
 /// Integrals over one mode: ∫ n(r) {Cext, Csca, Cback, g·Csca, r²·π, r³·π} dr [cm⁻³ µm²(µm)].

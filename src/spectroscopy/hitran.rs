@@ -265,9 +265,9 @@ impl LineList {
     /// A stable 64-bit fingerprint of every parameter of every line (FNV-1a over the bit
     /// patterns), used to tell whether a saved optical-depth table was built from this list.
     pub fn fingerprint(&self) -> u64 {
-        let mut h = super::table::Fnv::new();
+        let mut h = crate::digest::Fnv::new();
         for l in &self.lines {
-            h.bytes(&[l.molecule_id, l.iso_id]);
+            h.update(&[l.molecule_id, l.iso_id]);
             for v in [
                 l.nu_cm1,
                 l.sw_cm_per_molecule,
@@ -289,7 +289,7 @@ impl LineList {
                     }
                 }
                 let c = sp.columns;
-                h.bytes(&[
+                h.update(&[
                     u8::from(c.speed_dependence),
                     u8::from(c.dicke),
                     u8::from(c.correlation),
