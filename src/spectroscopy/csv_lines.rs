@@ -18,7 +18,7 @@
 
 use std::path::{Path, PathBuf};
 
-use super::hitran::{Broadener, Line, LineFilter, LineList, ShapeColumns, ShapeParameters, ranges};
+use super::lines::{Broadener, Line, LineFilter, LineList, ShapeColumns, ShapeParameters, ranges};
 use crate::input::Bounds;
 
 /// `SD_gamma`: the speed dependence Γ₂/Γ₀ (typical 0.05–0.15). The quadratic model gives the

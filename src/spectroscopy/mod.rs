@@ -8,6 +8,7 @@
 //! |---|---|---|
 //! | isotopologue masses, abundances | [`isotopologues`] | [`isotopologues::Isotopologue::get`] |
 //! | partition sums (TIPS-2021) | [`tips`] | [`tips::partition_sum`] |
+//! | lines and line lists | [`lines`] | [`Line`], [`LineList`], [`LineFilter`] |
 //! | line lists | [`hitran`] | [`LineList::read_par`], [`LineList::co2_30012_band_model`] |
 //! | Voigt profile | [`voigt`] | [`voigt::re_w`], [`voigt::re_w_exact`] |
 //! | cross-sections | [`xsec`] | [`cross_section`], [`cross_section_at`] |
@@ -26,13 +27,14 @@ pub mod hitran;
 pub mod htp;
 pub mod isotopologues;
 pub mod layers;
+pub mod lines;
 pub mod table;
 pub mod tips;
 pub mod voigt;
 pub mod xsec;
 
-pub use hitran::{Broadener, Line, LineFilter, LineList, ShapeColumns, ShapeParameters};
 pub use layers::{CgLayer, LineOfSight};
+pub use lines::{Broadener, Line, LineFilter, LineList, ShapeColumns, ShapeParameters};
 pub use table::GasOpticalDepthTable;
 pub use xsec::{
     Conventions, GasState, LayerGasCounts, LblOptions, LineShapeModel, VoigtMethod, WavenumberGrid,

@@ -20,8 +20,8 @@
 use std::path::Path;
 
 use super::SpectroscopyError;
-use super::hitran::LineList;
 use super::layers::{CgLayer, curtis_godson_layers, line_gases};
+use super::lines::LineList;
 use super::xsec::{LblOptions, WavenumberGrid, cross_section};
 use crate::atmosphere::Profile;
 use crate::digest::Fnv;

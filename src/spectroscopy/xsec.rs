@@ -26,8 +26,8 @@
 
 use rayon::prelude::*;
 
-use super::hitran::LineList;
 use super::htp::{HtParameters, HtProfile, hartmann_tran};
+use super::lines::LineList;
 use super::tips::partition_sum;
 use super::voigt::{SQRT_LN2, SQRT_LN2_OVER_PI, re_w, re_w_exact, w_fast};
 use super::{SpectroscopyError, isotopologues::Isotopologue};
