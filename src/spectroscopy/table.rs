@@ -121,11 +121,11 @@ impl GasOpticalDepthTable {
             for &(m, gi) in &gases {
                 let col = layer.gas_columns_per_cm2[gi];
                 // A layer without the gas adds σ · 0: no line-by-line work.
-                if !super::xsec::count_layer_gas(col) {
+                if !super::optical_depth::count_layer_gas(col) {
                     continue;
                 }
                 let sigma = cross_section(lines, m, &layer.state_for(gi), grid, opts)
-                    .map_err(|e| super::xsec::in_layer(e, layer, profile))?;
+                    .map_err(|e| super::optical_depth::in_layer(e, layer, profile))?;
                 for (t, s) in row.iter_mut().zip(sigma) {
                     *t += s * col;
                 }
