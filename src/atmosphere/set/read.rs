@@ -105,6 +105,76 @@ fn parse_gas_column(h: &str) -> Option<(String, GasUnit)> {
 /// Parse the text of a profile-set file (`path` for messages only).
 pub fn parse_profile_set(path: &Path, text: &str) -> Result<ProfileSet, InputError> {
     let t = CsvTable::parse(path, text)?;
+    let cols = columns(path, &t)?;
+    let c_id = cols.c_id;
+    let stem = path
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let mut set = ProfileSet {
+        name: path.display().to_string(),
+        members: Vec::new(),
+        notes: Vec::new(),
+    };
+    let mut ids_done: BTreeSet<String> = BTreeSet::new();
+    let rows: Vec<(usize, &[String])> = t.rows().collect();
+    let nrows = rows.len();
+    let mut r = 0;
+    while r < nrows {
+        let line0 = rows[r].0;
+        let id = rows[r].1[c_id].clone();
+        if id.is_empty() {
+            return Err(InputError::at(path, line0, "profile", "empty profile id"));
+        }
+        if ids_done.contains(&id) {
+            return Err(InputError::at(
+                path,
+                line0,
+                "profile",
+                format!("rows of profile `{id}` are not contiguous (it appeared before)"),
+            ));
+        }
+        let mut end = r;
+        while end < nrows && rows[end].1[c_id] == id {
+            end += 1;
+        }
+        let member = parse_member(path, &t, &rows[r..end], &id, &stem, &cols)?;
+        set.members.push(member);
+        ids_done.insert(id);
+        r = end;
+    }
+    if set.members.is_empty() {
+        return Err(InputError::file(path, "no profiles (no data rows)"));
+    }
+    set.notes = t
+        .comments
+        .iter()
+        .filter(|c| !c.starts_with("lidarsim profile set"))
+        .cloned()
+        .collect();
+    Ok(set)
+}
+
+/// The columns of a profile-set file: where each quantity is, and the unit of each gas.
+struct Columns {
+    c_id: usize,
+    c_lat: usize,
+    c_lon: usize,
+    c_time: Option<usize>,
+    c_weight: Option<usize>,
+    c_zs: Option<usize>,
+    c_p: usize,
+    /// Pa per unit of the pressure column.
+    p_scale: f64,
+    c_t: usize,
+    /// The altitude column and its metres per unit.
+    c_z: Option<(usize, f64)>,
+    /// The gas columns, H2O first.
+    gas_cols: Vec<(usize, String, GasUnit)>,
+}
+
+/// Find and check the columns of `t`; errors name the header line.
+fn columns(path: &Path, t: &CsvTable) -> Result<Columns, InputError> {
     let header = t.header().to_vec();
     // Errors about columns name the header line.
     let col_err = |name: &str, msg: String| InputError {
@@ -198,89 +268,46 @@ pub fn parse_profile_set(path: &Path, text: &str) -> Result<ProfileSet, InputErr
             "per-dry-air mixing ratios need a water vapour column to convert".into(),
         ));
     }
-
-    let stem = path
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let mut set = ProfileSet {
-        name: path.display().to_string(),
-        members: Vec::new(),
-        notes: Vec::new(),
-    };
-    let mut ids_done: BTreeSet<String> = BTreeSet::new();
-    let rows: Vec<(usize, &[String])> = t.rows().collect();
-    let nrows = rows.len();
-    let mut r = 0;
-    while r < nrows {
-        let line0 = rows[r].0;
-        let id = rows[r].1[c_id].clone();
-        if id.is_empty() {
-            return Err(InputError::at(path, line0, "profile", "empty profile id"));
-        }
-        if ids_done.contains(&id) {
-            return Err(InputError::at(
-                path,
-                line0,
-                "profile",
-                format!("rows of profile `{id}` are not contiguous (it appeared before)"),
-            ));
-        }
-        let mut end = r;
-        while end < nrows && rows[end].1[c_id] == id {
-            end += 1;
-        }
-        let member = parse_member(
-            path,
-            &t,
-            &rows[r..end],
-            &id,
-            &stem,
-            c_lat,
-            c_lon,
-            c_time,
-            c_weight,
-            c_zs,
-            c_p,
-            p_scale,
-            c_t,
-            c_z,
-            &gas_cols,
-        )?;
-        set.members.push(member);
-        ids_done.insert(id);
-        r = end;
-    }
-    if set.members.is_empty() {
-        return Err(InputError::file(path, "no profiles (no data rows)"));
-    }
-    set.notes = t
-        .comments
-        .iter()
-        .filter(|c| !c.starts_with("lidarsim profile set"))
-        .cloned()
-        .collect();
-    Ok(set)
+    Ok(Columns {
+        c_id,
+        c_lat,
+        c_lon,
+        c_time,
+        c_weight,
+        c_zs,
+        c_p,
+        p_scale,
+        c_t,
+        c_z,
+        gas_cols,
+    })
 }
 
-#[allow(clippy::too_many_arguments)]
-fn parse_member(
+/// One level of a profile as read.
+struct Level {
+    line: usize,
+    p: f64,
+    t: f64,
+    z: Option<f64>,
+    gas: Vec<f64>,
+}
+
+/// The metadata of one profile, from its first row (identical on all rows), and its surface
+/// altitude.
+fn member_meta(
     path: &Path,
     t: &CsvTable,
     all: &[(usize, &[String])],
     id: &str,
-    stem: &str,
-    c_lat: usize,
-    c_lon: usize,
-    c_time: Option<usize>,
-    c_weight: Option<usize>,
-    c_zs: Option<usize>,
-    c_p: usize,
-    p_scale: f64,
-    c_t: usize,
-    c_z: Option<(usize, f64)>,
-    gas_cols: &[(usize, String, GasUnit)],
-) -> Result<SetMember, InputError> {
+    cols: &Columns,
+) -> Result<(ProfileMeta, f64), InputError> {
+    let (c_lat, c_lon, c_time, c_weight, c_zs) = (
+        cols.c_lat,
+        cols.c_lon,
+        cols.c_time,
+        cols.c_weight,
+        cols.c_zs,
+    );
     let header = t.header();
     let (line0, f0) = all[0];
     let num = |line: usize, fields: &[String], col: usize, bounds: Bounds| {
@@ -316,15 +343,32 @@ fn parse_member(
         .map(|c| num(line0, f0, c, ALTITUDE_M))
         .transpose()?
         .unwrap_or(0.0);
+    let meta = ProfileMeta {
+        id: id.to_string(),
+        latitude_deg,
+        longitude_deg,
+        time_utc,
+        weight,
+    };
+    Ok((meta, surface_altitude_m))
+}
 
+/// The levels of one profile, checked, bottom-up.
+fn member_levels(
+    path: &Path,
+    t: &CsvTable,
+    all: &[(usize, &[String])],
+    id: &str,
+    cols: &Columns,
+) -> Result<Vec<Level>, InputError> {
+    let (c_p, p_scale, c_t, c_z) = (cols.c_p, cols.p_scale, cols.c_t, cols.c_z);
+    let gas_cols = &cols.gas_cols;
+    let header = t.header();
+    let line0 = all[0].0;
+    let num = |line: usize, fields: &[String], col: usize, bounds: Bounds| {
+        parse_f64_in(path, line, &header[col], &fields[col], bounds)
+    };
     // Levels in file order, then bottom-up.
-    struct Level {
-        line: usize,
-        p: f64,
-        t: f64,
-        z: Option<f64>,
-        gas: Vec<f64>,
-    }
     let mut levels = Vec::with_capacity(all.len());
     for (line, f) in all {
         let p = num(*line, f, c_p, PRESSURE_PA.scaled(1.0 / p_scale))? * p_scale;
@@ -406,6 +450,24 @@ fn parse_member(
     if !descending {
         levels.reverse();
     }
+    Ok(levels)
+}
+
+/// One profile of the set: its rows `all`, with the columns `cols`.
+fn parse_member(
+    path: &Path,
+    t: &CsvTable,
+    all: &[(usize, &[String])],
+    id: &str,
+    stem: &str,
+    cols: &Columns,
+) -> Result<SetMember, InputError> {
+    let header = t.header();
+    let line0 = all[0].0;
+    let (meta, surface_altitude_m) = member_meta(path, t, all, id, cols)?;
+    let levels = member_levels(path, t, all, id, cols)?;
+    let (c_z, gas_cols) = (cols.c_z, &cols.gas_cols);
+    let latitude_deg = meta.latitude_deg;
     let pressure_pa: Vec<f64> = levels.iter().map(|l| l.p).collect();
     let temperature_k: Vec<f64> = levels.iter().map(|l| l.t).collect();
     let gases: Vec<GasProfile> = gas_cols
@@ -457,14 +519,5 @@ fn parse_member(
     profile
         .validate()
         .map_err(|e| InputError::at(path, line0, "profile", e.to_string()))?;
-    Ok(SetMember {
-        meta: ProfileMeta {
-            id: id.to_string(),
-            latitude_deg,
-            longitude_deg,
-            time_utc,
-            weight,
-        },
-        profile,
-    })
+    Ok(SetMember { meta, profile })
 }
