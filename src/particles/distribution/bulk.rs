@@ -7,7 +7,7 @@ use num_complex::Complex64;
 
 use super::fingerprint::{fingerprint_hash, format_refractive_index};
 use super::integrate::{
-    MIN_INDEX_CONTRAST, MatrixSums, angle_tables, integrate_mode, matrix_integral,
+    MIN_INDEX_CONTRAST, MatrixSums, ModeGrid, angle_tables, integrate_mode, matrix_integral,
 };
 use super::work::mie_work;
 use super::{SizeDistribution, param};
@@ -221,71 +221,13 @@ pub fn bulk_optics_mixture(
         }
         None => default_angle_grid(x_eff),
     };
-    let mut phase_4pi = Vec::new();
-    let mut elements = Vec::new();
-    if !theta.is_empty() {
-        let n_max = grids
-            .iter()
-            .map(|g| n_terms(g.x_lo + g.points as f64 * g.dx))
-            .max()
-            .unwrap_or(1);
-        let tables = angle_tables(&theta, n_max);
-        let mut dcdo = MatrixSums::zeros(theta.len());
-        for g in &grids {
-            dcdo.add(&matrix_integral(g, &tables)?);
-        }
-        // F_ij = 4π ⟨dC_ij/dΩ⟩/⟨Csca⟩: every element normalised like the phase function; for
-        // spheres F22 = F11 and F44 = F33.
-        let norm = |d: f64| 4.0 * PI * d / sca;
-        phase_4pi = dcdo.s11.iter().map(|d| norm(*d)).collect();
-        elements = (0..theta.len())
-            .map(|a| MatrixElements {
-                f11: phase_4pi[a],
-                f22: phase_4pi[a],
-                f33: norm(dcdo.s33[a]),
-                f44: norm(dcdo.s33[a]),
-                f12: norm(dcdo.s12[a]),
-                f34: norm(dcdo.s34[a]),
-            })
-            .collect();
-    }
+    let (phase_4pi, elements) = if theta.is_empty() {
+        (Vec::new(), Vec::new())
+    } else {
+        mixture_matrix(&grids, &theta, sca)?
+    };
 
-    let refr = if components.len() == 1 {
-        format_refractive_index(components[0].refractive_index)
-    } else {
-        "external mixture (see component_* keys)".to_string()
-    };
-    let distribution = if components.len() == 1 {
-        components[0].distribution.to_string()
-    } else {
-        components
-            .iter()
-            .map(|c| c.name.clone())
-            .collect::<Vec<_>>()
-            .join(" + ")
-    };
-    let mut meta = vec![
-        (
-            "wavelength_nm".to_string(),
-            // Rounded to 1e-9 nm so 1572e-9 m prints as 1572, not 1572.0000000000002.
-            format!("{}", (wavelength_m * 1e18).round() / 1e9),
-        ),
-        ("refractive_index".to_string(), refr),
-        ("distribution".to_string(), distribution),
-    ];
-    if components.len() > 1 {
-        for (i, c) in components.iter().enumerate() {
-            meta.push((
-                format!("component_{}", i + 1),
-                format!(
-                    "{}: m = {}, {}",
-                    c.name,
-                    format_refractive_index(c.refractive_index),
-                    c.distribution
-                ),
-            ));
-        }
-    }
+    let mut meta = mixture_description(components, wavelength_m);
     let mut push = |k: &str, v: String| meta.push((k.to_string(), v));
     push("number_density_per_cm3", format!("{number_density:.6e}"));
     push(
@@ -364,6 +306,82 @@ pub fn bulk_optics_mixture(
         },
         convergence,
     })
+}
+
+/// The phase function (normalised to 4π) and scattering matrix of a mixture at `theta` \[°\],
+/// on the final grids of its modes.
+fn mixture_matrix(
+    grids: &[ModeGrid],
+    theta: &[f64],
+    sca: f64,
+) -> Result<(Vec<f64>, Vec<MatrixElements>), MieError> {
+    let n_max = grids
+        .iter()
+        .map(|g| n_terms(g.x_lo + g.points as f64 * g.dx))
+        .max()
+        .unwrap_or(1);
+    let tables = angle_tables(theta, n_max);
+    let mut dcdo = MatrixSums::zeros(theta.len());
+    for g in grids {
+        dcdo.add(&matrix_integral(g, &tables)?);
+    }
+    // F_ij = 4π ⟨dC_ij/dΩ⟩/⟨Csca⟩: every element normalised like the phase function; for
+    // spheres F22 = F11 and F44 = F33.
+    let norm = |d: f64| 4.0 * PI * d / sca;
+    let phase_4pi: Vec<f64> = dcdo.s11.iter().map(|d| norm(*d)).collect();
+    let elements = (0..theta.len())
+        .map(|a| MatrixElements {
+            f11: phase_4pi[a],
+            f22: phase_4pi[a],
+            f33: norm(dcdo.s33[a]),
+            f44: norm(dcdo.s33[a]),
+            f12: norm(dcdo.s12[a]),
+            f34: norm(dcdo.s34[a]),
+        })
+        .collect();
+    Ok((phase_4pi, elements))
+}
+
+/// The metadata that describe a mixture: wavelength, refractive index and distribution (of
+/// each component when there are several).
+fn mixture_description(components: &[Component], wavelength_m: f64) -> Vec<(String, String)> {
+    let refr = if components.len() == 1 {
+        format_refractive_index(components[0].refractive_index)
+    } else {
+        "external mixture (see component_* keys)".to_string()
+    };
+    let distribution = if components.len() == 1 {
+        components[0].distribution.to_string()
+    } else {
+        components
+            .iter()
+            .map(|c| c.name.clone())
+            .collect::<Vec<_>>()
+            .join(" + ")
+    };
+    let mut meta = vec![
+        (
+            "wavelength_nm".to_string(),
+            // Rounded to 1e-9 nm so 1572e-9 m prints as 1572, not 1572.0000000000002.
+            format!("{}", (wavelength_m * 1e18).round() / 1e9),
+        ),
+        ("refractive_index".to_string(), refr),
+        ("distribution".to_string(), distribution),
+    ];
+    if components.len() > 1 {
+        for (i, c) in components.iter().enumerate() {
+            meta.push((
+                format!("component_{}", i + 1),
+                format!(
+                    "{}: m = {}, {}",
+                    c.name,
+                    format_refractive_index(c.refractive_index),
+                    c.distribution
+                ),
+            ));
+        }
+    }
+    meta
 }
 
 /// The checks of [`bulk_optics_mixture`]'s inputs that need no Mie theory.
