@@ -190,27 +190,8 @@ pub fn study_member(member: &SetMember, cfg: &StudyConfig) -> Result<MemberResul
     let edges = layer_edges(surface_m, top_m, cfg.grid.layer_m)?;
     let z_top = edges[edges.len() - 1];
 
-    // Lines: on positions, off, on + δν, off + δν (the last two only for the unshifted state).
     let dnu = cfg.steps.frequency_mhz / MHZ_PER_CM1;
-    let named = |name: String, nu: f64| Line {
-        name,
-        wavenumber_cm1: nu,
-    };
-    let mut base: Vec<Line> = cfg
-        .positions
-        .iter()
-        .enumerate()
-        .map(|(i, p)| named(format!("on{i}"), p.nu_cm1))
-        .collect();
-    base.push(named("off".into(), cfg.off_cm1));
-    let mut all = base.clone();
-    all.extend(
-        cfg.positions
-            .iter()
-            .enumerate()
-            .map(|(i, p)| named(format!("on{i}+"), p.nu_cm1 + dnu)),
-    );
-    all.push(named("off+".into(), cfg.off_cm1 + dnu));
+    let (base, all) = study_lines(cfg, dnu);
     let off = n;
     let state = |profile: &Profile, lines: &[Line]| -> Result<ReferenceState, SelectError> {
         Ok(ReferenceState::new(
@@ -255,20 +236,7 @@ pub fn study_member(member: &SetMember, cfg: &StudyConfig) -> Result<MemberResul
          d_true: f64,
          x_true: f64| { (s.solve_scale(p, on, off, d_true) * x_assumed - x_true) * 1e6 };
 
-    // Rayleigh optical depth of the air column over the grid (Bucholtz 1995).
-    let rayleigh_tau = match &cfg.noise {
-        Some(_) => {
-            let wavelength_nm = 1e7 / cfg.off_cm1;
-            let sigma = crate::particles::rayleigh::cross_section_m2(wavelength_nm)
-                .map_err(|e| invalid("--off-cm1", cfg.off_cm1, e.to_string()))?;
-            let air: f64 = crate::spectroscopy::layers::curtis_godson_layers(&profiles[0], &edges)?
-                .iter()
-                .map(|l| l.air_column_per_cm2 * 1e4)
-                .sum();
-            sigma * air
-        }
-        None => 0.0,
-    };
+    let rayleigh_tau = rayleigh_optical_depth(cfg, &profiles[0], &edges)?;
     let tau_off = tau(&p0, off);
     let slope_off = tau(&p0, 2 * n + 1) - tau_off;
 
@@ -320,21 +288,7 @@ pub fn study_member(member: &SetMember, cfg: &StudyConfig) -> Result<MemberResul
         });
     }
 
-    // Fine spectra of the unshifted profile: two-way transmission, top to surface.
-    let mut spectra = Vec::with_capacity(cfg.spectra.len());
-    for w in &cfg.spectra {
-        let nus: Vec<f64> = w
-            .offsets_ghz
-            .iter()
-            .map(|o| w.centre_cm1 + o / GHZ_PER_CM1)
-            .collect();
-        let t = layer_optical_depths_at(&profiles[0], &cfg.lines, &edges, &nus, &cfg.options)?;
-        spectra.push(
-            (0..nus.len())
-                .map(|k| (-2.0 * t.iter().map(|row| row[k]).sum::<f64>()).exp())
-                .collect(),
-        );
-    }
+    let spectra = fine_spectra(cfg, &profiles[0], &edges)?;
     Ok(MemberResult {
         id: member.meta.id.clone(),
         class: member.meta.class(),
@@ -343,6 +297,80 @@ pub fn study_member(member: &SetMember, cfg: &StudyConfig) -> Result<MemberResul
         positions,
         spectra,
     })
+}
+
+/// The lines of a member's study: the on positions and the off-line (`base`), and `all`: those
+/// followed by the same shifted by `dnu` \[cm⁻¹\].
+fn study_lines(cfg: &StudyConfig, dnu: f64) -> (Vec<Line>, Vec<Line>) {
+    // Lines: on positions, off, on + δν, off + δν (the last two only for the unshifted state).
+    let named = |name: String, nu: f64| Line {
+        name,
+        wavenumber_cm1: nu,
+    };
+    let mut base: Vec<Line> = cfg
+        .positions
+        .iter()
+        .enumerate()
+        .map(|(i, p)| named(format!("on{i}"), p.nu_cm1))
+        .collect();
+    base.push(named("off".into(), cfg.off_cm1));
+    let mut all = base.clone();
+    all.extend(
+        cfg.positions
+            .iter()
+            .enumerate()
+            .map(|(i, p)| named(format!("on{i}+"), p.nu_cm1 + dnu)),
+    );
+    all.push(named("off+".into(), cfg.off_cm1 + dnu));
+    (base, all)
+}
+
+/// The Rayleigh optical depth of the air column of `profile` over `edges` at the off-line, for
+/// the noise model (0 without one).
+fn rayleigh_optical_depth(
+    cfg: &StudyConfig,
+    profile: &Profile,
+    edges: &[f64],
+) -> Result<f64, SelectError> {
+    // Rayleigh optical depth of the air column over the grid (Bucholtz 1995).
+    let tau = match &cfg.noise {
+        Some(_) => {
+            let wavelength_nm = 1e7 / cfg.off_cm1;
+            let sigma = crate::particles::rayleigh::cross_section_m2(wavelength_nm)
+                .map_err(|e| invalid("--off-cm1", cfg.off_cm1, e.to_string()))?;
+            let air: f64 = crate::spectroscopy::layers::curtis_godson_layers(profile, edges)?
+                .iter()
+                .map(|l| l.air_column_per_cm2 * 1e4)
+                .sum();
+            sigma * air
+        }
+        None => 0.0,
+    };
+    Ok(tau)
+}
+
+/// The fine spectra of `cfg.spectra` for `profile`.
+fn fine_spectra(
+    cfg: &StudyConfig,
+    profile: &Profile,
+    edges: &[f64],
+) -> Result<Vec<Vec<f64>>, SelectError> {
+    // Fine spectra of the unshifted profile: two-way transmission, top to surface.
+    let mut spectra = Vec::with_capacity(cfg.spectra.len());
+    for w in &cfg.spectra {
+        let nus: Vec<f64> = w
+            .offsets_ghz
+            .iter()
+            .map(|o| w.centre_cm1 + o / GHZ_PER_CM1)
+            .collect();
+        let t = layer_optical_depths_at(profile, &cfg.lines, edges, &nus, &cfg.options)?;
+        spectra.push(
+            (0..nus.len())
+                .map(|k| (-2.0 * t.iter().map(|row| row[k]).sum::<f64>()).exp())
+                .collect(),
+        );
+    }
+    Ok(spectra)
 }
 
 /// Study every member with its CO2 set to a dry-air column average of `co2_ppm` first
