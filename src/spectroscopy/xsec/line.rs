@@ -2,7 +2,7 @@
 //! the beyond-Voigt profile), the checks of its file's columns, and the refusal of a negative
 //! sum.
 
-use super::{GasState, LblOptions, LineShapeModel, VoigtMethod, WingCentre};
+use super::{Conventions, GasState, LblOptions, LineShapeModel, VoigtMethod, WingCentre};
 use crate::constants;
 use crate::spectroscopy::SpectroscopyError;
 use crate::spectroscopy::htp::{HtParameters, HtProfile, hartmann_tran};
@@ -187,7 +187,6 @@ pub(super) fn prepare(
     opts.check()?;
     let conv = &opts.conventions;
     let t = state.temperature_k;
-    const T_REF: f64 = 296.0;
     let p_atm = state.pressure_pa / constants::STANDARD_ATMOSPHERE_PA;
     let p_self = if opts.self_broadening {
         state.self_vmr * p_atm
@@ -204,27 +203,7 @@ pub(super) fn prepare(
         .filter(|(_, l)| l.molecule_id == molecule_id)
     {
         let key = (l.molecule_id, l.iso_id);
-        let (q_t, q_ref, mass) = match q_cache.iter().find(|c| c.0 == key) {
-            Some(c) => (c.1, c.2, c.3),
-            None => {
-                let iso = Isotopologue::get(key.0, key.1).ok_or_else(|| {
-                    SpectroscopyError::PartitionSum {
-                        molecule_id: key.0,
-                        iso_id: key.1,
-                        temperature_k: t,
-                        reason: "unknown isotopologue".into(),
-                    }
-                })?;
-                let c = (
-                    key,
-                    partition_sum(key.0, key.1, t)?,
-                    partition_sum(key.0, key.1, T_REF)?,
-                    iso.mass_g_per_mol * conv.atomic_mass_kg,
-                );
-                q_cache.push(c);
-                (c.1, c.2, c.3)
-            }
-        };
+        let (q_t, q_ref, mass) = iso_constants(&mut q_cache, key, t, conv)?;
         if l.sw_cm_per_molecule == 0.0 {
             continue;
         }
@@ -237,39 +216,7 @@ pub(super) fn prepare(
             * (2.0 * conv.boltzmann_j_per_k * t * std::f64::consts::LN_2
                 / (mass * conv.speed_of_light_m_per_s * conv.speed_of_light_m_per_s))
                 .sqrt();
-        // Collisional parameters: HITRAN's conventions for a CSV line with its own parameters
-        // (every one mole-fraction weighted between air and self; Tennyson et al. 2014), the
-        // .par record's otherwise (one exponent, the air shift for the whole pressure).
-        let (gamma_l, shift, ht) = match &l.shape {
-            Some(sp) => {
-                let x_self = if opts.self_broadening {
-                    state.self_vmr
-                } else {
-                    0.0
-                };
-                let c = collisional(sp, p_atm, x_self, t);
-                check_columns(lines, l, sp, opts)?;
-                if matches!(
-                    opts.line_shape,
-                    LineShapeModel::SdVoigt | LineShapeModel::HartmannTran
-                ) {
-                    check_speed_dependence(lines, sp, &c, x_self, t)?;
-                }
-                (c.gamma0, c.delta0, Some(c))
-            }
-            None => {
-                if opts.line_shape != LineShapeModel::Voigt || opts.line_mixing {
-                    return Err(no_parameters(lines, opts));
-                }
-                (
-                    (T_REF / t).powf(l.n_air)
-                        * (l.gamma_air_cm1_per_atm * (p_atm - p_self)
-                            + l.gamma_self_cm1_per_atm * p_self),
-                    l.delta_air_cm1_per_atm * p_atm,
-                    None,
-                )
-            }
-        };
+        let (gamma_l, shift, ht) = line_collisional(lines, l, state, opts, p_atm, p_self, t)?;
         let nu_c = if opts.line_shift {
             l.nu_cm1 + shift
         } else {
@@ -336,6 +283,85 @@ pub(super) fn prepare(
         out.sort_by(|a, b| a.nu0.total_cmp(&b.nu0));
     }
     Ok(out)
+}
+
+/// The reference temperature of HITRAN's intensities and widths \[K\].
+const T_REF: f64 = 296.0;
+
+/// One isotopologue's (Q(T), Q(296), mass \[kg\]) at temperature `t`, looked up once per
+/// isotopologue in `q_cache`.
+fn iso_constants(
+    q_cache: &mut Vec<((u8, u8), f64, f64, f64)>,
+    key: (u8, u8),
+    t: f64,
+    conv: &Conventions,
+) -> Result<(f64, f64, f64), SpectroscopyError> {
+    match q_cache.iter().find(|c| c.0 == key) {
+        Some(c) => Ok((c.1, c.2, c.3)),
+        None => {
+            let iso =
+                Isotopologue::get(key.0, key.1).ok_or_else(|| SpectroscopyError::PartitionSum {
+                    molecule_id: key.0,
+                    iso_id: key.1,
+                    temperature_k: t,
+                    reason: "unknown isotopologue".into(),
+                })?;
+            let c = (
+                key,
+                partition_sum(key.0, key.1, t)?,
+                partition_sum(key.0, key.1, T_REF)?,
+                iso.mass_g_per_mol * conv.atomic_mass_kg,
+            );
+            q_cache.push(c);
+            Ok((c.1, c.2, c.3))
+        }
+    }
+}
+
+/// A line's Lorentz width Γ₀ and shift \[cm⁻¹\] at the state, and its collisional parameters
+/// when its file has them (then checked against the profile `opts` asks for).
+fn line_collisional(
+    lines: &LineList,
+    l: &Line,
+    state: &GasState,
+    opts: &LblOptions,
+    p_atm: f64,
+    p_self: f64,
+    t: f64,
+) -> Result<(f64, f64, Option<Collisional>), SpectroscopyError> {
+    // Collisional parameters: HITRAN's conventions for a CSV line with its own parameters
+    // (every one mole-fraction weighted between air and self; Tennyson et al. 2014), the
+    // .par record's otherwise (one exponent, the air shift for the whole pressure).
+    Ok(match &l.shape {
+        Some(sp) => {
+            let x_self = if opts.self_broadening {
+                state.self_vmr
+            } else {
+                0.0
+            };
+            let c = collisional(sp, p_atm, x_self, t);
+            check_columns(lines, l, sp, opts)?;
+            if matches!(
+                opts.line_shape,
+                LineShapeModel::SdVoigt | LineShapeModel::HartmannTran
+            ) {
+                check_speed_dependence(lines, sp, &c, x_self, t)?;
+            }
+            (c.gamma0, c.delta0, Some(c))
+        }
+        None => {
+            if opts.line_shape != LineShapeModel::Voigt || opts.line_mixing {
+                return Err(no_parameters(lines, opts));
+            }
+            (
+                (T_REF / t).powf(l.n_air)
+                    * (l.gamma_air_cm1_per_atm * (p_atm - p_self)
+                        + l.gamma_self_cm1_per_atm * p_self),
+                l.delta_air_cm1_per_atm * p_atm,
+                None,
+            )
+        }
+    })
 }
 
 /// Beyond this many widths (the larger of Γ₀ and γ_D) from its centre, the fast path evaluates a
