@@ -311,7 +311,7 @@ fn check_line_ranges(
         let sd_name = name_of(cols.sd_gamma, &fb("SD_gamma"));
         if b.sd_gamma.is_finite() && !SD_RATIO.contains(b.sd_gamma) {
             return Err(InputError::at(
-                &path,
+                path,
                 line_no,
                 sd_name,
                 format!(
