@@ -3,8 +3,8 @@
 //! Consumes a validated [`Scene`] and its [`TransportOptions`], read alike by every rank;
 //! produces on rank 0 the [`RunOutput`] a single process would produce, and nothing elsewhere.
 //!
-//! Every rank builds the same optical atmosphere and transport plan (the options through
-//! [`pipeline::plan_options`], as [`pipeline::run_with`] builds them). Batches are assigned
+//! Every rank prepares the same run ([`pipeline::prepare`]) and builds the same transport plan
+//! ([`pipeline::Prepared::plan`]); rank 0 alone finishes it ([`pipeline::Prepared::finish`]). Batches are assigned
 //! statically, **round robin**: batch b is traced by rank b mod K. Each rank then gets an equal
 //! share whatever the batch count, and batches reach rank 0 nearly in order, so that it folds
 //! them as they come: rank 0 goes through the batches in chunks, traces its own batches of a
@@ -32,7 +32,6 @@ use mpi::traits::{CommunicatorCollectives, Destination, Source};
 use rayon::prelude::*;
 use thiserror::Error;
 
-use crate::optics::OpticalAtmosphere;
 use crate::pipeline::{self, RunError, RunOutput};
 use crate::scene::Scene;
 use crate::transport::{
@@ -105,59 +104,63 @@ fn root(
     scene: &Scene,
     transport: &TransportOptions,
 ) -> Result<RunOutput, DistributedError> {
-    // Set once the ranks have agreed (inside the Monte Carlo); then `Err` if they stopped.
-    let mut agreed: Option<Result<(), String>> = None;
-    let mut monte_carlo = |plan: &Plan| -> Result<McResult, TransportError> {
-        let pool = thread_pool(transport.threads);
-        let mine = match &pool {
-            Ok(p) => Ok(Digest::of(plan, transport.seed, p.current_num_threads())),
-            Err(e) => Err(e.to_string()),
-        };
-        let total_threads = match agree(world, 0, &mine) {
-            Ok(t) => t,
-            Err(failures) => {
-                agreed = Some(Err(report(&failures)));
-                return Err(TransportError::Options(
-                    "stopped before the exchange".into(),
-                ));
-            }
-        };
-        agreed = Some(Ok(()));
-        let Ok(pool) = pool else {
-            unreachable_after_agreement(world)
-        };
-        match catch_unwind(AssertUnwindSafe(|| {
-            gather(world, size, plan, &pool, total_threads)
-        })) {
-            Ok(Ok(mc)) => Ok(mc),
-            Ok(Err(message)) => abort(world, &message),
-            Err(_) => abort(world, "a panic on rank 0 (its message is above)"),
-        }
+    let prepared = match pipeline::prepare(scene, transport) {
+        Ok(p) => p,
+        Err(e) => return stop_before_exchange(world, e),
     };
-    let result = pipeline::run_with(scene, transport, &mut monte_carlo);
-    match (agreed, result) {
-        (Some(Err(message)), _) => Err(DistributedError::Ranks(message)),
-        (Some(Ok(())), result) => Ok(result?),
-        // No Monte Carlo was asked for, or the pipeline failed before it: agree now.
-        (None, result) => {
-            let mine = match &result {
-                Ok(_) => Ok(Digest::NONE),
-                Err(e) => Err(e.to_string()),
-            };
-            match (agree(world, 0, &mine), result) {
-                (Ok(_), Ok(out)) => Ok(out),
-                (Err(failures), Err(e)) if failures.iter().all(|(_, m)| *m == e.to_string()) => {
-                    Err(DistributedError::Run(e))
-                }
-                (Err(failures), _) => Err(DistributedError::Ranks(report(&failures))),
-                // `agree` counts rank 0's own failure.
-                (Ok(_), Err(e)) => Err(DistributedError::Run(e)),
-            }
+    if let Some(note) = prepared.warning() {
+        crate::limits::warn(&note);
+    }
+    let plan = match prepared.plan() {
+        Ok(p) => p,
+        Err(e) => return stop_before_exchange(world, e),
+    };
+    let Some(plan) = plan else {
+        // No Monte Carlo (0 photons, or none needed: `crate::skip`); the workers decide alike.
+        return match agree(world, 0, &Ok(Digest::NONE)) {
+            Ok(_) => Ok(prepared.finish(None)?),
+            Err(failures) => Err(DistributedError::Ranks(report(&failures))),
+        };
+    };
+    let pool = thread_pool(transport.threads);
+    let mine = match &pool {
+        Ok(p) => Ok(Digest::of(&plan, transport.seed, p.current_num_threads())),
+        Err(e) => Err(e.to_string()),
+    };
+    let total_threads =
+        agree(world, 0, &mine).map_err(|failures| DistributedError::Ranks(report(&failures)))?;
+    let Ok(pool) = pool else {
+        unreachable_after_agreement(world)
+    };
+    let mc = match catch_unwind(AssertUnwindSafe(|| {
+        gather(world, size, &plan, &pool, total_threads)
+    })) {
+        Ok(Ok(mc)) => mc,
+        Ok(Err(message)) => abort(world, &message),
+        Err(_) => abort(world, "a panic on rank 0 (its message is above)"),
+    };
+    drop(plan);
+    Ok(prepared.finish(Some(mc))?)
+}
+
+/// Rank 0's pipeline failed before the exchange: agree on it, and report the failure a single
+/// process would (every rank failed alike) or every rank's distinct message.
+fn stop_before_exchange(
+    world: &SimpleCommunicator,
+    e: RunError,
+) -> Result<RunOutput, DistributedError> {
+    match agree(world, 0, &Err(e.to_string())) {
+        Err(failures) if failures.iter().all(|(_, m)| *m == e.to_string()) => {
+            Err(DistributedError::Run(e))
         }
+        Err(failures) => Err(DistributedError::Ranks(report(&failures))),
+        // `agree` counts rank 0's own failure.
+        Ok(_) => Err(DistributedError::Run(e)),
     }
 }
 
-/// Ranks 1…K−1: build the same plan, agree, trace this rank's batches and send them.
+/// Ranks 1…K−1: prepare the same run, agree on its plan, trace this rank's batches and send
+/// them.
 fn worker(
     world: &SimpleCommunicator,
     rank: usize,
@@ -165,22 +168,22 @@ fn worker(
     scene: &Scene,
     transport: &TransportOptions,
 ) -> Outcome {
-    let atmosphere = OpticalAtmosphere::build(scene).map_err(|e| e.to_string());
-    // No Monte Carlo (0 photons, or none needed: `crate::skip`), as rank 0's pipeline decides.
-    let needed = atmosphere
-        .as_ref()
-        .is_ok_and(|a| crate::skip::decide(scene, a, transport.photons).run);
-    if atmosphere.is_ok() && !needed {
-        return match agree(world, rank, &Ok(Digest::NONE)) {
-            Ok(_) => Outcome::Worker,
-            Err(_) => Outcome::Stopped,
-        };
-    }
-    let opts = pipeline::plan_options(scene, transport);
-    let plan = atmosphere
+    let prepared = pipeline::prepare(scene, transport).map_err(|e| e.to_string());
+    let plan = prepared
         .as_ref()
         .map_err(Clone::clone)
-        .and_then(|a| Plan::new(scene, a, &opts).map_err(|e| e.to_string()));
+        .and_then(|p| p.plan().map_err(|e| e.to_string()));
+    let plan = match plan {
+        // No Monte Carlo (0 photons, or none needed: `crate::skip`), as rank 0 decides.
+        Ok(None) => {
+            return match agree(world, rank, &Ok(Digest::NONE)) {
+                Ok(_) => Outcome::Worker,
+                Err(_) => Outcome::Stopped,
+            };
+        }
+        Ok(Some(plan)) => Ok(plan),
+        Err(e) => Err(e),
+    };
     let pool = thread_pool(transport.threads).map_err(|e| e.to_string());
     let mine = match (&plan, &pool) {
         (Ok(plan), Ok(pool)) => Ok(Digest::of(plan, transport.seed, pool.current_num_threads())),

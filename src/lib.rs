@@ -1,22 +1,29 @@
 //! lidarsim: a simulation testbed for atmospheric lidars.
 //!
-//! The library follows the pipeline of `DESIGN.md`: each module is one stage, consuming the
-//! previous stage's plain data types and producing its own.
+//! The library follows the pipeline of `docs/design.md` (§1; §8 has the module map and the
+//! import rule): each module is one stage, consuming the previous stage's plain data types and
+//! producing its own, and imports only the stages below it.
 //!
 //! | stage | module | produces |
 //! |---|---|---|
-//! | scene file | [`scene`] | a validated [`scene::Scene`] |
-//! | atmospheric state | [`atmosphere`] | [`atmosphere::Profile`] |
+//! | scene description | [`scene`] | a [`scene::Scene`]: parsed, validated, resolved (`docs/design.md` §5) |
+//! | atmospheric state | [`atmosphere`] | [`atmosphere::Profile`], profile sets and ensembles |
 //! | gas absorption | [`spectroscopy`] | cross-sections, layer optical depths |
 //! | particles | [`particles`] | phase functions, Rayleigh and Mie optics |
+//! | laser lines, receiver, noise | [`instrument`] | channels of each line, line returns, [`instrument::signals::Signals`] |
 //! | optical atmosphere | [`optics`] | [`optics::OpticalAtmosphere`], the one input of transport |
 //! | Monte Carlo | [`transport`] | [`returns::Returns`] by channel, FOV, gate and order |
 //! | analytic single scatter | [`lidar_eq`] | [`returns::Returns`], order 1 |
 //! | the aperture seen from close by | [`aperture`] | the factors both estimators share |
 //! | what a scene does not need | [`skip`] | whether the Monte Carlo runs, and why |
+//! | retrievals | [`retrieval`] | IPDA and DIAL [`retrieval::Product`]s against the truth |
+//! | a scene from end to end | [`pipeline`] | prepare → trace → finish: [`pipeline::RunOutput`] |
+//! | batches traced elsewhere | [`shard`], `distributed` (feature `mpi`) | shard files, merged runs |
+//! | ensemble studies | [`study`] | `dial` and `select-lines` results |
 //!
-//! Beside the stages: [`output`] writes a command's files whole or not at all, and [`netcdf`]
-//! makes `run.nc`, the CF NetCDF file of a run's returns, signals and retrievals.
+//! Beside the stages: [`input`] and [`limits`] check what a user gives, [`output`] writes a
+//! command's files whole or not at all, [`netcdf`] makes the CF NetCDF files, and [`digest`]
+//! is the one hash (FNV-1a 64) of cache keys, fingerprints and shard checksums.
 
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]

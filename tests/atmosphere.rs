@@ -19,7 +19,7 @@ use lidarsim::constants::{
     MOLAR_MASS_WATER_KG_PER_MOL,
 };
 
-use crate::util::shared_file;
+use crate::util::{lidarsim, shared_file};
 
 /// WGS 84 normal gravity at the surface (Somigliana), written out here independently of the
 /// library.
@@ -619,13 +619,6 @@ fn covariance_file_projects_to_profile_levels() {
 // ---------------------------------------------------------------------------------------------
 // Command line
 
-fn lidarsim(args: &[&str]) -> std::process::Output {
-    std::process::Command::new(crate::util::lidarsim_bin())
-        .args(args)
-        .output()
-        .unwrap()
-}
-
 /// Issue 4 item 5: `profiles generate --class tropical --n 300 --seed 1` twice gives the same file
 /// byte for byte; another seed another file; `plot` writes a PNG; `info` and errors.
 #[test]
@@ -633,7 +626,7 @@ fn cli_generate_is_reproducible_and_plots() {
     let dir = tempfile::tempdir().unwrap();
     let p = |n: &str| dir.path().join(n).to_string_lossy().into_owned();
     for (name, seed) in [("a.csv", "1"), ("b.csv", "1"), ("c.csv", "2")] {
-        let o = lidarsim(&[
+        let o = lidarsim([
             "profiles",
             "generate",
             "--class",
@@ -653,7 +646,7 @@ fn cli_generate_is_reproducible_and_plots() {
     let set = read_profile_set(Path::new(&p("a.csv"))).unwrap();
     assert_eq!(set.len(), 300);
     assert_eq!(set.class_counts(), [300, 0, 0]);
-    let o = lidarsim(&["profiles", "plot", &p("a.csv"), "--out", &p("fig.png")]);
+    let o = lidarsim(["profiles", "plot", &p("a.csv"), "--out", &p("fig.png")]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let png = std::fs::read(p("fig.png")).unwrap();
     assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");
@@ -663,7 +656,7 @@ fn cli_generate_is_reproducible_and_plots() {
         "profile,latitude_deg,longitude_deg,pressure_hPa,temperature_K\nx,1,2,1000,abc\n",
     )
     .unwrap();
-    let o = lidarsim(&["profiles", "plot", &p("bad.csv"), "--out", &p("bad.png")]);
+    let o = lidarsim(["profiles", "plot", &p("bad.csv"), "--out", &p("bad.png")]);
     assert_eq!(o.status.code(), Some(2));
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("bad.csv:2: `temperature_K`"), "{err}");

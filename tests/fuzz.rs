@@ -1122,7 +1122,9 @@ mod scenes {
     //! --photons 2000 --no-plots`, a few hundred cases on two threads.
 
     use super::*;
-    use crate::util::lidarsim_bounded;
+    use crate::util::{
+        NON_NEGATIVE_COLUMNS, TEXT_COLUMNS, absolute_paths, check_json_text, lidarsim_bounded,
+    };
     use rand::{RngExt, SeedableRng};
     use std::ffi::OsString;
     use std::sync::atomic::{AtomicUsize, Ordering};
@@ -1134,32 +1136,6 @@ mod scenes {
     const PHOTONS: &str = "2000";
     /// A case that takes longer has hung (the unmutated scenes take at most 0.3 s).
     const TIME_LIMIT: Duration = Duration::from_secs(20);
-
-    /// Columns of the CSV outputs that hold text; every other field must be a finite number.
-    const TEXT_COLUMNS: [&str; 8] = [
-        "source",
-        "channel",
-        "order",
-        "method",
-        "channel_pair",
-        "quantity",
-        "unit",
-        "polarisation",
-    ];
-    /// Columns that are energies, counts or standard deviations: never negative.
-    const NON_NEGATIVE: [&str; 11] = [
-        "energy_j",
-        "stderr_j",
-        "signal_photoelectrons",
-        "background_photoelectrons",
-        "dark_electrons",
-        "noise_std_photoelectrons",
-        "mc_stderr",
-        "random_error_per_shot_pair",
-        "random_error_averaged",
-        "simulated_error_per_shot_pair",
-        "simulated_error_averaged",
-    ];
 
     /// One fuzz case: a shipped scene and the mutations applied to it.
     struct Case {
@@ -1177,7 +1153,7 @@ mod scenes {
         );
         let (path, text) = &scenes[index % scenes.len()];
         // Relative paths (phase tables) resolve from the scenes' folder: make them absolute.
-        let original = text.replace("\"../", &format!("\"{}/", project_root().display()));
+        let original = absolute_paths(text);
         // Most cases change numbers as a user might (a power of ten, a sign, a digit) and
         // often reach the physics; a quarter put in one hostile value; the rest damage keys,
         // lines and bytes.
@@ -1365,7 +1341,7 @@ mod scenes {
                         if !v.is_finite() {
                             return Err(format!("{name} row {}: `{col}` = {field}", n + 2));
                         }
-                        if v < 0.0 && NON_NEGATIVE.contains(&col.as_str()) {
+                        if v < 0.0 && NON_NEGATIVE_COLUMNS.contains(&col.as_str()) {
                             return Err(format!(
                                 "{name} row {}: `{col}` = {field} is negative",
                                 n + 2
@@ -1378,11 +1354,7 @@ mod scenes {
                 }
             } else if name.ends_with(".json") {
                 let text = std::fs::read_to_string(&p).map_err(|e| format!("{name}: {e}"))?;
-                let v: serde_json::Value =
-                    serde_json::from_str(&text).map_err(|e| format!("{name}: {e}"))?;
-                if let Some(at) = find_null(&v, "") {
-                    return Err(format!("{name}: `{at}` is null (a NaN or an infinity)"));
-                }
+                check_json_text(&name, &text)?;
             }
         }
         Ok(())
@@ -1406,27 +1378,6 @@ mod scenes {
                         "random_error_averaged",
                     ]
                     .contains(&col)))
-    }
-
-    /// The first `null` in a summary, except in the retrieval products from Monte Carlo
-    /// returns, where it is what retrieval.csv leaves empty.
-    fn find_null(v: &serde_json::Value, at: &str) -> Option<String> {
-        match v {
-            serde_json::Value::Null => Some(at.to_string()),
-            serde_json::Value::Object(o)
-                if at.starts_with(".retrieval.") && o.get("source") == Some(&"mc".into()) =>
-            {
-                None
-            }
-            serde_json::Value::Array(a) => a
-                .iter()
-                .enumerate()
-                .find_map(|(i, x)| find_null(x, &format!("{at}[{i}]"))),
-            serde_json::Value::Object(o) => o
-                .iter()
-                .find_map(|(k, x)| find_null(x, &format!("{at}.{k}"))),
-            _ => None,
-        }
     }
 
     /// Cases that fail for a reason that belongs to the photon loop

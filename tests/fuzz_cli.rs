@@ -48,8 +48,9 @@ use rand_xoshiro::Xoshiro256PlusPlus;
 
 use crate::fuzz::{self, Format, KINDS, Mutation};
 use crate::util::{
-    check_csv_text, check_json_text_allowing, check_written, lidarsim_bounded, lidarsim_ok,
-    non_finite_word, project_root, tree,
+    absolute_paths, check_csv_text, check_json_text_allowing, check_written, file_names,
+    lidarsim_bounded, lidarsim_ok, non_finite_word, project_root, shard_header, tree,
+    with_checksum, with_shard_header,
 };
 
 /// A case that takes longer has hung (the templates take at most about 0.5 s unmutated).
@@ -398,46 +399,6 @@ fn mutate_arg(c: &mut Case, i: usize, rng: &mut Xoshiro256PlusPlus) {
 // ---------------------------------------------------------------------------------------------
 // Shard files.
 
-/// Bytes before a shard's header: magic, format, header length.
-const PREAMBLE: usize = 28;
-
-/// FNV-1a 64, the shard checksum (README, "The shard file").
-fn fnv(bytes: &[u8]) -> u64 {
-    bytes.iter().fold(0xcbf2_9ce4_8422_2325, |h, b| {
-        (h ^ u64::from(*b)).wrapping_mul(0x0000_0100_0000_01b3)
-    })
-}
-
-/// A shard file with its checksum made right again.
-fn resum(mut bytes: Vec<u8>) -> Vec<u8> {
-    if bytes.len() >= 8 {
-        let n = bytes.len() - 8;
-        let sum = fnv(&bytes[..n]);
-        bytes[n..].copy_from_slice(&sum.to_le_bytes());
-    }
-    bytes
-}
-
-/// The header of a shard file and where its body starts.
-fn shard_header(bytes: &[u8]) -> Option<(serde_json::Value, usize)> {
-    let len = u64::from_le_bytes(bytes.get(20..28)?.try_into().ok()?) as usize;
-    let json = bytes.get(PREAMBLE..PREAMBLE.checked_add(len)?)?;
-    Some((serde_json::from_slice(json).ok()?, PREAMBLE + len))
-}
-
-/// The shard with its header replaced (and the checksum right).
-fn with_header(bytes: &[u8], h: &serde_json::Value) -> Vec<u8> {
-    let Some((_, body)) = shard_header(bytes) else {
-        return bytes.to_vec();
-    };
-    let json = serde_json::to_vec(h).unwrap_or_default();
-    let mut out = bytes[..20].to_vec();
-    out.extend((json.len() as u64).to_le_bytes());
-    out.extend(&json);
-    out.extend(&bytes[body..]);
-    resum(out)
-}
-
 /// Values put in a shard's numbers: not finite, negative, huge, tiny.
 const HOSTILE_F64: [f64; 11] = [
     f64::NAN,
@@ -516,7 +477,7 @@ fn mutate_shards(c: &mut Case, k: usize, rng: &mut Xoshiro256PlusPlus) {
             b[at] ^= 1 << bit;
             (
                 format!("bit {bit} of byte {at} flipped, checksum recomputed"),
-                Some(resum(b)),
+                Some(with_checksum(b)),
             )
         }
         30..50 => {
@@ -550,7 +511,7 @@ fn mutate_shards(c: &mut Case, k: usize, rng: &mut Xoshiro256PlusPlus) {
             line_break = new.as_str().is_some_and(|t| t.contains('\n'));
             (
                 format!("header `{key}` {old} → {new}, checksum recomputed"),
-                Some(with_header(&bytes, &h)),
+                Some(with_shard_header(&bytes, &h)),
             )
         }
         50..85 => {
@@ -593,7 +554,10 @@ fn mutate_shards(c: &mut Case, k: usize, rng: &mut Xoshiro256PlusPlus) {
                     format!("8 bytes of the body at {at} set to {v:e}")
                 }
             };
-            (format!("{what}, checksum recomputed"), Some(resum(b)))
+            (
+                format!("{what}, checksum recomputed"),
+                Some(with_checksum(b)),
+            )
         }
         85..90 => {
             let mut b = bytes.clone();
@@ -604,7 +568,7 @@ fn mutate_shards(c: &mut Case, k: usize, rng: &mut Xoshiro256PlusPlus) {
                 b.extend_from_slice(&[0u8; 8]);
                 (
                     "16 bytes appended, checksum recomputed".into(),
-                    Some(resum(b)),
+                    Some(with_checksum(b)),
                 )
             }
         }
@@ -1014,7 +978,7 @@ fn read(relative: &str) -> String {
 /// A shipped scene with its relative paths made absolute (as the scene fuzz does), so that it
 /// can be written anywhere.
 fn scene(name: &str) -> String {
-    read(&format!("scenes/{name}")).replace("\"../", &format!("\"{}/", project_root().display()))
+    absolute_paths(&read(&format!("scenes/{name}")))
 }
 
 /// Files made once by the binary for the templates: profile sets and a covariance written by
@@ -1884,11 +1848,7 @@ fn wall_time_ok(p: &Path) -> Result<(), String> {
 fn merge_templates() -> Vec<Template> {
     let f = Fixtures::get();
     let shards = |dir: &str| -> Vec<Input> {
-        let mut names: Vec<String> = std::fs::read_dir(f.dir.join(dir))
-            .unwrap()
-            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-            .collect();
-        names.sort();
+        let names = file_names(&f.dir.join(dir));
         assert_eq!(names.len(), 2, "{dir}: {names:?}");
         names
             .iter()
@@ -2440,7 +2400,11 @@ mod findings {
             .unwrap()
             .replace("seed = 1", "seed = 01");
         h["scene_text"] = text.into();
-        std::fs::write(shards.join("shard-0-of-2.lshard"), with_header(&good, &h)).unwrap();
+        std::fs::write(
+            shards.join("shard-0-of-2.lshard"),
+            with_shard_header(&good, &h),
+        )
+        .unwrap();
         let ran = run_in(dir.path(), &["merge", "shards", "--out", "m"]);
         refused_naming(&ran, "shard-0-of-2.lshard");
     }
@@ -2579,7 +2543,7 @@ mod findings {
             let shards = dir.path().join("shards");
             std::fs::create_dir(&shards).unwrap();
             std::fs::copy(&names[0], shards.join("shard-0-of-2.lshard")).unwrap();
-            std::fs::write(shards.join("shard-1-of-2.lshard"), resum(b)).unwrap();
+            std::fs::write(shards.join("shard-1-of-2.lshard"), with_checksum(b)).unwrap();
             let out = dir.path().join("m");
             let ran = lidarsim_bounded(
                 &[

@@ -5,7 +5,7 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::util::{lidarsim, lidarsim_bin, lidarsim_ok};
+use crate::util::{assert_no_non_finite, file_names, lidarsim, lidarsim_bin, lidarsim_ok};
 
 /// Every entry under `dir`, recursively, with the contents of files.
 fn snapshot(dir: &Path) -> Vec<(PathBuf, Option<Vec<u8>>)> {
@@ -101,13 +101,8 @@ fn a_run_replaces_every_file_of_an_earlier_run() {
         std::fs::read_to_string(out.join("notes.txt")).unwrap(),
         "mine\n"
     );
-    let mut names: Vec<String> = std::fs::read_dir(root.path().join("out"))
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect();
-    names.sort();
     assert_eq!(
-        names,
+        file_names(&root.path().join("out")),
         [
             "notes.txt",
             "retrieval.csv",
@@ -325,78 +320,6 @@ fn retrieval_csv_holds_no_nan_and_leaves_what_cannot_be_computed_empty() {
     );
 }
 
-/// Whether a CSV field reads as a non-finite number (as Rust, pandas or a spreadsheet would).
-fn non_finite_text(field: &str) -> bool {
-    let t = field.trim();
-    let t = t.strip_prefix(['+', '-']).unwrap_or(t);
-    ["nan", "inf", "infinity"]
-        .iter()
-        .any(|w| t.eq_ignore_ascii_case(w))
-}
-
-/// Issue 37, item 5: no CSV or NetCDF file under `dir` (recursively) holds `NaN` or `inf`. Every
-/// field of every `*.csv` (parsed by the `csv` crate, `#` lines as comments) and every value of
-/// every variable and attribute of every `*.nc` (read by the `netcdf3` crate) is checked.
-/// Returns the files checked.
-pub(crate) fn assert_no_non_finite(dir: &Path) -> Vec<PathBuf> {
-    let mut checked = Vec::new();
-    for (p, _) in snapshot(dir) {
-        let ext = p.extension().and_then(|e| e.to_str()).unwrap_or("");
-        if ext == "csv" {
-            let mut r = csv::ReaderBuilder::new()
-                .has_headers(false)
-                .flexible(true)
-                .comment(Some(b'#'))
-                .from_path(&p)
-                .unwrap();
-            for (line, rec) in r.records().enumerate() {
-                let rec = rec.unwrap();
-                for field in rec.iter() {
-                    assert!(
-                        !non_finite_text(field),
-                        "{} record {}: `{field}` in {rec:?}",
-                        p.display(),
-                        line + 1
-                    );
-                }
-            }
-            checked.push(p);
-        } else if ext == "nc" {
-            let mut r = netcdf3::FileReader::open(&p).unwrap();
-            for (name, values) in r.read_all_vars().unwrap() {
-                if let Some(v) = values.get_f64() {
-                    assert!(
-                        v.iter().all(|x| x.is_finite()),
-                        "{}: variable {name} holds a non-finite value",
-                        p.display()
-                    );
-                }
-            }
-            let (ds, _) = r.close();
-            for a in ds.get_global_attrs() {
-                if let Some(v) = a.get_f64() {
-                    assert!(v.iter().all(|x| x.is_finite()), "{}", p.display());
-                }
-            }
-            for var in ds.get_vars() {
-                for a in var.get_attrs() {
-                    if let Some(v) = a.get_f64() {
-                        assert!(
-                            v.iter().all(|x| x.is_finite()),
-                            "{}: {}:{}",
-                            p.display(),
-                            var.name(),
-                            a.name()
-                        );
-                    }
-                }
-            }
-            checked.push(p);
-        }
-    }
-    checked
-}
-
 /// A ground lidar with linear polarisation under an HG cloud at 1500–1700 m, no air: the gates
 /// below the cloud receive nothing.
 pub(crate) const POLARISED_CLOUD: &str = r#"
@@ -485,16 +408,6 @@ fn depolarisation_csv_leaves_bins_without_a_co_polarised_return_empty() {
     assert_eq!(empty, 4 * 5 + 5 * 3, "{rows} rows");
 }
 
-/// The names of the entries of `dir`, sorted.
-fn names_in(dir: &Path) -> Vec<String> {
-    let mut v: Vec<String> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect();
-    v.sort();
-    v
-}
-
 /// Issue 37, item 5: a second run into a directory removes the earlier run's outputs it does
 /// not rewrite, with the commit, so that no stale file stays beside the new ones: the airborne
 /// DIAL scene (signals, retrieval, figures, run.nc), then C.1 without `[receiver]` and
@@ -519,7 +432,7 @@ fn a_run_or_merge_removes_the_earlier_outputs_it_does_not_rewrite() {
         std::fs::write(out.join("notes.txt"), "mine\n").unwrap();
         std::fs::write(out.join("profiles.csv"), "mine too\n").unwrap();
         assert_eq!(
-            names_in(out),
+            file_names(out),
             [
                 "dial.png",
                 "notes.txt",
@@ -544,7 +457,7 @@ fn a_run_or_merge_removes_the_earlier_outputs_it_does_not_rewrite() {
         out.as_os_str(),
     ]);
     assert_eq!(
-        names_in(&out),
+        file_names(&out),
         ["notes.txt", "profiles.csv", "returns.csv", "summary.json"]
     );
     assert_eq!(
@@ -581,7 +494,7 @@ fn a_run_or_merge_removes_the_earlier_outputs_it_does_not_rewrite() {
         merged.as_os_str(),
     ]);
     assert_eq!(
-        names_in(&merged),
+        file_names(&merged),
         [
             "notes.txt",
             "profiles.csv",
@@ -599,7 +512,7 @@ fn a_run_or_merge_removes_the_earlier_outputs_it_does_not_rewrite() {
         shards.as_os_str(),
     ]);
     assert_eq!(
-        names_in(&shards),
+        file_names(&shards),
         [
             "returns.csv",
             "run.nc",
@@ -638,7 +551,7 @@ fn a_study_removes_the_earlier_studys_outputs_it_does_not_rewrite() {
     assert!(out.join("errors.png").is_file() && out.join("profiles.nc").is_file());
     dial(&["--no-plots", "--no-netcdf"]);
     assert_eq!(
-        names_in(&out),
+        file_names(&out),
         [
             "budget.csv",
             "failed.csv",
@@ -676,7 +589,7 @@ fn a_study_removes_the_earlier_studys_outputs_it_does_not_rewrite() {
     assert!(out.join("transmission_us_standard.png").is_file());
     select("tropical", &["--no-plots"]);
     assert_eq!(
-        names_in(&out),
+        file_names(&out),
         [
             "failed.csv",
             "notes.txt",

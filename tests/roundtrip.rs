@@ -17,28 +17,11 @@
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
+use crate::util::path_arg as s;
 use crate::util::{
-    check_csv_text, check_written, lidarsim, lidarsim_ok, project_root, shared_file,
+    absolute_paths, check_csv_text, check_written, lidarsim, lidarsim_ok, project_root, read_csv,
+    shared_file,
 };
-
-fn s(p: &Path) -> String {
-    p.to_string_lossy().into_owned()
-}
-
-/// The records of a CSV file as lidarsim writes it (`#` comments, a header), by a standard
-/// parser: (header, rows).
-fn read_csv(path: &Path) -> (Vec<String>, Vec<Vec<String>>) {
-    let mut r = csv::ReaderBuilder::new()
-        .comment(Some(b'#'))
-        .from_path(path)
-        .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    let header = r.headers().unwrap().iter().map(String::from).collect();
-    let rows = r
-        .records()
-        .map(|rec| rec.unwrap().iter().map(String::from).collect())
-        .collect();
-    (header, rows)
-}
 
 /// The distinct values of column `name`.
 fn column(path: &Path, name: &str) -> BTreeSet<String> {
@@ -80,9 +63,9 @@ const OFF: &str = "off,ref";
 /// The airborne DIAL scene with its channels so named (the retrieval's `on` and `off` given),
 /// its relative paths absolute.
 fn quoted_scene() -> String {
-    let text = std::fs::read_to_string(project_root().join("scenes/airborne_co2_dial.toml"))
-        .unwrap()
-        .replace("\"../", &format!("\"{}/", project_root().display()));
+    let text = absolute_paths(
+        &std::fs::read_to_string(project_root().join("scenes/airborne_co2_dial.toml")).unwrap(),
+    );
     let toml = |v: &str| toml::Value::String(v.into()).to_string();
     let out = text
         .replace("name = \"on\"", &format!("name = {}", toml(ON)))

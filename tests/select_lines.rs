@@ -787,7 +787,7 @@ fn cli_profiles_that_fail_are_counted_once_per_reason() {
     assert_eq!(rows[0], "profile_id,group,reason");
     assert_eq!(rows.len(), 3, "{failed}");
     assert!(rows[1].starts_with("short1,tropical,") && rows[2].starts_with("short2,tropical,"));
-    crate::output::assert_no_non_finite(&out);
+    crate::util::assert_no_non_finite(&out);
 
     let out_before = std::fs::read(out.join("sensitivities.csv")).unwrap();
     let o = run(tropical_set(&[

@@ -7,17 +7,16 @@ use std::path::{Path, PathBuf};
 
 use lidarsim::shard::{self, ShardFile, ShardSpec};
 
-use crate::util::{lidarsim, lidarsim_ok, project_root};
+use crate::util::path_arg as s;
+use crate::util::{
+    file_names, lidarsim, lidarsim_ok, project_root, shard_header, with_checksum, with_shard_header,
+};
 
 fn c1_scene() -> String {
     project_root()
         .join("scenes/bissonnette_c1.toml")
         .to_string_lossy()
         .into_owned()
-}
-
-fn s(p: &Path) -> String {
-    p.to_string_lossy().into_owned()
 }
 
 /// `lidarsim run SCENE --shard I/N --out DIR` with extra arguments (`None`: the default scene).
@@ -314,26 +313,11 @@ fn merge_refuses_a_scene_whose_files_changed_since_the_shards() {
     );
 }
 
-/// FNV-1a 64 as the file format says (tests rebuild shard files with it).
-fn fnv(bytes: &[u8]) -> u64 {
-    bytes.iter().fold(0xcbf2_9ce4_8422_2325, |h, b| {
-        (h ^ u64::from(*b)).wrapping_mul(0x0000_0100_0000_01b3)
-    })
-}
-
 /// `bytes` with its header replaced by `edit(header)` and a correct checksum.
 fn with_header(bytes: &[u8], edit: impl Fn(&mut serde_json::Value)) -> Vec<u8> {
-    let len = u64::from_le_bytes(bytes[20..28].try_into().unwrap()) as usize;
-    let mut h: serde_json::Value = serde_json::from_slice(&bytes[28..28 + len]).unwrap();
+    let (mut h, _) = shard_header(bytes).expect("a shard with a readable header");
     edit(&mut h);
-    let json = serde_json::to_vec(&h).unwrap();
-    let mut out = bytes[..20].to_vec();
-    out.extend((json.len() as u64).to_le_bytes());
-    out.extend(&json);
-    out.extend(&bytes[28 + len..bytes.len() - 8]);
-    let sum = fnv(&out);
-    out.extend(sum.to_le_bytes());
-    out
+    with_shard_header(bytes, &h)
 }
 
 /// A corrupt, truncated, foreign, future-format or other-version shard: one line naming the
@@ -853,16 +837,6 @@ fn three_select_shards(dir: &Path, name: &str, extra: &[&str]) -> Vec<PathBuf> {
     three_study_shards(dir, name, extra, select_lines)
 }
 
-/// The files in `dir`, sorted.
-fn file_names(dir: &Path) -> Vec<String> {
-    let mut names: Vec<String> = fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect();
-    names.sort();
-    names
-}
-
 /// Two NetCDF files with the same dimensions, variables, attributes and values (each f64 by
 /// its shortest exact decimal), read by the `netcdf3` crate's reader, but for the global
 /// attribute `history` (the time and the command line); `variable` is one of them. Returns the
@@ -1202,11 +1176,9 @@ fn select_lines_shards_of_a_profile_set_and_a_line_file() {
 /// `bytes` (a shard file) with the 8 bytes at `at` replaced by `value` and a correct checksum:
 /// a file whose framing is sound and whose numbers are not.
 fn with_bits(bytes: &[u8], at: usize, value: u64) -> Vec<u8> {
-    let mut out = bytes[..bytes.len() - 8].to_vec();
+    let mut out = bytes.to_vec();
     out[at..at + 8].copy_from_slice(&value.to_le_bytes());
-    let sum = fnv(&out);
-    out.extend(sum.to_le_bytes());
-    out
+    with_checksum(out)
 }
 
 /// Where the batch records of a run shard start, how long one is, and its tallies per batch
@@ -1340,7 +1312,7 @@ fn merge_checks_polarised_tallies_up_to_rounding() {
         "--out".into(),
         s(&out),
     ]);
-    crate::output::assert_no_non_finite(&out);
+    crate::util::assert_no_non_finite(&out);
 }
 
 /// Dial and select-lines shards: a record whose retrieved XCO2 is NaN (the noisy value alone
@@ -1506,7 +1478,7 @@ fn merge_refuses_folds_beyond_a_double_or_beyond_the_pulse() {
         "--out".into(),
         s(&out),
     ]);
-    crate::output::assert_no_non_finite(&out);
+    crate::util::assert_no_non_finite(&out);
 }
 
 /// Fuzz finding F11: a run shard whose stored scene text was changed (checksum recomputed) is

@@ -15,7 +15,7 @@ use lidarsim::scene::Scene;
 use lidarsim::spectroscopy::{LineList, layer_optical_depths_at, tips};
 use lidarsim::study::dial::{self, ProfileOutcome, Source, StudyOptions};
 
-use crate::util::{lidarsim, lidarsim_ok};
+use crate::util::{lidarsim, lidarsim_ok, read_csv};
 
 /// A space-borne CO2 IPDA, nadir from 450 km, monochromatic on-line 2.2 GHz up R16e and
 /// off-line in the trough, built-in band model, no Rayleigh scattering (so the measured
@@ -559,17 +559,6 @@ fn swapped_profiles_and_lasers_equal_parsed_scenes() {
     );
 }
 
-/// A CSV file as its header and records (the `csv` crate's reader).
-pub(crate) fn read_csv(path: &Path) -> (Vec<String>, Vec<Vec<String>>) {
-    let mut r = csv::Reader::from_path(path).unwrap();
-    let header = r.headers().unwrap().iter().map(str::to_string).collect();
-    let rows = r
-        .records()
-        .map(|rec| rec.unwrap().iter().map(str::to_string).collect())
-        .collect();
-    (header, rows)
-}
-
 /// Issue 37, item 5, the README's own example: `dial scenes/study_co2_ipda.toml --ensemble 3`.
 /// From 450 km the 2 km DIAL cells have an SNR far below 1 (random errors of 1e5 ppm), so one
 /// noisy measurement often has no positive signal and cannot be retrieved: that field is empty
@@ -591,7 +580,7 @@ fn the_readme_study_writes_no_nan_and_counts_its_noisy_profiles() {
         "--out".as_ref(),
         out.as_os_str(),
     ]);
-    let mut checked: Vec<String> = crate::output::assert_no_non_finite(&out)
+    let mut checked: Vec<String> = crate::util::assert_no_non_finite(&out)
         .iter()
         .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
         .collect();
@@ -728,7 +717,7 @@ fn the_humidity_step_is_bounded() {
         "{}",
         String::from_utf8_lossy(&o.stderr)
     );
-    crate::output::assert_no_non_finite(&out);
+    crate::util::assert_no_non_finite(&out);
     let (h, rows) = read_csv(&out.join("profiles.csv"));
     let c = h.iter().position(|x| x == "humidity_ppm").unwrap();
     for r in &rows {
@@ -857,7 +846,7 @@ fn a_study_whose_profiles_fail_says_so() {
         !rows.is_empty() && rows.iter().all(|r| r[c] == "1"),
         "{rows:?}"
     );
-    crate::output::assert_no_non_finite(&out);
+    crate::util::assert_no_non_finite(&out);
 
     let before = std::fs::read(out.join("summary.csv")).unwrap();
     let names = |d: &Path| {
@@ -919,7 +908,7 @@ fn a_monte_carlo_study_without_energy_in_a_window_writes_empty_fields() {
     };
     let out = d.join("study");
     dial(&["--no-plots"], &out);
-    crate::output::assert_no_non_finite(&out);
+    crate::util::assert_no_non_finite(&out);
     let (_, failed) = read_csv(&out.join("failed.csv"));
     assert!(failed.is_empty(), "{failed:?}");
     let (ph, profiles) = read_csv(&out.join("profiles.csv"));

@@ -41,6 +41,9 @@ mod retrieval;
 mod roundtrip;
 /// Scenes: parsing, validation and their documented errors.
 mod scene;
+/// The scene's three steps (issue 38): a description built in code checked like a file,
+/// written as TOML and read back, validated without reading a file.
+mod scene_lifecycle;
 /// Line selection for CO2 IPDA: sensitivities against hand-made finite differences, the CLI.
 mod select_lines;
 /// Sharded runs: `run --shard I/N` and `merge` against the single run; refused shard sets

@@ -1,4 +1,8 @@
-//! Shared test helpers.
+//! Shared test helpers: the one copy of what more than one test module needs. Paths (the
+//! project root, tests-only data under `../shared`, scene text with absolute paths, command-line
+//! arguments), running the binary (plain, requiring success, bounded in memory and time), reading
+//! CSV files, checking written outputs (CSV, JSON, NetCDF: finite, non-negative where they must
+//! be, nothing half-written), and rebuilding shard files (header, FNV-1a checksum).
 #![allow(dead_code)]
 
 use std::path::{Path, PathBuf};
@@ -366,4 +370,147 @@ pub fn non_finite_word(text: &str) -> Option<String> {
     text.split(|c: char| c.is_whitespace() || ",;:()[]{}|=\"'".contains(c))
         .find(|w| !w.is_empty() && non_finite_text(w))
         .map(str::to_string)
+}
+
+/// A path as a command-line argument.
+pub fn path_arg(p: &Path) -> String {
+    p.to_string_lossy().into_owned()
+}
+
+/// A shipped scene's text (`scenes/…` or any file under the project root) with its relative
+/// paths (`"../…"`: phase tables, line lists) made absolute, so that it can be written anywhere.
+pub fn absolute_paths(scene_text: &str) -> String {
+    scene_text.replace("\"../", &format!("\"{}/", project_root().display()))
+}
+
+/// The names of the entries of `dir` (not recursive), sorted.
+pub fn file_names(dir: &Path) -> Vec<String> {
+    let mut names: Vec<String> = std::fs::read_dir(dir)
+        .unwrap_or_else(|e| panic!("{}: {e}", dir.display()))
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    names
+}
+
+/// The records of a CSV file as lidarsim writes it (`#` comments, a header), by a standard
+/// parser: (header, rows).
+pub fn read_csv(path: &Path) -> (Vec<String>, Vec<Vec<String>>) {
+    let mut r = csv::ReaderBuilder::new()
+        .comment(Some(b'#'))
+        .from_path(path)
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let header = r.headers().unwrap().iter().map(String::from).collect();
+    let rows = r
+        .records()
+        .map(|rec| rec.unwrap().iter().map(String::from).collect())
+        .collect();
+    (header, rows)
+}
+
+// ---------------------------------------------------------------------------------------------
+// Shard files (README, "The shard file"), rebuilt by tests that damage them on purpose.
+
+/// Bytes before a shard's header: magic, format, header length.
+pub const SHARD_PREAMBLE: usize = 28;
+
+/// FNV-1a 64, the shard checksum, written here from its definition (an independent copy).
+pub fn fnv1a_64(bytes: &[u8]) -> u64 {
+    bytes.iter().fold(0xcbf2_9ce4_8422_2325, |h, b| {
+        (h ^ u64::from(*b)).wrapping_mul(0x0000_0100_0000_01b3)
+    })
+}
+
+/// A shard file with its checksum (the last 8 bytes) made right again.
+pub fn with_checksum(mut bytes: Vec<u8>) -> Vec<u8> {
+    if bytes.len() >= 8 {
+        let n = bytes.len() - 8;
+        let sum = fnv1a_64(&bytes[..n]);
+        bytes[n..].copy_from_slice(&sum.to_le_bytes());
+    }
+    bytes
+}
+
+/// The header of a shard file and where its body starts.
+pub fn shard_header(bytes: &[u8]) -> Option<(serde_json::Value, usize)> {
+    let len = u64::from_le_bytes(bytes.get(20..SHARD_PREAMBLE)?.try_into().ok()?) as usize;
+    let json = bytes.get(SHARD_PREAMBLE..SHARD_PREAMBLE.checked_add(len)?)?;
+    Some((serde_json::from_slice(json).ok()?, SHARD_PREAMBLE + len))
+}
+
+/// The shard with its header replaced by `h` and the checksum right (unchanged if it has no
+/// readable header).
+pub fn with_shard_header(bytes: &[u8], h: &serde_json::Value) -> Vec<u8> {
+    let Some((_, body)) = shard_header(bytes) else {
+        return bytes.to_vec();
+    };
+    let json = serde_json::to_vec(h).unwrap_or_default();
+    let mut out = bytes[..20].to_vec();
+    out.extend((json.len() as u64).to_le_bytes());
+    out.extend(&json);
+    out.extend(&bytes[body..]);
+    with_checksum(out)
+}
+
+/// No CSV or NetCDF file under `dir` (recursively) holds `NaN` or `inf`. Every
+/// field of every `*.csv` (parsed by the `csv` crate, `#` lines as comments) and every value of
+/// every variable and attribute of every `*.nc` (read by the `netcdf3` crate) is checked.
+/// Returns the files checked.
+pub fn assert_no_non_finite(dir: &Path) -> Vec<PathBuf> {
+    let mut checked = Vec::new();
+    for p in tree(dir).into_iter().map(|rel| dir.join(rel)) {
+        let ext = p.extension().and_then(|e| e.to_str()).unwrap_or("");
+        if ext == "csv" {
+            let mut r = csv::ReaderBuilder::new()
+                .has_headers(false)
+                .flexible(true)
+                .comment(Some(b'#'))
+                .from_path(&p)
+                .unwrap();
+            for (line, rec) in r.records().enumerate() {
+                let rec = rec.unwrap();
+                for field in rec.iter() {
+                    assert!(
+                        !non_finite_text(field),
+                        "{} record {}: `{field}` in {rec:?}",
+                        p.display(),
+                        line + 1
+                    );
+                }
+            }
+            checked.push(p);
+        } else if ext == "nc" {
+            let mut r = netcdf3::FileReader::open(&p).unwrap();
+            for (name, values) in r.read_all_vars().unwrap() {
+                if let Some(v) = values.get_f64() {
+                    assert!(
+                        v.iter().all(|x| x.is_finite()),
+                        "{}: variable {name} holds a non-finite value",
+                        p.display()
+                    );
+                }
+            }
+            let (ds, _) = r.close();
+            for a in ds.get_global_attrs() {
+                if let Some(v) = a.get_f64() {
+                    assert!(v.iter().all(|x| x.is_finite()), "{}", p.display());
+                }
+            }
+            for var in ds.get_vars() {
+                for a in var.get_attrs() {
+                    if let Some(v) = a.get_f64() {
+                        assert!(
+                            v.iter().all(|x| x.is_finite()),
+                            "{}: {}:{}",
+                            p.display(),
+                            var.name(),
+                            a.name()
+                        );
+                    }
+                }
+            }
+            checked.push(p);
+        }
+    }
+    checked
 }

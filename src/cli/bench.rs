@@ -1,6 +1,6 @@
 //! `lidarsim bench`: speed and Monte Carlo efficiency of the transport on a fixed workload, or
 //! (`--study N`) the speed of the seed paper's clear-sky ensemble study, or (`--scenes FILE…`)
-//! what skipping saves on whole scene runs (`lidarsim::skip::compare`).
+//! what skipping saves on whole scene runs (`lidarsim::pipeline::compare_skip`).
 //!
 //! The study workload is `scenes/study_co2_ipda.toml` (compiled in) run by `lidarsim dial` over
 //! N generated profiles per latitude class (3N in all), every one of its 10 on-lines against the
@@ -109,7 +109,7 @@ const FORCED_PHOTONS: u64 = 200_000;
 
 /// What skipping saves on whole scene runs (module docs).
 fn scenes_bench(args: &Args) -> anyhow::Result<()> {
-    use lidarsim::skip;
+    use lidarsim::pipeline::compare_skip;
     let mut out = std::io::stdout().lock();
     writeln!(
         out,
@@ -132,7 +132,7 @@ fn scenes_bench(args: &Args) -> anyhow::Result<()> {
         }
         for (name, scene) in &variants {
             for &threads in &args.threads {
-                let c = skip::compare(scene, FORCED_PHOTONS, threads, args.repeat)?;
+                let c = compare_skip(scene, FORCED_PHOTONS, threads, args.repeat)?;
                 let saved = c.forced_s - c.auto_s;
                 // Both run the Monte Carlo: their difference is only the noise of the machine.
                 let saved_text = if c.decision.run {

@@ -1,12 +1,14 @@
 //! The instrument and retrieval sections of a scene: `[laser]`, `[receiver]`, `[background]`,
-//! `[retrieval]`, validated into the instrument's and the retrieval's plain types.
+//! `[retrieval]`, checked and resolved into the instrument's and the retrieval's plain types
+//! (part of step 3, as they build on the instrument and retrieval modules).
 
-use std::path::Path;
 use std::sync::Arc;
 
-use super::file::{self, KeyPath, SceneFile};
+use super::description::{BackgroundDescription, RetrievalDescription, SceneDescription};
 use super::ranges::*;
-use super::{Atmosphere, Channel, GasAbsorption, Gates, Layer, Lidar, Surface, Validator};
+use super::resolve::Resolver;
+use super::source::KeyPath;
+use super::{Atmosphere, Channel, GasAbsorption, Gates, Layer, Lidar, Surface};
 use crate::input::{Bounds, InputError};
 use crate::instrument::detector::{self, Detector};
 use crate::instrument::laser::{Filter, Laser};
@@ -23,12 +25,25 @@ const DEFAULT_REALISATIONS: usize = 1000;
 /// Bandwidth stored when no white-noise term needs one \[Hz\] (it then enters no formula).
 const UNUSED_BANDWIDTH_HZ: f64 = 1e15;
 
-impl Validator<'_> {
+/// What the retrieval is checked against: the rest of the resolved scene.
+pub(super) struct Resolved<'a> {
+    pub lines: &'a [Channel],
+    pub lidar: &'a Lidar,
+    pub laser: &'a Laser,
+    pub gates: &'a Gates,
+    pub surface: Option<&'a Surface>,
+    pub layers: &'a [Layer],
+    pub atmosphere: Option<&'a Atmosphere>,
+    pub gas: Option<&'a GasAbsorption>,
+    pub has_receiver: bool,
+}
+
+impl Resolver<'_> {
     /// The laser: the `[laser]` section, or an ideal monochromatic laser with the lidar's pulse
     /// energy.
     pub(super) fn laser(
         &self,
-        raw: &SceneFile,
+        raw: &SceneDescription,
         lines: &[Channel],
         lidar_pulse_energy_j: Option<f64>,
     ) -> Result<Laser, InputError> {
@@ -87,7 +102,7 @@ impl Validator<'_> {
                         "`table` needs `line_shape_file` (relative to the scene)",
                     )
                 })?;
-                let p = self.path.parent().unwrap_or(Path::new(".")).join(f);
+                let p = self.base_dir.join(f);
                 LineShape::Table(
                     LineShapeTable::read(&p)
                         .map_err(|e| self.err(&file_at, format!("line-shape table: {e}")))?,
@@ -177,7 +192,7 @@ impl Validator<'_> {
     /// The `[receiver]` and `[background]` sections.
     pub(super) fn receiver(
         &self,
-        raw: &SceneFile,
+        raw: &SceneDescription,
         lines: &[Channel],
         surface_albedo: Option<f64>,
     ) -> Result<Option<Receiver>, InputError> {
@@ -292,7 +307,7 @@ impl Validator<'_> {
     /// L = ρ E_sun cos θ_sun / π (no atmospheric attenuation of the sunlight).
     fn background(
         &self,
-        b: &file::BackgroundFile,
+        b: &BackgroundDescription,
         surface_albedo: Option<f64>,
         filter_bandwidth_cm1: f64,
     ) -> Result<f64, InputError> {
@@ -343,20 +358,22 @@ impl Validator<'_> {
     }
 
     /// The `[retrieval]` section.
-    #[allow(clippy::too_many_arguments)]
     pub(super) fn retrieval(
         &self,
-        raw: &SceneFile,
-        lines: &[Channel],
-        lidar: &Lidar,
-        laser: &Laser,
-        gates: &Gates,
-        surface: Option<&Surface>,
-        layers: &[Layer],
-        atmosphere: Option<&Atmosphere>,
-        gas: Option<&GasAbsorption>,
-        has_receiver: bool,
+        raw: &SceneDescription,
+        scene: &Resolved,
     ) -> Result<Option<RetrievalConfig>, InputError> {
+        let Resolved {
+            lines,
+            lidar,
+            laser,
+            gates,
+            surface,
+            layers,
+            atmosphere,
+            gas,
+            has_receiver,
+        } = *scene;
         let Some(r) = &raw.retrieval else {
             return Ok(None);
         };
@@ -483,7 +500,7 @@ impl Validator<'_> {
     /// from the truth's: lines cut like the truth's, the truth's options otherwise.
     fn assumed_spectroscopy(
         &self,
-        r: &file::RetrievalFile,
+        r: &RetrievalDescription,
         g: &GasAbsorption,
     ) -> Result<Option<AssumedSpectroscopy>, InputError> {
         if r.lines.is_none() && r.line_shape.is_none() && r.line_mixing.is_none() {
@@ -501,7 +518,7 @@ impl Validator<'_> {
         }
         let lines = match &r.lines {
             Some(f) => {
-                let path = self.path.parent().unwrap_or(Path::new(".")).join(f);
+                let path = self.base_dir.join(f);
                 let (lo, hi) = g
                     .lines
                     .lines
@@ -539,7 +556,7 @@ impl Validator<'_> {
     /// The IPDA hard target: given, or the surface when it is in range.
     fn target(
         &self,
-        r: &file::RetrievalFile,
+        r: &RetrievalDescription,
         lidar: &Lidar,
         gates: &Gates,
         surface: Option<&Surface>,
@@ -652,7 +669,7 @@ impl Validator<'_> {
     /// Range cells of a range-resolved DIAL retrieval, if `dial_cell_m` is given.
     fn dial_cells(
         &self,
-        r: &file::RetrievalFile,
+        r: &RetrievalDescription,
         lidar: &Lidar,
         gates: &Gates,
         surface: Option<&Surface>,

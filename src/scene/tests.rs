@@ -1,1 +1,0 @@
-//! Unit tests of scene parsing (the documented errors are tested in tests/scene.rs).
