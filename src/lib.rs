@@ -24,8 +24,9 @@
 //! Beside the stages: [`input`] and [`limits`] check what a user gives, [`products`] makes
 //! every file and report of the commands from their in-memory results (`returns.csv`,
 //! `summary.json`, `run.nc`, the study tables), [`output`] writes a command's files whole or not
-//! at all, [`netcdf`] makes the CF NetCDF files, and [`benchmark`] holds the workloads and
-//! measurements of `lidarsim bench`.
+//! at all, [`netcdf`] makes the CF NetCDF files, [`benchmark`] holds the workloads and
+//! measurements of `lidarsim bench`, and [`digest`] is the one hash (FNV-1a 64) of cache keys,
+//! fingerprints and shard checksums.
 
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
@@ -37,6 +38,7 @@ pub mod aperture;
 pub mod atmosphere;
 pub mod benchmark;
 pub mod constants;
+pub mod digest;
 #[cfg(feature = "mpi")]
 pub mod distributed;
 pub mod input;

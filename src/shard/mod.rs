@@ -55,6 +55,7 @@ use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
+use crate::digest::Fnv;
 use crate::input::InputError;
 use crate::output::{self, OutputError, OutputSet};
 use crate::pipeline::{self, RunError, RunOutput};
@@ -359,31 +360,6 @@ fn list_paths(v: &[PathBuf]) -> String {
         s.push(format!("… {} more", v.len() - 8));
     }
     s.join(", ")
-}
-
-/// FNV-1a, 64 bit: the shard checksum and the scene digest. Stable across machines and Rust
-/// versions (std's `DefaultHasher` is not), and a change of any single byte changes it (each
-/// step is a bijection of the state).
-#[derive(Debug, Clone, Copy)]
-pub(crate) struct Fnv(pub(crate) u64);
-
-impl Fnv {
-    pub(crate) fn new() -> Self {
-        Fnv(0xcbf2_9ce4_8422_2325)
-    }
-
-    pub(crate) fn update(&mut self, bytes: &[u8]) {
-        for b in bytes {
-            self.0 = (self.0 ^ u64::from(*b)).wrapping_mul(0x0000_0100_0000_01b3);
-        }
-    }
-}
-
-impl fmt::Write for Fnv {
-    fn write_str(&mut self, s: &str) -> fmt::Result {
-        self.update(s.as_bytes());
-        Ok(())
-    }
 }
 
 /// The digest of a scene as parsed: FNV-1a 64 of its `Debug` text, which holds every value
