@@ -45,7 +45,7 @@ mod read;
 use read::check_time;
 pub use read::{parse_profile_set, read_profile_set};
 
-/// Latitude classes of the seed paper: high (|φ| > 50°), mid (30° ≤ |φ| ≤ 50°), tropical
+/// Latitude classes of the reference study: high (|φ| > 50°), mid (30° ≤ |φ| ≤ 50°), tropical
 /// (|φ| < 30°).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub enum LatitudeClass {

@@ -5,7 +5,7 @@
 //!   view. The figure of merit is FOM = 1/(rel_err² · t) of the multiple-scattering return
 //!   (orders ≥ 2) in the gate starting 100 m into the cloud (1100–1110 m), t the wall-clock
 //!   time of the transport at the given thread count.
-//! - [`study`]: the speed of the seed paper's clear-sky ensemble study:
+//! - [`study`]: the speed of the reference study's clear-sky ensemble study:
 //!   `scenes/study_co2_ipda.toml` (compiled in) run by `lidarsim dial` over N generated profiles
 //!   per latitude class (3N in all), every one of its 10 on-lines against the off-line, IPDA and
 //!   DIAL, with the whole error budget, analytic lidar equation.

@@ -1,5 +1,5 @@
 //! `lidarsim bench`: speed and Monte Carlo efficiency of the transport on a fixed workload, or
-//! (`--study N`) the speed of the seed paper's clear-sky ensemble study, or (`--scenes FILE…`)
+//! (`--study N`) the speed of the reference study's clear-sky ensemble study, or (`--scenes FILE…`)
 //! what skipping saves on whole scene runs, or (`--depth DIR`) the figure of merit of C.1's
 //! multiple scattering at every gate and field of view. The workloads and measurements are
 //! [`lidarsim::benchmark`]'s; this prints them and draws.

@@ -2,7 +2,7 @@
 //! surface pressure and humidity errors, and its random error, for candidate on-line positions
 //! (method: `lidarsim::study::select`, docs/retrieval.md; the study's set-up:
 //! `lidarsim::study::select_study`). Writes `DIR/sensitivities.csv`, `DIR/sensitivities.nc` and,
-//! unless `--no-plots`, per atmosphere `transmission_<atm>.png` (Figure 4 of the seed paper) and
+//! unless `--no-plots`, per atmosphere `transmission_<atm>.png` (Figure 4 of the reference study) and
 //! `errors_<atm>.png` (Figure 5); with `--shard I/N` only the shard file of a slice of the
 //! profiles (`lidarsim::study::select_shard`), which `lidarsim merge` puts together.
 

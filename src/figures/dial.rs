@@ -1,5 +1,5 @@
 //! Figures of `lidarsim dial`: the ensemble's spread (`ensemble.png`), the IPDA errors per
-//! class (`errors.png`) and the error budget per line pair (`budget.png`, the seed paper's
+//! class (`errors.png`) and the error budget per line pair (`budget.png`, the reference study's
 //! Figure 5 in kind).
 
 use std::path::Path;

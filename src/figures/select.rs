@@ -1,5 +1,5 @@
 //! Figures of `lidarsim select-lines`, per group (an AFGL atmosphere or a latitude class):
-//! `transmission_<group>.png` (Figure 4 of the seed paper) and `errors_<group>.png` (Figure 5).
+//! `transmission_<group>.png` (Figure 4 of the reference study) and `errors_<group>.png` (Figure 5).
 
 use std::path::Path;
 

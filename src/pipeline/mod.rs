@@ -1,4 +1,4 @@
-//! A scene from end to end: the stages of DESIGN §1 in order, the one path every command takes.
+//! A scene from end to end: the stages of docs/design.md §1 in order, the one path every command takes.
 //!
 //! [`prepare`] (optics → analytic lidar equation → retrieval set-up and the analytic
 //! retrievals, so that a retrieval that cannot be done fails before any photon is traced → the

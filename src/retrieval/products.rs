@@ -7,19 +7,19 @@
 //!   DAOD = ½ ln(P_off E_on / (P_on E_off)); the dry-air column mixing ratio X = s·X_ref with
 //!   D(s) = DAOD (the weighting-function form X = DAOD/IWF for a monochromatic laser;
 //!   [`super::reference`]); and the slant column N = (DAOD − D_other)/(σ_on − σ_off) with the
-//!   virtual cross-sections σ = −ln T_gas/(2N_ref) of the reference state (the seed paper),
+//!   virtual cross-sections σ = −ln T_gas/(2N_ref) of the reference state (the reference study),
 //!   D_other the other gases' DAOD in the reference state.
 //! * **DIAL** per range cell between gate centres r_a < r_b:
 //!   ΔD = ½ ln(P_off(r_b) P_on(r_a) / (P_on(r_b) P_off(r_a))), the cell's gas scaled by s so
 //!   that the reference's D(r_b) − D(r_a) equals it; n = s·n_ref and x = s·x_ref. For a
-//!   monochromatic laser n = ΔD/(Δσ Δr) (DESIGN §3, n = dN/dz).
+//!   monochromatic laser n = ΔD/(Δσ Δr) (docs/design.md §3, n = dN/dz).
 //!
 //! Errors, each converted to the product through dD/ds of the reference state:
 //! * Monte Carlo: the delta method on the on/off returns with their covariance (shared photon
 //!   paths), var ΔD = ¼ Σ_gates [σ²_on/P²_on + σ²_off/P²_off − 2 cov/(P_on P_off)], gates taken
 //!   as independent;
-//! * random, analytic, per shot pair: var D = ¼ Σ_lines [SNR⁻² + ε_M² + (σ_j S/P)²] (DESIGN
-//!   §3 with the energy monitor and the frequency jitter added; the jitter of one shot is common
+//! * random, analytic, per shot pair: var D = ¼ Σ_lines [SNR⁻² + ε_M² + (σ_j S/P)²]
+//!   (`docs/design.md` §3 with the energy monitor and the frequency jitter added; the jitter of one shot is common
 //!   to both ends of a DIAL cell, so there it enters as σ_j (S_b/P_b − S_a/P_a)); divided by
 //!   √N after averaging N shot pairs;
 //! * random, simulated: the standard deviation of the retrievals of `realisations` noisy

@@ -1,7 +1,7 @@
 //! Scenes: the description of a lidar, its channels, range gates, atmosphere, particle layers,
 //! surface and simulation settings, and the resolved [`Scene`] the stages use.
 //!
-//! **contract** (DESIGN §4): units in every key name, full angles where a cone is meant, every
+//! **contract** (docs/design.md §4): units in every key name, full angles where a cone is meant, every
 //! unknown key rejected with the file, line and key named. The key reference is in README.md;
 //! the files in `scenes/` are worked examples.
 //!
@@ -338,7 +338,7 @@ pub struct Simulation {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum MultipleScattering {
     /// Skip the Monte Carlo when it cannot change the answer: no particle layer scatters and
-    /// the bound on molecular multiple scattering (`lidar_eq::molecular_multiple_scattering_bound`)
+    /// the bound on all orders ≥ 2 ([`crate::lidar_eq::multiple_scattering_bound`])
     /// is below the tolerance in every field of view and channel.
     #[default]
     Auto,

@@ -1,6 +1,6 @@
 //! Absorption cross-sections line by line (HITRAN conventions, as HAPI uses them).
 //!
-//! For each line of the chosen molecule (DESIGN §3; Rothman et al. 1998, JQSRT 60, 665, App.;
+//! For each line of the chosen molecule (docs/design.md §3; Rothman et al. 1998, JQSRT 60, 665, App.;
 //! HAPI: Kochanov et al. 2016, JQSRT 177, 15):
 //!
 //! ```text

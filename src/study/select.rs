@@ -29,7 +29,7 @@
 //!   "shift" is [`shift_member`], which re-levels hydrostatically; both sides are always shifted
 //!   profiles, never a shifted one against the original (see its docs);
 //! * the two-way gas transmission of the on-line, T² = exp(−2 τ(ν_on));
-//! * with a [`NoiseModel`], the random error of an averaged measurement (DESIGN §3),
+//! * with a [`NoiseModel`], the random error of an averaged measurement (docs/design.md §3),
 //!   δX = X/(2D) · sqrt(Σ_ℓ [SNR_ℓ⁻² + ε_M² + (σ_j ∂ln E_ℓ/∂ν)²]) / √N over ℓ ∈ {on, off}, the
 //!   form of [`crate::retrieval::products`] for a hard target.
 //!
@@ -131,7 +131,7 @@ fn invalid(name: &'static str, value: impl ToString, reason: impl Into<String>) 
 /// One line of the CO2 30012←00001 band (626) found in a line list.
 #[derive(Debug, Clone, PartialEq)]
 pub struct BandLine {
-    /// Label as the seed paper writes it: branch, J″ and symmetry, e.g. `R16e`.
+    /// Label as the reference study writes it: branch, J″ and symmetry, e.g. `R16e`.
     pub label: String,
     /// J″.
     pub j_lower: u32,
@@ -403,7 +403,7 @@ impl NoiseModel {
         })
     }
 
-    /// SNR of one pulse's surface echo (hard-target lidar equation, DESIGN §3:
+    /// SNR of one pulse's surface echo (hard-target lidar equation, docs/design.md §3:
     /// E = E₀ η A/R² (ρ/π) T², T² the two-way transmission) through the detector
     /// ([`Detector::gate`]).
     pub fn snr(
@@ -424,7 +424,7 @@ impl NoiseModel {
     }
 }
 
-/// A fine spectrum of the two-way transmission around a line (Figure 4 of the seed paper).
+/// A fine spectrum of the two-way transmission around a line (Figure 4 of the reference study).
 #[derive(Debug, Clone, PartialEq)]
 pub struct SpectrumWindow {
     /// The line's label.

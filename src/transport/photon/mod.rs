@@ -1,7 +1,7 @@
 //! One photon packet's life, read from top to bottom:
 //! emit → (range check → flight → surface or collision → local estimate → roulette → scatter)*.
 //!
-//! Method (DESIGN §2; `docs/transport.md` has the derivations, by step):
+//! Method (docs/design.md §2; `docs/transport.md` has the derivations, by step):
 //! * Free paths are sampled on the scattering coefficient of channel 0 when all channels
 //!   scatter alike (one scattering class, `super::scatter_classes`); all absorption, and any
 //!   small difference in scattering between channels, rides in per-channel weights (ALIS,
