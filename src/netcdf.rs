@@ -533,6 +533,18 @@ fn product_variables(nc: &mut Builder, q: Quantity, rows: &[&Product], gas: Opti
     let dim = format!("{p}_product");
     nc.dim(&dim, rows.len());
     let name = |column: &str| format!("{p}_{column}");
+    let coordinates = product_coordinates(nc, &dim, rows, &name);
+    product_values(nc, q, &dim, rows, gas, &name, &coordinates);
+}
+
+/// The coordinates of a table of products: which retrieval, from which returns, where; their
+/// variable names.
+fn product_coordinates(
+    nc: &mut Builder,
+    dim: &str,
+    rows: &[&Product],
+    name: &dyn Fn(&str) -> String,
+) -> Vec<String> {
     let texts: [(&str, &str, Getter<String>); 4] = [
         (
             "method",
@@ -554,7 +566,7 @@ fn product_variables(nc: &mut Builder, q: Quantity, rows: &[&Product], gas: Opti
     let mut coordinates = Vec::new();
     for (column, long_name, get) in texts {
         let values: Vec<String> = rows.iter().map(|r| get(r)).collect();
-        nc.text(&name(column), &dim, &values)
+        nc.text(&name(column), dim, &values)
             .attrs([("long_name", long_name)]);
         coordinates.push(name(column));
     }
@@ -591,15 +603,24 @@ fn product_variables(nc: &mut Builder, q: Quantity, rows: &[&Product], gas: Opti
         ),
     ];
     for (column, long_name, units, get) in geometry {
-        nc.f64(
-            &name(column),
-            &[&dim],
-            rows.iter().map(|r| get(r)).collect(),
-        )
-        .attrs([("long_name", long_name), ("units", units)])
-        .fill();
+        nc.f64(&name(column), &[dim], rows.iter().map(|r| get(r)).collect())
+            .attrs([("long_name", long_name), ("units", units)])
+            .fill();
         coordinates.push(name(column));
     }
+    coordinates
+}
+
+/// The values of a table of products, in the quantity's unit, with their coordinates.
+fn product_values(
+    nc: &mut Builder,
+    q: Quantity,
+    dim: &str,
+    rows: &[&Product],
+    gas: Option<&str>,
+    name: &dyn Fn(&str) -> String,
+    coordinates: &[String],
+) {
     let (units, unit_text) = match q {
         // UDUNITS reads "1e-6" as parts per million; "ppm" is not in every UDUNITS database.
         Quantity::MixingRatio => ("1e-6", "dry-air mole fraction in ppm"),
@@ -667,11 +688,7 @@ fn product_variables(nc: &mut Builder, q: Quantity, rows: &[&Product], gas: Opti
     );
     for (column, long_name, get) in values {
         let v = nc
-            .f64(
-                &name(column),
-                &[&dim],
-                rows.iter().map(|r| get(r)).collect(),
-            )
+            .f64(&name(column), &[dim], rows.iter().map(|r| get(r)).collect())
             .attrs([
                 ("long_name", format!("{long_name} ({unit_text})").as_str()),
                 ("units", units),
@@ -687,7 +704,7 @@ fn product_variables(nc: &mut Builder, q: Quantity, rows: &[&Product], gas: Opti
     }
     nc.f64(
         &name("shots_averaged"),
-        &[&dim],
+        &[dim],
         rows.iter().map(|r| r.shots_averaged as f64).collect(),
     )
     .attrs([
