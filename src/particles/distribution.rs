@@ -60,14 +60,14 @@ use super::mie::MieError;
 mod bulk;
 mod fingerprint;
 mod integrate;
+mod options;
 mod work;
 
-pub use bulk::{
-    BulkOptics, BulkOptions, Component, ModeConvergence, bulk_optics, bulk_optics_mixture,
-    default_angle_grid,
-};
+pub use bulk::{bulk_optics, bulk_optics_mixture};
 pub use fingerprint::{fingerprint, fingerprint_hash, format_refractive_index};
-pub use integrate::MIN_INDEX_CONTRAST;
+pub use options::{
+    BulkOptics, BulkOptions, Component, MIN_INDEX_CONTRAST, ModeConvergence, default_angle_grid,
+};
 pub use work::{MieWork, mie_work, mie_work_of};
 
 fn param(name: &'static str, value: f64, reason: &'static str) -> MieError {

@@ -2,7 +2,7 @@
 
 use num_complex::Complex64;
 
-use super::bulk::{BulkOptions, Component};
+use super::options::{BulkOptions, Component};
 
 /// Format a complex refractive index as `1.3205+1.28e-6i` (the CLI's syntax).
 pub fn format_refractive_index(m: Complex64) -> String {

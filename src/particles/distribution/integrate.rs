@@ -7,7 +7,7 @@ use nalgebra::DMatrix;
 use num_complex::Complex64;
 use rayon::prelude::*;
 
-use super::bulk::{BulkOptions, ModeConvergence};
+use super::options::{BulkOptions, ModeConvergence};
 use super::{SizeDistribution, param};
 use crate::particles::mie::{MieCoefficients, MieError, four_s_from_s_pm};
 
@@ -116,12 +116,6 @@ pub(super) fn max_intervals(x_lo: f64, x_hi: f64, opts: &BulkOptions) -> usize {
     }
     intervals
 }
-
-/// Least index contrast |m − 1| a size integration accepts: the cross-sections scale as |m − 1|²
-/// (Rayleigh–Gans) and are rounding noise near |m − 1| = 10⁻¹⁵ (C.1-like drops at 532 nm: 25 %
-/// off the |m − 1|² scaling there, none at 10⁻⁷); at m = 1 Cback is 0 and the lidar ratio has no
-/// value. 10⁻⁶ keeps a wide margin and is below any particle in the atmosphere.
-pub const MIN_INDEX_CONTRAST: f64 = 1e-6;
 
 /// Efficiency below which the size integration's convergence is absolute (see
 /// [`integrate_mode`]): 10⁻¹² is far below any efficiency that matters next to the geometric

@@ -3,9 +3,9 @@
 
 use std::f64::consts::PI;
 
-use super::bulk::{BulkOptions, Component, check_inputs, default_angle_grid};
 use super::fingerprint::fingerprint;
 use super::integrate::{max_intervals, mode_range_um};
+use super::options::{BulkOptions, Component, check_inputs, default_angle_grid};
 use crate::particles::mie::{MieError, n_terms};
 
 /// The cost of Mie size integrations, bounded before any of them is done (README, "Limits").
