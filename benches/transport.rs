@@ -12,7 +12,7 @@ use lidarsim::optics::OpticalAtmosphere;
 use lidarsim::particles::builtin_table;
 use lidarsim::particles::phase::{HenyeyGreenstein, PhaseFunction, RayleighPhase, TabulatedPhase};
 use lidarsim::scene::Scene;
-use lidarsim::transport::{self, TransportOptions};
+use lidarsim::transport::{self, TallyLayout};
 use rand::{RngExt, SeedableRng};
 use rand_xoshiro::Xoshiro256PlusPlus;
 
@@ -79,13 +79,11 @@ fn whole_scene(c: &mut Criterion) {
     let photons = 20_000u64;
     g.throughput(Throughput::Elements(photons));
     for threads in [1, 2] {
+        let mut s = scene.clone();
+        s.simulation.photons = photons;
+        s.simulation.threads = threads;
         g.bench_function(format!("c1_1mrad_20k_photons/threads={threads}"), |b| {
-            b.iter(|| {
-                let mut o = TransportOptions::from_scene(&scene);
-                o.photons = photons;
-                o.threads = threads;
-                transport::run(&scene, &atm, &o).unwrap()
-            })
+            b.iter(|| transport::run(&s, &atm, &TallyLayout::default()).unwrap())
         });
     }
     g.finish();

@@ -1,6 +1,6 @@
 //! One run spread over MPI ranks (feature `mpi`): `mpirun -np K lidarsim run SCENE --out DIR`.
 //!
-//! Consumes a validated [`Scene`] and its [`TransportOptions`], read alike by every rank;
+//! Consumes a resolved [`Scene`] (its settings in `scene.simulation`), read alike by every rank;
 //! produces on rank 0 the [`RunOutput`] a single process would produce, and nothing elsewhere.
 //!
 //! Every rank prepares the same run ([`pipeline::prepare`]) and builds the same transport plan
@@ -34,9 +34,7 @@ use thiserror::Error;
 
 use crate::pipeline::{self, RunError, RunOutput};
 use crate::scene::Scene;
-use crate::transport::{
-    BatchTally, Flux, McResult, Plan, RunStats, TransportError, TransportOptions,
-};
+use crate::transport::{BatchTally, Flux, McResult, Plan, RunStats, TransportError};
 
 /// Exit status of a rank aborted by a failure during the exchange (input problems are refused
 /// before it, with the command line's usual status 2).
@@ -76,22 +74,16 @@ pub enum DistributedError {
 /// ranks trace their share of the batches. A process started without `mpirun` is one rank and
 /// does everything. MPI is initialised here and finalised before returning, so it can be used
 /// once per process.
-pub fn run(scene: &Scene, transport: &TransportOptions) -> Result<Outcome, DistributedError> {
+pub fn run(scene: &Scene) -> Result<Outcome, DistributedError> {
     // Only the main thread calls MPI; rayon's workers only trace.
     let (universe, _) =
         mpi::initialize_with_threading(Threading::Funneled).ok_or(DistributedError::Init)?;
     let world = universe.world();
     let size = world.size() as usize;
     let outcome = if world.rank() == 0 {
-        root(&world, size, scene, transport).map(Outcome::Root)
+        root(&world, size, scene).map(Outcome::Root)
     } else {
-        Ok(worker(
-            &world,
-            world.rank() as usize,
-            size,
-            scene,
-            transport,
-        ))
+        Ok(worker(&world, world.rank() as usize, size, scene))
     };
     // `universe` is dropped here: MPI_Finalize on every rank, after the last message.
     outcome
@@ -102,9 +94,8 @@ fn root(
     world: &SimpleCommunicator,
     size: usize,
     scene: &Scene,
-    transport: &TransportOptions,
 ) -> Result<RunOutput, DistributedError> {
-    let prepared = match pipeline::prepare(scene, transport) {
+    let prepared = match pipeline::prepare(scene) {
         Ok(p) => p,
         Err(e) => return stop_before_exchange(world, e),
     };
@@ -122,9 +113,13 @@ fn root(
             Err(failures) => Err(DistributedError::Ranks(report(&failures))),
         };
     };
-    let pool = thread_pool(transport.threads);
+    let pool = thread_pool(scene.simulation.threads);
     let mine = match &pool {
-        Ok(p) => Ok(Digest::of(&plan, transport.seed, p.current_num_threads())),
+        Ok(p) => Ok(Digest::of(
+            &plan,
+            scene.simulation.seed,
+            p.current_num_threads(),
+        )),
         Err(e) => Err(e.to_string()),
     };
     let total_threads =
@@ -161,14 +156,8 @@ fn stop_before_exchange(
 
 /// Ranks 1…K−1: prepare the same run, agree on its plan, trace this rank's batches and send
 /// them.
-fn worker(
-    world: &SimpleCommunicator,
-    rank: usize,
-    size: usize,
-    scene: &Scene,
-    transport: &TransportOptions,
-) -> Outcome {
-    let prepared = pipeline::prepare(scene, transport).map_err(|e| e.to_string());
+fn worker(world: &SimpleCommunicator, rank: usize, size: usize, scene: &Scene) -> Outcome {
+    let prepared = pipeline::prepare(scene).map_err(|e| e.to_string());
     let plan = prepared
         .as_ref()
         .map_err(Clone::clone)
@@ -184,9 +173,13 @@ fn worker(
         Ok(Some(plan)) => Ok(plan),
         Err(e) => Err(e),
     };
-    let pool = thread_pool(transport.threads).map_err(|e| e.to_string());
+    let pool = thread_pool(scene.simulation.threads).map_err(|e| e.to_string());
     let mine = match (&plan, &pool) {
-        (Ok(plan), Ok(pool)) => Ok(Digest::of(plan, transport.seed, pool.current_num_threads())),
+        (Ok(plan), Ok(pool)) => Ok(Digest::of(
+            plan,
+            scene.simulation.seed,
+            pool.current_num_threads(),
+        )),
         (Err(e), _) | (_, Err(e)) => Err(e.clone()),
     };
     if agree(world, rank, &mine).is_err() {

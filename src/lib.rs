@@ -21,8 +21,12 @@
 //! | batches traced elsewhere | [`shard`], `distributed` (feature `mpi`) | shard files, merged runs |
 //! | ensemble studies | [`study`] | `dial` and `select-lines` results |
 //!
-//! Beside the stages: [`input`] and [`limits`] check what a user gives, [`output`] writes a
-//! command's files whole or not at all, and [`netcdf`] makes the CF NetCDF files.
+//! Beside the stages: [`input`] and [`limits`] check what a user gives, [`products`] makes
+//! every file and report of the commands from their in-memory results (`returns.csv`,
+//! `summary.json`, `run.nc`, the study tables), [`output`] writes a command's files whole or not
+//! at all, [`netcdf`] makes the CF NetCDF files, [`benchmark`] holds the workloads and
+//! measurements of `lidarsim bench`, and [`digest`] is the one hash (FNV-1a 64) of cache keys,
+//! fingerprints and shard checksums.
 
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
@@ -32,7 +36,9 @@
 
 pub mod aperture;
 pub mod atmosphere;
+pub mod benchmark;
 pub mod constants;
+pub mod digest;
 #[cfg(feature = "mpi")]
 pub mod distributed;
 pub mod input;
@@ -44,6 +50,7 @@ pub mod optics;
 pub mod output;
 pub mod particles;
 pub mod pipeline;
+pub mod products;
 pub mod retrieval;
 pub mod returns;
 pub mod rng;

@@ -1,7 +1,7 @@
 //! The analytic single-scatter lidar equation for any scene, in the layout of the Monte Carlo
 //! returns (order 1).
 //!
-//! Energy received from gate [r₁, r₂] for pulse energy E₀ (DESIGN §3; Measures 1984, Eq. 7.7):
+//! Energy received from gate [r₁, r₂] for pulse energy E₀ (docs/design.md §3; Measures 1984, Eq. 7.7):
 //!
 //! E = E₀ η A_tel O ∫_{r₁}^{r₂} β(r) e^{−2τ(r)} / r² dr,
 //! β = Σᵢ σ_s,i Pᵢ(180°)/(4π),

@@ -1,11 +1,14 @@
 //! The `lidarsim` command line: parses arguments, dispatches to a subcommand, maps errors to an
-//! exit code (0 success, 2 error). Each subcommand lives in its own file under `src/cli/`.
+//! exit code (0 success, 2 error). Each subcommand lives in its own file under `src/cli/`, which
+//! calls the library (its products in `lidarsim::products`) and prints; the figures it draws
+//! are in `src/figures/`, one file per command.
 
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
 mod cli;
+mod figures;
 
 /// Simulation testbed for atmospheric lidars (DIAL, IPDA): line-by-line gas absorption, Mie and
 /// Rayleigh scattering, time-resolved Monte Carlo transport and the analytic lidar equation.
@@ -64,6 +67,10 @@ fn main() -> ExitCode {
         // A closed pipe (`lidarsim run | head`) is not an error (as in ripgrep).
         Err(e)
             if e.downcast_ref::<std::io::Error>()
+                .or(match e.downcast_ref::<lidarsim::products::ProductError>() {
+                    Some(lidarsim::products::ProductError::Io(io)) => Some(io),
+                    _ => None,
+                })
                 .is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe) =>
         {
             ExitCode::SUCCESS

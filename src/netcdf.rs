@@ -30,12 +30,8 @@
 //! quantity (its unit differs: ppm, m⁻², m⁻³), with a dimension `<quantity>_product` and the
 //! columns of `retrieval.csv` as `<quantity>_<column>` variables, rows in the CSV's order.
 
-use std::cell::RefCell;
-use std::io::{Cursor, Seek, SeekFrom, Write};
-use std::rc::Rc;
 use std::time::{SystemTime, UNIX_EPOCH};
 
-use netcdf3::{DataSet, FileWriter, NC_FILL_F64, Version};
 use thiserror::Error;
 
 use crate::instrument::laser::Line;
@@ -208,6 +204,20 @@ pub fn table_file(
         }
     }
     nc.finish()
+}
+
+/// The CF `history` attribute of a NetCDF file written now by `command` (the command line,
+/// `args_os`, so that a path that is not UTF-8 does not panic): the UTC time and the command.
+pub fn history(command: impl IntoIterator<Item = std::ffi::OsString>) -> String {
+    let command: Vec<String> = command
+        .into_iter()
+        .map(|a| a.to_string_lossy().into_owned())
+        .collect();
+    format!(
+        "{}: {}",
+        utc_timestamp(SystemTime::now()),
+        command.join(" ")
+    )
 }
 
 /// `t` as an ISO 8601 UTC time to the second (`2026-11-23T20:30:03Z`), for `history`.
@@ -523,6 +533,18 @@ fn product_variables(nc: &mut Builder, q: Quantity, rows: &[&Product], gas: Opti
     let dim = format!("{p}_product");
     nc.dim(&dim, rows.len());
     let name = |column: &str| format!("{p}_{column}");
+    let coordinates = product_coordinates(nc, &dim, rows, &name);
+    product_values(nc, q, &dim, rows, gas, &name, &coordinates);
+}
+
+/// The coordinates of a table of products: which retrieval, from which returns, where; their
+/// variable names.
+fn product_coordinates(
+    nc: &mut Builder,
+    dim: &str,
+    rows: &[&Product],
+    name: &dyn Fn(&str) -> String,
+) -> Vec<String> {
     let texts: [(&str, &str, Getter<String>); 4] = [
         (
             "method",
@@ -544,7 +566,7 @@ fn product_variables(nc: &mut Builder, q: Quantity, rows: &[&Product], gas: Opti
     let mut coordinates = Vec::new();
     for (column, long_name, get) in texts {
         let values: Vec<String> = rows.iter().map(|r| get(r)).collect();
-        nc.text(&name(column), &dim, &values)
+        nc.text(&name(column), dim, &values)
             .attrs([("long_name", long_name)]);
         coordinates.push(name(column));
     }
@@ -581,15 +603,24 @@ fn product_variables(nc: &mut Builder, q: Quantity, rows: &[&Product], gas: Opti
         ),
     ];
     for (column, long_name, units, get) in geometry {
-        nc.f64(
-            &name(column),
-            &[&dim],
-            rows.iter().map(|r| get(r)).collect(),
-        )
-        .attrs([("long_name", long_name), ("units", units)])
-        .fill();
+        nc.f64(&name(column), &[dim], rows.iter().map(|r| get(r)).collect())
+            .attrs([("long_name", long_name), ("units", units)])
+            .fill();
         coordinates.push(name(column));
     }
+    coordinates
+}
+
+/// The values of a table of products, in the quantity's unit, with their coordinates.
+fn product_values(
+    nc: &mut Builder,
+    q: Quantity,
+    dim: &str,
+    rows: &[&Product],
+    gas: Option<&str>,
+    name: &dyn Fn(&str) -> String,
+    coordinates: &[String],
+) {
     let (units, unit_text) = match q {
         // UDUNITS reads "1e-6" as parts per million; "ppm" is not in every UDUNITS database.
         Quantity::MixingRatio => ("1e-6", "dry-air mole fraction in ppm"),
@@ -657,11 +688,7 @@ fn product_variables(nc: &mut Builder, q: Quantity, rows: &[&Product], gas: Opti
     );
     for (column, long_name, get) in values {
         let v = nc
-            .f64(
-                &name(column),
-                &[&dim],
-                rows.iter().map(|r| get(r)).collect(),
-            )
+            .f64(&name(column), &[dim], rows.iter().map(|r| get(r)).collect())
             .attrs([
                 ("long_name", format!("{long_name} ({unit_text})").as_str()),
                 ("units", units),
@@ -677,7 +704,7 @@ fn product_variables(nc: &mut Builder, q: Quantity, rows: &[&Product], gas: Opti
     }
     nc.f64(
         &name("shots_averaged"),
-        &[&dim],
+        &[dim],
         rows.iter().map(|r| r.shots_averaged as f64).collect(),
     )
     .attrs([
@@ -686,195 +713,8 @@ fn product_variables(nc: &mut Builder, q: Quantity, rows: &[&Product], gas: Opti
     ]);
 }
 
-// ---------------------------------------------------------------------------------------------
-// A small builder over the `netcdf3` crate: collect everything, then define and write at once
-
-/// An attribute value.
-#[derive(Debug, Clone)]
-enum Attr {
-    Text(String),
-    F64(Vec<f64>),
-}
-
-impl Attr {
-    fn text(s: impl Into<String>) -> Attr {
-        Attr::Text(s.into())
-    }
-}
-
-#[derive(Debug)]
-enum Values {
-    F64(Vec<f64>),
-    /// Char array, row-major, each row NUL-padded to the last dimension's length.
-    Char(Vec<u8>),
-}
-
-#[derive(Debug)]
-struct Var {
-    name: String,
-    dims: Vec<String>,
-    values: Values,
-    attrs: Vec<(String, Attr)>,
-}
-
-impl Var {
-    fn attrs<const N: usize>(&mut self, attrs: [(&str, &str); N]) -> &mut Var {
-        for (k, v) in attrs {
-            self.attrs.push((k.into(), Attr::text(v)));
-        }
-        self
-    }
-
-    /// Mark non-finite values as missing: they become `_FillValue` (NetCDF's default fill
-    /// for doubles, so that a reader that ignores the attribute still sees the same number).
-    fn fill(&mut self) -> &mut Var {
-        if let Values::F64(v) = &mut self.values {
-            for x in v.iter_mut().filter(|x| !x.is_finite()) {
-                *x = NC_FILL_F64;
-            }
-        }
-        self.attrs
-            .push(("_FillValue".into(), Attr::F64(vec![NC_FILL_F64])));
-        self
-    }
-}
-
-#[derive(Debug, Default)]
-struct Builder {
-    dims: Vec<(String, usize)>,
-    vars: Vec<Var>,
-    globals: Vec<(String, Attr)>,
-}
-
-impl Builder {
-    fn dim(&mut self, name: &str, len: usize) {
-        self.dims.push((name.into(), len));
-    }
-
-    fn global(&mut self, name: &str, value: Attr) {
-        self.globals.push((name.into(), value));
-    }
-
-    fn f64(&mut self, name: &str, dims: &[&str], values: Vec<f64>) -> &mut Var {
-        self.vars.push(Var {
-            name: name.into(),
-            dims: dims.iter().map(|d| d.to_string()).collect(),
-            values: Values::F64(values),
-            attrs: Vec::new(),
-        });
-        let n = self.vars.len() - 1;
-        &mut self.vars[n]
-    }
-
-    /// A text variable over `dim`: a char array (`dim`, `<name>_strlen`) as CF-1.8 §2.2 has
-    /// it, with `_Encoding = "utf-8"` so that netCDF4-python and xarray read strings.
-    fn text(&mut self, name: &str, dim: &str, values: &[String]) -> &mut Var {
-        let strlen = values.iter().map(String::len).max().unwrap_or(0).max(1);
-        let strlen_dim = format!("{name}_strlen");
-        self.dim(&strlen_dim, strlen);
-        let mut chars = vec![0u8; values.len() * strlen];
-        for (row, v) in chars.chunks_mut(strlen).zip(values) {
-            row[..v.len()].copy_from_slice(v.as_bytes());
-        }
-        self.vars.push(Var {
-            name: name.into(),
-            dims: vec![dim.into(), strlen_dim],
-            values: Values::Char(chars),
-            attrs: vec![("_Encoding".into(), Attr::text("utf-8"))],
-        });
-        let n = self.vars.len() - 1;
-        &mut self.vars[n]
-    }
-
-    /// Define the data set, write header and values into memory, and return the bytes. A
-    /// non-finite number where it cannot be `_FillValue` (a variable without one, an
-    /// attribute) is refused: it would be `NaN` or `inf` in the file.
-    fn finish(self) -> Result<Vec<u8>, NetcdfError> {
-        let err = |e: &dyn std::fmt::Debug| NetcdfError::Format(format!("{e:?}"));
-        let non_finite = |what: String| {
-            NetcdfError::Layout(format!(
-                "{what} holds a value that is not finite and cannot be _FillValue (a bug in lidarsim; please report it)"
-            ))
-        };
-        for (name, a) in &self.globals {
-            if matches!(a, Attr::F64(v) if v.iter().any(|x| !x.is_finite())) {
-                return Err(non_finite(format!("the global attribute `{name}`")));
-            }
-        }
-        for v in &self.vars {
-            for (name, a) in &v.attrs {
-                if matches!(a, Attr::F64(x) if x.iter().any(|x| !x.is_finite())) {
-                    return Err(non_finite(format!("the attribute `{}:{name}`", v.name)));
-                }
-            }
-            if let Values::F64(x) = &v.values
-                && x.iter().any(|x| !x.is_finite())
-            {
-                return Err(non_finite(format!("the variable `{}`", v.name)));
-            }
-        }
-        let mut ds = DataSet::new();
-        for (name, len) in &self.dims {
-            ds.add_fixed_dim(name, *len).map_err(|e| err(&e))?;
-        }
-        for (name, a) in &self.globals {
-            match a {
-                Attr::Text(s) => ds.add_global_attr_string(name, s),
-                Attr::F64(v) => ds.add_global_attr_f64(name, v.clone()),
-            }
-            .map_err(|e| err(&e))?;
-        }
-        for v in &self.vars {
-            let dims: Vec<&str> = v.dims.iter().map(String::as_str).collect();
-            match v.values {
-                Values::F64(_) => ds.add_var_f64(&v.name, &dims),
-                Values::Char(_) => ds.add_var_u8(&v.name, &dims),
-            }
-            .map_err(|e| err(&e))?;
-            for (name, a) in &v.attrs {
-                match a {
-                    Attr::Text(s) => ds.add_var_attr_string(&v.name, name, s),
-                    Attr::F64(x) => ds.add_var_attr_f64(&v.name, name, x.clone()),
-                }
-                .map_err(|e| err(&e))?;
-            }
-        }
-        let buffer = SharedBuffer::default();
-        let mut w =
-            FileWriter::open_seek_write(RUN_FILE, Box::new(buffer.clone())).map_err(|e| err(&e))?;
-        w.set_def(&ds, Version::Offset64Bit, 0)
-            .map_err(|e| err(&e))?;
-        for v in &self.vars {
-            match &v.values {
-                Values::F64(x) => w.write_var_f64(&v.name, x),
-                Values::Char(x) => w.write_var_u8(&v.name, x),
-            }
-            .map_err(|e| err(&e))?;
-        }
-        w.close().map_err(|e| err(&e))?;
-        Ok(buffer.0.take().into_inner())
-    }
-}
-
-/// An in-memory file the writer (which wants to own a `'static` seekable writer) and this
-/// module share, so that the bytes go to the caller's atomic output set.
-#[derive(Debug, Clone, Default)]
-struct SharedBuffer(Rc<RefCell<Cursor<Vec<u8>>>>);
-
-impl Write for SharedBuffer {
-    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
-        self.0.borrow_mut().write(buf)
-    }
-    fn flush(&mut self) -> std::io::Result<()> {
-        Ok(())
-    }
-}
-
-impl Seek for SharedBuffer {
-    fn seek(&mut self, pos: SeekFrom) -> std::io::Result<u64> {
-        self.0.borrow_mut().seek(pos)
-    }
-}
+mod builder;
+use builder::{Attr, Builder};
 
 #[cfg(test)]
 mod tests;

@@ -5,7 +5,7 @@
 //! produces an [`OpticalAtmosphere`]: layer edges, per layer and channel the scattering and
 //! absorption coefficients, the scatterers present (molecules, each particle layer) with their
 //! phase functions, and cumulative vertical optical depths at the edges so that the optical depth
-//! of any straight segment is O(1) per channel: τ = |T(z₂) − T(z₁)|/|μ| (DESIGN §2).
+//! of any straight segment is O(1) per channel: τ = |T(z₂) − T(z₁)|/|μ| (docs/design.md §2).
 //!
 //! Every phase function comes with the scatterer's scattering matrix (`phases[i]` ↔
 //! `matrices[i]`, F11 of the matrix = the phase function) for polarised transport: molecules the
@@ -101,7 +101,8 @@ pub enum GasSource {
 }
 
 impl OpticalAtmosphere {
-    /// Build from a scene. Gas absorption from line-by-line calculations is added afterwards with
+    /// Build from a scene, gas absorption included: line by line at the channels' wavenumbers or
+    /// from the scene's table (`gas_layer_tau`), added through
     /// [`OpticalAtmosphere::add_absorption_tau`].
     pub fn build(scene: &Scene) -> Result<Self, OpticsError> {
         let nch = scene.channels.len();

@@ -1,7 +1,7 @@
 //! Received energy by channel, field of view, range gate and scattering order: the common
 //! output of the Monte Carlo transport and the analytic lidar equation, and its CSV form.
 //!
-//! **contract** (DESIGN §4): `returns.csv` has the columns
+//! **contract** (docs/design.md §4): `returns.csv` has the columns
 //! `source,channel,fov_full_angle_mrad,range_m,order,energy_j,stderr_j`, then `polarisation`:
 //! `total` on every row of an unpolarised run; with polarised light also `co` and `cross`
 //! rows (what a sphere's single backscatter returns, and the rest; `docs/transport.md`,
@@ -185,7 +185,7 @@ impl Returns {
     /// Energies combine exactly. Standard errors combine through the covariances where they are
     /// known (σ² = Σ_ab c_a c_b cov_ab); they are 0 where every term has zero error and NaN where
     /// a needed covariance is unknown. A Monte Carlo run that should report combined channels
-    /// with proper errors combines batch by batch instead (`TransportOptions::combinations`).
+    /// with proper errors combines batch by batch instead (`transport::TallyLayout::combinations`).
     pub fn combine(&self, combos: &[Combination]) -> Returns {
         let mut out = Returns::zeros(
             self.source,

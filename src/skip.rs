@@ -1,4 +1,4 @@
-//! What a scene does not need (DESIGN §1): whether the Monte Carlo runs at all. What skipping
+//! What a scene does not need (docs/design.md §1): whether the Monte Carlo runs at all. What skipping
 //! saves is measured by [`crate::pipeline::compare_skip`].
 //!
 //! Consumes a [`Scene`], its [`OpticalAtmosphere`] and the photons asked for; produces a

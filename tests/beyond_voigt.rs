@@ -483,8 +483,7 @@ fn a_retrieval_can_assume_other_spectroscopy() {
     };
     let scene = assumed_scene(&path);
 
-    let opts = lidarsim::transport::TransportOptions::from_scene(&scene);
-    let run = lidarsim::pipeline::run(&scene, &opts).unwrap();
+    let run = lidarsim::pipeline::run(&scene).unwrap();
     let ipda = run
         .products
         .iter()

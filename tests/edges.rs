@@ -292,7 +292,7 @@ fn check(name: &str, setup: &Setup, photons: u64, seed: u64, steps: usize) -> Me
     );
     assert!(m.with_signal > 0, "{name}: no gate with signal");
 
-    let mc = run(&scene, photons, |o| o.seed = seed).returns;
+    let mc = run(&scene, photons, |o| o.sim.seed = seed).returns;
     assert!(
         mc.energy_j
             .iter()
@@ -566,7 +566,7 @@ single_scattering_albedo = 0.9
 phase = { kind = "henyey_greenstein", g = 0.3 }
 "#,
     );
-    let mc = run(&scene, 200_000, |o| o.seed = 41);
+    let mc = run(&scene, 200_000, |o| o.sim.seed = 41);
     let (judged, with_signal) = check_order1("horizontal", &mc.returns, &analytic(&scene));
     assert!(
         judged >= 36 && with_signal == 40,
@@ -652,7 +652,7 @@ fn horizontal_beam_at_ground_level_returns_half() {
         worst < 1e-6,
         "analytic against half the unbounded medium: {worst:e}"
     );
-    let mc = run(&scene, 200_000, |o| o.seed = 51);
+    let mc = run(&scene, 200_000, |o| o.sim.seed = 51);
     let (judged, with_signal) = check_order1("horizontal at ground level", &mc.returns, &an);
     assert!(judged >= 60, "{judged} of {with_signal}");
 }
@@ -686,7 +686,7 @@ fn near_horizontal_beams_near_the_ground_and_layer_edges() {
         let name = format!("{altitude} m, zenith {zenith}°, layer {layer:?}, surface {surface}");
         let scene = near_horizontal(altitude, zenith, layer, surface);
         let an = analytic(&scene);
-        let mc = run(&scene, 100_000, |o| o.seed = 60 + i as u64);
+        let mc = run(&scene, 100_000, |o| o.sim.seed = 60 + i as u64);
         assert!(
             mc.returns
                 .energy_j

@@ -1381,7 +1381,7 @@ mod scenes {
     }
 
     /// Cases that fail for a reason that belongs to the photon loop
-    /// (`src/transport/photon.rs`), each with why: reported, not fixed here. Applies to the
+    /// (`src/transport/photon/`), each with why: reported, not fixed here. Applies to the
     /// default seed only.
     const KNOWN_FAILURES: &[(usize, &str)] = &[];
 

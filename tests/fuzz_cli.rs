@@ -418,7 +418,7 @@ const HOSTILE_F64: [f64; 11] = [
 const HOSTILE_U64: [u64; 6] = [0, 1, 3, u64::MAX, 1 << 53, 1 << 32];
 
 /// Where the floating-point words of a run shard are: (tally words, trailer wall time at),
-/// from its header (`src/shard.rs`: per batch an index, nine counters, the tallies and four
+/// from its header (`src/shard/`: per batch an index, nine counters, the tallies and four
 /// flux parts; then the wall time, the threads, the checksum).
 fn run_shard_words(
     h: &serde_json::Value,

@@ -1,7 +1,7 @@
 //! Output that is never half-written (issue 11, item 3): a failed command leaves its output
 //! directory as it was, with no temporary entry; CSV text fields survive a standard CSV parser.
 //! The failure modes the CLI cannot reach on demand (a producer failing after the first file, a
-//! rename failing midway, a simulated full disk) are tested on `OutputSet` in `src/output.rs`.
+//! rename failing midway, a simulated full disk) are tested on `OutputSet` in `src/output/`.
 
 use std::path::{Path, PathBuf};
 
@@ -146,7 +146,7 @@ fn a_full_disk_exits_2_and_leaves_nothing_behind() {
         .map(|o| String::from_utf8_lossy(&o.stdout).into_owned())
         .unwrap_or_default();
     if !stdout.starts_with("mounted\n") {
-        // The same failure, simulated through an injected writer, is tested in src/output.rs.
+        // The same failure, simulated through an injected writer, is tested in src/output/.
         println!("skipped: cannot mount a tmpfs here (unshare -rm, mount -t tmpfs)");
         return;
     }

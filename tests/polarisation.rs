@@ -143,7 +143,7 @@ phase = { kind = "rayleigh", depolarization_factor = 0.0 }
 fn circular_and_linear_depolarisation_obey_mishchenko_hovenier() {
     let scene = |pol: &str| scene_text(&lidar_355(pol, "20.0", "20.0", DIPOLES));
     let lin = run(&scene("linear"), 100_000, |_| {});
-    let circ = run(&scene("circular"), 100_000, |o| o.seed = 2);
+    let circ = run(&scene("circular"), 100_000, |o| o.sim.seed = 2);
     let orders = [Order::Exactly(2), Order::AtLeast(3), Order::Total];
     let judged = assert_mishchenko_hovenier(&lin, &circ, &orders);
     assert!(judged >= 15, "{judged}");
@@ -321,7 +321,9 @@ fn single_backscatter_by_spheres_does_not_depolarise() {
 #[test]
 fn spheres_obey_mishchenko_hovenier() {
     let lin = run(&spheres("linear", "10.0", "10.0"), 40_000, |_| {});
-    let circ = run(&spheres("circular", "10.0", "10.0"), 40_000, |o| o.seed = 2);
+    let circ = run(&spheres("circular", "10.0", "10.0"), 40_000, |o| {
+        o.sim.seed = 2
+    });
     let orders = [Order::Exactly(2), Order::Exactly(3), Order::Total];
     let judged = assert_mishchenko_hovenier(&lin, &circ, &orders);
     assert!(judged >= 10, "{judged}");
@@ -410,8 +412,8 @@ fn channels_at_two_wavelengths_keep_their_own_polarisation() {
     };
     let both = run(&text(&two), 40_000, |_| {});
     let alone = [
-        run(&text(SPHERES), 40_000, |o| o.seed = 3),
-        run(&text(&one_1064), 40_000, |o| o.seed = 4),
+        run(&text(SPHERES), 40_000, |o| o.sim.seed = 3),
+        run(&text(&one_1064), 40_000, |o| o.sim.seed = 4),
     ];
     let pb = &both.polarised.as_ref().unwrap().channels;
     let mut judged = 0;
@@ -531,12 +533,12 @@ fn polarised_combinations_carry_their_channels_returns_and_covariances() {
         terms,
     };
     let mc = run(&text, 20_000, |o| {
-        o.combinations = vec![
+        o.layout.combinations = vec![
             combination("on", vec![(0, 1.0)]),
             combination("off", vec![(1, 1.0)]),
             combination("diff", vec![(0, 1.0), (1, -1.0)]),
         ];
-        o.combination_pairs = vec![(0, 1), (0, 2)];
+        o.layout.combination_pairs = vec![(0, 1), (0, 2)];
     });
     let close = |a: f64, b: f64| (a - b).abs() <= 1e-12 * a.abs().max(b.abs());
     let pol = mc.polarised.as_ref().expect("polarised run");
@@ -625,7 +627,7 @@ particles = { distribution = "lognormal", median_radius_um = 0.3, sigma_g = 1.5,
     let body = format!("{DIPOLES}{spheres}");
     let scene = |pol: &str| scene_text(&lidar_355(pol, "20.0", "20.0", &body));
     let lin = run(&scene("linear"), 100_000, |_| {});
-    let circ = run(&scene("circular"), 100_000, |o| o.seed = 2);
+    let circ = run(&scene("circular"), 100_000, |o| o.sim.seed = 2);
     let orders = [Order::Exactly(2), Order::AtLeast(3), Order::Total];
     let judged = assert_mishchenko_hovenier(&lin, &circ, &orders);
     assert!(judged >= 15, "{judged}");

@@ -15,7 +15,7 @@ use lidarsim::returns::{Order, Source};
 use lidarsim::rng::{Stream, streams};
 use lidarsim::scene::Scene;
 use lidarsim::spectroscopy::{LineFilter, LineList, layer_optical_depths_at};
-use lidarsim::transport::{self, TransportOptions};
+use lidarsim::transport::{self, TallyLayout};
 
 /// An airborne CO2 IPDA/DIAL at 8 km, nadir, no particles: Rayleigh air, CO2 (built-in band
 /// model), a Lambertian surface; on-line 2.2 GHz up R16e. Each test changes what it studies.
@@ -78,10 +78,9 @@ fn scene(text: &str) -> Scene {
 /// Run `s` with `photons` photons traced whatever `multiple_scattering` says (as `--photons N`
 /// does; the test scene is clear sky, where "auto" would skip the Monte Carlo).
 fn run(s: &Scene, photons: u64) -> RunOutput {
-    let s = forced(s);
-    let mut opts = TransportOptions::from_scene(&s);
-    opts.photons = photons;
-    pipeline::run(&s, &opts).expect("run")
+    let mut s = forced(s);
+    s.simulation.photons = photons;
+    pipeline::run(&s).expect("run")
 }
 
 fn forced(s: &Scene) -> Scene {
@@ -634,10 +633,10 @@ fn retrievals_do_not_depend_on_the_thread_count() {
     ));
     let s = forced(&s);
     let at = |threads: usize| {
-        let mut opts = TransportOptions::from_scene(&s);
-        opts.photons = 20_000;
-        opts.threads = threads;
-        pipeline::run(&s, &opts).expect("run").products
+        let mut s = s.clone();
+        s.simulation.photons = 20_000;
+        s.simulation.threads = threads;
+        pipeline::run(&s).expect("run").products
     };
     let (one, two) = (at(1), at(2));
     assert!(!one.is_empty());
@@ -662,25 +661,28 @@ fn combined_channels_carry_consistent_errors_and_covariances() {
         "line_shape = \"monochromatic\"",
         1,
     ));
+    let mut s = s;
+    s.simulation.photons = 20_000;
     let atm = OpticalAtmosphere::build(&s).unwrap();
-    let mut opts = TransportOptions::from_scene(&s);
-    opts.photons = 20_000;
-    opts.combinations = vec![
-        Combination {
-            name: "on".into(),
-            terms: vec![(0, 1.0)],
-        },
-        Combination {
-            name: "off".into(),
-            terms: vec![(1, 1.0)],
-        },
-        Combination {
-            name: "diff".into(),
-            terms: vec![(0, 1.0), (1, -1.0)],
-        },
-    ];
-    opts.combination_pairs = vec![(0, 1), (0, 2)];
-    let mc = transport::run(&s, &atm, &opts).unwrap();
+    let layout = TallyLayout {
+        flux: false,
+        combinations: vec![
+            Combination {
+                name: "on".into(),
+                terms: vec![(0, 1.0)],
+            },
+            Combination {
+                name: "off".into(),
+                terms: vec![(1, 1.0)],
+            },
+            Combination {
+                name: "diff".into(),
+                terms: vec![(0, 1.0), (1, -1.0)],
+            },
+        ],
+        combination_pairs: vec![(0, 1), (0, 2)],
+    };
+    let mc = transport::run(&s, &atm, &layout).unwrap();
     let c = mc.combined.as_ref().unwrap();
     let r = &mc.returns;
     assert_eq!(c.energy_j[..2 * c.bins_per_channel()], r.energy_j[..]);
@@ -864,14 +866,9 @@ fn impossible_retrievals_name_the_scene_key() {
             SCENE.replacen(from, to, 1)
         };
         let result: Result<(), InputError> = Scene::from_toml(Path::new("bad.toml"), &text)
-            .and_then(|s| {
-                match pipeline::run(
-                    &s,
-                    &TransportOptions {
-                        photons: 0,
-                        ..TransportOptions::from_scene(&s)
-                    },
-                ) {
+            .and_then(|mut s| {
+                s.simulation.photons = 0;
+                match pipeline::run(&s) {
                     Ok(_) => Ok(()),
                     Err(RunError::Input(e)) => Err(e),
                     Err(e) => panic!("{what}: {e}"),

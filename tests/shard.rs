@@ -459,16 +459,14 @@ fn shard_options_are_checked_before_any_work() {
 /// Monte Carlo of [`lidarsim::pipeline::run`], equal as numbers.
 #[test]
 fn library_shards_fold_into_the_pipelines_result() {
-    let scene = shard::read_scene(Some(Path::new(&c1_scene()))).unwrap();
-    let mut opts = lidarsim::transport::TransportOptions::from_scene(&scene);
-    opts.photons = 1000;
-    opts.threads = 1;
-    let mut scene = scene;
-    scene.override_simulation(Some(1000), None, None).unwrap();
-    let whole = lidarsim::pipeline::run(&scene, &opts).unwrap();
+    let mut scene = shard::read_scene(Some(Path::new(&c1_scene()))).unwrap();
+    scene
+        .override_simulation(Some(1000), None, Some(1))
+        .unwrap();
+    let whole = lidarsim::pipeline::run(&scene).unwrap();
     let dir = tempfile::tempdir().unwrap();
     for i in 0..3 {
-        let r = shard::run(&scene, &opts, ShardSpec { index: i, count: 3 }, dir.path()).unwrap();
+        let r = shard::run(&scene, ShardSpec { index: i, count: 3 }, dir.path()).unwrap();
         assert_eq!(r.total_batches, 100);
     }
     let merged = shard::merge(&[dir.path().to_path_buf()]).unwrap();

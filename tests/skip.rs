@@ -16,7 +16,6 @@ use lidarsim::returns::Order;
 use lidarsim::scene::{MultipleScattering, Scene};
 use lidarsim::skip;
 use lidarsim::spectroscopy::{LineList, layer_gas_counts, layer_optical_depths_at};
-use lidarsim::transport::TransportOptions;
 
 use crate::util::{lidarsim_ok, project_root};
 
@@ -47,7 +46,7 @@ fn a_skipped_run_is_the_analytic_lidar_equation() {
         MultipleScattering::Auto
     );
     assert!(scene.simulation.photons > 0);
-    let run = pipeline::run(&scene, &TransportOptions::from_scene(&scene)).unwrap();
+    let run = pipeline::run(&scene).unwrap();
     assert!(!run.monte_carlo.run && run.mc.is_none() && run.mc_lines.is_none());
     let (bound, _) = run.monte_carlo.bound.expect("bound computed");
     assert!(bound > 0.0 && bound < 1e-4, "{bound}");
@@ -228,7 +227,7 @@ fn orders_2_and_up_within_the_bound(scene: &Scene) -> Vec<BoundCheck> {
     let atm = OpticalAtmosphere::build(scene).unwrap();
     let bound = lidar_eq::multiple_scattering_bound(scene, &atm);
     let analytic = lidar_eq::single_scatter(scene, &atm);
-    let run = pipeline::run(scene, &TransportOptions::from_scene(scene)).unwrap();
+    let run = pipeline::run(scene).unwrap();
     let mc = &run.mc.as_ref().expect("Monte Carlo ran").returns;
     let n_gates = bound.range_m.len();
     let mut out = Vec::new();

@@ -59,7 +59,7 @@ const HG85: &str = "{ kind = \"henyey_greenstein\", g = 0.85 }";
 /// Finite and non-negative energies and errors; order 1 against the lidar equation; the run.
 fn check(name: &str, s: &Scene, photons: u64, flux: bool) -> McResult {
     let t = Instant::now();
-    let mc = run(s, photons, |o| o.flux_tally = flux);
+    let mc = run(s, photons, |o| o.layout.flux = flux);
     let r: &Returns = &mc.returns;
     assert!(
         r.energy_j

@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 
 use crate::util::{lidarsim, non_finite_word};
 
-/// Fields of view and gate depths of the scan (`src/cli/bench_depth.rs`).
+/// Fields of view and gate depths of the scan (`src/benchmark/depth.rs`).
 const FOVS_MRAD: [f64; 5] = [0.5, 1.0, 2.0, 5.0, 10.0];
 
 /// A complete reference as `bench --write-plain` writes it, with made-up positive numbers.

@@ -13,7 +13,8 @@ use lidarsim::lidar_eq;
 use lidarsim::optics::OpticalAtmosphere;
 use lidarsim::returns::{Order, Returns};
 use lidarsim::scene::Scene;
-use lidarsim::transport::{self, McResult, RunStats, TransportOptions};
+use lidarsim::scene::Simulation;
+use lidarsim::transport::{self, McResult, RunStats, TallyLayout};
 
 use crate::util::project_root;
 
@@ -21,16 +22,24 @@ pub(crate) const K_SIGMA: f64 = 4.0;
 pub(crate) const REL_SLACK: f64 = 0.01;
 pub(crate) const MAX_REL_SE: f64 = 0.10;
 
-pub(crate) fn run(
-    scene: &Scene,
-    photons: u64,
-    configure: impl FnOnce(&mut TransportOptions),
-) -> McResult {
+/// What a test changes of a run: the scene's settings and the tallies' layout.
+pub(crate) struct Knobs {
+    pub(crate) sim: Simulation,
+    pub(crate) layout: TallyLayout,
+}
+
+/// The Monte Carlo of `scene` with `photons` and its settings and layout changed by `configure`.
+pub(crate) fn run(scene: &Scene, photons: u64, configure: impl FnOnce(&mut Knobs)) -> McResult {
     let atm = OpticalAtmosphere::build(scene).expect("optics");
-    let mut opts = TransportOptions::from_scene(scene);
-    opts.photons = photons;
-    configure(&mut opts);
-    transport::run(scene, &atm, &opts).expect("transport")
+    let mut knobs = Knobs {
+        sim: scene.simulation.clone(),
+        layout: TallyLayout::default(),
+    };
+    knobs.sim.photons = photons;
+    configure(&mut knobs);
+    let mut scene = scene.clone();
+    scene.simulation = knobs.sim;
+    transport::run(&scene, &atm, &knobs.layout).expect("transport")
 }
 
 pub(crate) fn analytic(scene: &Scene) -> Returns {
@@ -307,7 +316,7 @@ max_order = 3
 fn slab_conserves_energy() {
     for ssa in [1.0, 0.9] {
         let scene = scene_text(&SLAB.replace("SSA", &ssa.to_string()));
-        let mc = run(&scene, 100_000, |o| o.flux_tally = true);
+        let mc = run(&scene, 100_000, |o| o.layout.flux = true);
         assert_energy_conserved(&format!("ϖ = {ssa}"), &mc);
         assert_histories_end_once(&format!("ϖ = {ssa}"), &mc.stats);
         let f = &mc.flux;
@@ -404,7 +413,7 @@ fn every_first_collision_on_the_axis_makes_a_local_estimate() {
     let scene = scene_text(&SLAB.replace("SSA", "0.9"));
     let mc = run(&scene, 5_000, |o| {
         plain_local_estimates(o);
-        o.range_stratification = 0.0;
+        o.sim.variance_reduction.range_stratification = 0.0;
     });
     let s = &mc.stats;
     assert_histories_end_once("slab", s);
@@ -434,7 +443,7 @@ fn slab_over_a_surface_conserves_energy() {
             ],
         ) + "[surface]\naltitude_m = 0.0\nalbedo = 0.3\n";
         let scene = scene_text(&text);
-        let mc = run(&scene, 100_000, |o| o.flux_tally = true);
+        let mc = run(&scene, 100_000, |o| o.layout.flux = true);
         assert_energy_conserved(&format!("ϖ = {ssa}, over the ground"), &mc);
         assert_histories_end_once(&format!("ϖ = {ssa}, over the ground"), &mc.stats);
         let f = &mc.flux;
@@ -470,7 +479,7 @@ fn two_scattering_classes_over_a_surface_conserve_energy() {
         ],
     ) + "[surface]\naltitude_m = 0.0\nalbedo = 0.3\n";
     let scene = scene_text(&text);
-    let mc = run(&scene, 100_000, |o| o.flux_tally = true);
+    let mc = run(&scene, 100_000, |o| o.layout.flux = true);
     for k in 0..2 {
         assert_energy_conserved_in("two classes over the ground", &mc, k);
     }
@@ -493,7 +502,7 @@ fn a_horizontal_beam_conserves_energy() {
             ),
         ],
     );
-    let mc = run(&scene_text(&text), 20_000, |o| o.flux_tally = true);
+    let mc = run(&scene_text(&text), 20_000, |o| o.layout.flux = true);
     assert_energy_conserved("a horizontal beam", &mc);
     assert_histories_end_once("a horizontal beam", &mc.stats);
     assert!(mc.flux.cut[0] < 1e-6, "cut {}", mc.flux.cut[0]);
@@ -525,12 +534,12 @@ fn over_bare_ground_every_photon_reflects_once_and_escapes() {
 fn identical_results_at_one_and_two_threads() {
     let scene = scene_text(TWO_CHANNELS);
     let a = run(&scene, 20_000, |o| {
-        o.threads = 1;
-        o.flux_tally = true
+        o.sim.threads = 1;
+        o.layout.flux = true
     });
     let b = run(&scene, 20_000, |o| {
-        o.threads = 2;
-        o.flux_tally = true
+        o.sim.threads = 2;
+        o.layout.flux = true
     });
     assert_eq!(a.threads, 1);
     assert_eq!(b.threads, 2);
@@ -543,14 +552,16 @@ fn identical_results_at_one_and_two_threads() {
 /// give the run's numbers bit for bit; a fold refuses a batch out of order or an incomplete run.
 #[test]
 fn batches_traced_apart_and_folded_in_order_equal_the_run() {
-    let scene = scene_text(TWO_CHANNELS);
+    let mut scene = scene_text(TWO_CHANNELS);
+    scene.simulation.photons = 4_000;
+    scene.simulation.batches = 8;
     let atm = OpticalAtmosphere::build(&scene).expect("optics");
-    let mut opts = TransportOptions::from_scene(&scene);
-    opts.photons = 4_000;
-    opts.batches = 8;
-    opts.flux_tally = true;
-    let whole = transport::run(&scene, &atm, &opts).expect("transport");
-    let plan = transport::Plan::new(&scene, &atm, &opts).expect("plan");
+    let layout = TallyLayout {
+        flux: true,
+        ..TallyLayout::default()
+    };
+    let whole = transport::run(&scene, &atm, &layout).expect("transport");
+    let plan = transport::Plan::new(&scene, &atm, &layout).expect("plan");
     let mut tallies: Vec<_> = (0..plan.batches())
         .rev()
         .map(|b| plan.trace_batch(b))
@@ -638,7 +649,7 @@ fn channels_whose_scattering_differs_2500_fold_match_each_run_alone() {
         (["thin", "thick"], "[1.0, 2500.0]"),
     ] {
         let pair_scene = scene(&names, ext);
-        let pair = run(&pair_scene, photons, |o| o.seed = 4);
+        let pair = run(&pair_scene, photons, |o| o.sim.seed = 4);
         assert_histories_end_once(&format!("{names:?}"), &pair.stats);
         let r = &pair.returns;
         assert!(
@@ -728,10 +739,10 @@ fn ddis_is_unbiased() {
 fn ddis_agrees_with_plain(scene: &Scene, seed: u64) {
     let plain = run(scene, 200_000, plain_local_estimates);
     let ddis = run(scene, 200_000, |o| {
-        o.ddis_epsilon = 0.3;
-        o.alignment_splitting = 0.0;
-        o.cone_estimate = false;
-        o.seed = seed
+        o.sim.variance_reduction.ddis_epsilon = 0.3;
+        o.sim.variance_reduction.alignment_splitting = 0.0;
+        o.sim.variance_reduction.cone_estimate = false;
+        o.sim.seed = seed
     });
     multiple_scattering_agrees(&plain, &ddis);
 }
@@ -768,10 +779,10 @@ fn alignment_splitting_is_unbiased() {
     let scene = scene_text(HG_CLOUD);
     let plain = run(&scene, 200_000, plain_local_estimates);
     let split = run(&scene, 100_000, |o| {
-        o.ddis_epsilon = 0.3;
-        o.alignment_splitting = 0.1;
-        o.cone_estimate = false;
-        o.seed = 4
+        o.sim.variance_reduction.ddis_epsilon = 0.3;
+        o.sim.variance_reduction.alignment_splitting = 0.1;
+        o.sim.variance_reduction.cone_estimate = false;
+        o.sim.seed = 4
     });
     eprintln!(
         "{} copies from {} photons",
@@ -799,14 +810,14 @@ fn alignment_splitting_is_unbiased() {
 fn roulette_alignment_is_unbiased() {
     let scene = scene_text(&edited(HG_CLOUD, &[("g = 0.5 }", "g = 0.9 }")]));
     let weight_only = run(&scene, 200_000, |o| {
-        o.roulette_alignment = 0.0;
-        o.flux_tally = true;
-        o.seed = 9
+        o.sim.variance_reduction.roulette_alignment = 0.0;
+        o.layout.flux = true;
+        o.sim.seed = 9
     });
     let spared = run(&scene, 200_000, |o| {
-        o.roulette_alignment = 1.0;
-        o.flux_tally = true;
-        o.seed = 10
+        o.sim.variance_reduction.roulette_alignment = 1.0;
+        o.layout.flux = true;
+        o.sim.seed = 10
     });
     for (what, mc) in [("weight alone", &weight_only), ("alignment", &spared)] {
         assert_energy_conserved(what, mc);
@@ -838,7 +849,7 @@ fn cone_estimate_is_unbiased() {
 /// multiply scattered returns agree.
 fn cone_agrees_with_plain(scene: &Scene) {
     let plain = plain_reference(scene);
-    let cone = run(scene, 100_000, |o| o.seed = 3);
+    let cone = run(scene, 100_000, |o| o.sim.seed = 3);
     multiple_scattering_agrees(&plain, &cone);
 }
 
@@ -855,11 +866,11 @@ fn crossing_estimates_are_unbiased() {
     let scene = scene_text(&HG_CLOUD.replace("[1.0, 5.0]", "[1.0, 20.0]"));
     let plain = plain_reference(&scene);
     let crossing = run(&scene, 100_000, |o| {
-        o.cone_estimate = false;
-        o.seed = 5
+        o.sim.variance_reduction.cone_estimate = false;
+        o.sim.seed = 5
     });
     multiple_scattering_agrees(&plain, &crossing);
-    let both = run(&scene, 100_000, |o| o.seed = 6);
+    let both = run(&scene, 100_000, |o| o.sim.seed = 6);
     multiple_scattering_agrees(&plain, &both);
 }
 
@@ -874,10 +885,10 @@ fn crossing_estimates_are_unbiased() {
 fn cone_estimate_is_unbiased_in_a_forward_peaked_cloud() {
     let scene = scene_text(&edited(HG_CLOUD, &[("g = 0.5 }", "g = 0.9 }")]));
     let reference = run(&scene, 400_000, |o| {
-        o.cone_estimate = false;
-        o.seed = 8
+        o.sim.variance_reduction.cone_estimate = false;
+        o.sim.seed = 8
     });
-    let cone = run(&scene, 100_000, |o| o.seed = 3);
+    let cone = run(&scene, 100_000, |o| o.sim.seed = 3);
     multiple_scattering_agrees(&reference, &cone);
 }
 
@@ -956,8 +967,8 @@ fn crossing_estimate_is_unbiased_for_channels_that_scatter_alike() {
     let scene = scene_text(&text);
     let plain = plain_reference(&scene);
     let crossing = run(&scene, 100_000, |o| {
-        o.cone_estimate = false;
-        o.seed = 5
+        o.sim.variance_reduction.cone_estimate = false;
+        o.sim.seed = 5
     });
     multiple_scattering_agrees(&plain, &crossing);
 }
@@ -967,19 +978,19 @@ fn crossing_estimate_is_unbiased_for_channels_that_scatter_alike() {
 fn plain_reference(scene: &Scene) -> McResult {
     run(scene, 400_000, |o| {
         plain_local_estimates(o);
-        o.range_stratification = 0.0;
+        o.sim.variance_reduction.range_stratification = 0.0;
     })
 }
 
 /// Plain local estimates: no DDIS (and so no alignment splitting or DDIS crossing), no cone or
 /// crossing estimate; the reference the variance reductions are checked against.
-fn plain_local_estimates(o: &mut TransportOptions) {
-    o.ddis_epsilon = 0.0;
-    o.alignment_splitting = 0.0;
-    o.roulette_alignment = 0.0;
-    o.cone_estimate = false;
-    o.crossing_estimate = false;
-    o.ddis_crossing = false;
+fn plain_local_estimates(o: &mut Knobs) {
+    o.sim.variance_reduction.ddis_epsilon = 0.0;
+    o.sim.variance_reduction.alignment_splitting = 0.0;
+    o.sim.variance_reduction.roulette_alignment = 0.0;
+    o.sim.variance_reduction.cone_estimate = false;
+    o.sim.variance_reduction.crossing_estimate = false;
+    o.sim.variance_reduction.ddis_crossing = false;
 }
 
 /// Every (channel, field of view, gate) of a run's returns.

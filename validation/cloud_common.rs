@@ -112,7 +112,7 @@ pub fn attenuated_backscatter(g: &Gate, width_m: f64) -> (f64, f64) {
 /// The family name under which the embedded font is registered.
 pub const FONT: &str = "sans-serif";
 
-/// Register the embedded DejaVu Sans (as `src/cli/plot.rs` does) so the PNGs render anywhere.
+/// Register the embedded DejaVu Sans (as `src/figures/mod.rs` does) so the PNGs render anywhere.
 pub fn init_font() {
     static REGISTER: std::sync::Once = std::sync::Once::new();
     REGISTER.call_once(|| {

@@ -1,32 +1,23 @@
 //! `lidarsim bench`: speed and Monte Carlo efficiency of the transport on a fixed workload, or
-//! (`--study N`) the speed of the seed paper's clear-sky ensemble study, or (`--scenes FILE…`)
-//! what skipping saves on whole scene runs (`lidarsim::pipeline::compare_skip`).
-//!
-//! The study workload is `scenes/study_co2_ipda.toml` (compiled in) run by `lidarsim dial` over
-//! N generated profiles per latitude class (3N in all), every one of its 10 on-lines against the
-//! off-line, IPDA and DIAL, with the whole error budget, analytic lidar equation.
-//!
-//! The workload is the Bissonnette et al. (1995) case C.1 (`scenes/bissonnette_c1.toml`, compiled
-//! in) with one 1 mrad field of view. The figure of merit is FOM = 1/(rel_err² · t) of the
-//! multiple-scattering return (orders ≥ 2) in the gate starting 100 m into the cloud
-//! (1100–1110 m), t the wall-clock time of the transport at the given thread count.
+//! (`--study N`) the speed of the reference study's clear-sky ensemble study, or (`--scenes FILE…`)
+//! what skipping saves on whole scene runs, or (`--depth DIR`) the figure of merit of C.1's
+//! multiple scattering at every gate and field of view. The workloads and measurements are
+//! [`lidarsim::benchmark`]'s; this prints them and draws.
 
-use std::io::Write;
-
-use anyhow::Context;
 use std::path::{Path, PathBuf};
 
+use lidarsim::benchmark::{self, FORCED_PHOTONS, depth};
 use lidarsim::input::Bounds;
-use lidarsim::optics::OpticalAtmosphere;
-use lidarsim::output::write_file;
-use lidarsim::returns::Order;
-use lidarsim::scene::Scene;
-use lidarsim::stats;
-use lidarsim::transport::{self, TransportOptions};
+use lidarsim::output::{OutputSet, write_file};
+use lidarsim::scene::{Simulation, VarianceReduction};
 
-const C1_SCENE: &str = include_str!("../../scenes/bissonnette_c1.toml");
-const C1_TABLE_FILE: &str = r#"file = "../phase_functions/bissonnette_c1_1064nm.txt""#;
-const C1_TABLE_BUILTIN: &str = r#"builtin = "bissonnette_c1_1064nm""#;
+/// `print!` that returns a closed stdout (`| head`) as an error instead of panicking.
+macro_rules! out {
+    ($($t:tt)*) => {{
+        use std::io::Write as _;
+        write!(std::io::stdout().lock(), $($t)*)?;
+    }};
+}
 
 /// Arguments of `lidarsim bench`.
 #[derive(clap::Args, Debug)]
@@ -104,174 +95,50 @@ pub struct Args {
     pub scenes: Vec<PathBuf>,
 }
 
-/// Photons of a forced Monte Carlo for a scene that asks for none (the default scene's count).
-const FORCED_PHOTONS: u64 = 200_000;
-
-/// What skipping saves on whole scene runs (module docs).
+/// What skipping saves on whole scene runs ([`lidarsim::pipeline::compare_skip`]).
 fn scenes_bench(args: &Args) -> anyhow::Result<()> {
-    use lidarsim::pipeline::compare_skip;
-    let mut out = std::io::stdout().lock();
-    writeln!(
-        out,
-        "whole runs (`lidarsim run`, no figures), fastest of {}; forced = multiple_scattering \"always\" ({FORCED_PHOTONS} photons if the scene asks for none)",
-        args.repeat
-    )?;
-    writeln!(
-        out,
-        "| scene | threads | Monte Carlo (auto) | optics s | auto s | forced s | forced transport s | saved s | why |"
-    )?;
-    writeln!(out, "|---|---|---|---|---|---|---|---|---|")?;
+    outln!("{}", benchmark::scenes_header(args.repeat));
     let mut rows = Vec::new();
     for path in &args.scenes {
-        let scene = Scene::read(path)?;
-        let mut variants = vec![(path.display().to_string(), scene.clone())];
-        if !scene.layers.is_empty() {
-            let mut clear = scene.clone();
-            clear.layers.clear();
-            variants.push((format!("{} without its layers", path.display()), clear));
-        }
-        for (name, scene) in &variants {
+        for (name, scene) in &benchmark::scene_variants(path)? {
             for &threads in &args.threads {
-                let c = compare_skip(scene, FORCED_PHOTONS, threads, args.repeat)?;
-                let saved = c.forced_s - c.auto_s;
-                // Both run the Monte Carlo: their difference is only the noise of the machine.
-                let saved_text = if c.decision.run {
-                    "— (both run it)".to_string()
-                } else {
-                    format!("{saved:.3}")
-                };
-                writeln!(
-                    out,
-                    "| {name} | {threads} | {} | {:.3} | {:.3} | {:.3} | {:.3} | {saved_text} | {} |",
-                    if c.decision.run { "run" } else { "skipped" },
-                    c.optics_s,
-                    c.auto_s,
-                    c.forced_s,
-                    c.forced_transport_s,
-                    c.decision.reason
-                )?;
-                rows.push(serde_json::json!({
-                    "scene": name, "threads": threads, "monte_carlo_run": c.decision.run,
-                    "reason": c.decision.reason, "optics_s": c.optics_s, "auto_s": c.auto_s,
-                    "forced_s": c.forced_s, "forced_photons": c.forced_photons,
-                    "forced_transport_s": c.forced_transport_s, "saved_s": saved,
-                }));
+                let c =
+                    lidarsim::pipeline::compare_skip(scene, FORCED_PHOTONS, threads, args.repeat)?;
+                let (line, json) = benchmark::scene_row(name, threads, &c);
+                outln!("{line}");
+                rows.push(json);
             }
         }
     }
-    if let Some(path) = &args.json {
-        write_file(path, serde_json::to_string_pretty(&rows)?.as_bytes())?;
-    }
-    Ok(())
+    write_json(args, &rows)
 }
 
-const STUDY_SCENE: &str = include_str!("../../scenes/study_co2_ipda.toml");
-
-/// The ensemble study benchmark (module docs).
+/// The ensemble study benchmark ([`benchmark::StudyWorkload`]).
 fn study_bench(n: usize, args: &Args) -> anyhow::Result<()> {
-    use lidarsim::atmosphere::{LatitudeClass, ProfileSet, class_ensemble};
-    use lidarsim::study::dial::{self, StudyOptions};
-    use std::time::Instant;
-    let scene = Scene::from_toml(
-        Path::new("<embedded scenes/study_co2_ipda.toml>"),
-        STUDY_SCENE,
-    )?;
-    let retrieval = scene
-        .retrieval
-        .as_ref()
-        .context("study scene has a retrieval")?;
-    let pairs: Vec<(usize, usize)> = (0..scene.lines.len())
-        .filter(|&k| k != retrieval.off)
-        .map(|k| (k, retrieval.off))
-        .collect();
-    // Every thread count runs the study `repeat` times: its size before the ensemble is drawn
-    // (README, "Limits").
-    let runs = (3 * n as u64)
-        .saturating_mul(args.threads.len() as u64)
-        .saturating_mul(args.repeat as u64);
-    let work = lidarsim::pipeline::study_work(&scene, runs, 0)?;
-    work.check()
-        .map_err(|m| anyhow::anyhow!("--study {n} (× --threads, × --repeat): {m}"))?;
-    work.warnings()
-        .iter()
-        .for_each(|w| lidarsim::limits::warn(w));
-    let t = Instant::now();
-    let mut set = ProfileSet::default();
-    for (i, c) in LatitudeClass::ALL.iter().enumerate() {
-        set.members.extend(
-            class_ensemble(*c, n, args.seed.wrapping_add(i as u64))?
-                .0
-                .members,
-        );
-    }
-    let generate_s = t.elapsed().as_secs_f64();
-    let options = StudyOptions {
-        pairs,
-        seed: args.seed,
-        ..StudyOptions::from_scene(&scene).context("study scene has a retrieval")?
-    };
-    let mut out = std::io::stdout().lock();
-    writeln!(
-        out,
-        "ensemble study: {} profiles (3 classes × {n}), {} on-lines × IPDA and {} DIAL cells, error budget of {} rows; ensemble generated in {generate_s:.2} s",
-        set.len(),
-        options.pairs.len(),
-        retrieval.dial.map_or(0, |d| d.cells),
-        lidarsim::study::dial::N_SOURCES
-    )?;
-    writeln!(
-        out,
-        "threads  wall_s  profiles/s  truth_optics_s  returns_s  references_s  retrievals_s  (thread-summed)"
-    )?;
+    let runs = (args.threads.len() as u64).saturating_mul(args.repeat as u64);
+    let w = benchmark::StudyWorkload::new(n, args.seed, runs)?;
+    outln!("{}", w.header(n));
     let mut rows = Vec::new();
     for &threads in &args.threads {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
             .build()?;
-        let mut best: Option<dial::Timing> = None;
-        for _ in 0..args.repeat {
-            let r = pool.install(|| dial::run(&scene, &set, &options, &|| {}))?;
-            let failed = r.outcomes.iter().filter(|o| o.records.is_err()).count();
-            anyhow::ensure!(failed == 0, "{failed} profiles failed");
-            if best.is_none_or(|b| r.timing.wall_s < b.wall_s) {
-                best = Some(r.timing);
-            }
-        }
-        let Some(t) = best else { continue };
-        writeln!(
-            out,
-            "{:>7} {:>7.2} {:>11.1} {:>15.2} {:>10.2} {:>13.2} {:>13.2}",
-            pool.current_num_threads(),
-            t.wall_s,
-            set.len() as f64 / t.wall_s,
-            t.truth_optics_s,
-            t.returns_s,
-            t.references_s + t.mean_references_s,
-            t.retrievals_s
-        )?;
-        rows.push(serde_json::json!({
-            "threads": pool.current_num_threads(), "profiles": set.len(), "wall_s": t.wall_s,
-            "generate_s": generate_s, "truth_optics_s": t.truth_optics_s, "returns_s": t.returns_s,
-            "references_s": t.references_s + t.mean_references_s, "retrievals_s": t.retrievals_s,
-        }));
+        let Some(t) = w.measure(&pool, args.repeat)? else {
+            continue;
+        };
+        let (line, json) = w.row(pool.current_num_threads(), &t);
+        outln!("{line}");
+        rows.push(json);
     }
-    if let Some(path) = &args.json {
-        write_file(path, serde_json::to_string_pretty(&rows)?.as_bytes())?;
-    }
-    Ok(())
+    write_json(args, &rows)
 }
 
-/// The C.1 scene with a single 1 mrad field of view, orders split into 1 and 2+.
-pub fn c1_scene() -> anyhow::Result<Scene> {
-    anyhow::ensure!(
-        C1_SCENE.contains(C1_TABLE_FILE),
-        "the C.1 scene no longer names its table"
-    );
-    let text = C1_SCENE.replace(C1_TABLE_FILE, C1_TABLE_BUILTIN);
-    let mut scene = Scene::from_toml(Path::new("<embedded scenes/bissonnette_c1.toml>"), &text)?;
-    scene.lidar.fov_full_angle_mrad = vec![1.0];
-    scene.simulation.max_order = 1;
-    Ok(scene)
+/// The rows as JSON into `--json`, if given.
+fn write_json(args: &Args, rows: &[serde_json::Value]) -> anyhow::Result<()> {
+    if let Some(path) = &args.json {
+        write_file(path, serde_json::to_string_pretty(rows)?.as_bytes())?;
+    }
+    Ok(())
 }
 
 /// Run the subcommand.
@@ -282,46 +149,47 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         return study_bench(n, &args);
     }
     let first_threads = args.threads.first().copied().unwrap_or(1);
-    let method = |o: &mut TransportOptions| {
+    let method = |o: &mut Simulation| {
         o.batches = args.batches;
-        o.ddis_epsilon = args.ddis_epsilon;
-        o.range_stratification = args.range_stratification;
-        o.alignment_splitting = args.alignment_splitting;
-        o.roulette_alignment = args.roulette_alignment;
-        o.cone_estimate = args.cone_estimate;
-        o.crossing_estimate = args.crossing_estimate;
-        o.ddis_crossing = args.ddis_crossing;
+        o.variance_reduction = VarianceReduction {
+            ddis_epsilon: args.ddis_epsilon,
+            range_stratification: args.range_stratification,
+            alignment_splitting: args.alignment_splitting,
+            roulette_alignment: args.roulette_alignment,
+            cone_estimate: args.cone_estimate,
+            crossing_estimate: args.crossing_estimate,
+            ddis_crossing: args.ddis_crossing,
+        };
     };
     if let (Some(dir), Some(k)) = (&args.depth, args.seeds) {
-        return super::bench_depth::scatter(dir, args.photons, first_threads, k, method);
+        return scatter(dir, args.photons, first_threads, k, method);
     }
     if let (Some(dir), Some(plain), true) = (&args.depth, &args.plain, args.ladder) {
-        return super::bench_depth::ladder(dir, args.photons, first_threads, plain, method);
+        let (csv, series) = depth::ladder(args.photons, first_threads, plain, method)?;
+        let mut files = OutputSet::new();
+        files.write(dir.join("error_time.csv"), csv)?;
+        files.write_via(dir.join("error_time.png"), |path| {
+            crate::figures::bench::error_time(path, &series)
+        })?;
+        files.commit()?;
+        outln!("wrote {}", dir.join("error_time.{csv,png}").display());
+        return Ok(());
     }
     if let Some(dir) = &args.depth {
-        return super::bench_depth::run(
-            dir,
-            args.photons,
-            first_threads,
-            args.repeat,
-            args.seed,
-            args.plain.as_ref(),
-            method,
-        );
+        return depth_scan(dir, &args, first_threads, method);
     }
     if let Some(path) = &args.write_plain {
-        use super::bench_depth as d;
-        let mut scene = d::scene()?;
-        scene.simulation.photons = args.photons;
-        scene.simulation.seed = args.seed;
-        let atm = OpticalAtmosphere::build(&scene)?;
         let threads = args.threads.iter().copied().max().unwrap_or(0);
-        let r = d::fastest(&scene, &atm, threads, 1, |o| {
-            d::plain(o);
-            o.batches = args.batches;
-            o.progress = true;
-        })?;
-        d::write_reference(path, &d::cells(&scene, &r), r.photons)?;
+        let bar = super::progress::Progress::new(0, "transport", "batches");
+        let r = depth::write_plain(
+            path,
+            args.photons,
+            args.seed,
+            threads,
+            args.batches,
+            &|done, total| bar.reach(done, total),
+        )?;
+        bar.finish();
         outln!(
             "plain local estimate, {} photons in {:.1} s on {} threads: wrote {}",
             r.photons,
@@ -334,67 +202,103 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if !args.scenes.is_empty() {
         return scenes_bench(&args);
     }
-    let mut scene = c1_scene()?;
-    scene.simulation.photons = args.photons;
-    scene.simulation.seed = args.seed;
-    let atm = OpticalAtmosphere::build(&scene)?;
-    let gate = scene
-        .gates
-        .count
-        .min(((1100.0 - scene.gates.start_m) / scene.gates.width_m).round() as usize);
-
-    let mut out = std::io::stdout().lock();
-    writeln!(
-        out,
-        "Bissonnette C.1, 1064 nm, FOV 1 mrad, {} photons; FOM of the multiple-scattering return at {}–{} m",
-        args.photons,
-        scene.gates.start_m + gate as f64 * scene.gates.width_m,
-        scene.gates.start_m + (gate + 1) as f64 * scene.gates.width_m
-    )?;
-    writeln!(
-        out,
-        "threads  wall_s   photons/s   events/s  events/s/thread   E_ms [J]      rel_err     FOM [1/s]"
-    )?;
+    let w = benchmark::TransportWorkload::new(args.photons, args.seed)?;
+    outln!("{}", w.header());
     let mut rows = Vec::new();
     for &threads in &args.threads {
-        let mut best: Option<transport::McResult> = None;
-        for _ in 0..args.repeat {
-            let mut opts = TransportOptions::from_scene(&scene);
-            opts.threads = threads;
-            method(&mut opts);
-            let r = transport::run(&scene, &atm, &opts)?;
-            if best.as_ref().is_none_or(|b| r.wall_s < b.wall_s) {
-                best = Some(r);
+        let r = w.measure(threads, args.repeat, method)?;
+        outln!("{}", r.line());
+        rows.push(r.json());
+    }
+    write_json(&args, &rows)
+}
+
+/// The depth scan ([`depth::scan`]): its table of FOM ratios, `fom_depth.csv` and
+/// `fom_depth.png` into `dir`.
+fn depth_scan(
+    dir: &Path,
+    args: &Args,
+    threads: usize,
+    method: impl Fn(&mut Simulation),
+) -> anyhow::Result<()> {
+    let s = depth::scan(
+        args.photons,
+        threads,
+        args.repeat,
+        args.seed,
+        args.plain.as_deref(),
+        method,
+    )?;
+    outln!(
+        "C.1, orders ≥ 2: FOM ratio lidarsim / plain local estimate (plain variance from {} photons)",
+        s.long_photons
+    );
+    let depths: Vec<f64> = s.rows[..s.n_depth].iter().map(|r| r.0.depth_m).collect();
+    let ratios: Vec<f64> = s.rows.iter().map(|r| r.2).collect();
+    print_table(&depths, &ratios, 1)?;
+    let no_signal = s.rows.iter().filter(|r| !r.2.is_finite()).count();
+    if no_signal > 0 {
+        outln!("—: no signal in one of the estimates ({no_signal} cells; empty in fom_depth.csv)");
+    }
+    let least = if s.worst.is_finite() {
+        format!("{:.1}", s.worst)
+    } else {
+        "— (no cell with a signal in both)".to_string()
+    };
+    let (rms_z, n_z) = match s.rms_z {
+        Some((z, n)) => (format!("{z:.2}"), n),
+        None => ("—".to_string(), 0),
+    };
+    outln!(
+        "least ratio {least}; means against the plain estimate's: rms z {rms_z} over {n_z} cells"
+    );
+    let mut files = OutputSet::new();
+    files.write(dir.join("fom_depth.csv"), s.csv)?;
+    files.write_via(dir.join("fom_depth.png"), |path| {
+        crate::figures::bench::fom_depth(path, &s.rows)
+    })?;
+    files.commit()?;
+    outln!("wrote {}", dir.join("fom_depth.{csv,png}").display());
+    Ok(())
+}
+
+/// The spikes ([`depth::scatter`]): their table and `scatter.csv` into `dir`.
+fn scatter(
+    dir: &Path,
+    photons: u64,
+    threads: usize,
+    seeds: u64,
+    method: impl Fn(&mut Simulation),
+) -> anyhow::Result<()> {
+    let s = depth::scatter(photons, threads, seeds, method)?;
+    outln!("scatter of {seeds} runs' means / their standard errors (orders ≥ 2)");
+    print_table(&s.depths_m, &s.ratios, 2)?;
+    let mut files = OutputSet::new();
+    files.write(dir.join("scatter.csv"), s.csv)?;
+    files.commit()?;
+    Ok(())
+}
+
+/// A table of `values` (FOV-major) by depth and FOV with `digits` decimals; `—` where a value
+/// is not finite (a cell without signal), never NaN.
+fn print_table(depths_m: &[f64], values: &[f64], digits: usize) -> anyhow::Result<()> {
+    out!("depth_m");
+    for f in depth::FOVS_MRAD {
+        out!("  {f:>6} mrad");
+    }
+    outln!();
+    let n_depth = depths_m.len();
+    for (d, depth_m) in depths_m.iter().enumerate() {
+        out!("{:>7}", depth_m);
+        for f in 0..depth::FOVS_MRAD.len() {
+            let v = values[f * n_depth + d];
+            if v.is_finite() {
+                out!("  {v:>11.digits$}");
+            } else {
+                out!("  {:>11}", "—");
             }
         }
-        let Some(r) = best else { continue };
-        let ms = Order::AtLeast(2);
-        let e = r.returns.energy(0, 0, gate, ms).unwrap_or(0.0);
-        let se = r.returns.stderr(0, 0, gate, ms).unwrap_or(f64::NAN);
-        let rel = stats::rel_err(e, se);
-        let fom = stats::figure_of_merit(rel, r.wall_s);
-        let pps = r.photons as f64 / r.wall_s;
-        let eps = r.stats.collisions as f64 / r.wall_s;
-        writeln!(
-            out,
-            "{:>7} {:>7.2} {:>11.3e} {:>10.3e} {:>16.3e} {:>10.4e} {:>11.3e} {:>11.3e}",
-            r.threads,
-            r.wall_s,
-            pps,
-            eps,
-            eps / r.threads as f64,
-            e,
-            rel,
-            fom
-        )?;
-        rows.push(serde_json::json!({
-            "threads": r.threads, "wall_s": r.wall_s, "photons": r.photons,
-            "photons_per_s": pps, "events_per_s": eps, "events_per_s_per_thread": eps / r.threads as f64,
-            "multiple_scattering_j": e, "rel_err": rel, "fom_per_s": fom,
-        }));
-    }
-    if let Some(path) = &args.json {
-        write_file(path, serde_json::to_string_pretty(&rows)?.as_bytes())?;
+        outln!();
     }
     Ok(())
 }

@@ -7,15 +7,14 @@
 //! wavenumber and layer with the Curtis-Godson p and T, the vertical and the slant optical
 //! depth (vertical / |cos θ|, plane-parallel).
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::{Context, bail};
-use plotters::prelude::*;
-
-use lidarsim::atmosphere::{Profile, StandardAtmosphere, parse_afgl};
+use lidarsim::atmosphere::StandardAtmosphere;
 use lidarsim::input::Bounds;
 use lidarsim::limits::{MAX_LBL_ROWS, MAX_PATH_LAYERS, check_product};
 use lidarsim::output::{self, OutputSet};
+use lidarsim::products;
 use lidarsim::spectroscopy::isotopologues::molecule_name;
 use lidarsim::spectroscopy::xsec::GasState;
 use lidarsim::spectroscopy::{
@@ -23,7 +22,6 @@ use lidarsim::spectroscopy::{
     WavenumberGrid, WingCentre, cross_section,
 };
 
-use super::plot::{FONT, init_font};
 use super::real;
 
 /// Arguments of `lidarsim lbl`.
@@ -197,30 +195,14 @@ fn run_cross_sections(
         let name = molecule_name(m).unwrap_or("?").to_string();
         columns.push((name, cross_section(lines, m, &state, grid, opts)?));
     }
-    let mut text = String::new();
-    text.push_str(&format!(
-        "# lidarsim lbl: absorption cross-sections [cm^2/molecule], self-broadening mole fraction {}\n# lines: {}\n\
-         # line shape {}{}; pressure_atm = {p_atm}, temperature_k = {t_k}, wing_cm1 = {} around the {} centre, Voigt {}\n",
-        args.vmr,
-        lines.source,
-        opts.line_shape.name(),
-        if opts.line_mixing { " with line mixing" } else { "" },
-        opts.wing_cm1,
-        if opts.wing_centre == WingCentre::Shifted { "shifted" } else { "unshifted" },
-        if args.exact { "exact" } else { "fast (multigrid)" },
-    ));
-    text.push_str("wavenumber_cm1");
-    for (name, _) in &columns {
-        text.push_str(&format!(",sigma_{name}_cm2"));
-    }
-    text.push('\n');
-    for i in 0..grid.len {
-        text.push_str(&format!("{:.6}", grid.at(i)));
-        for (_, s) in &columns {
-            text.push_str(&format!(",{:.12e}", s[i]));
-        }
-        text.push('\n');
-    }
+    let text = products::lbl::cross_section_csv(
+        lines,
+        grid,
+        opts,
+        (p_atm, t_k, args.vmr),
+        args.exact,
+        &columns,
+    );
     let mut files = OutputSet::new();
     files.write(&args.out, text)?;
     if let Some(png) = &args.plot {
@@ -228,7 +210,7 @@ fn run_cross_sections(
             .iter()
             .map(|(n, s)| (format!("σ {n}"), s.clone()))
             .collect();
-        plot(
+        crate::figures::lbl::plot(
             &mut files,
             png,
             &format!("{} at {p_atm} atm, {t_k} K", lines.source),
@@ -241,39 +223,17 @@ fn run_cross_sections(
     Ok(())
 }
 
-fn load_profile(args: &Args) -> anyhow::Result<Profile> {
-    let mut prof = match (&args.layer.atmosphere, &args.layer.profile) {
-        (Some(a), None) => a.profile(),
-        (None, Some(p)) => {
-            let text = std::fs::read_to_string(p)
-                .with_context(|| format!("cannot read the profile {}", p.display()))?;
-            parse_afgl(&p.display().to_string(), &text)?
-        }
-        _ => bail!("give one of --atmosphere or --profile"),
-    };
-    if let Some(ppmv) = args.layer.co2_ppmv {
-        let g = prof
-            .gases
-            .iter_mut()
-            .find(|g| g.name == "CO2")
-            .context("--co2-ppmv: the profile has no CO2 column")?;
-        let surface = g.vmr.first().copied().unwrap_or(0.0);
-        if surface <= 0.0 || surface.is_nan() {
-            bail!("--co2-ppmv: the profile's surface CO2 is zero, nothing to scale");
-        }
-        let f = ppmv * 1e-6 / surface;
-        g.vmr.iter_mut().for_each(|v| *v *= f);
-    }
-    Ok(prof)
-}
-
 fn run_layers(
     args: &Args,
     lines: &LineList,
     grid: &WavenumberGrid,
     opts: &LblOptions,
 ) -> anyhow::Result<()> {
-    let prof = load_profile(args)?;
+    let prof = products::lbl::profile(
+        args.layer.atmosphere,
+        args.layer.profile.as_deref(),
+        args.layer.co2_ppmv,
+    )?;
     let (Some(sensor), Some(zenith)) = (args.layer.sensor_altitude_m, args.layer.zenith_deg) else {
         bail!("layer mode needs --sensor-altitude-m and --zenith-deg");
     };
@@ -313,32 +273,11 @@ fn run_layers(
             .with_context(|| format!("cannot write {}", path.display()))?;
         files.write(path, bytes)?;
     }
-    let mut text = format!(
-        "# lidarsim lbl: gas absorption optical depth per layer (vertical, and slant = vertical/|cos zenith|, plane-parallel)\n\
-         # lines: {}\n# profile: {}\n# sensor_altitude_m = {sensor}, zenith_deg = {zenith}, surface_altitude_m = {}, wing_cm1 = {}\n\
-         wavenumber_cm1,bottom_m,top_m,pressure_pa,temperature_k,tau_vertical,tau_slant\n",
-        lines.source, prof.name, args.layer.surface_altitude_m, opts.wing_cm1
-    );
-    let mut column_slant = vec![0.0; grid.len];
-    for (i, col) in column_slant.iter_mut().enumerate() {
-        for (l, layer) in table.layers.iter().enumerate() {
-            let tau = table.tau_at_grid(l, i);
-            *col += tau / mu;
-            text.push_str(&format!(
-                "{:.6},{},{},{:.6e},{:.4},{:.12e},{:.12e}\n",
-                grid.at(i),
-                layer.bottom_m,
-                layer.top_m,
-                layer.pressure_pa,
-                layer.temperature_k,
-                tau,
-                tau / mu
-            ));
-        }
-    }
+    let (text, column_slant) =
+        products::lbl::layer_csv(&table, lines, &prof.name, &los, mu, grid, opts.wing_cm1);
     files.write(&args.out, text)?;
     if let Some(png) = &args.plot {
-        plot(
+        crate::figures::lbl::plot(
             &mut files,
             png,
             &format!(
@@ -354,59 +293,4 @@ fn run_layers(
     }
     files.commit()?;
     Ok(())
-}
-
-/// Line plot with a logarithmic y axis (positive values only), staged in `files` as `path`.
-fn plot(
-    files: &mut OutputSet,
-    path: &Path,
-    title: &str,
-    y_label: &str,
-    x: &[f64],
-    series: &[(String, Vec<f64>)],
-) -> anyhow::Result<()> {
-    init_font();
-    let (x0, x1) = (x[0], x[x.len() - 1].max(x[0] + 1e-9));
-    let pos = series
-        .iter()
-        .flat_map(|(_, v)| v.iter().copied())
-        .filter(|v| *v > 0.0);
-    let (lo, hi) = pos.fold((f64::INFINITY, 0.0f64), |(a, b), v| (a.min(v), b.max(v)));
-    if hi.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
-        bail!("nothing to plot: every value is zero");
-    }
-    let lo = lo.max(hi * 1e-8);
-    let draw = |tmp: &Path| -> Result<(), Box<dyn std::error::Error>> {
-        let root = BitMapBackend::new(tmp, (1000, 600)).into_drawing_area();
-        root.fill(&WHITE)?;
-        let mut chart = ChartBuilder::on(&root)
-            .caption(title, (FONT, 18))
-            .margin(12)
-            .x_label_area_size(45)
-            .y_label_area_size(80)
-            // log10 on a linear axis: plotters' log axis draws no labels for values ~1e-25.
-            .build_cartesian_2d(x0..x1, (lo.log10() - 0.1)..(hi.log10() + 0.1))?;
-        chart
-            .configure_mesh()
-            .x_desc("wavenumber [cm⁻¹]")
-            .y_desc(y_label)
-            .label_style((FONT, 13))
-            .y_label_formatter(&|v| format!("{:.1e}", 10f64.powf(*v)))
-            .draw()?;
-        let colours = [BLUE, RED, GREEN, MAGENTA, CYAN, BLACK];
-        for (k, (name, v)) in series.iter().enumerate() {
-            let c = colours[k % colours.len()];
-            chart
-                .draw_series(LineSeries::new(
-                    x.iter().zip(v).map(|(a, b)| (*a, b.max(lo).log10())),
-                    c.stroke_width(1),
-                ))?
-                .label(name.as_str())
-                .legend(move |(px, py)| PathElement::new(vec![(px, py), (px + 20, py)], c));
-        }
-        super::plot::draw_legend(&mut chart)?;
-        root.present()?;
-        Ok(())
-    };
-    Ok(files.write_via(path, draw)?)
 }

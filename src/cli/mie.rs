@@ -8,12 +8,12 @@ use clap::ValueEnum;
 use lidarsim::input::{Bounds, check_finite_range};
 use lidarsim::particles::distribution::{
     BulkOptions, Component, MIN_INDEX_CONTRAST, MieWork, SizeDistribution, bulk_optics,
-    format_refractive_index, mie_work,
+    format_refractive_index,
 };
 use lidarsim::particles::mie::{
     MAX_SIZE_PARAMETER, MieCoefficients, MieError, parse_refractive_index,
 };
-use lidarsim::particles::opac::{OpacComponent, OpacType};
+use lidarsim::products::{self, ProductError, mie::Opac};
 use num_complex::Complex64;
 use serde_json::json;
 
@@ -180,32 +180,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     if let Some(x) = args.size_parameter {
         let k = MieCoefficients::compute(m, x).context("--size-parameter")?;
-        let e = k.efficiencies();
-        let mut out = json!({
-            "refractive_index": format_refractive_index(m),
-            "size_parameter": x,
-            "qext": e.qext,
-            "qsca": e.qsca,
-            "qback": e.qback,
-            "g": e.g,
-            "ssa": e.ssa,
-            "n_terms": e.n_terms,
-        });
-        if !args.angles_deg.is_empty() {
-            let mu: Vec<f64> = args
-                .angles_deg
-                .iter()
-                .map(|t| t.to_radians().cos())
-                .collect();
-            let (s1, s2) = k.amplitudes(&mu)?;
-            out["amplitudes"] = json!(
-                args.angles_deg
-                    .iter()
-                    .zip(s1.iter().zip(&s2))
-                    .map(|(t, (a, b))| json!({"theta_deg": t, "s1": [a.re, a.im], "s2": [b.re, b.im]}))
-                    .collect::<Vec<_>>()
-            );
-        }
+        let out = products::mie::sphere_json(&k, m, x, &args.angles_deg)?;
         outln!("{}", serde_json::to_string_pretty(&out)?);
         return Ok(());
     }
@@ -264,7 +239,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         dist = dist.truncated(lo, hi)?;
     }
     let opts = bulk_opts(&args);
-    let work = check_work(
+    let work = products::mie::check_work(
         &[Component {
             name: "particles".into(),
             distribution: dist.clone(),
@@ -273,9 +248,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         wavelength_nm * 1e-9,
         &opts,
     )
-    .map_err(|e| match e.downcast_ref::<MieError>() {
+    .map_err(|e| match &e {
         // The library names its own field; say which options made the range empty.
-        Some(MieError::Parameter {
+        ProductError::Mie(MieError::Parameter {
             name: "r_max_um",
             reason,
             ..
@@ -285,10 +260,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             args.r_max_um.map_or("(none)".to_string(), |v| v.to_string()),
             args.tail_fraction
         ),
-        _ => e,
+        _ => e.into(),
     })?;
     let mut b = bulk_optics(&dist, m, wavelength_nm * 1e-9, &opts)?;
-    add_meta(&mut b, &args.meta)?;
+    products::mie::add_meta(&mut b, &args.meta)?;
     finish(
         &b,
         &args,
@@ -324,96 +299,15 @@ fn run_opac(args: &Args) -> anyhow::Result<()> {
         bail!("--size-parameter and --distribution are exclusive");
     }
     let wavelength_nm = need(args.wavelength_nm, "--wavelength-nm")?;
-    let wavelength_m = wavelength_nm * 1e-9;
-    let opts = bulk_opts(args);
-    let (mut b, indices, description, work) = match (&args.aerosol_type, &args.opac_component) {
-        (Some(t), None) => {
-            let t = OpacType::from_name(t).with_context(|| {
-                format!(
-                    "--aerosol-type `{t}`: unknown OPAC type (known: {})",
-                    OpacType::ALL.map(|t| t.name()).join(", ")
-                )
-            })?;
-            let comps = t.components(wavelength_m).context("--wavelength-nm")?;
-            let work = check_work(&comps, wavelength_m, &opts)?;
-            let b = t.bulk_optics(wavelength_m, &opts)?;
-            let indices: serde_json::Map<String, serde_json::Value> = comps
-                .iter()
-                .map(|c| {
-                    (
-                        c.name.clone(),
-                        json!(format_refractive_index(c.refractive_index)),
-                    )
-                })
-                .collect();
-            let desc = b.phase.meta("distribution").unwrap_or_default().to_string();
-            (b, serde_json::Value::Object(indices), desc, work)
-        }
-        (None, Some(c)) => {
-            let c = OpacComponent::from_name(c).with_context(|| {
-                format!(
-                    "--opac-component `{c}`: unknown OPAC component (known: {})",
-                    OpacComponent::ALL.map(|c| c.name()).join(", ")
-                )
-            })?;
-            let m = c
-                .refractive_index(wavelength_m)
-                .context("--wavelength-nm")?;
-            let work = check_work(
-                &[c.component(args.number_density_per_cm3, wavelength_m)?],
-                wavelength_m,
-                &opts,
-            )?;
-            let b = c.bulk_optics(args.number_density_per_cm3, wavelength_m, &opts)?;
-            let desc = c
-                .size_distribution(args.number_density_per_cm3)?
-                .to_string();
-            (b, json!(format_refractive_index(m)), desc, work)
-        }
+    let which = match (&args.aerosol_type, &args.opac_component) {
+        (Some(t), None) => Opac::Type(t),
+        (None, Some(c)) => Opac::Component(c, args.number_density_per_cm3),
         _ => bail!("--distribution opac needs --aerosol-type TYPE or --opac-component NAME"),
     };
-    add_meta(&mut b, &args.meta)?;
-    finish(&b, args, wavelength_nm, indices, description, &work)
-}
-
-/// Refuse, in milliseconds, a size integration beyond the limit of Mie work (README, "Limits"),
-/// and say how long one above a minute will take before starting it.
-fn check_work(
-    components: &[Component],
-    wavelength_m: f64,
-    opts: &BulkOptions,
-) -> anyhow::Result<MieWork> {
-    let w = mie_work(components, wavelength_m, opts)?;
-    w.check().map_err(anyhow::Error::msg)?;
-    if let Some(note) = w.warning() {
-        eprintln!("lidarsim: warning: {note}");
-    }
-    Ok(w)
-}
-
-/// Add the --meta KEY=VALUE lines before the final `source` line.
-fn add_meta(
-    b: &mut lidarsim::particles::distribution::BulkOptics,
-    meta: &[String],
-) -> anyhow::Result<()> {
-    for kv in meta {
-        let Some((k, v)) = kv.split_once('=') else {
-            bail!("--meta `{kv}`: expected KEY=VALUE");
-        };
-        let k = k.trim();
-        if k.is_empty() || !k.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
-            bail!("--meta `{kv}`: the key must be letters, digits and _");
-        }
-        if b.phase.meta(k).is_some() {
-            bail!("--meta `{kv}`: key `{k}` is already set");
-        }
-        // Keep `source` last (the matrix table carries the same metadata).
-        for meta in [&mut b.phase.meta, &mut b.matrix.meta] {
-            let at = meta.len().saturating_sub(1);
-            meta.insert(at, (k.to_string(), v.trim().to_string()));
-        }
-    }
-    Ok(())
+    let mut o = products::mie::opac(which, wavelength_nm * 1e-9, &bulk_opts(args))?;
+    products::mie::add_meta(&mut o.bulk, &args.meta)?;
+    let (indices, description) = (o.indices, o.description);
+    finish(&o.bulk, args, wavelength_nm, indices, description, &o.work)
 }
 
 /// Write the table (if --out) and print the bulk properties as JSON.
@@ -431,32 +325,14 @@ fn finish(
     if let Some(path) = &args.matrix_out {
         b.matrix.write(path)?;
     }
-    let out = json!({
-        "wavelength_nm": wavelength_nm,
-        "refractive_index": refractive_index,
-        "distribution": distribution,
-        "number_density_per_cm3": b.number_density_per_m3 * 1e-6,
-        "extinction_cross_section_um2": b.extinction_cross_section_m2 * 1e12,
-        "scattering_cross_section_um2": b.scattering_cross_section_m2 * 1e12,
-        "backscatter_cross_section_um2": b.backscatter_cross_section_m2 * 1e12,
-        "extinction_per_km": b.extinction_per_m(b.number_density_per_m3) * 1e3,
-        "single_scattering_albedo": b.single_scattering_albedo,
-        "asymmetry": b.asymmetry,
-        "lidar_ratio_sr": b.lidar_ratio_sr,
-        "phase_180": b.phase_180(),
-        "effective_radius_um": b.effective_radius_um,
-        "size_grid": b.convergence.iter().map(|c| json!({
-            "component": c.component,
-            "r_min_um": c.r_range_um.0, "r_max_um": c.r_range_um.1, "step_x": c.step_x,
-            "points": c.points, "last_rel_change": c.last_rel_change, "converged": c.converged,
-        })).collect::<Vec<_>>(),
-        "mie_work": json!({
-            "term_angles": work.work, "radii_bound": work.radii, "terms": work.terms,
-            "angles": work.angles, "estimated_seconds_one_core": work.seconds(),
-        }),
-        "table": args.out.as_ref().map(|p| p.display().to_string()),
-        "matrix_table": args.matrix_out.as_ref().map(|p| p.display().to_string()),
-    });
+    let out = products::mie::bulk_json(
+        b,
+        wavelength_nm,
+        refractive_index,
+        distribution,
+        work,
+        (args.out.as_deref(), args.matrix_out.as_deref()),
+    );
     outln!("{}", serde_json::to_string_pretty(&out)?);
     Ok(())
 }

@@ -10,20 +10,19 @@ macro_rules! outln {
 }
 
 pub mod bench;
-pub mod bench_depth;
 pub mod dial;
-pub mod figures;
 pub mod lbl;
 pub mod merge;
 pub mod mie;
-pub mod plot;
 pub mod profiles;
 pub mod progress;
 pub mod run;
 pub mod select_lines;
-pub mod study_figures;
+pub mod write;
 
 use lidarsim::input::{Bounds, check_count, check_finite_range};
+use lidarsim::shard::{ShardError, ShardSpec};
+use lidarsim::study::shard::StudyShardReport;
 
 /// A clap value parser for a real option: a finite number inside `bounds` (unit as the
 /// option's name says), so that a bad value is refused by the parser with the option named.
@@ -113,17 +112,35 @@ pub fn latitude_class(text: &str) -> Result<String, String> {
         .map_err(|_| format!("{text}: unknown latitude class (known: tropical, mid, high, all)"))
 }
 
-/// The CF `history` attribute of a NetCDF file written now: the UTC time and the command line
-/// (`args_os`, so a path that is not UTF-8 does not panic).
+/// The CF `history` attribute of a NetCDF file written now by this command line.
 pub fn netcdf_history() -> String {
-    let command: Vec<String> = std::env::args_os()
-        .map(|a| a.to_string_lossy().into_owned())
-        .collect();
-    format!(
-        "{}: {}",
-        lidarsim::netcdf::utc_timestamp(std::time::SystemTime::now()),
-        command.join(" ")
-    )
+    lidarsim::netcdf::history(std::env::args_os())
+}
+
+/// `lidarsim dial … --shard I/N` and `lidarsim select-lines … --shard I/N`: run `shard` (which
+/// studies the `n` profiles of shard `spec` and writes its file) on `pool` with a progress bar
+/// labelled `what`, and print what it did.
+pub fn run_study_shard(
+    spec: ShardSpec,
+    n: usize,
+    what: &str,
+    pool: &rayon::ThreadPool,
+    shard: impl FnOnce(&(dyn Fn() + Sync)) -> Result<StudyShardReport, ShardError> + Send,
+) -> anyhow::Result<()> {
+    let bar = progress::Progress::new(n, what, "profiles");
+    let r = pool.install(|| shard(&|| bar.tick()))?;
+    bar.finish();
+    outln!(
+        "shard {spec}: profiles {}..{} of {} ({} failed) in {:.2} s on {} threads; wrote {}",
+        r.profiles.start,
+        r.profiles.end,
+        r.total_profiles,
+        r.failed,
+        r.wall_s,
+        r.threads,
+        r.path.display()
+    );
+    Ok(())
 }
 
 #[cfg(test)]

@@ -38,6 +38,16 @@ impl Progress {
         }
     }
 
+    /// `done` of `total` units done (a caller that reports positions, as the transport does).
+    pub fn reach(&self, done: usize, total: usize) {
+        self.bar.set_length(total as u64);
+        self.bar.set_position(done as u64);
+        if self.show && self.bar.is_hidden() && self.started.elapsed() > Duration::from_secs(1) {
+            self.bar
+                .set_draw_target(indicatif::ProgressDrawTarget::stderr());
+        }
+    }
+
     /// Remove the bar.
     pub fn finish(&self) {
         self.bar.finish_and_clear();

@@ -1,16 +1,11 @@
 //! `lidarsim run [SCENE] [--out DIR] [--photons N] [--seed S] [--threads T] [--no-plots]`
 
-use std::io::Write;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use lidarsim::input::Bounds;
-use lidarsim::instrument::signals;
-use lidarsim::output::{self, OutputSet};
-use lidarsim::pipeline::RunOutput;
-use lidarsim::retrieval::{self, Method, Product, Quantity};
-use lidarsim::returns::{self, Order, Returns, Source};
-use lidarsim::scene::Scene;
-use lidarsim::transport::TransportOptions;
+use lidarsim::output;
+use lidarsim::products::{self, run::FILES};
+use lidarsim::shard::{self, ShardSpec};
 
 /// Arguments of `lidarsim run`.
 #[derive(clap::Args, Debug)]
@@ -47,41 +42,32 @@ pub struct Args {
     pub no_netcdf: bool,
 }
 
-/// Every file `run` may write into its directory.
-pub(super) const FILES: [&str; 9] = [
-    "returns.csv",
-    "depolarisation.csv",
-    "depolarisation.png",
-    lidarsim::netcdf::RUN_FILE,
-    "signals.csv",
-    "retrieval.csv",
-    "returns.png",
-    "dial.png",
-    "summary.json",
-];
-
 /// Run the subcommand.
 pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(spec) = args.shard {
-        return super::merge::run_shard(&args, spec);
+        return run_shard(&args, spec);
     }
-    let mut scene = match &args.scene {
-        Some(p) => Scene::read(p)?,
-        None => Scene::default_scene()?,
-    };
+    let mut scene = products::read_scene(args.scene.as_deref(), false)?;
     scene
         .override_simulation(args.photons, args.seed, args.threads)
         .map_err(anyhow::Error::msg)?;
     // Before the work: a run must not fail at its end on a name it could have refused now.
     output::check_paths(&FILES.map(|f| args.out.join(f)))?;
-    let mut opts = TransportOptions::from_scene(&scene);
-    opts.progress = true;
-    opts.ddis_epsilon = args.ddis_epsilon;
+    scene.simulation.variance_reduction.ddis_epsilon = args.ddis_epsilon;
     #[cfg(not(feature = "mpi"))]
-    let run = lidarsim::pipeline::run(&scene, &opts)?;
+    let run = {
+        let prepared = lidarsim::pipeline::prepare(&scene)?;
+        if let Some(note) = prepared.warning() {
+            lidarsim::limits::warn(&note);
+        }
+        let bar = super::progress::Progress::new(0, "transport", "batches");
+        let mc = prepared.trace(&|done, total| bar.reach(done, total))?;
+        bar.finish();
+        prepared.finish(mc)?
+    };
     // Under `mpirun` the ranks share the batches; rank 0 alone writes (`lidarsim::distributed`).
     #[cfg(feature = "mpi")]
-    let run = match lidarsim::distributed::run(&scene, &opts)? {
+    let run = match lidarsim::distributed::run(&scene)? {
         lidarsim::distributed::Outcome::Root(run) => run,
         // Other ranks: rank 0 writes the files, or reports why the run stopped and ends with
         // status 2 (mpirun's status); a rank that ended with 2 first could cut its message off.
@@ -89,437 +75,26 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             return Ok(());
         }
     };
-    write_outputs(&args.out, args.no_plots, !args.no_netcdf, &scene, &run)
+    super::write::run(&args.out, args.no_plots, !args.no_netcdf, &scene, &run)
 }
 
-/// Write the files of a run into `out` (all together or none) and print its summary: for
-/// `run`, and for `merge`, whose files must be the same.
-pub(super) fn write_outputs(
-    out_dir: &Path,
-    no_plots: bool,
-    netcdf: bool,
-    scene: &Scene,
-    run: &RunOutput,
-) -> anyhow::Result<()> {
-    // Everything is computed; now write all files together or none (`lidarsim::output`), and
-    // an earlier run's files this one does not rewrite go with the commit.
-    let mut files = OutputSet::new();
-    files.replaces(out_dir, &FILES)?;
-    let sets: Vec<&Returns> = run
-        .mc_lines
-        .iter()
-        .map(|m| &m.mean)
-        .chain([&run.analytic_lines.mean])
-        .collect();
-    // returns.csv: every set's total, then with polarised light its co and cross rows.
-    let mut labelled: Vec<(&Returns, &str)> = sets.iter().map(|r| (*r, "total")).collect();
-    if let Some(p) = &run.polarised {
-        let mc = p.mc.as_ref();
-        for (part, label) in [(0, "co"), (1, "cross")] {
-            if let Some((co, cross, _)) = mc {
-                labelled.push((if part == 0 { co } else { cross }, label));
-            }
-            labelled.push((
-                if part == 0 {
-                    &p.analytic.0
-                } else {
-                    &p.analytic.1
-                },
-                label,
-            ));
-        }
-    }
-    files.write(out_dir.join("returns.csv"), returns::to_csv(&labelled))?;
-    if let Some(p) = &run.polarised {
-        let mut s = String::from(returns::DEPOLARISATION_HEADER);
-        s.push('\n');
-        if let Some((co, cross, cov)) = &p.mc {
-            returns::depolarisation_rows(&mut s, co, cross, Some(cov));
-        }
-        returns::depolarisation_rows(&mut s, &p.analytic.0, &p.analytic.1, None);
-        files.write(out_dir.join("depolarisation.csv"), s)?;
-    }
-    if !run.signals.is_empty() {
-        let mut s = String::from(signals::CSV_HEADER);
-        s.push('\n');
-        for sig in &run.signals {
-            sig.csv_rows(&mut s);
-        }
-        files.write(out_dir.join("signals.csv"), s)?;
-    }
-    if !run.products.is_empty() {
-        let mut s = String::from(retrieval::products::CSV_HEADER);
-        s.push('\n');
-        for p in &run.products {
-            s.push_str(&p.csv_row());
-            s.push('\n');
-        }
-        files.write(out_dir.join("retrieval.csv"), s)?;
-    }
-    if netcdf {
-        let nc = netcdf_file(scene, run, &sets)?;
-        files.write(out_dir.join(lidarsim::netcdf::RUN_FILE), nc)?;
-    }
-    if !no_plots && scene.retrieval.is_some() {
-        super::figures::draw(&mut files, out_dir, scene, run)?;
-    }
-    if !no_plots && run.polarised.is_some() {
-        super::plot::init_font();
-        files.write_via(out_dir.join("depolarisation.png"), |p| {
-            super::figures::depolarisation_figure(p, run)
-        })?;
-    }
-    files.write(out_dir.join("summary.json"), summary_json(scene, run))?;
-    let written = files.commit()?;
-
-    let mut out = std::io::stdout().lock();
-    print_summary(&mut out, scene, run)?;
-    if let Some(note) = &run.atmosphere.gas_note {
-        writeln!(out, "{note}")?;
-    }
-    let names: Vec<String> = written.iter().map(|p| p.display().to_string()).collect();
-    writeln!(out, "wrote {}", names.join(", "))?;
+/// `lidarsim run … --shard I/N`: trace the shard's batches and write its file.
+fn run_shard(args: &Args, spec: ShardSpec) -> anyhow::Result<()> {
+    let mut scene = products::read_scene(args.scene.as_deref(), true)?;
+    scene
+        .override_simulation(args.photons, args.seed, args.threads)
+        .map_err(anyhow::Error::msg)?;
+    scene.simulation.variance_reduction.ddis_epsilon = args.ddis_epsilon;
+    let r = shard::run(&scene, spec, &args.out)?;
+    outln!(
+        "shard {spec}: batches {}..{} of {} ({} photons each) in {:.2} s on {} threads; wrote {}",
+        r.batches.start,
+        r.batches.end,
+        r.total_batches,
+        r.photons_per_batch,
+        r.wall_s,
+        r.threads,
+        r.path.display()
+    );
     Ok(())
-}
-
-fn print_summary(out: &mut impl Write, scene: &Scene, run: &RunOutput) -> std::io::Result<()> {
-    let name = if scene.description.is_empty() {
-        scene.path.display().to_string()
-    } else {
-        scene.description.clone()
-    };
-    writeln!(out, "scene: {name}")?;
-    writeln!(out, "{}", run.monte_carlo.reason)?;
-    if scene.lidar.polarisation != lidarsim::scene::Polarisation::None {
-        // Once: which layers' scalar phase functions stand in for scattering matrices.
-        let stand_ins: Vec<&str> = scene
-            .layers
-            .iter()
-            .filter(|l| l.uses_stand_in())
-            .map(|l| l.name.as_str())
-            .collect();
-        writeln!(
-            out,
-            "polarisation: {} source, co- and cross-polarised returns in returns.csv and depolarisation.csv{}",
-            scene.lidar.polarisation.name(),
-            if stand_ins.is_empty() {
-                String::new()
-            } else {
-                format!(
-                    "; layers {} scatter through a scalar phase function taken as non-depolarising (F22 = F33 = F44 = F11, F12 = F34 = 0)",
-                    stand_ins.join(", ")
-                )
-            }
-        )?;
-    }
-    let analytic = &run.analytic_lines.mean;
-    match (&run.mc, &run.mc_lines) {
-        (Some(mc), Some(lines)) => {
-            writeln!(
-                out,
-                "transport: {} photons, {} scattering events in {:.2} s on {} threads ({:.2} M events/s), {} channels for {} lines",
-                mc.photons,
-                mc.stats.collisions,
-                mc.wall_s,
-                mc.threads,
-                mc.stats.collisions as f64 / mc.wall_s.max(1e-9) * 1e-6,
-                scene.channels.len(),
-                scene.lines.len()
-            )?;
-            print_returns(out, &lines.mean, analytic)?;
-        }
-        _ => {
-            for (k, ch) in analytic.channels.iter().enumerate() {
-                for (f, fov) in analytic.fov_full_angle_mrad.iter().enumerate() {
-                    let an: f64 = (0..analytic.range_m.len())
-                        .map(|g| analytic.energy(k, f, g, Order::Exactly(1)).unwrap_or(0.0))
-                        .sum();
-                    writeln!(
-                        out,
-                        "  channel {ch}, FOV {fov} mrad: all gates {} J",
-                        sci(an, 4)
-                    )?;
-                }
-            }
-        }
-    }
-    if let Some(r) = &run.retrieval {
-        print_retrieval(out, r, &run.products)?;
-    }
-    Ok(())
-}
-
-fn print_returns(out: &mut impl Write, r: &Returns, analytic: &Returns) -> std::io::Result<()> {
-    for (k, ch) in r.channels.iter().enumerate() {
-        for (f, fov) in r.fov_full_angle_mrad.iter().enumerate() {
-            let (mut total, mut single, mut an) = (0.0, 0.0, 0.0);
-            let mut single_err = Vec::with_capacity(r.range_m.len());
-            for g in 0..r.range_m.len() {
-                total += r.energy(k, f, g, Order::Total).unwrap_or(0.0);
-                single += r.energy(k, f, g, Order::Exactly(1)).unwrap_or(0.0);
-                single_err.push(r.stderr(k, f, g, Order::Exactly(1)).unwrap_or(0.0));
-                an += analytic.energy(k, f, g, Order::Exactly(1)).unwrap_or(0.0);
-            }
-            // Gates are not independent; this root sum of variances is only a rough guide.
-            let single_se = root_sum_square(&single_err);
-            let share = if total > 0.0 {
-                100.0 * single / total
-            } else {
-                0.0
-            };
-            writeln!(
-                out,
-                "  channel {ch}, FOV {fov} mrad: all gates {} J, single scattering {} % \
-                 (MC {} ± {} J, analytic {} J)",
-                sci(total, 4),
-                fixed(share, 1),
-                sci(single, 4),
-                sci(single_se, 1),
-                sci(an, 4)
-            )?;
-        }
-    }
-    Ok(())
-}
-
-/// `v` as `{:.digits$e}`, or `n/a` where it is not a finite number: the summary never prints
-/// `NaN` or `inf` (a sum of huge energies can overflow though each is finite).
-fn sci(v: f64, digits: usize) -> String {
-    if v.is_finite() {
-        format!("{v:.digits$e}")
-    } else {
-        "n/a".into()
-    }
-}
-
-/// `v` as `{:.digits$}` (with its sign when `signed`), or `n/a` where it is not finite.
-fn fixed_with(v: f64, digits: usize, signed: bool) -> String {
-    match (v.is_finite(), signed) {
-        (false, _) => "n/a".into(),
-        (true, true) => format!("{v:+.digits$}"),
-        (true, false) => format!("{v:.digits$}"),
-    }
-}
-
-fn fixed(v: f64, digits: usize) -> String {
-    fixed_with(v, digits, false)
-}
-
-/// √(Σ xᵢ²), scaled by the largest |xᵢ| so that the squares of finite values cannot overflow;
-/// not finite only if some xᵢ is not.
-fn root_sum_square(x: &[f64]) -> f64 {
-    let m = x.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-    if m == 0.0 || !m.is_finite() {
-        return if x.iter().all(|v| v.is_finite()) {
-            m
-        } else {
-            f64::NAN
-        };
-    }
-    m * x.iter().map(|v| (v / m).powi(2)).sum::<f64>().sqrt()
-}
-
-fn source_label(p: &Product) -> &'static str {
-    match (p.source, p.order) {
-        (Source::Analytic, _) => "analytic single scattering",
-        (Source::MonteCarlo, Order::Exactly(1)) => "MC single scattering",
-        _ => "MC all orders",
-    }
-}
-
-fn print_retrieval(
-    out: &mut impl Write,
-    r: &retrieval::Retrieval,
-    products: &[Product],
-) -> std::io::Result<()> {
-    let c = &r.config;
-    writeln!(
-        out,
-        "retrieval of {} from {}: reference state = the scene's own profile; averaging {}; {} noisy realisations",
-        c.gas, r.pair, c.averaging_label, c.realisations
-    )?;
-    let ipda: Vec<&Product> = products
-        .iter()
-        .filter(|p| p.method == Method::Ipda)
-        .collect();
-    if let (Some(first), Some(t)) = (ipda.first(), &c.target) {
-        let what = match &t.kind {
-            retrieval::TargetKind::Surface => "the surface".to_string(),
-            retrieval::TargetKind::Layer { name, .. } => format!("the top of `{name}`"),
-        };
-        writeln!(
-            out,
-            "  IPDA to {what} at {:.0} m: truth X{} = {} ppm (dry-air column {:.0}–{:.0} m)",
-            t.range_m,
-            c.gas,
-            fixed(first.truth, 4),
-            first.altitude_m.0,
-            first.altitude_m.1
-        )?;
-        for p in &ipda {
-            writeln!(
-                out,
-                "    FOV {} mrad, {}: retrieved {} ppm, bias {} ppm (MC ± {}, {} if on/off were traced apart); random error {} ppm per shot pair (simulated {}), {} ppm averaged (simulated {})",
-                p.fov_full_angle_mrad,
-                source_label(p),
-                fixed(p.retrieved, 4),
-                fixed_with(p.bias(), 4, true),
-                sci(p.mc_stderr, 1),
-                sci(p.mc_stderr_independent, 1),
-                fixed(p.random_error_per_shot_pair, 3),
-                fixed(p.simulated_error_per_shot_pair, 3),
-                fixed(p.random_error_averaged, 4),
-                fixed(p.simulated_error_averaged, 4)
-            )?;
-        }
-    }
-    let dial: Vec<&Product> = products
-        .iter()
-        .filter(|p| p.method == Method::Dial && p.quantity == Quantity::MixingRatio)
-        .collect();
-    if let Some(d) = &c.dial {
-        writeln!(
-            out,
-            "  DIAL: {} cells of {} m (mixing ratio per cell; all cells in retrieval.csv)",
-            d.cells, d.cell_m
-        )?;
-        let mut keys: Vec<(Source, Order, f64)> = Vec::new();
-        for p in &dial {
-            if !keys.contains(&(p.source, p.order, p.fov_full_angle_mrad)) {
-                keys.push((p.source, p.order, p.fov_full_angle_mrad));
-            }
-        }
-        for (s, o, f) in keys {
-            let set: Vec<&&Product> = dial
-                .iter()
-                .filter(|p| p.source == s && p.order == o && p.fov_full_angle_mrad == f)
-                .collect();
-            let rms_bias =
-                (set.iter().map(|p| p.bias().powi(2)).sum::<f64>() / set.len() as f64).sqrt();
-            let mut errs: Vec<f64> = set.iter().map(|p| p.random_error_averaged).collect();
-            errs.sort_by(f64::total_cmp);
-            writeln!(
-                out,
-                "    FOV {f} mrad, {}: rms bias {} ppm; random error averaged {}–{} ppm (median {})",
-                source_label(set[0]),
-                fixed(rms_bias, 4),
-                fixed(errs[0], 3),
-                fixed(errs[errs.len() - 1], 3),
-                fixed(errs[errs.len() / 2], 3)
-            )?;
-        }
-    }
-    Ok(())
-}
-
-/// The bytes of `run.nc` (`lidarsim::netcdf`): the numbers of the CSV files, the scene's text
-/// and this command line.
-fn netcdf_file(scene: &Scene, run: &RunOutput, returns: &[&Returns]) -> anyhow::Result<Vec<u8>> {
-    use lidarsim::netcdf;
-    let scene_text = scene.text().to_string();
-    let title = if scene.description.is_empty() {
-        scene.path.display().to_string()
-    } else {
-        scene.description.clone()
-    };
-    let attributes = netcdf::RunAttributes {
-        title: format!("lidarsim run: {title}"),
-        history: super::netcdf_history(),
-        scene_file: scene.path.display().to_string(),
-        scene_text,
-        seed: scene.simulation.seed,
-        photons: run.mc.as_ref().map_or(0, |m| m.photons),
-        batches: scene.simulation.batches as u64,
-    };
-    Ok(netcdf::run_file(&netcdf::RunFile {
-        returns,
-        gates: &scene.gates,
-        lines: &scene.sampling.lines,
-        signals: &run.signals,
-        products: &run.products,
-        gas: run.retrieval.as_ref().map(|r| r.config.gas.as_str()),
-        attributes: &attributes,
-    })?)
-}
-
-fn summary_json(scene: &Scene, run: &RunOutput) -> String {
-    let mut json = serde_json::json!({
-        "scene": scene.path.display().to_string(),
-        "description": scene.description,
-        "channels": scene.channels.iter().map(|c| serde_json::json!({
-            "name": c.name, "wavenumber_cm1": c.wavenumber_cm1,
-        })).collect::<Vec<_>>(),
-        "photons": run.mc.as_ref().map_or(0, |m| m.photons),
-        "monte_carlo": {
-            "run": run.monte_carlo.run,
-            "multiple_scattering": run.monte_carlo.mode.label(),
-            "reason": run.monte_carlo.reason,
-        },
-    });
-    // Only where computed: summary.json holds no nulls.
-    if let Some((bound, fov)) = run.monte_carlo.bound {
-        json["monte_carlo"]["multiple_scattering_bound"] = bound.into();
-        json["monte_carlo"]["multiple_scattering_bound_fov_full_angle_mrad"] = fov.into();
-    }
-    if let Some(mc) = &run.mc {
-        let s = &mc.stats;
-        json["batches"] = scene.simulation.batches.into();
-        json["seed"] = scene.simulation.seed.into();
-        json["threads"] = mc.threads.into();
-        json["wall_s"] = mc.wall_s.into();
-        json["counters"] = serde_json::json!({
-            "collisions": s.collisions,
-            "surface_reflections": s.surface_reflections,
-            "local_estimates": s.local_estimates,
-            "roulette_kills": s.roulette_kills,
-            "cut": s.cut,
-            "escaped": s.escaped,
-            "zero_weight": s.zero_weight,
-        });
-    }
-    if let Some(r) = &run.retrieval {
-        json["retrieval"] = serde_json::json!({
-            "gas": r.config.gas,
-            "channel_pair": r.pair,
-            "shots_averaged": r.config.averaging_shots,
-            "averaging": r.config.averaging_label,
-            "ipda": run.products.iter().filter(|p| p.method == Method::Ipda).map(|p| serde_json::json!({
-                "source": p.source.label(),
-                "order": p.order.label(),
-                "fov_full_angle_mrad": p.fov_full_angle_mrad,
-                "truth_ppm": p.truth,
-                "retrieved_ppm": p.retrieved,
-                "bias_ppm": p.bias(),
-                "mc_stderr_ppm": p.mc_stderr,
-                "random_error_per_shot_pair_ppm": p.random_error_per_shot_pair,
-                "random_error_averaged_ppm": p.random_error_averaged,
-            })).collect::<Vec<_>>(),
-        });
-    }
-    serde_json::to_string_pretty(&json).unwrap_or_default()
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// The summary's numbers: never `NaN` or `inf`; a root sum of squares of finite errors is
-    /// finite even where the squares overflow (√2·1e200 from two errors of 1e200, whose squares
-    /// do), and exact where they do not (3, 4 → 5).
-    #[test]
-    fn summary_numbers_are_finite_or_na() {
-        for v in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
-            assert_eq!(sci(v, 4), "n/a");
-            assert_eq!(fixed(v, 1), "n/a");
-            assert_eq!(fixed_with(v, 4, true), "n/a");
-        }
-        assert_eq!(sci(6.0e-2, 4), "6.0000e-2");
-        assert_eq!(fixed_with(0.25, 2, true), "+0.25");
-        assert_eq!(root_sum_square(&[3.0, 4.0]), 5.0);
-        assert_eq!(root_sum_square(&[]), 0.0);
-        let r = root_sum_square(&[1e200, 1e200]);
-        assert!((r / (2f64.sqrt() * 1e200) - 1.0).abs() < 1e-15, "{r}");
-        assert!(root_sum_square(&[1.0, f64::NAN]).is_nan());
-        assert_eq!(sci(root_sum_square(&[f64::MAX, f64::MAX]), 1), "n/a");
-    }
 }

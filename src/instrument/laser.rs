@@ -6,7 +6,7 @@
 //! `frequency_offset_mhz` from the nominal one), a fraction 1 − p of the energy (spectral
 //! impurity, e.g. amplified spontaneous emission) elsewhere, and a frequency that jitters from
 //! shot to shot with rms σ_j. The transport and the lidar equation are monochromatic, so each
-//! line becomes a few *channels* riding on the same photon paths (DESIGN §1):
+//! line becomes a few *channels* riding on the same photon paths (docs/design.md §1):
 //!
 //! * the n quadrature nodes of g over the filter's pass band ([`LineShape::nodes_within`]),
 //!   P̄ = Σᵢ wᵢ P(c + xᵢ), the energy outside the band being blocked;

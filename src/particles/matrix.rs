@@ -1,4 +1,4 @@
-//! Scattering matrices for polarised transport (issue 16).
+//! Scattering matrices for polarised transport (`docs/particles.md`, "Scattering matrices (polarisation)").
 //!
 //! For a macroscopically isotropic, mirror-symmetric medium (spheres, randomly oriented
 //! particles with their mirror images) the 4 × 4 scattering matrix has six independent

@@ -7,7 +7,6 @@ use super::{RunError, RunOutput, run};
 use crate::optics::OpticalAtmosphere;
 use crate::scene::{MultipleScattering, Scene};
 use crate::skip::Decision;
-use crate::transport::TransportOptions;
 
 /// Wall-clock times of one scene's whole run ([`run`]) as the scene asks for it and with
 /// the Monte Carlo forced on: what skipping saves.
@@ -44,11 +43,10 @@ pub fn compare_skip(
         forced.simulation.photons = forced_photons;
     }
     let fastest = |s: &Scene| -> Result<(f64, RunOutput), RunError> {
-        let opts = TransportOptions::from_scene(s);
         let mut best: Option<(f64, RunOutput)> = None;
         for _ in 0..repeat.max(1) {
             let t = Instant::now();
-            let out = run(s, &opts)?;
+            let out = run(s)?;
             let dt = t.elapsed().as_secs_f64();
             if best.as_ref().is_none_or(|(b, _)| dt < *b) {
                 best = Some((dt, out));

@@ -1,4 +1,4 @@
-//! A scene from end to end: the stages of DESIGN §1 in order, the one path every command takes.
+//! A scene from end to end: the stages of docs/design.md §1 in order, the one path every command takes.
 //!
 //! [`prepare`] (optics → analytic lidar equation → retrieval set-up and the analytic
 //! retrievals, so that a retrieval that cannot be done fails before any photon is traced → the
@@ -21,7 +21,7 @@ use crate::retrieval::{
 };
 use crate::returns::{Order, Returns, Source};
 use crate::scene::Scene;
-use crate::transport::{self, McResult, TransportError, TransportOptions};
+use crate::transport::{self, McResult, Progress, TallyLayout, TransportError};
 
 mod compare;
 mod work;
@@ -117,7 +117,7 @@ pub enum RunError {
 #[derive(Debug)]
 pub struct Prepared<'s> {
     scene: &'s Scene,
-    transport: TransportOptions,
+    layout: TallyLayout,
     atmosphere: OpticalAtmosphere,
     analytic: Returns,
     analytic_lines: LineReturns,
@@ -129,12 +129,11 @@ pub struct Prepared<'s> {
     products: Vec<Product>,
 }
 
-/// Everything of a run of `scene` before its Monte Carlo ([`Prepared`]); `transport` says how
-/// the Monte Carlo would run (0 photons: the analytic lidar equation only).
-pub fn prepare<'s>(
-    scene: &'s Scene,
-    transport: &TransportOptions,
-) -> Result<Prepared<'s>, RunError> {
+/// Everything of a run of `scene` before its Monte Carlo ([`Prepared`]); its settings
+/// (`scene.simulation`) say how the Monte Carlo would run (0 photons: the analytic lidar
+/// equation only).
+pub fn prepare(scene: &Scene) -> Result<Prepared<'_>, RunError> {
+    let photons = scene.simulation.photons;
     let atmosphere = OpticalAtmosphere::build(scene)?;
     let analytic = lidar_eq::single_scatter(scene, &atmosphere);
     let analytic_lines = scene.sampling.combine(&analytic);
@@ -153,12 +152,12 @@ pub fn prepare<'s>(
         &mut signals,
         &mut products,
     )?;
-    let decision = crate::skip::decide(scene, &atmosphere, transport.photons);
+    let decision = crate::skip::decide(scene, &atmosphere, photons);
     // A Monte Carlo that would run for months is refused here, in milliseconds (README,
     // "Limits").
     let mut warning = None;
     if decision.run {
-        let work = monte_carlo_work(scene, &atmosphere, transport.photons);
+        let work = monte_carlo_work(scene, &atmosphere, photons);
         work.check()
             .map_err(|m| RunError::Input(scene.input_error("simulation", "photons", m)))?;
         warning = work
@@ -167,7 +166,7 @@ pub fn prepare<'s>(
     }
     Ok(Prepared {
         scene,
-        transport: plan_options(scene, transport),
+        layout: tally_layout(scene),
         atmosphere,
         analytic,
         analytic_lines,
@@ -195,10 +194,9 @@ impl<'s> Prepared<'s> {
         &self.decision
     }
 
-    /// The transport options the plan is built with: the caller's, with the scene's line
-    /// combinations ([`plan_options`]).
-    pub fn transport_options(&self) -> &TransportOptions {
-        &self.transport
+    /// The layout of the Monte Carlo's tallies ([`tally_layout`]).
+    pub fn layout(&self) -> &TallyLayout {
+        &self.layout
     }
 
     /// A note for the user when the Monte Carlo is allowed but long (README, "Limits"), named
@@ -216,8 +214,18 @@ impl<'s> Prepared<'s> {
         Ok(Some(transport::Plan::new(
             self.scene,
             &self.atmosphere,
-            &self.transport,
+            &self.layout,
         )?))
+    }
+
+    /// The Monte Carlo traced on this machine, on `scene.simulation.threads` threads
+    /// ([`transport::run_plan`]), reporting the batches folded to `progress`; `None` when the
+    /// scene runs none.
+    pub fn trace(&self, progress: Progress) -> Result<Option<McResult>, RunError> {
+        match self.plan()? {
+            Some(plan) => Ok(Some(transport::run_plan(&plan, progress)?)),
+            None => Ok(None),
+        }
     }
 
     /// The run's outputs from the folded Monte Carlo of [`Self::plan`]'s batches (`None`
@@ -277,17 +285,14 @@ impl<'s> Prepared<'s> {
     }
 }
 
-/// Run every stage of `scene` on this machine: [`prepare`], trace the plan's batches on
-/// `transport.threads` threads ([`transport::run_plan`]), [`Prepared::finish`].
-pub fn run(scene: &Scene, transport: &TransportOptions) -> Result<RunOutput, RunError> {
-    let prepared = prepare(scene, transport)?;
+/// Run every stage of `scene` on this machine, quietly: [`prepare`], [`Prepared::trace`],
+/// [`Prepared::finish`]; a note on long work goes to standard error ([`crate::limits::warn`]).
+pub fn run(scene: &Scene) -> Result<RunOutput, RunError> {
+    let prepared = prepare(scene)?;
     if let Some(note) = prepared.warning() {
         crate::limits::warn(&note);
     }
-    let mc = match prepared.plan()? {
-        Some(plan) => Some(transport::run_plan(&plan)?),
-        None => None,
-    };
+    let mc = prepared.trace(&transport::quiet)?;
     prepared.finish(mc)
 }
 
@@ -318,28 +323,27 @@ fn polarised_lines(
     })
 }
 
-/// The Monte Carlo of `scene` through `atmosphere` with `transport`'s photons and seed, and its
-/// line returns: what a study traces for each truth ([`crate::study::dial`]), with the plan
-/// options a run would use ([`plan_options`]).
+/// The Monte Carlo of `scene` through `atmosphere` (its settings: `scene.simulation`), and its
+/// line returns: what a study traces for each truth ([`crate::study::dial`]), with the tally
+/// layout a run would use ([`tally_layout`]).
 pub fn trace_lines(
     scene: &Scene,
     atmosphere: &OpticalAtmosphere,
-    transport: &TransportOptions,
 ) -> Result<(McResult, Option<LineReturns>), TransportError> {
-    let opts = plan_options(scene, transport);
-    let mc = transport::run_plan(&transport::Plan::new(scene, atmosphere, &opts)?)?;
+    let mc = transport::run(scene, atmosphere, &tally_layout(scene))?;
     let lines = mc.combined.as_ref().map(|c| scene.sampling.split(c));
     Ok((mc, lines))
 }
 
-/// The transport options a run of `scene` plans with: `transport` with the scene's line
-/// combinations and the pairs whose covariance is folded. The one place they are set, so that a
-/// run, a shard ([`crate::shard`]) and a merge of shards build the same plan.
-pub fn plan_options(scene: &Scene, transport: &TransportOptions) -> TransportOptions {
-    let mut opts = transport.clone();
-    opts.combinations = scene.sampling.combinations();
-    opts.combination_pairs = scene.sampling.covariance_pairs();
-    opts
+/// The layout of a run's tallies: the scene's line combinations and the pairs whose covariance
+/// is folded. The one place they are set, so that a run, a shard ([`crate::shard`]), a merge
+/// of shards and a study build the same plan.
+pub fn tally_layout(scene: &Scene) -> TallyLayout {
+    TallyLayout {
+        flux: false,
+        combinations: scene.sampling.combinations(),
+        combination_pairs: scene.sampling.covariance_pairs(),
+    }
 }
 
 /// Signals of one set of line returns, and the retrievals from them.

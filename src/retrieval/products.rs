@@ -7,19 +7,19 @@
 //!   DAOD = ½ ln(P_off E_on / (P_on E_off)); the dry-air column mixing ratio X = s·X_ref with
 //!   D(s) = DAOD (the weighting-function form X = DAOD/IWF for a monochromatic laser;
 //!   [`super::reference`]); and the slant column N = (DAOD − D_other)/(σ_on − σ_off) with the
-//!   virtual cross-sections σ = −ln T_gas/(2N_ref) of the reference state (the seed paper),
+//!   virtual cross-sections σ = −ln T_gas/(2N_ref) of the reference state (the reference study),
 //!   D_other the other gases' DAOD in the reference state.
 //! * **DIAL** per range cell between gate centres r_a < r_b:
 //!   ΔD = ½ ln(P_off(r_b) P_on(r_a) / (P_on(r_b) P_off(r_a))), the cell's gas scaled by s so
 //!   that the reference's D(r_b) − D(r_a) equals it; n = s·n_ref and x = s·x_ref. For a
-//!   monochromatic laser n = ΔD/(Δσ Δr) (DESIGN §3, n = dN/dz).
+//!   monochromatic laser n = ΔD/(Δσ Δr) (docs/design.md §3, n = dN/dz).
 //!
 //! Errors, each converted to the product through dD/ds of the reference state:
 //! * Monte Carlo: the delta method on the on/off returns with their covariance (shared photon
 //!   paths), var ΔD = ¼ Σ_gates [σ²_on/P²_on + σ²_off/P²_off − 2 cov/(P_on P_off)], gates taken
 //!   as independent;
-//! * random, analytic, per shot pair: var D = ¼ Σ_lines [SNR⁻² + ε_M² + (σ_j S/P)²] (DESIGN
-//!   §3 with the energy monitor and the frequency jitter added; the jitter of one shot is common
+//! * random, analytic, per shot pair: var D = ¼ Σ_lines [SNR⁻² + ε_M² + (σ_j S/P)²]
+//!   (`docs/design.md` §3 with the energy monitor and the frequency jitter added; the jitter of one shot is common
 //!   to both ends of a DIAL cell, so there it enters as σ_j (S_b/P_b − S_a/P_a)); divided by
 //!   √N after averaging N shot pairs;
 //! * random, simulated: the standard deviation of the retrievals of `realisations` noisy
@@ -237,6 +237,37 @@ struct Target {
     windows: Vec<Range<usize>>,
 }
 
+impl Target {
+    /// The sign of window `k` in D: D of a cell is the far end's minus the near end's; an IPDA
+    /// window stands alone.
+    fn window_sign(&self, k: usize) -> f64 {
+        let ipda = self.windows.len() == 1;
+        if k == 0 && !ipda { -1.0 } else { 1.0 }
+    }
+}
+
+/// Every window any target is measured on, once, and the indices of each target's windows in
+/// that list.
+fn measurement_windows(targets: &[Target]) -> (Vec<Range<usize>>, Vec<Vec<usize>>) {
+    let mut windows: Vec<Range<usize>> = Vec::new();
+    let window_ids: Vec<Vec<usize>> = targets
+        .iter()
+        .map(|t| {
+            t.windows
+                .iter()
+                .map(|w| match windows.iter().position(|x| x == w) {
+                    Some(i) => i,
+                    None => {
+                        windows.push(w.clone());
+                        windows.len() - 1
+                    }
+                })
+                .collect()
+        })
+        .collect();
+    (windows, window_ids)
+}
+
 impl Retrieval {
     /// The retrieval of `config` for a lidar at `lidar_altitude_m` pointing with direction
     /// cosine `mu`, gates centred at `range_m`. Checks that the on-line absorbs more than the
@@ -445,23 +476,7 @@ impl Retrieval {
         let targets = &self.targets;
         let n_avg = self.config.averaging_shots;
         let reals = self.config.realisations;
-        // Every window any product is measured on, once.
-        let mut windows: Vec<Range<usize>> = Vec::new();
-        let window_ids: Vec<Vec<usize>> = targets
-            .iter()
-            .map(|t| {
-                t.windows
-                    .iter()
-                    .map(|w| match windows.iter().position(|x| x == w) {
-                        Some(i) => i,
-                        None => {
-                            windows.push(w.clone());
-                            windows.len() - 1
-                        }
-                    })
-                    .collect()
-            })
-            .collect();
+        let (windows, window_ids) = measurement_windows(targets);
         // The expected echo and noise of every window, for the on- (0) and the off-line (1).
         let expected: [Vec<WindowSignal>; 2] = [on, off].map(|line| {
             windows
@@ -484,9 +499,8 @@ impl Retrieval {
                     .map(|g| mean.covariance_j2(on, off, fov, g, o).unwrap_or(0.0))
                     .sum()
             };
-            // D of a cell is the far end's minus the near end's; an IPDA window stands alone.
             let ipda = t.windows.len() == 1;
-            let sign = |k: usize| if k == 0 && !ipda { -1.0 } else { 1.0 };
+            let sign = |k: usize| t.window_sign(k);
             let (mut d, mut var_mc, mut var_ind) = (0.0, 0.0, 0.0);
             let mut no_signal = None;
             for (k, w) in t.windows.iter().enumerate() {
@@ -501,30 +515,7 @@ impl Retrieval {
                 var_ind += 0.25 * ind;
                 var_mc += 0.25 * (ind - 2.0 * cov(w) / (p_on * p_off));
             }
-            // Analytic random error per shot pair.
-            let mut var_shot = 0.0;
-            // A window whose SNR is so small (a signal of 1e-300 photo-electrons) that 1/SNR²
-            // overflows carries no more usable signal than one with none.
-            let mut weak = None;
-            for line_windows in &expected {
-                let mut jitter = 0.0;
-                for (k, id) in ids.iter().enumerate() {
-                    let w = &line_windows[*id];
-                    let snr = w.noise.snr();
-                    let inv = 1.0 / (snr * snr);
-                    if inv.is_finite() {
-                        var_shot += inv;
-                    } else {
-                        var_shot = f64::INFINITY;
-                        weak.get_or_insert((t.windows[k].clone(), snr));
-                    }
-                    jitter += sign(k) * w.jitter_relative(self.laser.frequency_jitter_rms_mhz);
-                }
-                var_shot += jitter * jitter;
-                if ipda {
-                    var_shot += self.laser.energy_monitor_error_fraction.powi(2);
-                }
-            }
+            let (var_shot, weak) = self.shot_variance(t, ids, &expected);
             let what = if ipda { "hard-target" } else { "atmospheric" };
             let refusal = match (no_signal, weak) {
                 (Some(w), _) => Some(format!(
@@ -591,6 +582,43 @@ impl Retrieval {
             });
         }
         Ok(products)
+    }
+
+    /// The analytic variance of D per shot pair of target `t`, measured on the windows `ids` of
+    /// `expected`, and the first window too weak for it (then the variance is infinite).
+    fn shot_variance(
+        &self,
+        t: &Target,
+        ids: &[usize],
+        expected: &[Vec<WindowSignal>; 2],
+    ) -> (f64, Option<(Range<usize>, f64)>) {
+        let ipda = t.windows.len() == 1;
+        let sign = |k: usize| t.window_sign(k);
+        // Analytic random error per shot pair.
+        let mut var_shot = 0.0;
+        // A window whose SNR is so small (a signal of 1e-300 photo-electrons) that 1/SNR²
+        // overflows carries no more usable signal than one with none.
+        let mut weak = None;
+        for line_windows in expected {
+            let mut jitter = 0.0;
+            for (k, id) in ids.iter().enumerate() {
+                let w = &line_windows[*id];
+                let snr = w.noise.snr();
+                let inv = 1.0 / (snr * snr);
+                if inv.is_finite() {
+                    var_shot += inv;
+                } else {
+                    var_shot = f64::INFINITY;
+                    weak.get_or_insert((t.windows[k].clone(), snr));
+                }
+                jitter += sign(k) * w.jitter_relative(self.laser.frequency_jitter_rms_mhz);
+            }
+            var_shot += jitter * jitter;
+            if ipda {
+                var_shot += self.laser.energy_monitor_error_fraction.powi(2);
+            }
+        }
+        (var_shot, weak)
     }
 
     /// Noisy measurements: `reals` of N shot pairs, then `reals` of one shot pair. Each draws the

@@ -6,7 +6,7 @@
 //! its thickness, as the optical atmosphere does.
 //!
 //! The forward model of the retrieval (Ehret et al. 2008, Appl. Phys. B 90, 593, Eqs. 1–4, in
-//! the form of DESIGN §3) is the one-way differential absorption optical depth from the lidar to
+//! the form of docs/design.md §3) is the one-way differential absorption optical depth from the lidar to
 //! altitude z for a reference profile whose target gas is scaled by s,
 //!
 //! ```text
@@ -275,7 +275,7 @@ impl ReferenceState {
         s
     }
 
-    /// Virtual absorption cross-section of a line over a path (the seed paper's
+    /// Virtual absorption cross-section of a line over a path (the reference study's
     /// σ = −ln T_gas/(2N)): the target gas's two-way line-shape-averaged transmission and its
     /// slant column N [m²/molecule].
     pub fn virtual_cross_section_m2(

@@ -1,7 +1,7 @@
 //! Scenes: the description of a lidar, its channels, range gates, atmosphere, particle layers,
 //! surface and simulation settings, and the resolved [`Scene`] the stages use.
 //!
-//! **contract** (DESIGN §4): units in every key name, full angles where a cone is meant, every
+//! **contract** (docs/design.md §4): units in every key name, full angles where a cone is meant, every
 //! unknown key rejected with the file, line and key named. The key reference is in README.md;
 //! the files in `scenes/` are worked examples.
 //!
@@ -36,6 +36,7 @@ mod validate;
 mod validate_atmosphere;
 mod validate_instrument;
 mod validate_retrieval;
+mod variance;
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -57,6 +58,9 @@ pub use description::{
     SimulationDescription, SurfaceDescription,
 };
 use source::{KeyPath, Source};
+pub use variance::{
+    ALIGNMENT_SPLITTING, DDIS_EPSILON, RANGE_STRATIFICATION, ROULETTE_ALIGNMENT, VarianceReduction,
+};
 
 /// The scene run when `lidarsim run` gets no file.
 pub const DEFAULT_SCENE_TOML: &str = include_str!("../../scenes/spaceborne_co2_ipda.toml");
@@ -99,7 +103,9 @@ pub struct Scene {
     pub surface: Option<Surface>,
     /// Line-by-line gas absorption, if any.
     pub gas: Option<GasAbsorption>,
-    /// Monte Carlo settings.
+    /// The run settings: everything that says how a scene is run rather than what it is (photons,
+    /// seed, batches, threads, orders, when the Monte Carlo runs, its variance reductions). The one
+    /// settings type: the transport, the pipeline, shards and MPI read them from here.
     pub simulation: Simulation,
     /// The description it was resolved from.
     spec: Arc<SceneDescription>,
@@ -309,7 +315,9 @@ pub struct Surface {
     pub albedo: Vec<f64>,
 }
 
-/// Monte Carlo settings.
+/// The run settings: everything that says how a scene is run rather than what it is (photons,
+/// seed, batches, threads, orders, when the Monte Carlo runs, its variance reductions). The one
+/// settings type: the transport, the pipeline, shards and MPI read them from here.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Simulation {
     /// Number of photon packets (0: analytic single scattering only, no Monte Carlo).
@@ -330,6 +338,9 @@ pub struct Simulation {
     /// The multiple-scattering share of a return below which `"auto"` skips the Monte Carlo
     /// (`multiple_scattering_tolerance`, default [`MULTIPLE_SCATTERING_TOLERANCE`]).
     pub multiple_scattering_tolerance: f64,
+    /// The Monte Carlo's variance reductions (not in the scene file: defaults, which the
+    /// command line and the benchmarks may change).
+    pub variance_reduction: VarianceReduction,
 }
 
 /// When the Monte Carlo runs (`[simulation] multiple_scattering`). Single scattering always
@@ -338,7 +349,7 @@ pub struct Simulation {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum MultipleScattering {
     /// Skip the Monte Carlo when it cannot change the answer: no particle layer scatters and
-    /// the bound on molecular multiple scattering (`lidar_eq::molecular_multiple_scattering_bound`)
+    /// the bound on all orders ≥ 2 ([`crate::lidar_eq::multiple_scattering_bound`])
     /// is below the tolerance in every field of view and channel.
     #[default]
     Auto,

@@ -16,7 +16,7 @@ use super::validate_instrument::{LaserValues, ReceiverValues};
 use super::validate_retrieval::{Known, RetrievalValues};
 use super::{
     BeamProfile, Channel, Gates, Lidar, MULTIPLE_SCATTERING_TOLERANCE, MultipleScattering,
-    Polarisation, Simulation, Surface,
+    Polarisation, Simulation, Surface, VarianceReduction,
 };
 use crate::input::{Bounds, InputError, check_count, check_finite_range, names};
 
@@ -366,6 +366,7 @@ impl Validator<'_> {
                     self.range(&sec.key("multiple_scattering_tolerance"), v, MS_TOLERANCE)?
                 }
             },
+            variance_reduction: VarianceReduction::default(),
         };
         check_count(sim.max_order.into(), 1, 1000)
             .map_err(|m| self.err(&sec.key("max_order"), m))?;

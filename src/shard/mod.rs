@@ -55,13 +55,12 @@ use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
+use crate::digest::Fnv;
 use crate::input::InputError;
 use crate::output::{self, OutputError, OutputSet};
 use crate::pipeline::{self, RunError, RunOutput};
 use crate::scene::Scene;
-use crate::transport::{
-    self, BatchTally, Flux, McResult, RunStats, TransportError, TransportOptions,
-};
+use crate::transport::{self, BatchTally, Flux, McResult, RunStats, TallyLayout, TransportError};
 
 mod check;
 mod file;
@@ -363,31 +362,6 @@ fn list_paths(v: &[PathBuf]) -> String {
     s.join(", ")
 }
 
-/// FNV-1a, 64 bit: the shard checksum and the scene digest. Stable across machines and Rust
-/// versions (std's `DefaultHasher` is not), and a change of any single byte changes it (each
-/// step is a bijection of the state).
-#[derive(Debug, Clone, Copy)]
-pub(crate) struct Fnv(pub(crate) u64);
-
-impl Fnv {
-    pub(crate) fn new() -> Self {
-        Fnv(0xcbf2_9ce4_8422_2325)
-    }
-
-    pub(crate) fn update(&mut self, bytes: &[u8]) {
-        for b in bytes {
-            self.0 = (self.0 ^ u64::from(*b)).wrapping_mul(0x0000_0100_0000_01b3);
-        }
-    }
-}
-
-impl fmt::Write for Fnv {
-    fn write_str(&mut self, s: &str) -> fmt::Result {
-        self.update(s.as_bytes());
-        Ok(())
-    }
-}
-
 /// The digest of a scene as parsed: FNV-1a 64 of its `Debug` text, which holds every value
 /// of the scene after validation (floats in their shortest exact form), its text, its path,
 /// the overrides of photons and seed, and the contents of every file it read (phase tables,
@@ -469,8 +443,7 @@ pub struct Merged {
 pub fn merge(inputs: &[PathBuf]) -> Result<Merged, ShardError> {
     let set = ShardSet::open(&shard_paths(inputs)?)?;
     let scene = set.scene()?;
-    let opts = set.transport_options(&scene);
-    let prepared = pipeline::prepare(&scene, &opts)?;
+    let prepared = pipeline::prepare(&scene)?;
     let mc = match prepared.plan()? {
         Some(plan) => Some(set.fold(&plan, &scene)?),
         None => None,

@@ -79,24 +79,28 @@ impl ShardSet {
                 digest: &h.scene_digest,
             })
             .collect();
+        if h.flux_tally {
+            return Err(ShardError::Bad {
+                path: self.shards[0].0.clone(),
+                what: "its header says the flux leaving the scene was tallied, which no run does"
+                    .into(),
+            });
+        }
+        // The scene with the settings the shards ran with (threads aside: they do not change
+        // the numbers), as its digest was taken.
         scene_of(
             &claims,
-            |s| s.override_simulation(Some(h.photons), Some(h.seed), None),
+            |s| {
+                s.override_simulation(Some(h.photons), Some(h.seed), None)?;
+                let sim = &mut s.simulation;
+                sim.max_order = h.max_order;
+                sim.variance_reduction.ddis_epsilon = f64::from_bits(h.ddis_epsilon_bits);
+                sim.variance_reduction.range_stratification =
+                    f64::from_bits(h.range_stratification_bits);
+                Ok(())
+            },
             run_scene_digest,
         )
-    }
-
-    /// The transport options the shards ran with (threads: all cores; they do not matter).
-    pub fn transport_options(&self, scene: &Scene) -> TransportOptions {
-        let h = self.first();
-        let mut o = TransportOptions::from_scene(scene);
-        o.photons = h.photons;
-        o.seed = h.seed;
-        o.max_order = h.max_order;
-        o.ddis_epsilon = f64::from_bits(h.ddis_epsilon_bits);
-        o.range_stratification = f64::from_bits(h.range_stratification_bits);
-        o.flux_tally = h.flux_tally;
-        o
     }
 
     /// Fold every shard's batches in batch order into the run's result. Its `wall_s` is the sum

@@ -65,20 +65,6 @@ fn file_names_sort_in_shard_order() {
     );
 }
 
-/// FNV-1a 64 test vectors (Fowler, Noll and Vo; draft-eastlake-fnv).
-#[test]
-fn fnv_matches_its_published_vectors() {
-    for (text, want) in [
-        ("", 0xcbf2_9ce4_8422_2325u64),
-        ("a", 0xaf63_dc4c_8601_ec8c),
-        ("foobar", 0x8594_4171_f739_67e8),
-    ] {
-        let mut h = Fnv::new();
-        h.update(text.as_bytes());
-        assert_eq!(h.0, want, "{text:?}");
-    }
-}
-
 /// The digest is that of the scene as parsed: the same for the same scene read twice or
 /// run on other threads, different for another seed, photon count or value.
 #[test]

@@ -45,22 +45,17 @@ fn write_record(w: &mut impl Write, t: &BatchTally) -> io::Result<()> {
     Ok(())
 }
 
-/// Run shard `spec` of `scene` with `transport` and write it as `out_dir/`[`ShardSpec::file_name`]
+/// Run shard `spec` of `scene` (its settings: `scene.simulation`) and write it as `out_dir/`[`ShardSpec::file_name`]
 /// (whole or not at all).
 ///
 /// The shard runs [`pipeline::prepare`], so that everything checked before the Monte Carlo in a
 /// single run (the optics, the analytic returns, the retrieval's set-up and its analytic
 /// products, the Monte Carlo's work) is checked here too: a scene a merge would refuse is
 /// refused before any photon is traced. It then traces the shard's batches of the plan on
-/// `transport.threads` threads and writes them; [`Prepared::finish`](pipeline::Prepared::finish)
+/// `scene.simulation.threads` threads and writes them; [`Prepared::finish`](pipeline::Prepared::finish)
 /// is the merge's.
-pub fn run(
-    scene: &Scene,
-    transport: &TransportOptions,
-    spec: ShardSpec,
-    out_dir: &Path,
-) -> Result<ShardReport, ShardError> {
-    if transport.photons == 0 {
+pub fn run(scene: &Scene, spec: ShardSpec, out_dir: &Path) -> Result<ShardReport, ShardError> {
+    if scene.simulation.photons == 0 {
         return Err(ShardError::Spec {
             spec,
             what: "a shard needs photons (0 photons runs the analytic lidar equation only)".into(),
@@ -68,12 +63,12 @@ pub fn run(
     }
     let path = out_dir.join(spec.file_name());
     output::check_paths(&[&path])?;
-    let prepared = pipeline::prepare(scene, transport)?;
+    let prepared = pipeline::prepare(scene)?;
     if let Some(note) = prepared.warning() {
         crate::limits::warn(&note);
     }
     match prepared.plan()? {
-        Some(plan) => write_shard(scene, transport, &plan, spec, &path),
+        Some(plan) => write_shard(scene, prepared.layout(), &plan, spec, &path),
         None => Err(ShardError::Spec {
             spec,
             what: format!(
@@ -87,7 +82,7 @@ pub fn run(
 /// Trace the batches of `spec` from `plan` and write the shard file.
 fn write_shard(
     scene: &Scene,
-    transport: &TransportOptions,
+    layout: &TallyLayout,
     plan: &transport::Plan,
     spec: ShardSpec,
     path: &Path,
@@ -104,10 +99,13 @@ fn write_shard(
     }
     let range = spec.batches(total);
     let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(transport.threads)
+        .num_threads(scene.simulation.threads)
         .build()
         .map_err(|e| {
-            RunError::Transport(TransportError::Threads(transport.threads, e.to_string()))
+            RunError::Transport(TransportError::Threads(
+                scene.simulation.threads,
+                e.to_string(),
+            ))
         })?;
     let threads = pool.current_num_threads();
     let started = Instant::now();
@@ -119,18 +117,22 @@ fn write_shard(
         scene_path: scene.path.to_string_lossy().into_owned(),
         scene_text: scene.text().to_string(),
         scene_digest: run_scene_digest(scene),
-        seed: transport.seed,
-        photons: transport.photons,
+        seed: scene.simulation.seed,
+        photons: scene.simulation.photons,
         batches: total as u64,
         photons_per_batch: plan.photons_per_batch(),
         shard_index: spec.index as u64,
         shard_count: spec.count as u64,
         first_batch: range.start as u64,
         end_batch: range.end as u64,
-        max_order: transport.max_order,
-        ddis_epsilon_bits: transport.ddis_epsilon.to_bits(),
-        range_stratification_bits: transport.range_stratification.to_bits(),
-        flux_tally: transport.flux_tally,
+        max_order: scene.simulation.max_order,
+        ddis_epsilon_bits: scene.simulation.variance_reduction.ddis_epsilon.to_bits(),
+        range_stratification_bits: scene
+            .simulation
+            .variance_reduction
+            .range_stratification
+            .to_bits(),
+        flux_tally: layout.flux,
         bins_per_batch: first.bins.len() as u64,
         channels: first.flux.up.len() as u64,
     };

@@ -19,7 +19,7 @@
 //! which writes `data/co2_band_model/co2_30012_band.toml` (embedded here) and the fit report.
 //! Only even J″ exist (¹⁶O nuclei have spin 0), so P(J″) and R(J″) for even J″.
 
-use super::hitran::{Line, LineList};
+use super::lines::{Line, LineList};
 
 const EMBEDDED: &str = include_str!("../../data/co2_band_model/co2_30012_band.toml");
 
@@ -152,6 +152,15 @@ impl Co2BandModel {
             source: format!("<built-in CO2 30012<-00001 band model: {}>", self.source),
             lines,
         }
+    }
+}
+
+impl LineList {
+    /// The built-in model of the CO2 30012←00001 band (626 only, P and R branches
+    /// |m| ≤ 60), for scenes without a HITRAN file. Approximate: see
+    /// [`super::band_model`] and `validation/co2_band_model/`.
+    pub fn co2_30012_band_model() -> LineList {
+        super::band_model::Co2BandModel::embedded().line_list(60)
     }
 }
 

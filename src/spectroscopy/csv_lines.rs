@@ -18,7 +18,7 @@
 
 use std::path::{Path, PathBuf};
 
-use super::hitran::{Broadener, Line, LineFilter, LineList, ShapeColumns, ShapeParameters, ranges};
+use super::lines::{Broadener, Line, LineFilter, LineList, ShapeColumns, ShapeParameters, ranges};
 use crate::input::Bounds;
 
 /// `SD_gamma`: the speed dependence Γ₂/Γ₀ (typical 0.05–0.15). The quadratic model gives the
@@ -228,72 +228,14 @@ impl LineList {
             let s = own.read(&get, Some(&a))?;
             let sw = get(c_sw)?;
             let elower = get(c_el)?;
-            // Each parameter in its range, named by the column it came from (or, for a
-            // `_self` value taken from air, by the air column).
-            let name_of = |c: Option<usize>, fallback: &str| -> String {
-                c.map_or(fallback.to_string(), |c| t.header()[c].clone())
-            };
-            let check = |v: f64, name: String, bounds| {
-                crate::input::check_finite_range(v, bounds)
-                    .map(|_| ())
-                    .map_err(|m| InputError::at(&path, line_no, name, m))
-            };
-            check(sw, "sw".into(), ranges::SW)?;
-            check(elower, "elower".into(), ranges::ELOWER_CM1)?;
-            for (b, cols, side) in [(&a, &air, "air"), (&s, &own, "self")] {
-                let fb = |n: &str| format!("{n}_{side}");
-                check(b.gamma0, name_of(cols.gamma0, &fb("gamma0")), ranges::GAMMA)?;
-                check(
-                    b.n_gamma0,
-                    name_of(cols.n_gamma0, &fb("n_gamma0")),
-                    ranges::EXPONENT,
-                )?;
-                check(b.delta0, name_of(cols.delta0, &fb("delta0")), ranges::DELTA)?;
-                check(
-                    b.n_delta0,
-                    name_of(cols.n_delta0, &fb("n_delta0")),
-                    ranges::DELTA,
-                )?;
-                let sd_name = name_of(cols.sd_gamma, &fb("SD_gamma"));
-                if b.sd_gamma.is_finite() && !SD_RATIO.contains(b.sd_gamma) {
-                    return Err(InputError::at(
-                        &path,
-                        line_no,
-                        sd_name,
-                        format!(
-                            "{} must lie in {SD_RATIO_TEXT}: the speed-dependent width \
-                             Γ(v) = Γ₀ + Γ₂ (v²/v_p² − 3/2) is negative at some speed outside it \
-                             ({}), and the profile with it is not a line shape",
-                            crate::input::fmt_bound(b.sd_gamma),
-                            if b.sd_gamma < 0.0 {
-                                "the fastest molecules"
-                            } else {
-                                "the slowest molecules: Γ₀ − 3Γ₂/2 < 0"
-                            }
-                        ),
-                    ));
-                }
-                check(b.sd_gamma, sd_name, SD_RATIO)?;
-                check(
-                    b.n_gamma2,
-                    name_of(cols.n_gamma2, &fb("n_gamma2")),
-                    ranges::EXPONENT,
-                )?;
-                check(
-                    b.sd_delta,
-                    name_of(cols.sd_delta, &fb("SD_delta")),
-                    SD_SHIFT_RATIO,
-                )?;
-                check(b.nu_vc, name_of(cols.nu_vc, &fb("nuVC")), ranges::GAMMA)?;
-                check(
-                    b.n_nu_vc,
-                    name_of(cols.n_nu_vc, &fb("n_nuVC")),
-                    ranges::EXPONENT,
-                )?;
-                check(b.eta, name_of(cols.eta, &fb("eta")), ETA)?;
-                check(b.y, name_of(cols.y, &fb("y")), LINE_MIXING_Y)?;
-                check(b.n_y, name_of(cols.n_y, &fb("n_y")), ranges::EXPONENT)?;
-            }
+            check_line_ranges(
+                &t,
+                &path,
+                line_no,
+                sw,
+                elower,
+                [(&a, &air, "air"), (&s, &own, "self")],
+            )?;
             let mut quanta = [b' '; 60];
             for (k, c) in quanta_cols.iter().enumerate() {
                 if let Some(c) = c {
@@ -330,4 +272,81 @@ impl LineList {
             lines,
         })
     }
+}
+
+/// Each parameter of a line (at line `line_no` of `path`) in its range, named by the column it
+/// came from (or, for a `_self` value taken from air, by the air column).
+fn check_line_ranges(
+    t: &CsvTable,
+    path: &Path,
+    line_no: usize,
+    sw: f64,
+    elower: f64,
+    sides: [(&Broadener, &BroadenerColumns, &str); 2],
+) -> Result<(), InputError> {
+    let name_of = |c: Option<usize>, fallback: &str| -> String {
+        c.map_or(fallback.to_string(), |c| t.header()[c].clone())
+    };
+    let check = |v: f64, name: String, bounds| {
+        crate::input::check_finite_range(v, bounds)
+            .map(|_| ())
+            .map_err(|m| InputError::at(path, line_no, name, m))
+    };
+    check(sw, "sw".into(), ranges::SW)?;
+    check(elower, "elower".into(), ranges::ELOWER_CM1)?;
+    for (b, cols, side) in sides {
+        let fb = |n: &str| format!("{n}_{side}");
+        check(b.gamma0, name_of(cols.gamma0, &fb("gamma0")), ranges::GAMMA)?;
+        check(
+            b.n_gamma0,
+            name_of(cols.n_gamma0, &fb("n_gamma0")),
+            ranges::EXPONENT,
+        )?;
+        check(b.delta0, name_of(cols.delta0, &fb("delta0")), ranges::DELTA)?;
+        check(
+            b.n_delta0,
+            name_of(cols.n_delta0, &fb("n_delta0")),
+            ranges::DELTA,
+        )?;
+        let sd_name = name_of(cols.sd_gamma, &fb("SD_gamma"));
+        if b.sd_gamma.is_finite() && !SD_RATIO.contains(b.sd_gamma) {
+            return Err(InputError::at(
+                path,
+                line_no,
+                sd_name,
+                format!(
+                    "{} must lie in {SD_RATIO_TEXT}: the speed-dependent width \
+                     Γ(v) = Γ₀ + Γ₂ (v²/v_p² − 3/2) is negative at some speed outside it \
+                     ({}), and the profile with it is not a line shape",
+                    crate::input::fmt_bound(b.sd_gamma),
+                    if b.sd_gamma < 0.0 {
+                        "the fastest molecules"
+                    } else {
+                        "the slowest molecules: Γ₀ − 3Γ₂/2 < 0"
+                    }
+                ),
+            ));
+        }
+        check(b.sd_gamma, sd_name, SD_RATIO)?;
+        check(
+            b.n_gamma2,
+            name_of(cols.n_gamma2, &fb("n_gamma2")),
+            ranges::EXPONENT,
+        )?;
+        check(
+            b.sd_delta,
+            name_of(cols.sd_delta, &fb("SD_delta")),
+            SD_SHIFT_RATIO,
+        )?;
+        check(b.nu_vc, name_of(cols.nu_vc, &fb("nuVC")), ranges::GAMMA)?;
+        check(
+            b.n_nu_vc,
+            name_of(cols.n_nu_vc, &fb("n_nuVC")),
+            ranges::EXPONENT,
+        )?;
+        check(b.eta, name_of(cols.eta, &fb("eta")), ETA)?;
+        check(b.y, name_of(cols.y, &fb("y")), LINE_MIXING_Y)?;
+        check(b.n_y, name_of(cols.n_y, &fb("n_y")), ranges::EXPONENT)?;
+    }
+    Ok(())
 }

@@ -22,8 +22,8 @@
 //! of sight with zenith angle θ is τ_vertical/|cos θ| ([`LineOfSight`]).
 
 use super::SpectroscopyError;
-use super::hitran::LineList;
 use super::isotopologues::molecule_name;
+use super::lines::LineList;
 use super::xsec::GasState;
 use crate::atmosphere::Profile;
 use crate::atmosphere::hydrostatic::HydrostaticProfile;

@@ -8,10 +8,12 @@
 //! |---|---|---|
 //! | isotopologue masses, abundances | [`isotopologues`] | [`isotopologues::Isotopologue::get`] |
 //! | partition sums (TIPS-2021) | [`tips`] | [`tips::partition_sum`] |
+//! | lines and line lists | [`lines`] | [`Line`], [`LineList`], [`LineFilter`] |
 //! | line lists | [`hitran`] | [`LineList::read_par`], [`LineList::co2_30012_band_model`] |
 //! | Voigt profile | [`voigt`] | [`voigt::re_w`], [`voigt::re_w_exact`] |
 //! | cross-sections | [`xsec`] | [`cross_section`], [`cross_section_at`] |
 //! | Curtis-Godson layers | [`layers`] | [`layers::curtis_godson_layers`] |
+//! | layer optical depths, direct | [`optical_depth`] | [`layer_optical_depths_at`] |
 //! | optical-depth table | [`table`] | [`GasOpticalDepthTable`] |
 //! | CO2 band model | [`band_model`] | [`band_model::Co2BandModel`] |
 //!
@@ -26,17 +28,20 @@ pub mod hitran;
 pub mod htp;
 pub mod isotopologues;
 pub mod layers;
+pub mod lines;
+pub mod optical_depth;
 pub mod table;
 pub mod tips;
 pub mod voigt;
 pub mod xsec;
 
-pub use hitran::{Broadener, Line, LineFilter, LineList, ShapeColumns, ShapeParameters};
 pub use layers::{CgLayer, LineOfSight};
+pub use lines::{Broadener, Line, LineFilter, LineList, ShapeColumns, ShapeParameters};
+pub use optical_depth::{LayerGasCounts, layer_gas_counts, layer_optical_depths_at};
 pub use table::GasOpticalDepthTable;
 pub use xsec::{
-    Conventions, GasState, LayerGasCounts, LblOptions, LineShapeModel, VoigtMethod, WavenumberGrid,
-    WingCentre, cross_section, cross_section_at, layer_gas_counts, layer_optical_depths_at,
+    Conventions, GasState, LblOptions, LineShapeModel, VoigtMethod, WavenumberGrid, WingCentre,
+    cross_section, cross_section_at,
 };
 
 use crate::input::InputError;

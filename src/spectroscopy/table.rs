@@ -20,43 +20,12 @@
 use std::path::Path;
 
 use super::SpectroscopyError;
-use super::hitran::LineList;
 use super::layers::{CgLayer, curtis_godson_layers, line_gases};
+use super::lines::LineList;
 use super::xsec::{LblOptions, WavenumberGrid, cross_section};
 use crate::atmosphere::Profile;
+use crate::digest::Fnv;
 use crate::input::InputError;
-
-/// FNV-1a 64-bit hash (stable across Rust versions and machines, unlike `DefaultHasher`).
-#[derive(Debug, Clone, Copy)]
-pub struct Fnv(u64);
-
-impl Default for Fnv {
-    fn default() -> Self {
-        Self::new()
-    }
-}
-
-impl Fnv {
-    /// A fresh hash.
-    pub fn new() -> Self {
-        Fnv(0xcbf2_9ce4_8422_2325)
-    }
-    /// Hash bytes.
-    pub fn bytes(&mut self, b: &[u8]) {
-        for &x in b {
-            self.0 ^= x as u64;
-            self.0 = self.0.wrapping_mul(0x0000_0100_0000_01b3);
-        }
-    }
-    /// Hash the bit pattern of an f64.
-    pub fn f64(&mut self, v: f64) {
-        self.bytes(&v.to_bits().to_le_bytes());
-    }
-    /// The hash value.
-    pub fn finish(&self) -> u64 {
-        self.0
-    }
-}
 
 /// Fingerprint of a profile (name excluded: same numbers, same table).
 pub fn profile_fingerprint(profile: &Profile) -> u64 {
@@ -70,8 +39,8 @@ pub fn profile_fingerprint(profile: &Profile) -> u64 {
         h.f64(*v);
     }
     for g in &profile.gases {
-        h.bytes(g.name.as_bytes());
-        h.bytes(&[0]);
+        h.update(g.name.as_bytes());
+        h.update(&[0]);
         for v in &g.vmr {
             h.f64(*v);
         }
@@ -83,7 +52,7 @@ pub fn profile_fingerprint(profile: &Profile) -> u64 {
 pub fn options_fingerprint(opts: &LblOptions) -> u64 {
     let mut h = Fnv::new();
     // serde_json of a plain struct is deterministic (field order).
-    h.bytes(serde_json::to_string(opts).unwrap_or_default().as_bytes());
+    h.update(serde_json::to_string(opts).unwrap_or_default().as_bytes());
     h.finish()
 }
 
@@ -152,11 +121,11 @@ impl GasOpticalDepthTable {
             for &(m, gi) in &gases {
                 let col = layer.gas_columns_per_cm2[gi];
                 // A layer without the gas adds σ · 0: no line-by-line work.
-                if !super::xsec::count_layer_gas(col) {
+                if !super::optical_depth::count_layer_gas(col) {
                     continue;
                 }
                 let sigma = cross_section(lines, m, &layer.state_for(gi), grid, opts)
-                    .map_err(|e| super::xsec::in_layer(e, layer, profile))?;
+                    .map_err(|e| super::optical_depth::in_layer(e, layer, profile))?;
                 for (t, s) in row.iter_mut().zip(sigma) {
                     *t += s * col;
                 }

@@ -2,7 +2,7 @@
 //!
 //! * [`dial`]: a scene's instrument and retrievals run for every profile of an ensemble, with
 //!   the error of each profile's retrieval and an error budget per class and line pair (the
-//!   seed paper's study: 300 NWP-perturbed profiles per latitude class);
+//!   reference study (docs/design.md): 300 NWP-perturbed profiles per latitude class);
 //! * [`select`]: sensitivities of candidate on/off line positions (line selection), set up and
 //!   summarised as `lidarsim select-lines` does by [`select_study`].
 //!

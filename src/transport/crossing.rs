@@ -374,7 +374,7 @@ mod tests {
         });
         with_options(
             &three_fields(),
-            |o| o.cone_estimate = false,
+            |s| s.variance_reduction.cone_estimate = false,
             |s, _| {
                 assert_eq!(
                     s.crossing_from, 0,

@@ -2,9 +2,9 @@
 
 use std::path::Path;
 
-use super::{Plan, Setup, TransportOptions};
+use super::{Plan, Setup, TallyLayout};
 use crate::optics::OpticalAtmosphere;
-use crate::scene::Scene;
+use crate::scene::{Scene, Simulation};
 
 /// A cloud from 500 to 700 m (10 km⁻¹, HG g = 0.8) over a ground lidar with a 1 mrad field
 /// of view, gates to 10 km (a budget that cuts no ray below).
@@ -49,16 +49,15 @@ pub(super) fn with_setup(text: &str, check: impl FnOnce(&Setup<'_>, &OpticalAtmo
     with_options(text, |_| {}, check);
 }
 
-/// As [`with_setup`], with the scene's transport options changed by `options` first.
+/// As [`with_setup`], with the scene's run settings changed by `settings` first.
 pub(super) fn with_options(
     text: &str,
-    options: impl FnOnce(&mut TransportOptions),
+    settings: impl FnOnce(&mut Simulation),
     check: impl FnOnce(&Setup<'_>, &OpticalAtmosphere),
 ) {
-    let scene = Scene::from_toml(Path::new("scene.toml"), text).unwrap();
+    let mut scene = Scene::from_toml(Path::new("scene.toml"), text).unwrap();
+    settings(&mut scene.simulation);
     let atm = OpticalAtmosphere::build(&scene).unwrap();
-    let mut opts = TransportOptions::from_scene(&scene);
-    options(&mut opts);
-    let plan = Plan::new(&scene, &atm, &opts).unwrap();
+    let plan = Plan::new(&scene, &atm, &TallyLayout::default()).unwrap();
     check(&plan.setup, &atm);
 }

@@ -10,7 +10,7 @@ use super::fit::{FitResult, Measurement};
 
 const FONT: &str = "sans-serif";
 
-/// Register the embedded font, as `src/cli/plot.rs` does (DejaVu Sans, `assets/`).
+/// Register the embedded font, as `src/figures/mod.rs` does (DejaVu Sans, `assets/`).
 fn init_font() {
     static REGISTER: std::sync::Once = std::sync::Once::new();
     REGISTER.call_once(|| {

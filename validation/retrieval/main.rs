@@ -17,16 +17,14 @@ use lidarsim::pipeline::{self, RunOutput};
 use lidarsim::retrieval::{Method, Quantity};
 use lidarsim::returns::{Order, Source};
 use lidarsim::scene::{DEFAULT_SCENE_TOML, Scene};
-use lidarsim::transport::TransportOptions;
 
 fn run(text: &str, photons: u64) -> (Scene, RunOutput, f64) {
     let mut scene = Scene::from_toml(Path::new("validation.toml"), text).expect("scene");
     // Photons asked for are traced, also through clear sky (as `--photons N` does).
     scene.simulation.multiple_scattering = lidarsim::scene::MultipleScattering::Always;
-    let mut opts = TransportOptions::from_scene(&scene);
-    opts.photons = photons;
+    scene.simulation.photons = photons;
     let t = Instant::now();
-    let out = pipeline::run(&scene, &opts).expect("run");
+    let out = pipeline::run(&scene).expect("run");
     (scene, out, t.elapsed().as_secs_f64())
 }
 

@@ -3,8 +3,8 @@
 //! For every profile of a set the scene is run with that profile as the truth
 //! ([`Scene::with_profile`]): optics, the analytic lidar equation (or the Monte Carlo, with
 //! photons), line returns, signals, and the retrievals of every on/off pair asked for. The
-//! retrieval is the seed paper's: the slant column from **virtual cross-sections of the
-//! ensemble-mean profile of the profile's latitude class**, σ = −ln T_gas/(2N) (DESIGN §3), and
+//! retrieval is the reference study's: the slant column from **virtual cross-sections of the
+//! ensemble-mean profile of the profile's latitude class**, σ = −ln T_gas/(2N) (docs/design.md §3), and
 //! XCO2 = N / N_dry with the profile's own dry-air column (the meteorology a retrieval takes
 //! from NWP and a surface model); for DIAL the cell's density over its dry-air density. The
 //! noisy value is one simulated averaged measurement per profile, with the profile's own noise
@@ -56,7 +56,6 @@ use crate::retrieval::{
 use crate::returns::{Order, Returns};
 use crate::rng::{self, Stream};
 use crate::scene::Scene;
-use crate::transport::TransportOptions;
 
 mod netcdf;
 mod profile;

@@ -59,11 +59,13 @@ impl Study<'_> {
         })?;
         Clock::time(&self.clock.returns, || {
             let (channels, lines, order) = if self.options.photons > 0 {
-                let mut opts = TransportOptions::from_scene(&scene);
-                opts.photons = self.options.photons;
-                opts.seed = seed;
+                // The study's photons, from the profile's seed (every truth of one profile on the
+                // same photons).
+                let mut traced = scene.clone();
+                traced.simulation.photons = self.options.photons;
+                traced.simulation.seed = seed;
                 let (_, lines) =
-                    pipeline::trace_lines(&scene, &optics, &opts).map_err(|e| e.to_string())?;
+                    pipeline::trace_lines(&traced, &optics).map_err(|e| e.to_string())?;
                 (None, lines.ok_or("no combined returns")?, Order::Total)
             } else {
                 let analytic = lidar_eq::single_scatter(&scene, &optics);

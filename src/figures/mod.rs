@@ -1,10 +1,21 @@
-//! Shared set-up for figures: the embedded font.
+//! The figures the command line draws, one module per command; the data they show comes from
+//! the library. Here the shared set-up: the embedded font and the legend style.
 //!
 //! plotters' default font features link the system's fontconfig and freetype; with its
 //! `ab_glyph` feature and a TTF font compiled into the binary, labelled PNGs render on any machine
 //! (DejaVu Sans, free licence in `assets/DejaVuSans.LICENSE`).
 
 use std::sync::Once;
+
+pub mod bench;
+pub mod dial;
+pub mod lbl;
+pub mod profiles;
+pub mod run;
+pub mod select;
+
+/// The result of drawing one figure.
+pub type DrawResult = Result<(), Box<dyn std::error::Error>>;
 
 /// Font family name to use in plotters text styles.
 pub const FONT: &str = "sans-serif";

@@ -1,12 +1,12 @@
 //! Figures of `lidarsim dial`: the ensemble's spread (`ensemble.png`), the IPDA errors per
-//! class (`errors.png`) and the error budget per line pair (`budget.png`, the seed paper's
+//! class (`errors.png`) and the error budget per line pair (`budget.png`, the reference study's
 //! Figure 5 in kind).
 
 use std::path::Path;
 
 use plotters::prelude::*;
 
-use super::plot::{FONT, draw_legend, init_font};
+use super::{FONT, draw_legend, init_font};
 use lidarsim::atmosphere::{LatitudeClass, ProfileSet};
 use lidarsim::output::{OutputError, OutputSet};
 use lidarsim::retrieval::Method;

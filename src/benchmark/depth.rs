@@ -11,25 +11,15 @@
 //! contribution and t₁ the time per photon.
 
 use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-use anyhow::Context;
-
-use lidarsim::optics::OpticalAtmosphere;
-use lidarsim::output::OutputSet;
-use lidarsim::returns::Order;
-use lidarsim::scene::Scene;
-use lidarsim::transport::{self, McResult, TransportOptions};
-
-use super::plot::{FONT, draw_legend, init_font};
-
-/// `print!` that returns a closed stdout (`| head`) as an error instead of panicking.
-macro_rules! out {
-    ($($t:tt)*) => {{
-        use std::io::Write as _;
-        write!(std::io::stdout().lock(), $($t)*)?;
-    }};
-}
+use super::{BenchError, ensure, fastest};
+use crate::optics::OpticalAtmosphere;
+use crate::output::{OutputSet, csv_number};
+use crate::returns::Order;
+use crate::scene::Scene;
+use crate::scene::{Simulation, VarianceReduction};
+use crate::transport::{McResult, Progress};
 
 /// Fields of view of the scan [mrad, full angle].
 pub const FOVS_MRAD: [f64; 5] = [0.5, 1.0, 2.0, 5.0, 10.0];
@@ -42,10 +32,15 @@ const CLOUD_BASE_M: f64 = 1000.0;
 /// and the time per photon.
 #[derive(Debug, Clone, Copy)]
 pub struct Cell {
+    /// Field of view \[mrad, full angle\].
     pub fov_mrad: f64,
+    /// Depth of the gate's start into the cloud \[m\].
     pub depth_m: f64,
+    /// Multiple-scattering energy \[J\].
     pub mean_j: f64,
+    /// Variance of one photon's contribution \[J²\].
     pub var_per_photon: f64,
+    /// Time per photon \[s\].
     pub s_per_photon: f64,
 }
 
@@ -61,14 +56,14 @@ impl Cell {
 }
 
 /// The C.1 scene of the scan: five fields of view, orders 1 and 2+.
-pub fn scene() -> anyhow::Result<Scene> {
-    let mut s = super::bench::c1_scene()?;
+pub fn scene() -> Result<Scene, BenchError> {
+    let mut s = super::c1_scene()?;
     s.lidar.fov_full_angle_mrad = FOVS_MRAD.to_vec();
     Ok(s)
 }
 
 /// Gate indices of the scan in `scene`.
-fn gates(scene: &Scene) -> Vec<(usize, f64)> {
+pub fn gates(scene: &Scene) -> Vec<(usize, f64)> {
     let mut out = Vec::new();
     let mut depth = FIRST_DEPTH_M;
     while depth <= LAST_DEPTH_M + 1e-9 {
@@ -99,53 +94,26 @@ pub fn cells(scene: &Scene, r: &McResult) -> Vec<Cell> {
     out
 }
 
-/// Transport options of the plain local estimate.
-pub fn plain(opts: &mut TransportOptions) {
-    opts.ddis_epsilon = 0.0;
-    opts.range_stratification = 0.0;
-    opts.alignment_splitting = 0.0;
-    opts.roulette_alignment = 0.0;
-    opts.cone_estimate = false;
-    opts.crossing_estimate = false;
-    opts.ddis_crossing = false;
-}
-
-/// Run `scene` `repeat` times with `configure`; the fastest run (least disturbed by other load).
-pub fn fastest(
-    scene: &Scene,
-    atm: &OpticalAtmosphere,
-    threads: usize,
-    repeat: usize,
-    configure: impl Fn(&mut TransportOptions),
-) -> anyhow::Result<McResult> {
-    let mut best: Option<McResult> = None;
-    for _ in 0..repeat.max(1) {
-        let mut opts = TransportOptions::from_scene(scene);
-        opts.threads = threads;
-        configure(&mut opts);
-        let r = transport::run(scene, atm, &opts)?;
-        if best.as_ref().is_none_or(|b| r.wall_s < b.wall_s) {
-            best = Some(r);
-        }
-    }
-    best.context("at least one run")
+/// The settings of the plain local estimate: no variance reduction.
+pub fn plain(sim: &mut Simulation) {
+    sim.variance_reduction = VarianceReduction::none();
 }
 
 const HEADER: &str =
     "fov_full_angle_mrad,depth_m,ms_energy_j,var_per_photon_j2,s_per_photon,photons";
 
 /// Write the plain estimator's reference cells (from a long run of `photons`).
-pub fn write_reference(path: &Path, cells: &[Cell], photons: u64) -> anyhow::Result<()> {
+pub fn write_reference(path: &Path, cells: &[Cell], photons: u64) -> Result<(), BenchError> {
     let mut s = format!(
         "# plain local estimate of C.1, orders >= 2, {photons} photons (lidarsim {})\n{HEADER}\n",
         env!("CARGO_PKG_VERSION")
     );
     for c in cells {
-        writeln!(
+        let _ = writeln!(
             s,
             "{},{},{:e},{:e},{:e},{photons}",
             c.fov_mrad, c.depth_m, c.mean_j, c.var_per_photon, c.s_per_photon
-        )?;
+        );
     }
     let mut files = OutputSet::new();
     files.write(path, s)?;
@@ -155,8 +123,9 @@ pub fn write_reference(path: &Path, cells: &[Cell], photons: u64) -> anyhow::Res
 
 /// Read a reference written by [`write_reference`]: its cells and photon count. Every refusal
 /// names the file, the line and the column.
-pub fn read_reference(path: &Path) -> anyhow::Result<(Vec<Cell>, u64)> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("{}", path.display()))?;
+pub fn read_reference(path: &Path) -> Result<(Vec<Cell>, u64), BenchError> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| BenchError::Invalid(format!("{}: {e}", path.display())))?;
     let columns: Vec<&str> = HEADER.split(',').collect();
     let mut out = Vec::new();
     let mut photons = 0;
@@ -166,23 +135,28 @@ pub fn read_reference(path: &Path) -> anyhow::Result<(Vec<Cell>, u64)> {
         }
         let at = format!("{}:{}", path.display(), i + 1);
         let f: Vec<&str> = line.split(',').collect();
-        anyhow::ensure!(
+        ensure!(
             f.len() == columns.len(),
             "{at}: {} fields, expected {} ({HEADER})",
             f.len(),
             columns.len()
         );
-        let num = |j: usize| -> anyhow::Result<f64> {
+        let num = |j: usize| -> Result<f64, BenchError> {
             let v = f[j].trim();
             v.parse::<f64>()
                 .ok()
                 .filter(|v| v.is_finite())
-                .with_context(|| format!("{at}: {} `{v}` is not a finite number", columns[j]))
+                .ok_or_else(|| {
+                    BenchError::Invalid(format!(
+                        "{at}: {} `{v}` is not a finite number",
+                        columns[j]
+                    ))
+                })
         };
         // Photons ≥ 1 (a whole number), variances and energies ≥ 0, time per photon > 0: else a
         // figure of merit or a standard error would be infinite or NaN.
         let n = num(5)?;
-        anyhow::ensure!(
+        ensure!(
             n >= 1.0 && n.fract() == 0.0 && n <= u64::MAX as f64,
             "{at}: {} = {n} must be a whole number ≥ 1",
             columns[5]
@@ -196,9 +170,9 @@ pub fn read_reference(path: &Path) -> anyhow::Result<(Vec<Cell>, u64)> {
             s_per_photon: num(4)?,
         };
         for (j, v) in [(2, cell.mean_j), (3, cell.var_per_photon)] {
-            anyhow::ensure!(v >= 0.0, "{at}: {} = {v} must be ≥ 0", columns[j]);
+            ensure!(v >= 0.0, "{at}: {} = {v} must be ≥ 0", columns[j]);
         }
-        anyhow::ensure!(
+        ensure!(
             cell.s_per_photon > 0.0,
             "{at}: {} = {} must be > 0",
             columns[4],
@@ -206,21 +180,38 @@ pub fn read_reference(path: &Path) -> anyhow::Result<(Vec<Cell>, u64)> {
         );
         out.push(cell);
     }
-    anyhow::ensure!(!out.is_empty(), "{}: no cells", path.display());
+    ensure!(!out.is_empty(), "{}: no cells", path.display());
     Ok((out, photons))
 }
 
-/// The scan: lidarsim's estimator and the plain one side by side; writes `fom_depth.csv` and
-/// `fom_depth.png` into `out`.
-pub fn run(
-    out: &Path,
+/// The scan's result: every cell of lidarsim's estimator with the plain one's and their FOM
+/// ratio, in FOV-major order, and `fom_depth.csv`.
+pub struct Scan {
+    /// (lidarsim's cell, the plain one's, FOM ratio) per FOV and depth.
+    pub rows: Vec<(Cell, Cell, f64)>,
+    /// Depths per FOV.
+    pub n_depth: usize,
+    /// Photons of the plain variance (the long reference's, or the side-by-side run's).
+    pub long_photons: u64,
+    /// The least finite FOM ratio (infinite if none).
+    pub worst: f64,
+    /// Root mean square of the finite z of the means against the plain estimate's, and their
+    /// number.
+    pub rms_z: Option<(f64, usize)>,
+    /// `fom_depth.csv`.
+    pub csv: String,
+}
+
+/// The scan: lidarsim's estimator (`method`) and the plain one side by side, `photons` on
+/// `threads`, fastest of `repeat`; the plain variance from `reference` if given.
+pub fn scan(
     photons: u64,
     threads: usize,
     repeat: usize,
     seed: u64,
-    reference: Option<&PathBuf>,
-    method: impl Fn(&mut TransportOptions),
-) -> anyhow::Result<()> {
+    reference: Option<&Path>,
+    method: impl Fn(&mut Simulation),
+) -> Result<Scan, BenchError> {
     let mut scene = scene()?;
     scene.simulation.photons = photons;
     scene.simulation.seed = seed;
@@ -232,7 +223,7 @@ pub fn run(
                 .iter()
                 .flat_map(|f| gates(&scene).into_iter().map(move |g| (f, g)))
             {
-                anyhow::ensure!(
+                ensure!(
                     cells
                         .iter()
                         .any(|c| c.fov_mrad == *fov && c.depth_m == depth),
@@ -258,15 +249,7 @@ pub fn run(
         ours.photons, ours.wall_s, plain_run.photons, plain_run.wall_s, ours.threads, long_photons
     );
     let mut rows = Vec::new();
-    outln!(
-        "C.1, orders ≥ 2: FOM ratio lidarsim / plain local estimate (plain variance from {long_photons} photons)"
-    );
-    out!("depth_m");
-    for f in FOVS_MRAD {
-        out!("  {f:>6} mrad");
-    }
-    outln!();
-    // Over the cells where both estimates have a signal (the others print `—`).
+    // Over the cells where both estimates have a signal.
     let mut worst = f64::INFINITY;
     let mut z2 = 0.0;
     let mut n_z = 0usize;
@@ -274,11 +257,11 @@ pub fn run(
         let p = long
             .iter()
             .find(|p| p.fov_mrad == c.fov_mrad && p.depth_m == c.depth_m)
-            .with_context(|| {
-                format!(
+            .ok_or_else(|| {
+                BenchError::Invalid(format!(
                     "plain reference has no cell at {} mrad, {} m",
                     c.fov_mrad, c.depth_m
-                )
+                ))
             })?;
         // The long run's variance with this run's time per photon.
         let p = Cell {
@@ -300,8 +283,8 @@ pub fn run(
             n_z += 1;
         }
         // A cell without signal has no error, FOM or z: empty fields, never `NaN` or `inf`.
-        let n = lidarsim::output::csv_number;
-        writeln!(
+        let n = csv_number;
+        let _ = writeln!(
             csv,
             "{},{},{:e},{:e},{:e},{:e},{:e},{:e},{:.3}",
             c.fov_mrad,
@@ -313,117 +296,41 @@ pub fn run(
             n(p.fom()),
             n(ratio),
             n(z)
-        )?;
+        );
         rows.push((*c, p, ratio));
     }
-    let n_depth = gates(&scene).len();
-    for d in 0..n_depth {
-        out!("{:>7}", rows[d].0.depth_m);
-        for f in 0..FOVS_MRAD.len() {
-            let ratio = rows[f * n_depth + d].2;
-            if ratio.is_finite() {
-                out!("  {ratio:>11.1}");
-            } else {
-                out!("  {:>11}", "—");
-            }
-        }
-        outln!();
-    }
-    let no_signal = rows.iter().filter(|r| !r.2.is_finite()).count();
-    if no_signal > 0 {
-        outln!("—: no signal in one of the estimates ({no_signal} cells; empty in fom_depth.csv)");
-    }
-    let least = if worst.is_finite() {
-        format!("{worst:.1}")
-    } else {
-        "— (no cell with a signal in both)".to_string()
-    };
-    let rms_z = if n_z > 0 {
-        format!("{:.2}", (z2 / n_z as f64).sqrt())
-    } else {
-        "—".to_string()
-    };
-    outln!(
-        "least ratio {least}; means against the plain estimate's: rms z {rms_z} over {n_z} cells"
-    );
-    let mut files = OutputSet::new();
-    files.write(out.join("fom_depth.csv"), csv)?;
-    files.write_via(out.join("fom_depth.png"), |path| draw(path, &rows))?;
-    files.commit()?;
-    outln!("wrote {}", out.join("fom_depth.{csv,png}").display());
-    Ok(())
+    Ok(Scan {
+        rows,
+        n_depth: gates(&scene).len(),
+        long_photons,
+        worst,
+        rms_z: (n_z > 0).then(|| ((z2 / n_z as f64).sqrt(), n_z)),
+        csv,
+    })
 }
 
-/// FOM against depth, one colour per FOV: lidarsim solid, plain dashed (as points).
-fn draw(path: &Path, rows: &[(Cell, Cell, f64)]) -> Result<(), Box<dyn std::error::Error>> {
-    use plotters::prelude::*;
-    init_font();
-    let root = BitMapBackend::new(path, (1000, 650)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let foms = rows.iter().flat_map(|(a, b, _)| [a.fom(), b.fom()]);
-    let (lo, hi) = foms
-        .filter(|v| *v > 0.0)
-        .fold((f64::INFINITY, 0.0f64), |(l, h), v| (l.min(v), h.max(v)));
-    let mut chart = ChartBuilder::on(&root)
-        .caption(
-            "C.1 multiple scattering: figure of merit against depth (solid lidarsim, dashed plain)",
-            (FONT, 20),
-        )
-        .margin(15)
-        .x_label_area_size(45)
-        .y_label_area_size(70)
-        .build_cartesian_2d(40.0..300.0, (lo / 2.0..hi * 2.0).log_scale())?;
-    chart
-        .configure_mesh()
-        .x_desc("depth into the cloud [m] (gate start)")
-        .y_desc("FOM = 1/(rel. error² · s)")
-        .label_style((FONT, 15))
-        .axis_desc_style((FONT, 17))
-        .draw()?;
-    for (i, fov) in FOVS_MRAD.iter().enumerate() {
-        let colour = Palette99::pick(i).to_rgba();
-        let mine: Vec<(f64, f64)> = rows
-            .iter()
-            .filter(|r| r.0.fov_mrad == *fov && r.0.fom() > 0.0)
-            .map(|r| (r.0.depth_m + 5.0, r.0.fom()))
-            .collect();
-        let plain: Vec<(f64, f64)> = rows
-            .iter()
-            .filter(|r| r.1.fov_mrad == *fov && r.1.fom() > 0.0)
-            .map(|r| (r.1.depth_m + 5.0, r.1.fom()))
-            .collect();
-        chart
-            .draw_series(LineSeries::new(
-                mine,
-                ShapeStyle::from(&colour).stroke_width(2),
-            ))?
-            .label(format!("{fov} mrad"))
-            .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], colour.stroke_width(2)));
-        chart.draw_series(DashedLineSeries::new(
-            plain,
-            6,
-            4,
-            ShapeStyle::from(&colour).stroke_width(1),
-        ))?;
-    }
-    draw_legend(&mut chart)?;
-    root.present()?;
-    Ok(())
+/// The spikes' result: per (FOV, depth) cell, in FOV-major order, the ratio of the scatter of
+/// the runs' means to their standard errors, and `scatter.csv`.
+pub struct Scatter {
+    /// The cells' depths (of the first FOV) \[m\].
+    pub depths_m: Vec<f64>,
+    /// The ratio per cell.
+    pub ratios: Vec<f64>,
+    /// `scatter.csv`.
+    pub csv: String,
 }
 
 /// Spikes: `seeds` independent runs of `photons`; per (FOV, gate) the scatter of the runs'
 /// multiple-scattering means against the standard error each run reports. Without spikes the
 /// ratio sd(means)/rms(stderr) is 1 within about 1/√(2(K − 1)); rare large contributions make
-/// it large (the batches of one run miss them, other runs catch them). Writes
-/// `scatter.csv` into `out`.
+/// it large (the batches of one run miss them, other runs catch them).
 pub fn scatter(
-    out: &Path,
     photons: u64,
     threads: usize,
     seeds: u64,
-    method: impl Fn(&mut TransportOptions),
-) -> anyhow::Result<()> {
-    anyhow::ensure!(seeds >= 3, "--seeds needs at least 3 runs");
+    method: impl Fn(&mut Simulation),
+) -> Result<Scatter, BenchError> {
+    ensure!(seeds >= 3, "--seeds needs at least 3 runs");
     let mut scene = scene()?;
     scene.simulation.photons = photons;
     let atm = OpticalAtmosphere::build(&scene)?;
@@ -438,12 +345,6 @@ pub fn scatter(
          fov_full_angle_mrad,depth_m,mean_j,sd_of_means_j,rms_stderr_j,ratio\n",
         1.0 / (2.0 * (k - 1.0)).sqrt()
     );
-    outln!("scatter of {seeds} runs' means / their standard errors (orders ≥ 2)");
-    out!("depth_m");
-    for f in FOVS_MRAD {
-        out!("  {f:>6} mrad");
-    }
-    outln!();
     let n_cells = runs[0].len();
     let mut ratios = vec![0.0; n_cells];
     for (i, ratio) in ratios.iter_mut().enumerate() {
@@ -458,8 +359,8 @@ pub fn scatter(
             .sqrt();
         *ratio = sd / rms_se;
         let c = runs[0][i];
-        let n = lidarsim::output::csv_number;
-        writeln!(
+        let n = csv_number;
+        let _ = writeln!(
             csv,
             "{},{},{:e},{:e},{:e},{:.3}",
             c.fov_mrad,
@@ -468,39 +369,28 @@ pub fn scatter(
             n(sd),
             n(rms_se),
             n(*ratio)
-        )?;
+        );
     }
     let n_depth = n_cells / FOVS_MRAD.len();
-    for d in 0..n_depth {
-        out!("{:>7}", runs[0][d].depth_m);
-        for f in 0..FOVS_MRAD.len() {
-            // A cell without signal in any run has no ratio: `—`, never NaN.
-            let ratio = ratios[f * n_depth + d];
-            if ratio.is_finite() {
-                out!("  {ratio:>11.2}");
-            } else {
-                out!("  {:>11}", "—");
-            }
-        }
-        outln!();
-    }
-    let mut files = OutputSet::new();
-    files.write(out.join("scatter.csv"), csv)?;
-    files.commit()?;
-    Ok(())
+    Ok(Scatter {
+        depths_m: runs[0][..n_depth].iter().map(|c| c.depth_m).collect(),
+        ratios,
+        csv,
+    })
 }
 
 /// Error against time: both estimators at `photons`/27, /9, /3 and `photons`; the relative
 /// error of orders ≥ 2 at three depths for 1 and 10 mrad against the run's time, with the plain
 /// estimator's expected error from the long reference (its short runs miss the spikes).
-/// Writes `error_time.csv` and `error_time.png` into `out`.
+/// Returns `error_time.csv` and the series (label, points (s, relative error)): lidarsim's
+/// first, then the plain estimator's (drawn with its expected error).
+#[allow(clippy::type_complexity)]
 pub fn ladder(
-    out: &Path,
     photons: u64,
     threads: usize,
     reference: &Path,
-    method: impl Fn(&mut TransportOptions),
-) -> anyhow::Result<()> {
+    method: impl Fn(&mut Simulation),
+) -> Result<(String, Vec<(String, Vec<(f64, f64)>)>), BenchError> {
     let (long, _) = read_reference(reference)?;
     let mut scene = scene()?;
     let atm = OpticalAtmosphere::build(&scene)?;
@@ -540,15 +430,15 @@ pub fn ladder(
                     .map_or(f64::NAN, |p| {
                         (p.var_per_photon / r.photons as f64).sqrt() / p.mean_j
                     });
-                let n = lidarsim::output::csv_number;
-                writeln!(
+                let n = csv_number;
+                let _ = writeln!(
                     csv,
                     "{name},{fov},{depth},{},{:.4},{:e},{:e}",
                     r.photons,
                     r.wall_s,
                     n(rel),
                     n(expected)
-                )?;
+                );
                 // The plain estimator is drawn with its expected error (long reference).
                 pts[j].push((r.wall_s, if plain_method { expected } else { rel }));
             }
@@ -557,76 +447,35 @@ pub fn ladder(
             series.push((format!("{name} {fov} mrad {depth} m"), pts[j].clone()));
         }
     }
-    let mut files = OutputSet::new();
-    files.write(out.join("error_time.csv"), csv)?;
-    files.write_via(out.join("error_time.png"), |path| {
-        draw_ladder(path, &series)
-    })?;
-    files.commit()?;
-    outln!("wrote {}", out.join("error_time.{csv,png}").display());
-    Ok(())
+    Ok((csv, series))
 }
 
-/// Relative error against seconds, log-log: lidarsim solid, plain (expected) dashed.
-fn draw_ladder(
+/// `--write-plain`: the plain local estimate of C.1 with `photons` on `threads` threads, in
+/// `batches`, reporting its batches to `progress`; its cells written to `path` as the reference
+/// of the scan.
+pub fn write_plain(
     path: &Path,
-    series: &[(String, Vec<(f64, f64)>)],
-) -> Result<(), Box<dyn std::error::Error>> {
-    use plotters::prelude::*;
-    init_font();
-    let root = BitMapBackend::new(path, (1000, 650)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let pts = series
-        .iter()
-        .flat_map(|s| s.1.iter())
-        .filter(|(t, e)| *t > 0.0 && *e > 0.0 && e.is_finite());
-    let (t0, t1, e0, e1) = pts.fold(
-        (f64::INFINITY, 0.0f64, f64::INFINITY, 0.0f64),
-        |a, (t, e)| (a.0.min(*t), a.1.max(*t), a.2.min(*e), a.3.max(*e)),
-    );
-    let mut chart = ChartBuilder::on(&root)
-        .caption(
-            "C.1 orders ≥ 2: relative error against time (solid lidarsim, dashed plain, expected)",
-            (FONT, 20),
-        )
-        .margin(15)
-        .x_label_area_size(45)
-        .y_label_area_size(70)
-        .build_cartesian_2d(
-            (t0 / 1.5..t1 * 1.5).log_scale(),
-            (e0 / 1.5..e1 * 1.5).log_scale(),
-        )?;
-    chart
-        .configure_mesh()
-        .x_desc("wall-clock seconds, 1 thread")
-        .y_desc("relative standard error")
-        .label_style((FONT, 15))
-        .axis_desc_style((FONT, 17))
-        .draw()?;
-    let half = series.len() / 2;
-    for (i, (label, pts)) in series.iter().enumerate() {
-        let colour = Palette99::pick(i % half).to_rgba();
-        let pts: Vec<(f64, f64)> = pts.iter().copied().filter(|(_, e)| e.is_finite()).collect();
-        if i < half {
-            chart
-                .draw_series(LineSeries::new(
-                    pts,
-                    ShapeStyle::from(&colour).stroke_width(2),
-                ))?
-                .label(label.trim_start_matches("lidarsim ").to_string())
-                .legend(move |(x, y)| {
-                    PathElement::new([(x, y), (x + 20, y)], colour.stroke_width(2))
-                });
-        } else {
-            chart.draw_series(DashedLineSeries::new(
-                pts,
-                6,
-                4,
-                ShapeStyle::from(&colour).stroke_width(1),
-            ))?;
-        }
-    }
-    draw_legend(&mut chart)?;
-    root.present()?;
-    Ok(())
+    photons: u64,
+    seed: u64,
+    threads: usize,
+    batches: usize,
+    progress: Progress,
+) -> Result<McResult, BenchError> {
+    let mut scene = scene()?;
+    scene.simulation.photons = photons;
+    scene.simulation.seed = seed;
+    let atm = OpticalAtmosphere::build(&scene)?;
+    let r = super::fastest_with(
+        &scene,
+        &atm,
+        threads,
+        1,
+        |o| {
+            plain(o);
+            o.batches = batches;
+        },
+        progress,
+    )?;
+    write_reference(path, &cells(&scene, &r), r.photons)?;
+    Ok(r)
 }

@@ -7,7 +7,7 @@ use std::path::Path;
 
 use plotters::prelude::*;
 
-use super::plot::{FONT, init_font};
+use super::{FONT, init_font};
 use lidarsim::output::{OutputError, OutputSet};
 use lidarsim::pipeline::RunOutput;
 use lidarsim::retrieval::{Method, Product, Quantity};
@@ -16,7 +16,8 @@ use lidarsim::scene::Scene;
 
 type DrawResult = Result<(), Box<dyn std::error::Error>>;
 
-/// Draw every figure the run has data for into `files`, for the directory `dir`.
+/// Draw every figure the run has data for into `files`, for the directory `dir`: with a
+/// retrieval its returns and DIAL profile, with polarised light its depolarisation.
 pub fn draw(
     files: &mut OutputSet,
     dir: &Path,
@@ -24,6 +25,24 @@ pub fn draw(
     run: &RunOutput,
 ) -> Result<(), OutputError> {
     init_font();
+    if scene.retrieval.is_some() {
+        draw_retrieval(files, dir, scene, run)?;
+    }
+    if run.polarised.is_some() {
+        files.write_via(dir.join("depolarisation.png"), |p| {
+            depolarisation_figure(p, run)
+        })?;
+    }
+    Ok(())
+}
+
+/// `returns.png` and, with a DIAL retrieval, `dial.png`.
+fn draw_retrieval(
+    files: &mut OutputSet,
+    dir: &Path,
+    scene: &Scene,
+    run: &RunOutput,
+) -> Result<(), OutputError> {
     let mc = run.mc_lines.as_ref().map(|m| &m.mean);
     files.write_via(dir.join("returns.png"), |p| {
         returns_figure(p, scene, &run.analytic_lines.mean, mc)
@@ -42,7 +61,7 @@ pub fn draw(
 /// The depolarisation ratio δ = cross/co of the first line against range, one colour per field
 /// of view: Monte Carlo (all orders) as points with ±1 standard error, analytic single
 /// scattering as a line.
-pub fn depolarisation_figure(path: &Path, run: &RunOutput) -> DrawResult {
+fn depolarisation_figure(path: &Path, run: &RunOutput) -> DrawResult {
     let Some(pol) = &run.polarised else {
         return Err("not a polarised run".into());
     };
@@ -123,7 +142,7 @@ pub fn depolarisation_figure(path: &Path, run: &RunOutput) -> DrawResult {
             c.stroke_width(1),
         ))?;
     }
-    super::plot::draw_legend(&mut chart)?;
+    super::draw_legend(&mut chart)?;
     root.present()?;
     Ok(())
 }
@@ -208,7 +227,7 @@ fn returns_figure(
                 .legend(move |(x, y)| Circle::new((x + 10, y), 3, c.filled()));
         }
     }
-    super::plot::draw_legend(&mut chart)?;
+    super::draw_legend(&mut chart)?;
     root.present()?;
     Ok(())
 }
@@ -316,7 +335,7 @@ fn dial_figure(path: &Path, products: &[&Product]) -> DrawResult {
             .label(format!("{name} ± random error"))
             .legend(move |(x, y)| Circle::new((x + 10, y), 3, c.filled()));
     }
-    super::plot::draw_legend(&mut chart)?;
+    super::draw_legend(&mut chart)?;
     root.present()?;
     Ok(())
 }

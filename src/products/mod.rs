@@ -1,0 +1,103 @@
+//! The products of the commands: every file `run`, `dial`, `select-lines` and `merge` write
+//! (the CSV tables, `summary.json`, the NetCDF files) and the reports they print, made from the
+//! in-memory results of the pipeline and the studies. The caller (the command line, a notebook)
+//! supplies the figures, which this library does not draw, through a callback that stages them
+//! in the same [`OutputSet`](crate::output::OutputSet): all files of a command are written
+//! together or none.
+//!
+//! | command | module | files |
+//! |---|---|---|
+//! | `run` | [`run`] | `returns.csv`, `depolarisation.csv`, `signals.csv`, `retrieval.csv`, `run.nc`, `summary.json` |
+//! | `dial` | [`dial`] | `profiles.csv`, `summary.csv`, `budget.csv`, `failed.csv`, `profiles.nc`, `summary.nc`, `summary.json` |
+//! | `select-lines` | [`select`] | `sensitivities.csv`, `sensitivities.nc`, `failed.csv` |
+//! | `merge` | [`merge`] | those of the command whose shards it folds |
+//! | `lbl` | [`lbl`] | the cross-section and layer optical-depth tables |
+//! | `mie` | [`mie`] | the JSON it prints |
+//! | `profiles info` | [`profiles`] | the table it prints |
+
+pub mod dial;
+pub mod lbl;
+pub mod merge;
+pub mod mie;
+pub mod profiles;
+pub mod run;
+pub mod select;
+
+use std::path::Path;
+
+use crate::scene::Scene;
+
+/// Why a command's products could not be made or written.
+#[derive(Debug, thiserror::Error)]
+pub enum ProductError {
+    /// Staging or committing the files.
+    #[error(transparent)]
+    Output(#[from] crate::output::OutputError),
+    /// Making a NetCDF file.
+    #[error(transparent)]
+    Netcdf(#[from] crate::netcdf::NetcdfError),
+    /// Reading the scene.
+    #[error(transparent)]
+    Input(#[from] crate::input::InputError),
+    /// Reading or folding shard files.
+    #[error(transparent)]
+    Shard(#[from] crate::shard::ShardError),
+    /// A study's results that cannot be reported (a group that fails its checks).
+    #[error(transparent)]
+    Select(#[from] crate::study::select::SelectError),
+    /// A request that cannot be resolved (an option that names nothing, a study beyond the
+    /// limits), with the reason.
+    #[error("{0}")]
+    Request(String),
+    /// Sizing a study.
+    #[error(transparent)]
+    Optics(#[from] crate::optics::OpticsError),
+    /// Setting up a study.
+    #[error(transparent)]
+    Study(#[from] crate::study::dial::StudyError),
+    /// The atmosphere (a profile, a covariance, an ensemble).
+    #[error(transparent)]
+    Atmosphere(#[from] crate::atmosphere::AtmosphereError),
+    /// Writing a report (a closed pipe: `lidarsim … | head`).
+    #[error(transparent)]
+    Io(#[from] std::io::Error),
+    /// Mie scattering.
+    #[error(transparent)]
+    Mie(#[from] crate::particles::mie::MieError),
+    /// An error and the option or value it concerns.
+    #[error("{context}")]
+    Context {
+        /// The option or value.
+        context: String,
+        /// The error.
+        #[source]
+        source: Box<dyn std::error::Error + Send + Sync>,
+    },
+    /// Every profile of a study failed: nothing is written as if it had succeeded.
+    #[error("{0}")]
+    AllFailed(String),
+}
+
+impl ProductError {
+    /// `source` with the option or value it concerns (as `anyhow`'s `context`).
+    pub fn context(
+        context: &str,
+        source: impl std::error::Error + Send + Sync + 'static,
+    ) -> ProductError {
+        ProductError::Context {
+            context: context.to_string(),
+            source: Box::new(source),
+        }
+    }
+}
+
+/// The scene of a command: the file at `path`, or the embedded default scene without one. A
+/// shard (`absolute`) reads it by its absolute path, so that shards started from different
+/// directories agree ([`crate::shard::read_scene`]).
+pub fn read_scene(path: Option<&Path>, absolute: bool) -> Result<Scene, ProductError> {
+    match (path, absolute) {
+        (Some(_), true) => Ok(crate::shard::read_scene(path)?),
+        (Some(p), false) => Ok(Scene::read(p)?),
+        (None, _) => Ok(Scene::default_scene()?),
+    }
+}

@@ -1,0 +1,198 @@
+//! The products of `lidarsim select-lines` (and of `lidarsim merge` of its shards):
+//! `sensitivities.csv`, `sensitivities.nc` and `failed.csv` from a study's member outcomes, and
+//! the lines of its report.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use super::ProductError;
+use crate::atmosphere::{LatitudeClass, StandardAtmosphere};
+use crate::output::{OutputError, OutputSet, csv_field};
+use crate::study;
+use crate::study::select::{self, MemberFailure, Row};
+use crate::study::select_study::{GroupSummary, MemberOutcome, SelectSource, SelectStudy};
+
+/// The line of the report that says what the study computes.
+pub fn setup_line(study: &SelectStudy) -> String {
+    let cfg = &study.config;
+    format!(
+        "select-lines: {} on-line positions, off-line {} cm-1, lines {} ({} lines), grid {} m to {} km",
+        cfg.positions.len(),
+        cfg.off_cm1,
+        cfg.lines.source,
+        cfg.lines.len(),
+        study.options.layer_m,
+        study.options.top_km
+    )
+}
+
+/// A study's results ready to be reported and written: the study, its members' outcomes (all
+/// of them, in member order), its groups' statistics and the rows of `sensitivities.csv`.
+pub struct SelectProducts<'a> {
+    /// The study.
+    pub study: &'a SelectStudy,
+    /// Its members' outcomes.
+    pub outcomes: &'a [MemberOutcome],
+    /// Its groups' statistics ([`SelectStudy::summarise`]).
+    pub summaries: Vec<GroupSummary>,
+    /// The rows of `sensitivities.csv`: every group's, then the per-profile ones.
+    pub rows: Vec<Row>,
+}
+
+impl<'a> SelectProducts<'a> {
+    /// The products of a study; an error when every member failed (nothing is written as if
+    /// the study had succeeded).
+    pub fn new(
+        study: &'a SelectStudy,
+        outcomes: &'a [MemberOutcome],
+    ) -> Result<Self, ProductError> {
+        let failed: Vec<&MemberFailure> =
+            outcomes.iter().filter_map(|o| o.as_ref().err()).collect();
+        if !outcomes.is_empty() && failed.len() == outcomes.len() {
+            // Nothing to report: no file is written as if the study had succeeded.
+            let o = &study.options;
+            let of = match &o.source {
+                SelectSource::Set(p) => p.display().to_string(),
+                SelectSource::Ensemble(n) => {
+                    format!("the ensemble ({n} members per class, seed {})", o.seed)
+                }
+                SelectSource::Atmospheres(a) => {
+                    let names: Vec<&str> = a.iter().map(|s| s.name()).collect();
+                    format!("--atmosphere {}", names.join(","))
+                }
+            };
+            return Err(ProductError::AllFailed(study::all_failed_message(
+                &of,
+                &study::group_failures(failed.iter().map(|f| (f.id.as_str(), f.reason.as_str()))),
+            )));
+        }
+        let summaries = study.summarise(outcomes);
+        let mut rows: Vec<Row> = Vec::new();
+        let mut per_profile: Vec<Row> = Vec::new();
+        for g in &summaries {
+            rows.extend(g.rows.iter().cloned());
+            per_profile.extend(g.per_profile.iter().cloned());
+        }
+        rows.extend(per_profile);
+        Ok(SelectProducts {
+            study,
+            outcomes,
+            summaries,
+            rows,
+        })
+    }
+
+    /// Write the study's files into `dir`, all or none: the tables, `sensitivities.nc` (with
+    /// `history`, the NetCDF `history` attribute) when there are rows, and the figures
+    /// `figures` stages. Returns the files written, in order.
+    pub fn write(
+        &self,
+        dir: &Path,
+        history: &str,
+        figures: impl FnOnce(&mut OutputSet) -> Result<(), OutputError>,
+    ) -> Result<Vec<PathBuf>, ProductError> {
+        // An earlier study's files this one does not rewrite (the figures of other groups, a
+        // NetCDF file) go with the commit.
+        let mut files = OutputSet::new();
+        let names = file_names();
+        files.replaces(dir, &names.iter().map(String::as_str).collect::<Vec<_>>())?;
+        files.write(dir.join("sensitivities.csv"), select::to_csv(&self.rows))?;
+        files.write(dir.join(FAILED_CSV), failed_csv(self.study, self.outcomes))?;
+        if !self.rows.is_empty() {
+            let nc = select::to_netcdf(
+                &self.rows,
+                "lidarsim select-lines: CO2 IPDA line selection",
+                history,
+            )?;
+            files.write(dir.join("sensitivities.nc"), nc)?;
+        }
+        figures(&mut files)?;
+        Ok(files.commit()?)
+    }
+}
+
+/// The group's failed members, each reason once with its count and first profile: not a line
+/// per profile.
+pub fn report_failures(out: &mut impl Write, g: &GroupSummary) -> std::io::Result<()> {
+    let name = &g.name;
+    for f in g.failure_groups() {
+        writeln!(out, "{name}: excluded {f}")?;
+    }
+    Ok(())
+}
+
+/// The group's size and mean XCO2, and its five best-ranked positions.
+pub fn report_group(out: &mut impl Write, g: &GroupSummary) -> std::io::Result<()> {
+    let name = &g.name;
+    writeln!(
+        out,
+        "{name}: {} profiles ({} excluded), XCO2 {:.2} ppm, {} positions kept, {} dropped (DAOD ≤ 0)",
+        g.profiles,
+        g.failed.len(),
+        g.mean_xco2_ppm,
+        g.rows.len(),
+        g.dropped.len()
+    )?;
+    for r in g.rows.iter().take(5) {
+        writeln!(
+            out,
+            "  #{} {:.4} cm-1 {} {:+.2} GHz: DAOD {:.3}, WF peak {:.0} hPa, per K {:+.3}, per MHz {:+.3}, per hPa {:+.3}, per 10% H2O {:+.3}, random {:.3}, total {:.3} ppm",
+            r.rank,
+            r.position.nu_cm1,
+            r.position.line.as_deref().unwrap_or("-"),
+            r.position.offset_ghz,
+            r.daod_one_way,
+            r.wf_peak_hpa,
+            r.dxco2_per_k_ppm,
+            r.dxco2_per_mhz_ppm,
+            r.dxco2_per_hpa_ppm,
+            r.dxco2_per_10pct_h2o_ppm,
+            r.random_error_ppm,
+            r.total_error_ppm
+        )?;
+    }
+    Ok(())
+}
+
+/// The file that lists the profiles that could not be studied.
+pub const FAILED_CSV: &str = "failed.csv";
+
+/// Every file `select-lines` may write into its directory: the tables, and the two figures of
+/// each group it can have (an AFGL atmosphere or a latitude class).
+pub fn file_names() -> Vec<String> {
+    let mut v: Vec<String> = ["sensitivities.csv", "sensitivities.nc", FAILED_CSV]
+        .map(String::from)
+        .to_vec();
+    let groups = StandardAtmosphere::ALL
+        .iter()
+        .map(|a| a.name())
+        .chain(LatitudeClass::ALL.iter().map(|c| c.name()));
+    for g in groups {
+        v.push(format!("transmission_{g}.png"));
+        v.push(format!("errors_{g}.png"));
+    }
+    v
+}
+
+/// `failed.csv`: `profile_id,group,reason`, one row per member that could not be studied, in
+/// member order (the header alone when none failed).
+pub fn failed_csv(study: &SelectStudy, outcomes: &[MemberOutcome]) -> String {
+    use std::fmt::Write as _;
+    let mut s = String::from("profile_id,group,reason\n");
+    let groups = study
+        .groups
+        .iter()
+        .flat_map(|(name, members)| std::iter::repeat_n(name, members.len()));
+    for (o, group) in outcomes.iter().zip(groups) {
+        if let Err(f) = o {
+            let _ = writeln!(
+                s,
+                "{},{},{}",
+                csv_field(&f.id),
+                csv_field(group),
+                csv_field(&f.reason)
+            );
+        }
+    }
+    s
+}

@@ -1,0 +1,63 @@
+//! The surface's expected contribution to the signal, and the flux tally's absorption.
+
+use std::f64::consts::PI;
+
+use glam::DVec3;
+
+use super::*;
+
+impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
+    /// Expected surface contribution of a flight that heads for the surface point `hit`; the
+    /// uncollided weights are w_k e^{−tmp_k}.
+    pub(super) fn score_surface(&mut self, hit: DVec3, path: f64, order: u32) {
+        let s = self.s;
+        let Some(albedo) = &s.surface else { return };
+        let v = s.receiver - hit;
+        let d2 = v.length_squared();
+        let d = d2.sqrt();
+        let omega = v * (1.0 / d);
+        if omega.z <= 0.0 {
+            return;
+        }
+        let cos_axis = -omega.dot(s.axis);
+        let Some(annulus) = self.annulus(cos_axis) else {
+            return;
+        };
+        let Some(gate) = self.gate(path + d) else {
+            return;
+        };
+        self.stats.local_estimates += 1;
+        // Close by, the cosine-weighted solid angle of the aperture: a surface never returns
+        // more than its albedo times what reaches it (`crate::aperture`).
+        let geometric = if d2 < s.aperture.surface_near_d2 {
+            omega.z / PI * cos_axis * s.aperture.lambertian_per_area(d)
+        } else {
+            omega.z / PI * cos_axis / d2
+        };
+        let base = self.shape.base(gate, s.order_bin(order), annulus);
+        let layer = 0;
+        let n = self.nch();
+        for k in 0..n {
+            let (ts, ta) = s.atm.cumulative_tau(hit.z, k);
+            let tau_back = s.tau_to_receiver(hit.z, omega.z, d, layer, k, ts + ta);
+            let e = self.w[k] * (-self.tmp[k]).exp() * albedo[k] * geometric * (-tau_back).exp();
+            if s.analyser.is_some() {
+                // A Lambertian surface reflects unpolarised light: half of it each way.
+                self.bins[base + k] += 0.5 * e;
+                self.bins[base + n + k] += 0.5 * e;
+            } else {
+                self.bins[base + k] += e;
+            }
+        }
+    }
+
+    /// Expected absorption in the atmosphere along a flight, per channel (flux tally only):
+    /// w_k ∫ σ_a e^{−τ_ext(s)} ds, layer by layer.
+    pub(super) fn score_absorption(&mut self, z0: f64, mu: f64, s_end: f64) {
+        let atm = self.s.atm;
+        let nch = self.nch();
+        for k in 0..nch {
+            self.flux.absorbed[k] += self.w[k] * atm.absorbed_fraction(z0, mu, s_end, k);
+        }
+    }
+}
