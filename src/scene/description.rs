@@ -265,7 +265,7 @@ pub struct AtmosphereDescription {
 }
 
 /// A profile given by values (`[atmosphere] profile = { … }`): the levels of
-/// [`crate::atmosphere::Profile`], bottom up.
+/// the atmosphere module's `Profile`, bottom up.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ProfileDescription {
