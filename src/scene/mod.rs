@@ -30,12 +30,14 @@ mod ranges;
 mod resolve;
 mod resolve_gas;
 mod resolve_instrument;
+mod resolver;
 mod reuse;
 mod source;
 mod validate;
 mod validate_atmosphere;
 mod validate_instrument;
 mod validate_retrieval;
+mod validator;
 mod variance;
 
 use std::path::{Path, PathBuf};
@@ -398,7 +400,9 @@ impl SceneDescription {
     /// field path (`layer[2].top_m`).
     pub fn validate(&self) -> Result<(), InputError> {
         let source = self.code_source()?;
-        validate::Validator { src: &source }.check(self).map(|_| ())
+        validator::Validator { src: &source }
+            .check(self)
+            .map(|_| ())
     }
 
     /// Validate, then resolve (step 3): read the files the description names (relative paths
@@ -430,7 +434,7 @@ impl Scene {
     /// errors name the file, line and key.
     pub fn check_toml(path: &Path, text: &str) -> Result<SceneDescription, InputError> {
         let d = SceneDescription::parse(path, text)?;
-        validate::Validator {
+        validator::Validator {
             src: &Source::toml(path, text),
         }
         .check(&d)?;
@@ -451,8 +455,8 @@ impl Scene {
         source: Source,
         base_dir: &Path,
     ) -> Result<Scene, InputError> {
-        let checked = validate::Validator { src: &source }.check(&d)?;
-        resolve::Resolver {
+        let checked = validator::Validator { src: &source }.check(&d)?;
+        resolver::Resolver {
             src: &source,
             base_dir,
         }

@@ -3,7 +3,6 @@
 //! and the sampling of the laser lines; and the checks that need what those give. Errors still
 //! name the scene key that led to them.
 
-use std::ops::Deref;
 use std::path::Path;
 use std::sync::Arc;
 
@@ -11,9 +10,11 @@ use super::description::{
     AtmosphereDescription, LayerDescription, OneOrMany, ParticlesDescription, PerChannel,
     PhaseDescription, SceneDescription,
 };
+use super::resolver::Resolver;
 use super::reuse::Reuse;
-use super::source::{KeyPath, Source};
-use super::validate::{Checked, ProblemSize, Validator};
+use super::source::KeyPath;
+use super::validate::{Checked, ProblemSize};
+use super::validator::Validator;
 use super::{
     Atmosphere, Channel, Layer, Polarisation, Scene, Surface, molecular_layer_count, sample_lines,
 };
@@ -25,19 +26,6 @@ use crate::particles::matrix_table::MatrixTable;
 use crate::particles::phase::{HenyeyGreenstein, PhaseFunction, RayleighPhase, TabulatedPhase};
 use crate::particles::table::PhaseTable;
 use crate::particles::{builtin_table, rayleigh};
-
-/// Resolves a validated description; relative paths are anchored at `base_dir`.
-pub(super) struct Resolver<'a> {
-    pub src: &'a Source,
-    pub base_dir: &'a Path,
-}
-
-impl<'a> Deref for Resolver<'a> {
-    type Target = Source;
-    fn deref(&self) -> &Source {
-        self.src
-    }
-}
 
 impl Resolver<'_> {
     /// The scene of a description that has passed [`Validator::check`], given what it found,

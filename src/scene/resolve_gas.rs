@@ -5,7 +5,7 @@
 use std::sync::Arc;
 
 use super::description::GasAbsorptionDescription;
-use super::resolve::Resolver;
+use super::resolver::Resolver;
 use super::source::KeyPath;
 use super::{Atmosphere, Channel, GasAbsorption, GasTable, molecular_layer_count};
 use crate::input::InputError;

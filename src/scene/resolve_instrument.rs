@@ -6,7 +6,7 @@
 use std::sync::Arc;
 
 use super::description::{RetrievalDescription, SceneDescription};
-use super::resolve::Resolver;
+use super::resolver::Resolver;
 use super::source::KeyPath;
 use super::validate_instrument::{
     BackgroundValues, FilterWidth, LaserLineShape, LaserValues, ReceiverValues,

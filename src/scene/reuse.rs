@@ -9,9 +9,9 @@ use super::description::{
     GasDescription, LaserDescription, LineShapeTableDescription, PerChannel, ProfileDescription,
     SceneDescription,
 };
-use super::resolve::Resolver;
+use super::resolver::Resolver;
 use super::source::Source;
-use super::{Atmosphere, GasAbsorption, Layer, Scene, validate};
+use super::{Atmosphere, GasAbsorption, Layer, Scene, validator};
 use crate::atmosphere::Profile;
 use crate::input::InputError;
 use crate::instrument::laser::Laser;
@@ -106,7 +106,7 @@ impl Scene {
         base_dir: &Path,
         previous: &Scene,
     ) -> Result<Scene, InputError> {
-        let checked = validate::Validator { src: &source }.check(&d)?;
+        let checked = validator::Validator { src: &source }.check(&d)?;
         let reuse = Reuse::of(previous, &d, base_dir);
         Resolver {
             src: &source,

@@ -3,7 +3,6 @@
 //! finds on the way (the lidar, the lines, the gates, the surface, the Monte Carlo settings)
 //! it hands to resolve.
 
-use std::ops::Deref;
 use std::path::PathBuf;
 
 use super::description::{
@@ -11,26 +10,15 @@ use super::description::{
     SceneDescription,
 };
 use super::ranges::*;
-use super::source::{KeyPath, Source};
+use super::source::KeyPath;
 use super::validate_instrument::{LaserValues, ReceiverValues};
 use super::validate_retrieval::{Known, RetrievalValues};
+use super::validator::Validator;
 use super::{
     BeamProfile, Channel, Gates, Lidar, MULTIPLE_SCATTERING_TOLERANCE, MultipleScattering,
     Polarisation, Simulation, Surface, VarianceReduction,
 };
 use crate::input::{Bounds, InputError, check_count, check_finite_range, names};
-
-/// Checks a description against the rules of a scene; its errors are named by the source.
-pub(super) struct Validator<'a> {
-    pub src: &'a Source,
-}
-
-impl Deref for Validator<'_> {
-    type Target = Source;
-    fn deref(&self) -> &Source {
-        self.src
-    }
-}
 
 /// What validation finds on the way, for resolve to build on.
 pub(super) struct Checked {

@@ -5,7 +5,7 @@
 use super::description::{AtmosphereDescription, ProfileDescription};
 use super::ranges::*;
 use super::source::KeyPath;
-use super::validate::Validator;
+use super::validator::Validator;
 use crate::input::{InputError, check_finite_range, names};
 
 impl Validator<'_> {

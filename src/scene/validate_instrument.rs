@@ -8,7 +8,7 @@ use super::description::{
 };
 use super::ranges::*;
 use super::source::KeyPath;
-use super::validate::Validator;
+use super::validator::Validator;
 use crate::input::{Bounds, InputError, check_finite_range};
 
 /// Default number of line-shape quadrature nodes (odd, so the line centre is a node).

@@ -9,8 +9,8 @@ use std::ops::Range;
 use super::description::{LayerDescription, RetrievalDescription, SceneDescription};
 use super::ranges::*;
 use super::source::KeyPath;
-use super::validate::Validator;
 use super::validate_instrument::LaserValues;
+use super::validator::Validator;
 use super::{Channel, Gates, Lidar, Surface};
 use crate::input::{Bounds, InputError};
 
