@@ -661,7 +661,7 @@ fn multigrid_evaluates_beyond_voigt_profiles() {
 }
 
 // ---------------------------------------------------------------------------------------------
-// Physical ranges of the line parameters (issue 37, item 3)
+// Physical ranges of the line parameters
 // ---------------------------------------------------------------------------------------------
 
 /// The Hartmann-Tran profile (and its limits) as the speed average that defines it, written

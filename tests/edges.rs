@@ -1,4 +1,4 @@
-//! Edge-case scenes (issue 17, item 3): the analytic single-scatter lidar equation
+//! Edge-case scenes: the analytic single-scatter lidar equation
 //! (`lidar_eq::single_scatter`) and the Monte Carlo (`transport::run`) each against an
 //! independent truth, and against each other, where the beam meets no scatterer (gates below,
 //! between and above particle layers; a lidar inside a gap; a downward beam with no surface,

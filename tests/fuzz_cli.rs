@@ -32,7 +32,7 @@
 //! million-point grid) are redrawn, not run (the Limits table of the README bounds them, and
 //! `tests/validation_inputs.rs` checks the limits): each template says what is too large.
 //!
-//! Bugs found and reported (FUZZ_FINDINGS.md, issue 37) but not fixed here are in [`KNOWN`]:
+//! Bugs found and reported (FUZZ_FINDINGS.md) but not fixed here are in [`KNOWN`]:
 //! their cases are counted apart, so that the fuzz keeps running in CI and fails on anything
 //! new; a default run in which one no longer occurs fails until its entry is removed. Each has
 //! a test of its own in [`findings`], ignored until its fix is merged.

@@ -1,4 +1,4 @@
-//! Scattering matrices (issue 16): the Mie matrix of one sphere against the amplitudes of
+//! Scattering matrices: the Mie matrix of one sphere against the amplitudes of
 //! independent codes and against Bohren & Huffman's printed BHMIE output, the size integral
 //! against a direct quadrature of single spheres, the dipole limit, the Mueller inequalities,
 //! the C.1 cloud near backscatter, and scalar tables unchanged.
@@ -366,7 +366,7 @@ fn mie_matrices_satisfy_the_mueller_inequalities() {
     );
 }
 
-/// C.1 at 532 nm, m = 1.334 + 1.5e-9 i (issue 16): F33/F11 = −1, F12 = F34 = 0 at 180° (spheres
+/// C.1 at 532 nm, m = 1.334 + 1.5e-9 i: F33/F11 = −1, F12 = F34 = 0 at 180° (spheres
 /// keep the polarisation of backscattered light: S1(180°) = −S2(180°)); near 178°, where the
 /// glory makes F33/F11 swing, the values are printed (the issue expects about +0.6), the matrix
 /// is physical, and the default grid (0.01° from 178° to 180°) is fine enough: the table,

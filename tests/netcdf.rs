@@ -1,6 +1,5 @@
 //! `run.nc` opened by real NetCDF clients (xarray and netCDF4-python, `tests/netcdf_check.py`):
-//! every number equals the CSV files beside it, and the CF attributes are there (issue 12,
-//! item 4); so do `sensitivities.nc` of `lidarsim select-lines` and `profiles.nc` and
+//! every number equals the CSV files beside it, and the CF attributes are there; so do `sensitivities.nc` of `lidarsim select-lines` and `profiles.nc` and
 //! `summary.nc` of `lidarsim dial`. Without Python, xarray or netCDF4 the test prints one line and skips, except in CI
 //! (`CI` set), where `.ci/run` installs them and their absence is a failure.
 

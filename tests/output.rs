@@ -1,4 +1,4 @@
-//! Output that is never half-written (issue 11, item 3): a failed command leaves its output
+//! Output that is never half-written: a failed command leaves its output
 //! directory as it was, with no temporary entry; CSV text fields survive a standard CSV parser.
 //! The failure modes the CLI cannot reach on demand (a producer failing after the first file, a
 //! rename failing midway, a simulated full disk) are tested on `OutputSet` in `src/output/`.
@@ -312,7 +312,7 @@ fn retrieval_csv_holds_no_nan_and_leaves_what_cannot_be_computed_empty() {
     assert!(rows > 100, "{rows} rows");
     // The case this test is about: some far cells have no Monte Carlo signal at 2000 photons.
     assert!(empty_mc > 0, "every Monte Carlo cell had a signal");
-    // And no other file of the run holds NaN or inf either (issue 37, item 5).
+    // And no other file of the run holds NaN or inf either.
     assert_eq!(
         assert_no_non_finite(dir.path()).len(),
         4,

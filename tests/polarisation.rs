@@ -1,4 +1,4 @@
-//! Polarised transport (issue 16, item 4): exact checks of the co- and cross-polarised returns
+//! Polarised transport: exact checks of the co- and cross-polarised returns
 //! and the depolarisation ratio.
 
 use lidarsim::lidar_eq;

@@ -387,7 +387,7 @@ fn noise_free_retrievals_return_the_truth() {
             // XCO2 over 0–8 km of the US standard scaled to 420 ppm over the whole column:
             // higher below, where the air is moist (the table's CO2 is constant in moist
             // air). 420.496 since the columns interpolate mixing ratios in dry air between
-            // levels (issue 37; 420.483 with every density log-linear).
+            // levels (420.483 with every density log-linear).
             assert!((p.truth - 420.496).abs() < 0.002, "truth {}", p.truth);
             assert!(p.bias().abs() < 0.05, "IPDA bias {} ppm", p.bias());
             assert!(p.bias().abs() < 1e-3, "IPDA bias {} ppm", p.bias());

@@ -8,8 +8,9 @@ use lidarsim::scene::Scene;
 
 use crate::util::project_root;
 
-/// A valid scene; each case below breaks one thing in it. Line numbers are 1-based.
-const BASE: &str = r#"description = "test"
+/// A valid scene; each case below breaks one thing in it (here and in `scene_lifecycle`). Line
+/// numbers are 1-based.
+pub(crate) const BASE: &str = r#"description = "test"
 [lidar]
 altitude_m = 0.0
 zenith_angle_deg = 0.0

@@ -1,4 +1,4 @@
-//! The scene's three steps (issue 38, item 1): a description built in code is checked like a
+//! The scene's three steps (`docs/design.md` §5): a description built in code is checked like a
 //! file, with the field path where a file has its line; a description written as TOML and read
 //! back resolves to the same scene; validation reads no file; a swapped profile is checked.
 
@@ -15,41 +15,8 @@ use lidarsim::scene::{
 
 use crate::util::project_root;
 
-/// A small valid scene; the cases edit it.
-const BASE: &str = r#"description = "lifecycle"
-[lidar]
-altitude_m = 0.0
-zenith_angle_deg = 0.0
-pulse_energy_j = 0.1
-beam_divergence_full_angle_mrad = 0.1
-telescope_diameter_m = 0.3
-optical_efficiency = 0.5
-fov_full_angle_mrad = [0.5, 1.0]
-[[channel]]
-name = "on"
-wavelength_nm = 1572.0
-[[channel]]
-name = "off"
-wavenumber_cm1 = 6361.0
-[gates]
-start_m = 100.0
-end_m = 5000.0
-width_m = 10.0
-[atmosphere]
-standard = "us_standard"
-[[layer]]
-name = "aerosol"
-base_m = 0.0
-top_m = 1500.0
-extinction_per_km = [0.1, 0.1]
-single_scattering_albedo = 0.95
-phase = { kind = "henyey_greenstein", g = 0.7 }
-[surface]
-altitude_m = 0.0
-albedo = 0.2
-[simulation]
-photons = 1000
-"#;
+/// A small valid scene ([`crate::scene`]'s); the cases edit it.
+use crate::scene::BASE;
 
 fn base() -> SceneDescription {
     SceneDescription::parse(Path::new("base.toml"), BASE).unwrap()

@@ -1,4 +1,4 @@
-//! Sharded runs (issue 12, item 1): `run --shard I/N` and `merge` give the single run's files
+//! Sharded runs: `run --shard I/N` and `merge` give the single run's files
 //! byte for byte, and a merge refuses every shard set that is not one whole run, naming the
 //! files.
 

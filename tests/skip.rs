@@ -1,4 +1,4 @@
-//! What a scene does not need (issue 10, item 4): the Monte Carlo skipped where multiple
+//! What a scene does not need: the Monte Carlo skipped where multiple
 //! scattering cannot matter, and no line-by-line work for absent gases.
 //!
 //! Independent truths: a skipped run's returns are the analytic lidar equation's rows, byte for

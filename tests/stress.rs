@@ -1,4 +1,4 @@
-//! Extreme physical scenes (issue 11): optical depths to 1000, Henyey-Greenstein g = ±0.9999,
+//! Extreme physical scenes: optical depths to 1000, Henyey-Greenstein g = ±0.9999,
 //! single-scattering albedos exactly 0 and 1, a 1 mm layer among 500 thin ones, horizontal and
 //! grazing beams, a 1000 km range in 5 m gates, a channel with absorption optical depth 50.
 //! Each gives finite, non-negative returns and error bars, its single scattering equals the

@@ -1,4 +1,4 @@
-//! `bench --depth` and `mie` at their edges (issue 37, FUZZ_FINDINGS.md F4, F16): the `--plain`
+//! `bench --depth` and `mie` at their edges (FUZZ_FINDINGS.md F4, F16): the `--plain`
 //! reference's refusals name the file, the line and the column before any work; a size
 //! distribution without index contrast is refused at once, and one with a little contrast ends
 //! fast with the cross-sections the Rayleigh–Gans scaling predicts.

@@ -1,4 +1,4 @@
-//! What beyond-Voigt spectroscopy means for a CO2 IPDA (issue 15, item 6).
+//! What beyond-Voigt spectroscopy means for a CO2 IPDA.
 //!
 //! `cargo run --release --example beyond_voigt_lidar -- SHARED_DATA_DIR [OUT.csv]`
 //! (SHARED_DATA_DIR = `../shared/data`, with `nist_30012/` and `hitran/`).

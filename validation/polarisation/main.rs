@@ -1,4 +1,4 @@
-//! Polarised multiple scattering (issue 16, item 5; README.md beside this file): the
+//! Polarised multiple scattering (README.md beside this file): the
 //! depolarisation ratio δ and the multiple-scattering fraction against penetration depth of the
 //! C.1 cloud at 532 nm for a ground lidar (2, 4, 10 and 20 mrad), and the layer-integrated δ
 //! against Hu et al.'s relation η = ((1 − δ)/(1 + δ))² (Hu et al. 2006, Opt. Lett. 31, 1809;
