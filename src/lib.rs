@@ -27,6 +27,36 @@
 //! at all, [`netcdf`] makes the CF NetCDF files, [`benchmark`] holds the workloads and
 //! measurements of `lidarsim bench`, and [`digest`] is the one hash (FNV-1a 64) of cache keys,
 //! fingerprints and shard checksums.
+//!
+//! # From Rust
+//!
+//! A scene from a file or from values, its settings changed, run through the pipeline's three
+//! steps and written as `lidarsim run` writes it (`docs/design.md` §5–§7):
+//!
+//! ```no_run
+//! use std::path::Path;
+//!
+//! use lidarsim::pipeline;
+//! use lidarsim::scene::{PerChannel, Scene, SceneDescription};
+//!
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! // Parse → validate (no I/O) → resolve (files, Mie, line lists).
+//! let text = std::fs::read_to_string("scenes/bissonnette_c1.toml")?;
+//! let mut description = SceneDescription::parse(Path::new("c1.toml"), &text)?;
+//! description.lidar.fov_full_angle_mrad = PerChannel::Many(vec![0.5, 2.0]);
+//! description.validate()?;
+//! let mut scene: Scene = description.resolve(Path::new("scenes"))?;
+//! // How it runs is one settings type.
+//! scene.simulation.photons = 100_000;
+//! // Prepare (optics, analytic returns, retrieval set-up, skip decision) → trace → finish.
+//! let prepared = pipeline::prepare(&scene)?;
+//! let mc = prepared.trace(&|done, total| eprintln!("{done}/{total} batches"))?;
+//! let run = prepared.finish(mc)?;
+//! // The files of `lidarsim run`, all or none (no figures here).
+//! lidarsim::products::run::write(Path::new("out"), &scene, &run, None, |_| Ok(()))?;
+//! # Ok(())
+//! # }
+//! ```
 
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
