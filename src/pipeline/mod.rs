@@ -16,8 +16,8 @@ use crate::instrument::signals::{Signals, Telescope};
 use crate::lidar_eq;
 use crate::optics::{OpticalAtmosphere, OpticsError};
 use crate::retrieval::{
-    AssumedInstrument, LayerColumns, Method, Product, Quantity, ReferenceState, Retrieval,
-    RetrievalConfig, RetrievalError,
+    AssumedInstrument, Geometry, LayerColumns, Method, Product, Quantity, ReferenceState,
+    Retrieval, RetrievalConfig, RetrievalError,
 };
 use crate::returns::{Order, Returns, Source};
 use crate::scene::Scene;
@@ -438,14 +438,16 @@ pub fn retrieval_of(
     let range_m = (0..scene.gates.count)
         .map(|g| scene.gates.centre_m(g))
         .collect();
+    let geometry = Geometry {
+        lidar_altitude_m: scene.lidar.altitude_m,
+        mu: scene.lidar.axis().z,
+        range_m,
+    };
     Retrieval::new(
         config,
         scene.laser.clone(),
-        reference,
-        truth,
-        scene.lidar.altitude_m,
-        scene.lidar.axis().z,
-        range_m,
+        (reference, truth),
+        geometry,
         pair,
         seed,
     )

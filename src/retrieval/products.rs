@@ -268,22 +268,34 @@ fn measurement_windows(targets: &[Target]) -> (Vec<Range<usize>>, Vec<Vec<usize>
     (windows, window_ids)
 }
 
+/// Where a retrieval looks from: the lidar's altitude, its beam's direction and its gates.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Geometry {
+    /// Altitude of the lidar \[m\].
+    pub lidar_altitude_m: f64,
+    /// Direction cosine of the beam with the upward vertical.
+    pub mu: f64,
+    /// Centres of the range gates \[m\].
+    pub range_m: Vec<f64>,
+}
+
 impl Retrieval {
-    /// The retrieval of `config` for a lidar at `lidar_altitude_m` pointing with direction
-    /// cosine `mu`, gates centred at `range_m`. Checks that the on-line absorbs more than the
-    /// off-line over every path it will retrieve.
-    #[allow(clippy::too_many_arguments)]
+    /// The retrieval of `config` (its line pair named `pair`) seen from `geometry`, against
+    /// `reference` and `truth`; `seed` seeds its noise. Checks that the on-line absorbs more
+    /// than the off-line over every path it will retrieve.
     pub fn new(
         config: RetrievalConfig,
         laser: Laser,
-        reference: ReferenceState,
-        truth: LayerColumns,
-        lidar_altitude_m: f64,
-        mu: f64,
-        range_m: Vec<f64>,
+        (reference, truth): (ReferenceState, LayerColumns),
+        geometry: Geometry,
         pair: String,
         seed: u64,
     ) -> Result<Self, RetrievalError> {
+        let Geometry {
+            lidar_altitude_m,
+            mu,
+            range_m,
+        } = geometry;
         let mut r = Retrieval {
             config,
             laser,
