@@ -88,7 +88,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // Before the work: a study must not fail at its end on a name it could have refused now.
     output::check_paths(&out_files)?;
     let inputs = request(&args).resolve()?;
-    let pool = super::study_pool(args.threads)?;
+    let pool = lidarsim::study::thread_pool(args.threads).map_err(anyhow::Error::msg)?;
     if let Some(spec) = args.shard {
         let n = spec.batches(inputs.set.len()).len();
         return super::run_study_shard(spec, n, "dial shard", &pool, |tick| {

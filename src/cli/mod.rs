@@ -71,39 +71,6 @@ pub fn threads() -> impl Fn(&str) -> Result<usize, String> + Clone + Send + Sync
     count_usize(0, lidarsim::limits::MAX_THREADS)
 }
 
-/// The worker threads a study runs on for `--threads requested` (0: all cores) with `cores`
-/// available: at most the cores. A study's work is computation, so a thread beyond the cores
-/// only waits for one, and hundreds of them waiting on the nested parallel line-by-line loops
-/// cost their own seconds (`dial --threads 1000`: 27 s instead of 0.2 s on 2 cores). The
-/// numbers do not depend on the thread count.
-pub fn study_threads(requested: usize, cores: usize) -> usize {
-    let cores = cores.max(1);
-    if requested == 0 {
-        cores
-    } else {
-        requested.min(cores)
-    }
-}
-
-/// The thread pool of a study (`dial`, `select-lines`, their shards): [`study_threads`] of
-/// the cores this process may use (`available_parallelism`: its CPU affinity and cgroup
-/// quota, e.g. a Slurm job's `--cpus-per-task`), with a warning when `--threads` asked for
-/// more.
-pub fn study_pool(requested: usize) -> anyhow::Result<rayon::ThreadPool> {
-    use anyhow::Context as _;
-    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let threads = study_threads(requested, cores);
-    if threads < requested {
-        lidarsim::limits::warn(&format!(
-            "--threads {requested}: {cores} cores available, running on {threads} threads (threads beyond the cores only wait; the results are the same)"
-        ));
-    }
-    rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .with_context(|| format!("cannot start {threads} threads"))
-}
-
 /// A clap value parser for `--class`: a latitude class of a study (`tropical`, `mid`, `high`)
 /// or `all`, refused with the option named (by `main`) and the names known.
 pub fn latitude_class(text: &str) -> Result<String, String> {
@@ -144,20 +111,8 @@ pub fn run_study_shard(
 }
 
 #[cfg(test)]
-mod study_thread_tests {
+mod tests {
     use super::*;
-
-    /// `--threads 0` is every core; more than the cores is capped at them; fewer are kept.
-    #[test]
-    fn a_study_runs_on_at_most_the_cores() {
-        assert_eq!(study_threads(0, 8), 8);
-        assert_eq!(study_threads(3, 8), 3);
-        assert_eq!(study_threads(1000, 2), 2);
-        assert_eq!(study_threads(1024, 64), 64);
-        // An unknown core count is one.
-        assert_eq!(study_threads(0, 0), 1);
-        assert_eq!(study_threads(4, 0), 1);
-    }
 
     #[test]
     fn a_latitude_class_is_refused_with_the_names_known() {

@@ -31,14 +31,14 @@ impl Progress {
 
     /// One more unit done.
     pub fn tick(&self) {
-        self.bar.inc(1);
-        if self.show && self.bar.is_hidden() && self.started.elapsed() > Duration::from_secs(1) {
-            self.bar
-                .set_draw_target(indicatif::ProgressDrawTarget::stderr());
-        }
+        self.reach(
+            self.bar.position() as usize + 1,
+            self.bar.length().unwrap_or(0) as usize,
+        );
     }
 
-    /// `done` of `total` units done (a caller that reports positions, as the transport does).
+    /// `done` of `total` units done (a caller that reports positions, as the transport does);
+    /// the bar shows once the work has taken a second, on a terminal.
     pub fn reach(&self, done: usize, total: usize) {
         self.bar.set_length(total as u64);
         self.bar.set_position(done as u64);

@@ -47,23 +47,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(spec) = args.shard {
         return run_shard(&args, spec);
     }
-    let mut scene = products::read_scene(args.scene.as_deref(), false)?;
-    scene
-        .override_simulation(args.photons, args.seed, args.threads)
-        .map_err(anyhow::Error::msg)?;
+    let scene = scene(&args, false)?;
     // Before the work: a run must not fail at its end on a name it could have refused now.
     output::check_paths(&FILES.map(|f| args.out.join(f)))?;
-    scene.simulation.variance_reduction.ddis_epsilon = args.ddis_epsilon;
     #[cfg(not(feature = "mpi"))]
     let run = {
-        let prepared = lidarsim::pipeline::prepare(&scene)?;
-        if let Some(note) = prepared.warning() {
-            lidarsim::limits::warn(&note);
-        }
         let bar = super::progress::Progress::new(0, "transport", "batches");
-        let mc = prepared.trace(&|done, total| bar.reach(done, total))?;
+        let run = lidarsim::pipeline::run_reporting(&scene, &|done, total| bar.reach(done, total));
         bar.finish();
-        prepared.finish(mc)?
+        run?
     };
     // Under `mpirun` the ranks share the batches; rank 0 alone writes (`lidarsim::distributed`).
     #[cfg(feature = "mpi")]
@@ -78,14 +70,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     super::write::run(&args.out, args.no_plots, !args.no_netcdf, &scene, &run)
 }
 
-/// `lidarsim run … --shard I/N`: trace the shard's batches and write its file.
-fn run_shard(args: &Args, spec: ShardSpec) -> anyhow::Result<()> {
-    let mut scene = products::read_scene(args.scene.as_deref(), true)?;
+/// The scene with the command line's settings (`absolute`: read by its absolute path, as shards).
+fn scene(args: &Args, absolute: bool) -> anyhow::Result<lidarsim::scene::Scene> {
+    let mut scene = products::read_scene(args.scene.as_deref(), absolute)?;
+    let sim = &mut scene.simulation;
+    sim.variance_reduction.ddis_epsilon = args.ddis_epsilon;
     scene
         .override_simulation(args.photons, args.seed, args.threads)
         .map_err(anyhow::Error::msg)?;
-    scene.simulation.variance_reduction.ddis_epsilon = args.ddis_epsilon;
-    let r = shard::run(&scene, spec, &args.out)?;
+    Ok(scene)
+}
+
+/// `lidarsim run … --shard I/N`: trace the shard's batches and write its file.
+fn run_shard(args: &Args, spec: ShardSpec) -> anyhow::Result<()> {
+    let r = shard::run(&scene(args, true)?, spec, &args.out)?;
     outln!(
         "shard {spec}: batches {}..{} of {} ({} photons each) in {:.2} s on {} threads; wrote {}",
         r.batches.start,

@@ -133,7 +133,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     };
     output::check_paths(&out_files)?;
     outln!("{}", products::select::setup_line(&study));
-    let pool = super::study_pool(a.threads)?;
+    let pool = lidarsim::study::thread_pool(a.threads).map_err(anyhow::Error::msg)?;
     if let Some(spec) = a.shard {
         let n = spec.batches(study.len()).len();
         return super::run_study_shard(spec, n, "select-lines shard", &pool, |tick| {

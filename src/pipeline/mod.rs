@@ -288,11 +288,16 @@ impl<'s> Prepared<'s> {
 /// Run every stage of `scene` on this machine, quietly: [`prepare`], [`Prepared::trace`],
 /// [`Prepared::finish`]; a note on long work goes to standard error ([`crate::limits::warn`]).
 pub fn run(scene: &Scene) -> Result<RunOutput, RunError> {
+    run_reporting(scene, &transport::quiet)
+}
+
+/// [`run`], reporting the Monte Carlo's batches folded to `progress`.
+pub fn run_reporting(scene: &Scene, progress: Progress) -> Result<RunOutput, RunError> {
     let prepared = prepare(scene)?;
     if let Some(note) = prepared.warning() {
         crate::limits::warn(&note);
     }
-    let mc = prepared.trace(&transport::quiet)?;
+    let mc = prepared.trace(progress)?;
     prepared.finish(mc)
 }
 
