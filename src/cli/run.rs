@@ -73,8 +73,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 /// The scene with the command line's settings (`absolute`: read by its absolute path, as shards).
 fn scene(args: &Args, absolute: bool) -> anyhow::Result<lidarsim::scene::Scene> {
     let mut scene = products::read_scene(args.scene.as_deref(), absolute)?;
-    let sim = &mut scene.simulation;
-    sim.variance_reduction.ddis_epsilon = args.ddis_epsilon;
+    scene.simulation.variance_reduction.ddis_epsilon = args.ddis_epsilon;
     scene
         .override_simulation(args.photons, args.seed, args.threads)
         .map_err(anyhow::Error::msg)?;

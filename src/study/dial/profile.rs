@@ -53,19 +53,18 @@ impl Study<'_> {
 
     /// The expected returns and signals of `scene` (a truth); with photons, traced from the
     /// profile's `seed` (every truth of one profile on the same photons).
-    fn measure(&self, scene: Scene, seed: u64) -> Result<Measured, String> {
+    fn measure(&self, mut scene: Scene, seed: u64) -> Result<Measured, String> {
+        // The study's photons, from the profile's seed (every truth of one profile on the same
+        // photons).
+        scene.simulation.photons = self.options.photons;
+        scene.simulation.seed = seed;
         let optics = Clock::time(&self.clock.truth_optics, || {
             OpticalAtmosphere::build(&scene).map_err(|e| e.to_string())
         })?;
         Clock::time(&self.clock.returns, || {
             let (channels, lines, order) = if self.options.photons > 0 {
-                // The study's photons, from the profile's seed (every truth of one profile on the
-                // same photons).
-                let mut traced = scene.clone();
-                traced.simulation.photons = self.options.photons;
-                traced.simulation.seed = seed;
                 let (_, lines) =
-                    pipeline::trace_lines(&traced, &optics).map_err(|e| e.to_string())?;
+                    pipeline::trace_lines(&scene, &optics).map_err(|e| e.to_string())?;
                 (None, lines.ok_or("no combined returns")?, Order::Total)
             } else {
                 let analytic = lidar_eq::single_scatter(&scene, &optics);
