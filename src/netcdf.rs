@@ -20,7 +20,7 @@
 //! estimate names its standard error in `ancillary_variables` (§3.4); a bin with no value
 //! holds `_FillValue` (§2.5.1; the CSV writes those as empty fields). No file holds `NaN` or
 //! `inf`: a variable without `_FillValue` (a coordinate, bounds, a count) that holds one is
-//! refused as a bug, and so is a non-finite attribute ([`Builder::finish`]).
+//! refused as a bug, and so is a non-finite attribute ([`Dataset::encode`]).
 //!
 //! **Layout** (README, "Output: `run.nc`"). The dimensions and coordinates carry the CSV
 //! columns' names: `source` (`mc`, `analytic`), `channel`, `fov_full_angle_mrad`, `range_m`
@@ -42,6 +42,9 @@ use crate::scene::Gates;
 
 /// The CF version the file declares in its `Conventions` attribute.
 pub const CONVENTIONS: &str = "CF-1.8";
+
+/// A missing double's value (`_FillValue`): NetCDF's default fill for doubles.
+pub const FILL_F64: f64 = netcdf3::NC_FILL_F64;
 
 /// Name of the file `lidarsim run` writes beside its CSV files.
 pub const RUN_FILE: &str = "run.nc";
@@ -99,7 +102,12 @@ pub struct RunFile<'a> {
 
 /// The bytes of `run.nc` (module documentation).
 pub fn run_file(run: &RunFile) -> Result<Vec<u8>, NetcdfError> {
-    let mut nc = Builder::default();
+    run_dataset(run)?.encode()
+}
+
+/// What `run.nc` holds, before it is written ([`run_file`]).
+pub fn run_dataset(run: &RunFile) -> Result<Dataset, NetcdfError> {
+    let mut nc = Dataset::default();
     let grid = Grid::of(run.returns)?;
     globals(&mut nc, run.attributes);
     coordinates(&mut nc, &grid, run)?;
@@ -117,7 +125,8 @@ pub fn run_file(run: &RunFile) -> Result<Vec<u8>, NetcdfError> {
             product_variables(&mut nc, q, &rows, run.gas);
         }
     }
-    nc.finish()
+    nc.check()?;
+    Ok(nc)
 }
 
 /// One column of a table ([`table_file`]).
@@ -151,6 +160,16 @@ pub fn table_file(
     title: &str,
     history: &str,
 ) -> Result<Vec<u8>, NetcdfError> {
+    table_dataset(row_dim, columns, title, history)?.encode()
+}
+
+/// What [`table_file`] writes, before it is written.
+pub fn table_dataset(
+    row_dim: &str,
+    columns: &[Column],
+    title: &str,
+    history: &str,
+) -> Result<Dataset, NetcdfError> {
     let rows = columns.first().map_or(0, |c| match &c.values {
         ColumnValues::Text(v) => v.len(),
         ColumnValues::Number(v) => v.len(),
@@ -158,7 +177,7 @@ pub fn table_file(
     if rows == 0 {
         return Err(NetcdfError::Layout("a table without rows".into()));
     }
-    let mut nc = Builder::default();
+    let mut nc = Dataset::default();
     nc.global("Conventions", Attr::text(CONVENTIONS));
     nc.global("title", Attr::text(title));
     nc.global(
@@ -203,7 +222,8 @@ pub fn table_file(
             }
         }
     }
-    nc.finish()
+    nc.check()?;
+    Ok(nc)
 }
 
 /// The CF `history` attribute of a NetCDF file written now by `command` (the command line,
@@ -326,7 +346,7 @@ const GRID_DIMS: [&str; 5] = [
     "order",
 ];
 
-fn globals(nc: &mut Builder, a: &RunAttributes) {
+fn globals(nc: &mut Dataset, a: &RunAttributes) {
     let version = env!("CARGO_PKG_VERSION");
     nc.global("Conventions", Attr::text(CONVENTIONS));
     nc.global("title", Attr::text(&a.title));
@@ -349,7 +369,7 @@ fn globals(nc: &mut Builder, a: &RunAttributes) {
     nc.global("batches", Attr::F64(vec![a.batches as f64]));
 }
 
-fn coordinates(nc: &mut Builder, grid: &Grid, run: &RunFile) -> Result<(), NetcdfError> {
+fn coordinates(nc: &mut Dataset, grid: &Grid, run: &RunFile) -> Result<(), NetcdfError> {
     nc.dim("source", grid.sources.len());
     nc.dim("channel", grid.channels.len());
     nc.dim("fov_full_angle_mrad", grid.fov_full_angle_mrad.len());
@@ -425,7 +445,7 @@ fn coordinates(nc: &mut Builder, grid: &Grid, run: &RunFile) -> Result<(), Netcd
     Ok(())
 }
 
-fn returns_variables(nc: &mut Builder, grid: &Grid, sets: &[&Returns]) {
+fn returns_variables(nc: &mut Dataset, grid: &Grid, sets: &[&Returns]) {
     let mut energy = vec![f64::NAN; grid.len()];
     let mut stderr = vec![f64::NAN; grid.len()];
     for (s, r) in sets.iter().enumerate() {
@@ -467,7 +487,7 @@ fn returns_variables(nc: &mut Builder, grid: &Grid, sets: &[&Returns]) {
         .fill();
 }
 
-fn signal_variables(nc: &mut Builder, grid: &Grid, signals: &[Signals]) -> Result<(), NetcdfError> {
+fn signal_variables(nc: &mut Dataset, grid: &Grid, signals: &[Signals]) -> Result<(), NetcdfError> {
     const NAMES: [(&str, &str); 5] = [
         (
             "signal_photoelectrons",
@@ -528,7 +548,7 @@ fn signal_variables(nc: &mut Builder, grid: &Grid, signals: &[Signals]) -> Resul
 type Getter<T> = fn(&Product) -> T;
 
 /// One table of `retrieval.csv`'s rows of one quantity.
-fn product_variables(nc: &mut Builder, q: Quantity, rows: &[&Product], gas: Option<&str>) {
+fn product_variables(nc: &mut Dataset, q: Quantity, rows: &[&Product], gas: Option<&str>) {
     let p = q.label();
     let dim = format!("{p}_product");
     nc.dim(&dim, rows.len());
@@ -540,7 +560,7 @@ fn product_variables(nc: &mut Builder, q: Quantity, rows: &[&Product], gas: Opti
 /// The coordinates of a table of products: which retrieval, from which returns, where; their
 /// variable names.
 fn product_coordinates(
-    nc: &mut Builder,
+    nc: &mut Dataset,
     dim: &str,
     rows: &[&Product],
     name: &dyn Fn(&str) -> String,
@@ -613,7 +633,7 @@ fn product_coordinates(
 
 /// The values of a table of products, in the quantity's unit, with their coordinates.
 fn product_values(
-    nc: &mut Builder,
+    nc: &mut Dataset,
     q: Quantity,
     dim: &str,
     rows: &[&Product],
@@ -714,7 +734,7 @@ fn product_values(
 }
 
 mod builder;
-use builder::{Attr, Builder};
+pub use builder::{Attr, Dataset, Values, Var};
 
 #[cfg(test)]
 mod tests;

@@ -1,4 +1,7 @@
-//! A small builder over the `netcdf3` crate: collect everything, then define and write at once
+//! A data set in memory (dimensions, variables, attributes), built up, then written at once
+//! over the `netcdf3` crate ([`Dataset::encode`]) or handed over as it is (the Python package
+//! turns the same value into an `xarray.Dataset`, so that a run returned to Python and its
+//! `run.nc` hold the same variables).
 
 use std::cell::RefCell;
 use std::io::{Cursor, Seek, SeekFrom, Write};
@@ -9,31 +12,42 @@ use netcdf3::{DataSet, FileWriter, NC_FILL_F64, Version};
 use super::{NetcdfError, RUN_FILE};
 
 /// An attribute value.
-#[derive(Debug, Clone)]
-pub(super) enum Attr {
+#[derive(Debug, Clone, PartialEq)]
+pub enum Attr {
+    /// Text.
     Text(String),
+    /// Doubles.
     F64(Vec<f64>),
 }
 
 impl Attr {
-    pub(super) fn text(s: impl Into<String>) -> Attr {
+    /// A text attribute.
+    pub fn text(s: impl Into<String>) -> Attr {
         Attr::Text(s.into())
     }
 }
 
-#[derive(Debug)]
-pub(super) enum Values {
+/// A variable's values, row-major over its dimensions.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Values {
+    /// Doubles; a missing value is `_FillValue` ([`NC_FILL_F64`]) where the variable has one.
     F64(Vec<f64>),
-    /// Char array, row-major, each row NUL-padded to the last dimension's length.
+    /// Char array, row-major, each row NUL-padded to the last dimension's length (text over
+    /// the other dimensions, CF-1.8 §2.2).
     Char(Vec<u8>),
 }
 
-#[derive(Debug)]
-pub(super) struct Var {
-    pub(super) name: String,
-    pub(super) dims: Vec<String>,
-    pub(super) values: Values,
-    pub(super) attrs: Vec<(String, Attr)>,
+/// One variable.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Var {
+    /// Its name.
+    pub name: String,
+    /// Its dimensions, slowest first.
+    pub dims: Vec<String>,
+    /// Its values.
+    pub values: Values,
+    /// Its attributes, in order.
+    pub attrs: Vec<(String, Attr)>,
 }
 
 impl Var {
@@ -58,14 +72,18 @@ impl Var {
     }
 }
 
-#[derive(Debug, Default)]
-pub(super) struct Builder {
-    pub(super) dims: Vec<(String, usize)>,
-    pub(super) vars: Vec<Var>,
-    pub(super) globals: Vec<(String, Attr)>,
+/// A whole data set: what one NetCDF file holds.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Dataset {
+    /// Dimensions and their lengths, in order.
+    pub dims: Vec<(String, usize)>,
+    /// Variables, in order.
+    pub vars: Vec<Var>,
+    /// Global attributes, in order.
+    pub globals: Vec<(String, Attr)>,
 }
 
-impl Builder {
+impl Dataset {
     pub(super) fn dim(&mut self, name: &str, len: usize) {
         self.dims.push((name.into(), len));
     }
@@ -105,11 +123,9 @@ impl Builder {
         &mut self.vars[n]
     }
 
-    /// Define the data set, write header and values into memory, and return the bytes. A
-    /// non-finite number where it cannot be `_FillValue` (a variable without one, an
-    /// attribute) is refused: it would be `NaN` or `inf` in the file.
-    pub(super) fn finish(self) -> Result<Vec<u8>, NetcdfError> {
-        let err = |e: &dyn std::fmt::Debug| NetcdfError::Format(format!("{e:?}"));
+    /// Refuse a non-finite number where it cannot be `_FillValue` (a variable without one, an
+    /// attribute): it would be `NaN` or `inf` in the file or in the caller's data set.
+    pub fn check(&self) -> Result<(), NetcdfError> {
         let non_finite = |what: String| {
             NetcdfError::Layout(format!(
                 "{what} holds a value that is not finite and cannot be _FillValue (a bug in lidarsim; please report it)"
@@ -132,6 +148,14 @@ impl Builder {
                 return Err(non_finite(format!("the variable `{}`", v.name)));
             }
         }
+        Ok(())
+    }
+
+    /// The NetCDF-3 file (64-bit offsets): define the data set, write header and values into
+    /// memory, and return the bytes; refused as [`Self::check`] refuses.
+    pub fn encode(&self) -> Result<Vec<u8>, NetcdfError> {
+        self.check()?;
+        let err = |e: &dyn std::fmt::Debug| NetcdfError::Format(format!("{e:?}"));
         let mut ds = DataSet::new();
         for (name, len) in &self.dims {
             ds.add_fixed_dim(name, *len).map_err(|e| err(&e))?;

@@ -361,26 +361,26 @@ fn a_table_with_columns_of_different_lengths_is_refused() {
 /// non-finite value anywhere else (a coordinate, bounds, an attribute) refuses the file.
 #[test]
 fn non_finite_values_are_fill_or_refused() {
-    let mut nc = Builder::default();
+    let mut nc = Dataset::default();
     nc.dim("x", 3);
     nc.f64("v", &["x"], vec![1.0, f64::INFINITY, f64::NAN])
         .attrs([("long_name", "v")])
         .fill();
-    let mut r = read(nc.finish().unwrap());
+    let mut r = read(nc.encode().unwrap());
     assert_eq!(
         r.read_var_f64("v").unwrap(),
         [1.0, NC_FILL_F64, NC_FILL_F64]
     );
-    let mut nc = Builder::default();
+    let mut nc = Dataset::default();
     nc.dim("x", 2);
     nc.f64("x", &["x"], vec![0.0, f64::NEG_INFINITY]);
-    let e = nc.finish().unwrap_err().to_string();
+    let e = nc.encode().unwrap_err().to_string();
     assert!(
         e.contains("the variable `x`") && e.contains("not finite"),
         "{e}"
     );
-    let mut nc = Builder::default();
+    let mut nc = Dataset::default();
     nc.global("g", Attr::F64(vec![f64::NAN]));
-    let e = nc.finish().unwrap_err().to_string();
+    let e = nc.encode().unwrap_err().to_string();
     assert!(e.contains("the global attribute `g`"), "{e}");
 }

@@ -387,6 +387,26 @@ pub fn netcdf_file(
     returns: &[&Returns],
     history: &str,
 ) -> Result<Vec<u8>, crate::netcdf::NetcdfError> {
+    dataset_of(scene, run, returns, history)?.encode()
+}
+
+/// What `run.nc` holds ([`crate::netcdf::run_dataset`]), before it is written: the Python
+/// package's `lidarsim.run` returns it as an `xarray.Dataset`. `history` is the CF `history`
+/// attribute (when and by what the run was made).
+pub fn dataset(
+    scene: &Scene,
+    run: &RunOutput,
+    history: &str,
+) -> Result<crate::netcdf::Dataset, crate::netcdf::NetcdfError> {
+    dataset_of(scene, run, &returns_sets(run), history)
+}
+
+fn dataset_of(
+    scene: &Scene,
+    run: &RunOutput,
+    returns: &[&Returns],
+    history: &str,
+) -> Result<crate::netcdf::Dataset, crate::netcdf::NetcdfError> {
     use crate::netcdf;
     let scene_text = scene.text().to_string();
     let title = if scene.description.is_empty() {
@@ -403,7 +423,7 @@ pub fn netcdf_file(
         photons: run.mc.as_ref().map_or(0, |m| m.photons),
         batches: scene.simulation.batches as u64,
     };
-    netcdf::run_file(&netcdf::RunFile {
+    netcdf::run_dataset(&netcdf::RunFile {
         returns,
         gates: &scene.gates,
         lines: &scene.sampling.lines,

@@ -99,11 +99,12 @@ impl<'a> SelectProducts<'a> {
         files.write(dir.join("sensitivities.csv"), select::to_csv(&self.rows))?;
         files.write(dir.join(FAILED_CSV), failed_csv(self.study, self.outcomes))?;
         if !self.rows.is_empty() {
-            let nc = select::to_netcdf(
+            let nc = select::to_dataset(
                 &self.rows,
                 "lidarsim select-lines: CO2 IPDA line selection",
                 history,
-            )?;
+            )?
+            .encode()?;
             files.write(dir.join("sensitivities.nc"), nc)?;
         }
         figures(&mut files)?;

@@ -59,7 +59,7 @@ pub use member::{
     weighting_function,
 };
 pub use summary::{
-    CSV_HEADER, Row, Uncertainties, spectrum_statistics, summarise, to_csv, to_netcdf,
+    CSV_HEADER, Row, Uncertainties, spectrum_statistics, summarise, to_csv, to_dataset,
 };
 
 /// GHz per cm⁻¹ (c = 299 792 458 m/s): 1 GHz = 1/29.979 cm⁻¹.

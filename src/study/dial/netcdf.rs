@@ -7,16 +7,16 @@ pub const PROFILES_NC: &str = "profiles.nc";
 /// `summary.nc` beside `summary.csv`.
 pub const SUMMARY_NC: &str = "summary.nc";
 
-/// The records of the profiles that ran as a CF NetCDF file (`profiles.nc`): the columns of
+/// The records of the profiles that ran as the CF NetCDF data set of `profiles.nc`: the columns of
 /// `profiles.csv` at full precision over the dimension `row`, one row per profile, line pair
 /// and retrieved quantity, in the CSV's order ([`crate::netcdf::table_file`]). Mixing ratios
 /// in ppm have the units `1e-6` (UDUNITS, CF-1.8 §3.1). An error when no profile has records.
-pub fn profiles_netcdf(
+pub fn profiles_dataset(
     outcomes: &[ProfileOutcome],
     title: &str,
     history: &str,
-) -> Result<Vec<u8>, crate::netcdf::NetcdfError> {
-    use crate::netcdf::{Column, ColumnValues::Number, ColumnValues::Text, table_file};
+) -> Result<crate::netcdf::Dataset, crate::netcdf::NetcdfError> {
+    use crate::netcdf::{Column, ColumnValues::Number, ColumnValues::Text, table_dataset};
     let rows: Vec<(&ProfileOutcome, &Record)> = outcomes
         .iter()
         .filter_map(|o| o.records.as_ref().ok().map(|r| (o, r)))
@@ -97,18 +97,18 @@ pub fn profiles_netcdf(
             r.budget_ppm[j]
         }));
     }
-    table_file("row", &columns, title, history)
+    table_dataset("row", &columns, title, history)
 }
 
-/// The statistics as a CF NetCDF file (`summary.nc`): the columns of `summary.csv` at full
+/// The statistics as the CF NetCDF data set of `summary.nc`: the columns of `summary.csv` at full
 /// precision over the dimension `row`, one row per class (and `all`), line pair and retrieved
 /// quantity ([`crate::netcdf::table_file`]). An error when there are no rows.
-pub fn summary_netcdf(
+pub fn summary_dataset(
     summaries: &[Summary],
     title: &str,
     history: &str,
-) -> Result<Vec<u8>, crate::netcdf::NetcdfError> {
-    use crate::netcdf::{Column, ColumnValues::Number, ColumnValues::Text, table_file};
+) -> Result<crate::netcdf::Dataset, crate::netcdf::NetcdfError> {
+    use crate::netcdf::{Column, ColumnValues::Number, ColumnValues::Text, table_dataset};
     let text = |name, long_name, f: fn(&Summary) -> String| Column {
         name,
         long_name,
@@ -205,5 +205,5 @@ pub fn summary_netcdf(
             |m| m.total_ppm,
         ),
     ];
-    table_file("row", &columns, title, history)
+    table_dataset("row", &columns, title, history)
 }

@@ -17,6 +17,6 @@ fn budget_columns_are_the_labels_in_ppm() {
 /// No rows, no file: the callers skip it.
 #[test]
 fn empty_tables_are_refused() {
-    assert!(profiles_netcdf(&[], "t", "h").is_err());
-    assert!(summary_netcdf(&[], "t", "h").is_err());
+    assert!(profiles_dataset(&[], "t", "h").is_err());
+    assert!(summary_dataset(&[], "t", "h").is_err());
 }

@@ -199,14 +199,14 @@ pub fn to_csv(rows: &[Row]) -> String {
     s
 }
 
-/// The rows as a CF NetCDF file (`sensitivities.nc`), the columns of `sensitivities.csv` at
+/// The rows as the CF NetCDF data set of `sensitivities.nc`, the columns of `sensitivities.csv` at
 /// full precision over the dimension `row` ([`crate::netcdf::table_file`]).
-pub fn to_netcdf(
+pub fn to_dataset(
     rows: &[Row],
     title: &str,
     history: &str,
-) -> Result<Vec<u8>, crate::netcdf::NetcdfError> {
-    use crate::netcdf::{Column, ColumnValues::Number, ColumnValues::Text, table_file};
+) -> Result<crate::netcdf::Dataset, crate::netcdf::NetcdfError> {
+    use crate::netcdf::{Column, ColumnValues::Number, ColumnValues::Text, table_dataset};
     let num = |name, long_name, units, f: fn(&Row) -> f64| Column {
         name,
         long_name,
@@ -311,7 +311,7 @@ pub fn to_netcdf(
         ),
         num("profiles", "profiles averaged", "1", |r| r.profiles as f64),
     ];
-    table_file("row", &columns, title, history)
+    table_dataset("row", &columns, title, history)
 }
 
 /// Mean and standard deviation over members of each fine spectrum ([`StudyConfig::spectra`]):
