@@ -8,6 +8,8 @@
 //! them. A study over many profiles calls the pieces it needs per truth: [`trace_lines`],
 //! [`signals_of`], [`retrieval_of`].
 
+use std::sync::atomic::AtomicBool;
+
 use thiserror::Error;
 
 use crate::input::InputError;
@@ -224,6 +226,19 @@ impl<'s> Prepared<'s> {
     pub fn trace(&self, progress: Progress) -> Result<Option<McResult>, RunError> {
         match self.plan()? {
             Some(plan) => Ok(Some(transport::run_plan(&plan, progress)?)),
+            None => Ok(None),
+        }
+    }
+
+    /// [`Self::trace`], stopping soon after `stop` is set (from another thread: a user's
+    /// Ctrl-C) with [`transport::TransportError::Stopped`].
+    pub fn trace_until(
+        &self,
+        progress: Progress,
+        stop: &AtomicBool,
+    ) -> Result<Option<McResult>, RunError> {
+        match self.plan()? {
+            Some(plan) => Ok(Some(transport::run_plan(&plan.stop_when(stop), progress)?)),
             None => Ok(None),
         }
     }

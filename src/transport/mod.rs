@@ -35,7 +35,7 @@ use crate::scene::{BeamProfile, Polarisation, Scene};
 
 pub use fold::Fold;
 use fold::PolarisedLayout;
-pub use plan::{BatchTally, Plan};
+pub use plan::{BatchTally, Plan, STOP_CHECK_PHOTONS};
 pub(crate) use setup::Setup;
 pub use tally::Flux;
 use tally::{Accumulator, TallyShape};
@@ -154,6 +154,9 @@ pub enum TransportError {
     /// Nonsensical options.
     #[error("transport options: {0}")]
     Options(String),
+    /// The run was stopped before its end ([`Plan::stop_when`]).
+    #[error("the run was stopped before its end")]
+    Stopped,
 }
 
 /// What a transport run produces.
@@ -238,6 +241,9 @@ pub fn run_plan(plan: &Plan, progress: Progress) -> Result<McResult, TransportEr
                 .map(|b| plan.trace_batch(b))
                 .collect()
         });
+        if plan.stopped() {
+            return Err(TransportError::Stopped);
+        }
         for t in results {
             fold.add(t)?;
         }

@@ -2,6 +2,7 @@
 //! built, and any batch traced from its own random stream.
 
 use super::*;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// One batch's raw tallies, before normalisation: what a shard stores and a rank sends. Folding
 /// these in batch order ([`Fold`]) gives the same numbers however they were computed.
@@ -17,6 +18,10 @@ pub struct BatchTally {
     /// Counters of the batch.
     pub stats: RunStats,
 }
+
+/// Photons a batch traces between two looks at its plan's stop flag: a few milliseconds in
+/// the slowest scenes, and an atomic load per thousand photons costs nothing measurable.
+pub const STOP_CHECK_PHOTONS: u64 = 1024;
 
 /// A validated transport run, ready to trace any of its batches: the read-only set-up shared by
 /// all batches plus what is needed to fold them. [`run`] is `Plan::new`, every batch in parallel,
@@ -40,6 +45,8 @@ pub struct Plan<'a> {
     /// The user's combinations' names, and the layout of a polarised run's tallies.
     pub(super) combination_names: Vec<String>,
     pub(super) polarised: Option<PolarisedLayout>,
+    /// Set from another thread to stop tracing ([`Plan::stop_when`]).
+    pub(super) stop: Option<&'a AtomicBool>,
 }
 
 impl<'a> Plan<'a> {
@@ -100,12 +107,27 @@ impl<'a> Plan<'a> {
             combination_pairs,
             combination_names: layout.combinations.iter().map(|c| c.name.clone()).collect(),
             polarised,
+            stop: None,
             channels: scene.channels.iter().map(|c| c.name.clone()).collect(),
             fov_full_angle_mrad: lidar.fov_full_angle_mrad.clone(),
             range_m: (0..scene.gates.count)
                 .map(|i| scene.gates.centre_m(i))
                 .collect(),
         })
+    }
+
+    /// The plan stopping its batches soon after `flag` is set (a user's Ctrl-C, seen by the
+    /// thread that waits for the run): [`super::run_plan`] then ends with
+    /// [`super::TransportError::Stopped`]. A batch looks at the flag every
+    /// [`STOP_CHECK_PHOTONS`] photons; a run never stopped gives the same numbers.
+    pub fn stop_when(mut self, flag: &'a AtomicBool) -> Self {
+        self.stop = Some(flag);
+        self
+    }
+
+    /// Whether the plan was asked to stop.
+    pub fn stopped(&self) -> bool {
+        self.stop.is_some_and(|f| f.load(Ordering::Relaxed))
     }
 
     /// Number of batches.
@@ -151,8 +173,13 @@ impl<'a> Plan<'a> {
         rng: &mut rng::Rng,
     ) -> BatchTally {
         let mut tracer = photon::Tracer::<ONE_CHANNEL>::new(&self.setup);
-        for _ in 0..self.per_batch {
-            tracer.trace(rng);
+        let mut left = self.per_batch;
+        while left > 0 && !self.stopped() {
+            let n = left.min(STOP_CHECK_PHOTONS);
+            for _ in 0..n {
+                tracer.trace(rng);
+            }
+            left -= n;
         }
         BatchTally {
             index,

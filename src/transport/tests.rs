@@ -230,3 +230,28 @@ fn one_channel_tracer_is_the_general_one() {
         assert_eq!(reflections > 0, text.contains("[surface]"));
     }
 }
+
+/// A plan whose stop flag is set traces no more photons (a batch looks at the flag before its
+/// first photon) and the run ends with `Stopped`, not with a result; one never stopped gives
+/// the numbers of a plan without a flag, bit for bit.
+#[test]
+fn a_stopped_plan_ends_without_a_result() {
+    use std::sync::atomic::AtomicBool;
+    let mut scene = Scene::from_toml(std::path::Path::new("scene.toml"), CLOUD).unwrap();
+    scene.simulation.photons = 3 * (STOP_CHECK_PHOTONS + 7);
+    scene.simulation.batches = 3;
+    let atm = OpticalAtmosphere::build(&scene).unwrap();
+    let layout = TallyLayout::default();
+    let plain = run_plan(&Plan::new(&scene, &atm, &layout).unwrap(), &quiet).unwrap();
+    let never = AtomicBool::new(false);
+    let watched = Plan::new(&scene, &atm, &layout).unwrap().stop_when(&never);
+    let same = run_plan(&watched, &quiet).unwrap();
+    assert_eq!(plain.returns, same.returns);
+    let stop = AtomicBool::new(true);
+    let stopped = Plan::new(&scene, &atm, &layout).unwrap().stop_when(&stop);
+    assert_eq!(stopped.trace_batch(0).stats.photons, 0);
+    assert!(matches!(
+        run_plan(&stopped, &quiet),
+        Err(TransportError::Stopped)
+    ));
+}
