@@ -65,10 +65,6 @@ impl DialRequest {
     pub fn resolve(&self) -> Result<StudyInputs, ProductError> {
         let args = self;
         let scene = super::read_scene(args.scene.as_deref(), args.shard)?;
-        let retrieval = scene.retrieval.as_ref().ok_or_else(|| {
-            ProductError::Request("the scene has no [retrieval]: nothing to study".into())
-        })?;
-        let seed = args.seed.unwrap_or(scene.simulation.seed);
         let source = match (&args.profiles, args.ensemble) {
             (Some(p), _) if args.shard => {
                 ProfileSource::Set(std::fs::canonicalize(p).map_err(|e| {
@@ -83,6 +79,21 @@ impl DialRequest {
                 ));
             }
         };
+        self.resolve_with(scene, source)
+    }
+
+    /// [`Self::resolve`] with the scene and the profiles given (the Python package's; `scene`
+    /// and `profiles` of the request are not read).
+    pub fn resolve_with(
+        &self,
+        scene: Scene,
+        source: ProfileSource,
+    ) -> Result<StudyInputs, ProductError> {
+        let args = self;
+        let retrieval = scene.retrieval.as_ref().ok_or_else(|| {
+            ProductError::Request("the scene has no [retrieval]: nothing to study".into())
+        })?;
+        let seed = args.seed.unwrap_or(scene.simulation.seed);
         let photons = args.photons.unwrap_or(if scene.layers.is_empty() {
             0
         } else {
@@ -100,7 +111,7 @@ impl DialRequest {
             check_size(n.saturating_mul(if args.class == "all" { 3 } else { 1 }))?;
         }
         let set = dial::profile_set(&source, &args.class, seed)?;
-        if let ProfileSource::Set(_) = source {
+        if !matches!(source, ProfileSource::Ensemble(_)) {
             check_size(set.len())?;
         }
         // Each step was checked by the argument parser (finite, signed where a sign means a
@@ -176,6 +187,7 @@ impl<'a> DialProducts<'a> {
             let of = match &inputs.source {
                 ProfileSource::Set(p) => p.display().to_string(),
                 ProfileSource::Ensemble(_) => format!("the ensemble ({})", set.name),
+                ProfileSource::Given(given) => format!("the profiles given ({})", given.name),
             };
             let of = format!("{of} through the scene {}", scene.path.display());
             return Err(ProductError::AllFailed(study::all_failed_message(
@@ -215,11 +227,11 @@ impl<'a> DialProducts<'a> {
                 .iter()
                 .any(|o| o.records.as_ref().is_ok_and(|r| !r.is_empty()))
             {
-                let nc = dial::profiles_netcdf(&result.outcomes, &title, history)?;
+                let nc = dial::profiles_dataset(&result.outcomes, &title, history)?.encode()?;
                 files.write(dir.join(dial::PROFILES_NC), nc)?;
             }
             if !summaries.is_empty() {
-                let nc = dial::summary_netcdf(summaries, &title, history)?;
+                let nc = dial::summary_dataset(summaries, &title, history)?.encode()?;
                 files.write(dir.join(dial::SUMMARY_NC), nc)?;
             }
         }

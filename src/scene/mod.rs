@@ -467,6 +467,12 @@ impl Scene {
     pub fn as_description(&self) -> &SceneDescription {
         &self.spec
     }
+
+    /// The directory its relative paths are anchored at (the scene file's; the one
+    /// [`SceneDescription::resolve`] was given).
+    pub fn base_dir(&self) -> &Path {
+        &self.base_dir
+    }
 }
 
 impl Scene {

@@ -319,6 +319,14 @@ fn header_of(
     let (profiles_path, ensemble) = match &inputs.source {
         ProfileSource::Set(p) => (Some(p.to_string_lossy().into_owned()), None),
         ProfileSource::Ensemble(n) => (None, Some(*n as u64)),
+        // A shard's profiles must be found again by every other shard and by the merge.
+        ProfileSource::Given(set) => {
+            return Err(ShardError::Bad {
+                path: set.name.clone().into(),
+                what: "profiles given in memory cannot be run in shards (give a profile-set file)"
+                    .into(),
+            });
+        }
     };
     let o = &inputs.options;
     let st = &o.steps;
@@ -743,6 +751,7 @@ pub fn merge(paths: &[PathBuf]) -> Result<DialMerged, ShardError> {
                 match &source {
                     ProfileSource::Set(p) => p.display().to_string(),
                     ProfileSource::Ensemble(n) => format!("of {n} members per class"),
+                    ProfileSource::Given(given) => given.name.clone(),
                 },
                 set.len(),
                 h.profiles,

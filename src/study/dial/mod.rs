@@ -61,7 +61,7 @@ mod netcdf;
 mod profile;
 mod summary;
 
-pub use netcdf::{PROFILES_NC, SUMMARY_NC, profiles_netcdf, summary_netcdf};
+pub use netcdf::{PROFILES_NC, SUMMARY_NC, profiles_dataset, summary_dataset};
 pub use summary::{SourceStats, Summary, summarise};
 
 /// A relative humidity above this (over liquid water) makes a profile unphysical for the study:
@@ -559,6 +559,8 @@ pub enum ProfileSource {
     /// `n` members per class generated around the class's AFGL mean with the representative
     /// NWP forecast-error covariance; class i of tropical, mid, high takes seed `seed + i`.
     Ensemble(usize),
+    /// A set in memory (the Python package's profiles), its members of the classes asked for.
+    Given(ProfileSet),
 }
 
 /// The latitude classes `class` names: `tropical`, `mid`, `high` or `all`.
@@ -579,26 +581,30 @@ pub fn profile_set(
     seed: u64,
 ) -> Result<ProfileSet, StudyError> {
     let classes = classes(class)?;
+    let of_classes = |set: &ProfileSet| -> Result<ProfileSet, StudyError> {
+        let mut out = ProfileSet {
+            name: set.name.clone(),
+            members: Vec::new(),
+            notes: set.notes.clone(),
+        };
+        for c in &classes {
+            out.members.extend(set.class(*c).members);
+        }
+        if out.is_empty() {
+            return Err(StudyError::Profiles(format!(
+                "{}: no profile of class {class}",
+                set.name
+            )));
+        }
+        Ok(out)
+    };
     let n = match source {
         ProfileSource::Set(path) => {
             let set = crate::atmosphere::read_profile_set(path)
                 .map_err(|e| StudyError::Profiles(e.to_string()))?;
-            let mut out = ProfileSet {
-                name: set.name.clone(),
-                members: Vec::new(),
-                notes: set.notes.clone(),
-            };
-            for c in &classes {
-                out.members.extend(set.class(*c).members);
-            }
-            if out.is_empty() {
-                return Err(StudyError::Profiles(format!(
-                    "{}: no profile of class {class}",
-                    path.display()
-                )));
-            }
-            return Ok(out);
+            return of_classes(&set);
         }
+        ProfileSource::Given(set) => return of_classes(set),
         ProfileSource::Ensemble(n) => *n,
     };
     let mut set = ProfileSet {
