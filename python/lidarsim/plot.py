@@ -76,6 +76,12 @@ def _pyplot():
     return plt
 
 
+def _cmap(name):
+    import matplotlib
+
+    return matplotlib.colormaps[name]
+
+
 def _new_axes(figsize):
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=figsize, layout="constrained")
@@ -302,7 +308,7 @@ def returns(ds, *, fov=None, source=None, orders=("total", "1"), ax=None):
         keys = [(f,) for f in fovs]
     else:
         keys = [(c, f) for c in channels for f in fovs]
-    cmap = _pyplot().get_cmap("tab10" if len(keys) <= 10 else "tab20")
+    cmap = _cmap("tab10" if len(keys) <= 10 else "tab20")
     colour = {k: cmap(i % cmap.N) for i, k in enumerate(keys)}
 
     def key(c, f):
@@ -558,9 +564,7 @@ def _kind_label(k):
 def _series_colours(pairs, kinds):
     if len(pairs) == 1:
         return {(pairs[0], k): _KIND_COLOUR.get(k, "tab:purple") for k in kinds}
-    import matplotlib
-
-    cmap = matplotlib.colormaps["tab10" if len(pairs) * len(kinds) <= 10 else "tab20"]
+    cmap = _cmap("tab10" if len(pairs) * len(kinds) <= 10 else "tab20")
     keys = [(pr, k) for pr in pairs for k in kinds]
     return {key: cmap(i % cmap.N) for i, key in enumerate(keys)}
 
@@ -682,6 +686,10 @@ def _dial_cells(ax, rows, gas, unit, error):
     title = f"DIAL {g}" + (f", {pairs[0]}" if len(pairs) == 1 else "")
     title += f", ± {error.replace('_', ' ')}" if error else ""
     note = _off_scale_note(n_off, n_bars, "cells", np.max(e[np.isfinite(x)], initial=0), unit)
+    n_empty = int(np.sum(~np.isfinite(x)))
+    if n_empty:
+        empty = f"{n_empty} cells without a value (too little signal)"
+        note = f"{note}; {empty}" if note else empty
     _style_axes(
         ax,
         f"{g} dry-air mixing ratio [{unit}]",
@@ -857,7 +865,7 @@ def study_errors(summary, *, method=None, group=None, ax=None):
     n = len(r["bias_ppm"])
     in_clean, in_noisy = inside[:n], inside[n:]
     n_off = n_bars = 0
-    cmap = _pyplot().get_cmap("tab10")
+    cmap = _cmap("tab10")
     if method == "ipda":
         gs = [c for c in groups if c in set(r["class"])]
         width = 0.8 / max(len(gs), 1)
@@ -948,7 +956,7 @@ def budget_table(profiles, *, method="ipda"):
         ``{(class, pair, altitude_bottom_m): {source: rms [ppm]}}``, classes including
         ``all``.
     """
-    t = _table(profiles, ["class", "pair", "method", "altitude_bottom_m"],
+    t = _table(profiles, ["profile_id", "class", "pair", "method", "altitude_bottom_m"],
                "study_budget (profiles.nc of lidarsim dial)")
     sources = [str(v)[: -len("_ppm")] for v in profiles.data_vars
                if str(v).endswith("_ppm") and str(v) not in _NOT_BUDGET]
@@ -1033,7 +1041,7 @@ def study_budget(profiles, *, method="ipda", group=None, ax=None):
     sources = list(dict.fromkeys(s for k in keys for s in rows[k]))
     if ax is None:
         ax = _new_axes((max(8.0, 1.1 * len(keys) + 5.0), 5.5))
-    colours = _pyplot().get_cmap("tab10" if len(sources) <= 10 else "tab20")
+    colours = _cmap("tab10" if len(sources) <= 10 else "tab20")
     total = np.array([np.sqrt(sum(v**2 for v in rows[k].values())) for k in keys])
     top = float(np.nanmax(total)) * 2.0
     bottom = top / 2.0 * 1e-5
