@@ -13,7 +13,7 @@ bit those of the ``lidarsim`` command line for the same scene and seed.
 See the README's Python section.
 """
 
-from . import profiles
+from . import plot, profiles
 from ._api import Lines, LidarsimWarning, StudyResult, cross_section, dial, mie, run, select_lines
 from ._lidarsim import SceneError, __version__
 from ._scene import Scene
@@ -28,6 +28,7 @@ __all__ = [
     "cross_section",
     "dial",
     "mie",
+    "plot",
     "profiles",
     "run",
     "select_lines",

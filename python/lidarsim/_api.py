@@ -110,7 +110,7 @@ class Lines:
 
 def cross_section(lines, pressure_pa, temperature_k, wavenumbers_cm1=None, *, wavelengths_nm=None,
                   molecule=None, line_shape="voigt", line_mixing=False, vmr=0.0, wing_cm1=25.0,
-                  shifted_wing=False, exact=False):
+                  shifted_wing=False, exact=False, conventions="codata2018", self_broadening=True):
     """Absorption cross-section σ [cm² molecule⁻¹] of one molecule, line by line (as
     ``lidarsim lbl``).
 
@@ -136,6 +136,14 @@ def cross_section(lines, pressure_pa, temperature_k, wavenumbers_cm1=None, *, wa
         The gas's volume mixing ratio, for self-broadening [mol/mol].
     wing_cm1 : float
         Line wing cutoff [cm⁻¹] (HAPI's default is 50 half-widths; lidarsim's a fixed 25 cm⁻¹).
+    shifted_wing : bool
+        Centre the cutoff window on the pressure-shifted line centre (default: unshifted, as HAPI).
+    exact : bool
+        Exact Faddeeva function at every line and point (slow; the reference path).
+    conventions : {"codata2018", "hapi"}
+        Physical constants: CODATA 2018, or HAPI 1.3's (to compare with HAPI exactly).
+    self_broadening : bool
+        Use γ_self for the gas's own partial pressure (``vmr``); False: air broadening only.
 
     Returns
     -------
@@ -161,7 +169,8 @@ def cross_section(lines, pressure_pa, temperature_k, wavenumbers_cm1=None, *, wa
         lines = Lines(lines, None if lo is None else lo - wing_cm1 - 1.0, None if hi is None else hi + wing_cm1 + 1.0)
     columns = _lidarsim.cross_section(
         lines._inner, float(pressure_pa), float(temperature_k), nu, line_shape, bool(line_mixing),
-        float(vmr), float(wing_cm1), bool(shifted_wing), bool(exact),
+        float(vmr), float(wing_cm1), bool(shifted_wing), bool(exact), conventions,
+        bool(self_broadening),
     )
     if not columns:
         raise ValueError(f"no lines of {lines._inner.source} reach {nu.min()}–{nu.max()} cm⁻¹ (with the {wing_cm1} cm⁻¹ wing)")

@@ -7,7 +7,7 @@ use lidarsim::particles::mie::MieCoefficients;
 use lidarsim::spectroscopy::isotopologues::molecule_name;
 use lidarsim::spectroscopy::xsec::GasState;
 use lidarsim::spectroscopy::{
-    LblOptions, LineFilter, LineList, LineShapeModel, WavenumberGrid, WingCentre,
+    Conventions, LblOptions, LineFilter, LineList, LineShapeModel, WavenumberGrid, WingCentre,
     cross_section as lbl_cross_section, cross_section_at,
 };
 use num_complex::Complex64;
@@ -87,7 +87,7 @@ fn line_shape(name: &str) -> PyResult<LineShapeModel> {
 /// given: a dict molecule → numpy array (moved, not copied, from Rust). An evenly spaced grid
 /// goes through the multigrid (as `lidarsim lbl`), any other point by point.
 #[pyfunction]
-#[pyo3(signature = (lines, pressure_pa, temperature_k, wavenumbers_cm1, line_shape_name="voigt", line_mixing=false, vmr=0.0, wing_cm1=25.0, shifted_wing=false, exact=false))]
+#[pyo3(signature = (lines, pressure_pa, temperature_k, wavenumbers_cm1, line_shape_name="voigt", line_mixing=false, vmr=0.0, wing_cm1=25.0, shifted_wing=false, exact=false, conventions="codata2018", self_broadening=true))]
 #[allow(clippy::too_many_arguments)]
 pub fn cross_section<'py>(
     py: Python<'py>,
@@ -101,6 +101,8 @@ pub fn cross_section<'py>(
     wing_cm1: f64,
     shifted_wing: bool,
     exact: bool,
+    conventions: &str,
+    self_broadening: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
     let nu = wavenumbers_cm1.as_slice()?.to_vec();
     if nu.is_empty() {
@@ -120,6 +122,16 @@ pub fn cross_section<'py>(
     if shifted_wing {
         opts.wing_centre = WingCentre::Shifted;
     }
+    opts.self_broadening = self_broadening;
+    opts.conventions = match conventions {
+        "codata2018" => Conventions::CODATA_2018,
+        "hapi" => Conventions::HAPI_1_3,
+        other => {
+            return Err(value_error(format!(
+                "conventions `{other}` (known: codata2018, hapi)"
+            )));
+        }
+    };
     if exact {
         opts.voigt = lidarsim::spectroscopy::VoigtMethod::Exact;
         opts.multigrid = false;
