@@ -2,6 +2,7 @@
 truth the package's numbers are compared with, bit for bit), and the "tests only" data of
 ../shared (a test that needs an absent file skips with one line naming it)."""
 
+import math
 import os
 import subprocess
 from pathlib import Path
@@ -19,6 +20,15 @@ def shared_file(relative):
     if not p.is_file():
         pytest.skip(f"{p} is absent")
     return p
+
+
+def as_written(v, digits):
+    """A number as lidarsim's CSV files write it with Rust's `{:.Ne}` (`1.500000000e-3`,
+    `0.000000000e0`; an empty field for no value)."""
+    if not math.isfinite(v):
+        return ""
+    mantissa, exponent = f"{v:.{digits}e}".split("e")
+    return f"{mantissa}e{int(exponent)}"
 
 
 @pytest.fixture(scope="session")

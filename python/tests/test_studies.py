@@ -1,0 +1,85 @@
+"""Profiles and studies against the command line: the same files' contents, and a study that
+fails everywhere fails."""
+
+import numpy as np
+import pytest
+import xarray as xr
+
+import lidarsim
+from conftest import ROOT
+
+
+def same_but_history(a, b):
+    a, b = a.copy(), b.copy()
+    a.attrs.pop("history")
+    b.attrs.pop("history")
+    xr.testing.assert_identical(a, b)
+
+
+def same_table(ds, path):
+    """A study Dataset is its NetCDF file (but for `history`)."""
+    with xr.open_dataset(path) as f:
+        same_but_history(ds, f.load())
+
+
+def test_ensemble_is_profiles_generate(cli, tmp_path):
+    """profiles.ensemble draws what `lidarsim profiles generate` writes (its file keeps nine
+    significant digits, altitudes in m, pressures in hPa, gases in ppmv)."""
+    out = tmp_path / "e.csv"
+    cli("profiles", "generate", "--n", 4, "--seed", 7, "--class", "mid", "--co2-ppm", 415, "--out", out)
+    ens = lidarsim.profiles.ensemble(4, seed=7, latitude_class="mid", co2_ppm=415)
+    file = lidarsim.profiles.read(out)
+    assert ens.sizes == file.sizes and list(ens.data_vars) == list(file.data_vars)
+    for v in ("altitude_m", "pressure_pa", "temperature_k", "CO2", "H2O"):
+        np.testing.assert_allclose(ens[v], file[v], rtol=1e-8, equal_nan=True)
+    assert ens["CO2"].attrs["standard_name"] == "mole_fraction_of_carbon_dioxide_in_air"
+    assert ens["pressure_pa"].attrs["units"] == "Pa"
+    assert set(ens["latitude_class"].values) == {"mid"}
+
+
+def test_dial_is_the_command_line(cli, tmp_path):
+    """A study of the default scene over a generated ensemble: profiles.nc and summary.nc."""
+    cli("dial", "--ensemble", 2, "--seed", 4, "--class", "mid", "--out", tmp_path, "--no-plots")
+    r = lidarsim.dial(ensemble=2, seed=4, latitude_class="mid", threads=1)
+    same_table(r.records, tmp_path / "profiles.nc")
+    same_table(r.summary, tmp_path / "summary.nc")
+    assert r.failed == []
+
+
+def test_dial_over_a_dataset_is_the_study_of_its_file(cli, tmp_path):
+    """Profiles read into a Dataset and handed back give the study of the file."""
+    set_file = tmp_path / "set.csv"
+    cli("profiles", "generate", "--n", 2, "--seed", 5, "--class", "tropical", "--out", set_file)
+    cli("dial", "--profiles", set_file, "--seed", 2, "--out", tmp_path / "d", "--no-plots")
+    r = lidarsim.dial(profiles=lidarsim.profiles.read(set_file), seed=2)
+    same_table(r.records, tmp_path / "d" / "profiles.nc")
+    by_path = lidarsim.dial(profiles=set_file, seed=2)
+    same_but_history(by_path.records, r.records)
+
+
+def test_a_study_where_every_profile_fails_raises():
+    """Every profile without CO2 (the scene retrieves CO2): a RuntimeError that says why, not
+    an empty success."""
+    ens = lidarsim.profiles.ensemble(3, seed=1, latitude_class="mid").drop_vars("CO2")
+    with pytest.raises(RuntimeError, match="CO2"):
+        lidarsim.dial(profiles=ens, seed=1)
+
+
+def test_select_lines_is_the_command_line(cli, tmp_path):
+    args = ["--off-cm1", 6360.61, "--co2-ppm", 420, "--on-cm1", "6358.655,6359.967", "--atmosphere", "us_standard,tropical"]
+    cli("select-lines", *args, "--out", tmp_path, "--no-plots", "--threads", 1)
+    r = lidarsim.select_lines(off_cm1=6360.61, co2_ppm=420, on_cm1=[6358.655, 6359.967],
+                              atmospheres=["us_standard", "tropical"])
+    same_table(r.records, tmp_path / "sensitivities.nc")
+    assert r.summary is None and r.failed == []
+
+
+def test_study_arguments_are_checked():
+    with pytest.raises(ValueError, match="profiles"):
+        lidarsim.dial()
+    with pytest.raises(ValueError, match="latitude class"):
+        lidarsim.dial(ensemble=2, latitude_class="polar-ish")
+    with pytest.raises(ValueError, match="budget"):
+        lidarsim.dial(ensemble=2, budget={"pressure": 1})
+    with pytest.raises(ValueError, match="no .retrieval."):
+        lidarsim.dial(ROOT / "scenes" / "bissonnette_c1.toml", ensemble=2)
