@@ -368,9 +368,13 @@ pub fn dial<'py>(
     let result = watch(py, progress, |control| {
         control.report(0, inputs.set.len());
         pool.install(|| {
-            dial_study::run(&inputs.scene, &inputs.set, &inputs.options, &|| {
-                control.tick()
-            })
+            dial_study::run_until(
+                &inputs.scene,
+                &inputs.set,
+                &inputs.options,
+                &|| control.tick(),
+                control.stop(),
+            )
         })
     })?
     .map_err(runtime_error)?;
@@ -487,8 +491,9 @@ pub fn select_lines<'py>(
     let pool = lidarsim::study::thread_pool(threads).map_err(value_error)?;
     let outcomes = watch(py, progress, |control| {
         control.report(0, study.len());
-        pool.install(|| study.study(0..study.len(), &|| control.tick()))
-    })?;
+        pool.install(|| study.study_until(&|| control.tick(), control.stop()))
+    })?
+    .ok_or_else(|| runtime_error("the study was stopped before its end"))?;
     let products = SelectProducts::new(&study, &outcomes).map_err(runtime_error)?;
     let table = if products.rows.is_empty() {
         py.None().into_bound(py)

@@ -12,6 +12,7 @@
 
 use std::ops::Range;
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use crate::atmosphere::{LatitudeClass, SetMember, StandardAtmosphere, read_profile_set};
 use crate::scene::Scene;
@@ -321,7 +322,25 @@ impl SelectStudy {
     /// `progress` is called once per member.
     pub fn study(&self, range: Range<usize>, progress: &(dyn Fn() + Sync)) -> Vec<MemberOutcome> {
         let members: Vec<&SetMember> = self.members().skip(range.start).take(range.len()).collect();
-        select::study_members(&members, &self.config, self.options.co2_ppm, progress)
+        select::study_members(&members, &self.config, self.options.co2_ppm, progress, None)
+    }
+
+    /// [`Self::study`] of every member, the members not yet begun when `stop` is set (from
+    /// another thread: a user's Ctrl-C) left out: `None` when stopped.
+    pub fn study_until(
+        &self,
+        progress: &(dyn Fn() + Sync),
+        stop: &AtomicBool,
+    ) -> Option<Vec<MemberOutcome>> {
+        let members: Vec<&SetMember> = self.members().collect();
+        let outcomes = select::study_members(
+            &members,
+            &self.config,
+            self.options.co2_ppm,
+            progress,
+            Some(stop),
+        );
+        (!stop.load(Ordering::Relaxed)).then_some(outcomes)
     }
 
     /// Summarise every group from the outcomes of all members ([`SelectStudy::study`] of

@@ -223,6 +223,7 @@ pub fn run(
         &inputs.options,
         range.clone(),
         progress,
+        None,
     )
     .map_err(|e| ShardError::Spec {
         spec,

@@ -35,7 +35,7 @@
 //! numbers. A profile that cannot be run (it does not cover the scene, is supersaturated, a
 //! retrieval fails) is reported with the reason and left out of the statistics.
 
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Instant;
 
 use rand::RngExt;
@@ -348,6 +348,9 @@ pub enum StudyError {
     /// The profile set could not be read or generated.
     #[error("{0}")]
     Profiles(String),
+    /// The study was stopped before its end ([`run_until`]).
+    #[error("the study was stopped before its end")]
+    Stopped,
     /// The ensemble-mean profile of a class failed.
     #[error("the mean profile of class {class}: {message}")]
     MeanProfile {
@@ -395,7 +398,19 @@ pub fn run(
     options: &StudyOptions,
     progress: &(dyn Fn() + Sync),
 ) -> Result<StudyResult, StudyError> {
-    run_slice(scene, set, options, 0..set.len(), progress)
+    run_slice(scene, set, options, 0..set.len(), progress, None)
+}
+
+/// [`run`], stopping soon after `stop` is set (from another thread: a user's Ctrl-C) with
+/// [`StudyError::Stopped`]: the profiles not yet begun are not run (one under way finishes).
+pub fn run_until(
+    scene: &Scene,
+    set: &ProfileSet,
+    options: &StudyOptions,
+    progress: &(dyn Fn() + Sync),
+    stop: &AtomicBool,
+) -> Result<StudyResult, StudyError> {
+    run_slice(scene, set, options, 0..set.len(), progress, Some(stop))
 }
 
 /// [`run`] for the profiles `slice` of `set` only (a shard of the study,
@@ -408,7 +423,9 @@ pub fn run_slice(
     options: &StudyOptions,
     slice: std::ops::Range<usize>,
     progress: &(dyn Fn() + Sync),
+    stop: Option<&AtomicBool>,
 ) -> Result<StudyResult, StudyError> {
+    let stopped = || stop.is_some_and(|s| s.load(Ordering::Relaxed));
     if slice.start > slice.end || slice.end > set.len() {
         return Err(StudyError::Scene(format!(
             "profiles {}..{} of a set of {}",
@@ -509,6 +526,7 @@ pub fn run_slice(
         .collect();
     let one = |((member, seed), ok): ((&SetMember, &u64), &Result<Scene, String>)| {
         let records = match ok {
+            _ if stopped() => Err("stopped".into()),
             Ok(scene) => study.profile(member, scene, *seed),
             Err(e) => Err(e.clone()),
         };
@@ -535,6 +553,9 @@ pub fn run_slice(
             .map(one)
             .collect()
     };
+    if stopped() {
+        return Err(StudyError::Stopped);
+    }
     let secs = |c: &AtomicU64| c.load(Ordering::Relaxed) as f64 * 1e-9;
     let timing = Timing {
         mean_references_s,

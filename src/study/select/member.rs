@@ -1,6 +1,8 @@
 //! One member of the set: its four shifted profiles, the weighting function and the
 //! sensitivities of every on-line position ([`super`] module docs).
 
+use std::sync::atomic::{AtomicBool, Ordering};
+
 use rayon::prelude::*;
 
 use super::{
@@ -382,10 +384,17 @@ pub fn study_members(
     cfg: &StudyConfig,
     co2_ppm: f64,
     progress: &(dyn Fn() + Sync),
+    stop: Option<&AtomicBool>,
 ) -> Vec<Result<MemberResult, MemberFailure>> {
     members
         .par_iter()
         .map(|m| {
+            if stop.is_some_and(|s| s.load(Ordering::Relaxed)) {
+                return Err(MemberFailure {
+                    id: m.meta.id.clone(),
+                    reason: "stopped".into(),
+                });
+            }
             let mut m = (*m).clone();
             let r = set_co2_column_average(&mut m.profile, co2_ppm)
                 .map_err(SelectError::from)
