@@ -125,3 +125,16 @@ def test_received_energy_never_exceeds_the_emitted():
     ds = lidarsim.run(ROOT / "scenes" / "bissonnette_c1.toml", photons=20_000, seed=1)
     total = ds["energy_j"].sel(order="total").sum(("range_m",))
     assert float(total.max()) < 1.0  # pulse_energy_j = 1
+
+
+def test_result_arrays_are_the_buffers_rust_filled():
+    """No copy of the results: every numeric variable of the Dataset but the dimension
+    coordinates (which pandas indexes) is the numpy array that owns the Rust vector."""
+    from lidarsim import _lidarsim
+    from lidarsim._data import to_xarray
+
+    parts, _ = _lidarsim.run(lidarsim.Scene.default()._inner, 2000, 1, 1, None, "")
+    ds = to_xarray(parts)
+    for name, dims, values, _ in parts[1]:
+        if isinstance(values, np.ndarray) and list(dims) != [name]:
+            assert np.shares_memory(ds[name].values, values), name
