@@ -90,6 +90,9 @@ pub struct RunFile<'a> {
     pub gates: &'a Gates,
     /// The laser lines (each channel's wavenumber, where a channel is one of them).
     pub lines: &'a [Line],
+    /// With polarised light, the co- and cross-polarised parts of the sets of returns
+    /// (`returns.csv`'s `co` and `cross` rows, `depolarisation.csv`); empty otherwise.
+    pub polarised: &'a [PolarisedSet<'a>],
     /// The sets of signals of `signals.csv` (may be empty).
     pub signals: &'a [Signals],
     /// The rows of `retrieval.csv` (may be empty).
@@ -98,6 +101,17 @@ pub struct RunFile<'a> {
     pub gas: Option<&'a str>,
     /// Global attributes.
     pub attributes: &'a RunAttributes,
+}
+
+/// The co- and cross-polarised parts of one set of returns (its source's).
+#[derive(Debug, Clone, Copy)]
+pub struct PolarisedSet<'a> {
+    /// Co-polarised returns.
+    pub co: &'a Returns,
+    /// Cross-polarised returns, on the grid of `co`.
+    pub cross: &'a Returns,
+    /// Covariance of the two means bin by bin \[J²\] (`None`: analytic, no error).
+    pub cov_j2: Option<&'a [f64]>,
 }
 
 /// The bytes of `run.nc` (module documentation).
@@ -112,6 +126,9 @@ pub fn run_dataset(run: &RunFile) -> Result<Dataset, NetcdfError> {
     globals(&mut nc, run.attributes);
     coordinates(&mut nc, &grid, run)?;
     returns_variables(&mut nc, &grid, run.returns);
+    if !run.polarised.is_empty() {
+        polarised_variables(&mut nc, &grid, run.polarised)?;
+    }
     if !run.signals.is_empty() {
         signal_variables(&mut nc, &grid, run.signals)?;
     }
@@ -485,6 +502,89 @@ fn returns_variables(nc: &mut Dataset, grid: &Grid, sets: &[&Returns]) {
             ("units", "J"),
         ])
         .fill();
+}
+
+/// With polarised light: the co- and cross-polarised returns on a last dimension
+/// `polarisation` (`co`, `cross`), and the depolarisation ratio with its standard error
+/// (`depolarisation.csv`'s numbers).
+fn polarised_variables(
+    nc: &mut Dataset,
+    grid: &Grid,
+    sets: &[PolarisedSet],
+) -> Result<(), NetcdfError> {
+    nc.dim("polarisation", 2);
+    nc.text("polarisation", "polarisation", &["co".to_string(), "cross".to_string()])
+        .attrs([(
+            "long_name",
+            "polarisation relative to the emitted light: co = what a sphere's single backscatter returns, cross = the rest",
+        )]);
+    let n = grid.len();
+    let (mut energy, mut stderr) = (vec![f64::NAN; 2 * n], vec![f64::NAN; 2 * n]);
+    let (mut delta, mut delta_se) = (vec![f64::NAN; n], vec![f64::NAN; n]);
+    for set in sets {
+        let s = Grid::position(&grid.sources, "source", set.co.source.label())?;
+        for (o, order) in set.co.orders.iter().enumerate() {
+            let go = Grid::position(&grid.orders, "order", &order.label())?;
+            for c in 0..grid.channels.len() {
+                for f in 0..grid.fov_full_angle_mrad.len() {
+                    for g in 0..grid.range_m.len() {
+                        let i = set.co.index(c, f, g, o);
+                        let j = grid.index(s, c, f, g, go);
+                        for (p, part) in [set.co, set.cross].iter().enumerate() {
+                            energy[2 * j + p] = part.energy_j[i];
+                            stderr[2 * j + p] = part.stderr_j[i];
+                        }
+                        (delta[j], delta_se[j]) =
+                            crate::returns::depolarisation_ratio(set.co, set.cross, set.cov_j2, i);
+                    }
+                }
+            }
+        }
+    }
+    let dims = [
+        GRID_DIMS[0],
+        GRID_DIMS[1],
+        GRID_DIMS[2],
+        GRID_DIMS[3],
+        GRID_DIMS[4],
+        "polarisation",
+    ];
+    nc.f64("polarised_energy_j", &dims, energy)
+        .attrs([
+            (
+                "long_name",
+                "energy_j in each polarisation (co + cross = energy_j)",
+            ),
+            ("units", "J"),
+            ("ancillary_variables", "polarised_stderr_j"),
+        ])
+        .fill();
+    nc.f64("polarised_stderr_j", &dims, stderr)
+        .attrs([
+            ("long_name", "standard error of polarised_energy_j"),
+            ("units", "J"),
+        ])
+        .fill();
+    nc.f64("depolarisation_ratio", &GRID_DIMS, delta)
+        .attrs([
+            (
+                "long_name",
+                "volume depolarisation ratio cross/co of the received energy",
+            ),
+            ("units", "1"),
+            ("ancillary_variables", "depolarisation_ratio_stderr"),
+        ])
+        .fill();
+    nc.f64("depolarisation_ratio_stderr", &GRID_DIMS, delta_se)
+        .attrs([
+            (
+                "long_name",
+                "standard error of depolarisation_ratio (batch errors of co and cross and their covariance; 0 for analytic)",
+            ),
+            ("units", "1"),
+        ])
+        .fill();
+    Ok(())
 }
 
 fn signal_variables(nc: &mut Dataset, grid: &Grid, signals: &[Signals]) -> Result<(), NetcdfError> {

@@ -309,31 +309,44 @@ pub fn depolarisation_rows(
         for (f, fov) in co.fov_full_angle_mrad.iter().enumerate() {
             for (g, r) in co.range_m.iter().enumerate() {
                 for (o, label) in labels.iter().enumerate() {
-                    let i = co.index(c, f, g, o);
-                    let (a, x) = (co.energy_j[i], cross.energy_j[i]);
-                    let delta = if a > 0.0 { x / a } else { f64::NAN };
-                    let se = match cov_j2 {
-                        None => 0.0,
-                        Some(cov) => {
-                            let (sa, sx) = (co.stderr_j[i], cross.stderr_j[i]);
-                            if x == 0.0 {
-                                // δ = 0: its error is that of the cross-polarised return alone.
-                                sx / a
-                            } else {
-                                let rel =
-                                    (sa / a).powi(2) + (sx / x).powi(2) - 2.0 * cov[i] / (a * x);
-                                delta.abs() * rel.max(0.0).sqrt()
-                            }
-                        }
-                    };
+                    let (delta, se) = depolarisation_ratio(co, cross, cov_j2, co.index(c, f, g, o));
                     let _ = writeln!(
                         out,
                         "{src},{ch},{fov},{r},{label},{:.9e},{:.9e}",
                         csv_number(delta),
-                        csv_number(if delta.is_finite() { se } else { f64::NAN })
+                        csv_number(se)
                     );
                 }
             }
         }
     }
+}
+
+/// The depolarisation ratio δ = cross/co of bin `i` ([`Returns::index`]) and its standard
+/// error, as [`depolarisation_rows`] writes them: both NaN where the co-polarised return is 0.
+pub fn depolarisation_ratio(
+    co: &Returns,
+    cross: &Returns,
+    cov_j2: Option<&[f64]>,
+    i: usize,
+) -> (f64, f64) {
+    let (a, x) = (co.energy_j[i], cross.energy_j[i]);
+    if !(a > 0.0) {
+        return (f64::NAN, f64::NAN);
+    }
+    let delta = x / a;
+    let se = match cov_j2 {
+        None => 0.0,
+        Some(cov) => {
+            let (sa, sx) = (co.stderr_j[i], cross.stderr_j[i]);
+            if x == 0.0 {
+                // δ = 0: its error is that of the cross-polarised return alone.
+                sx / a
+            } else {
+                let rel = (sa / a).powi(2) + (sx / x).powi(2) - 2.0 * cov[i] / (a * x);
+                delta.abs() * rel.max(0.0).sqrt()
+            }
+        }
+    };
+    (delta, se)
 }

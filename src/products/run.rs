@@ -423,10 +423,26 @@ fn dataset_of(
         photons: run.mc.as_ref().map_or(0, |m| m.photons),
         batches: scene.simulation.batches as u64,
     };
+    let mut polarised = Vec::new();
+    if let Some(p) = &run.polarised {
+        if let Some((co, cross, cov)) = &p.mc {
+            polarised.push(netcdf::PolarisedSet {
+                co,
+                cross,
+                cov_j2: Some(cov),
+            });
+        }
+        polarised.push(netcdf::PolarisedSet {
+            co: &p.analytic.0,
+            cross: &p.analytic.1,
+            cov_j2: None,
+        });
+    }
     netcdf::run_dataset(&netcdf::RunFile {
         returns,
         gates: &scene.gates,
         lines: &scene.sampling.lines,
+        polarised: &polarised,
         signals: &run.signals,
         products: &run.products,
         gas: run.retrieval.as_ref().map(|r| r.config.gas.as_str()),
