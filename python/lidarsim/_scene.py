@@ -12,6 +12,13 @@ from . import _lidarsim
 from ._lidarsim import SceneError
 
 
+def _error(key, message):
+    """A SceneError at `key` of a description given by values, as the Rust side makes them."""
+    e = SceneError(f"{key}: {message}" if key else message)
+    e.path, e.line, e.key = None, None, key or None
+    return e
+
+
 def _plain(value, path):
     """``value`` as JSON-ready Python (numpy arrays and scalars, tuples and paths made plain),
     every number finite; ``path`` (``layer[0].top_m``) names a bad value."""
@@ -19,7 +26,7 @@ def _plain(value, path):
         out = {}
         for k, v in value.items():
             if not isinstance(k, str):
-                raise SceneError(f"{path or 'scene'}: key {k!r} is not text")
+                raise _error(path, f"key {k!r} is not text")
             out[k] = _plain(v, f"{path}.{k}" if path else k)
         return out
     if isinstance(value, np.ndarray):
@@ -31,7 +38,7 @@ def _plain(value, path):
     if isinstance(value, os.PathLike):
         return os.fspath(value)
     if isinstance(value, float) and not math.isfinite(value):
-        raise SceneError(f"{path}: `{value}` is not a finite number")
+        raise _error(path, f"`{value}` is not a finite number")
     return value
 
 
@@ -80,12 +87,16 @@ class Scene:
 
     @classmethod
     def from_toml(cls, path_or_text, base_dir=None):
-        """The scene of a TOML file (a path) or of TOML text (a string holding a newline or
-        a ``[section]``). A file's relative paths are taken from its directory, text's from
-        ``base_dir`` (default: the current directory). Errors name the file, line and key."""
-        if isinstance(path_or_text, os.PathLike) or (
-            isinstance(path_or_text, str) and "\n" not in path_or_text and "[" not in path_or_text
-        ):
+        """The scene of a TOML file (a path, or a string naming a file that exists) or of TOML
+        text (any other string with a newline or an ``=``). A file's relative paths are taken
+        from its directory, text's from ``base_dir`` (default: the current directory). Errors
+        name the file, line and key."""
+        is_text = (
+            isinstance(path_or_text, str)
+            and not os.path.isfile(path_or_text)
+            and ("\n" in path_or_text or "=" in path_or_text)
+        )
+        if not is_text:
             return cls._wrap(_lidarsim.Scene.read(os.fspath(path_or_text)))
         base = Path(base_dir) if base_dir is not None else Path()
         return cls._wrap(_lidarsim.Scene.from_toml_text(path_or_text, os.fspath(base / "<scene text>")))

@@ -38,12 +38,12 @@ fn description_from_json(json: &str) -> PyResult<SceneDescription> {
             Some(i) => message[..i].to_string(),
             None => message,
         };
-        let message = if path == "." {
-            message
-        } else {
-            format!("{path}: {message}")
-        };
-        crate::errors::SceneError::new_err(message)
+        scene_error(&lidarsim::input::InputError {
+            path: lidarsim::scene::DESCRIPTION_NAME.into(),
+            line: None,
+            field: (path != ".").then_some(path),
+            message,
+        })
     })
 }
 

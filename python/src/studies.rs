@@ -238,9 +238,6 @@ pub fn ensemble<'py>(
     max_rh_percent: f64,
     rh_over: &str,
 ) -> PyResult<Bound<'py, PyDict>> {
-    if n == 0 {
-        return Err(value_error("n: at least one profile"));
-    }
     let class = latitude_class
         .map(|c| {
             c.parse::<LatitudeClass>()
@@ -253,28 +250,6 @@ pub fn ensemble<'py>(
                 .map_err(|m| value_error(format!("atmosphere: {m}")))
         })
         .transpose()?;
-    let check = |name: &str, v: Option<f64>, lo: f64, hi: f64| -> PyResult<()> {
-        match v {
-            Some(x) if !(x.is_finite() && x >= lo && x <= hi) => {
-                Err(value_error(format!("{name}: {x} is not in [{lo}, {hi}]")))
-            }
-            _ => Ok(()),
-        }
-    };
-    check("co2_ppm", co2_ppm, f64::MIN_POSITIVE, 1e6)?;
-    check("co2_std_ppm", co2_std_ppm, 0.0, 1e3)?;
-    check("ps_std_hpa", ps_std_hpa, 0.0, 100.0)?;
-    check(
-        "max_rh_percent",
-        Some(max_rh_percent),
-        f64::MIN_POSITIVE,
-        200.0,
-    )?;
-    if rh_over != "water" && rh_over != "ice" {
-        return Err(value_error(format!(
-            "rh_over: `{rh_over}` (known: water, ice)"
-        )));
-    }
     let request = GenerateRequest {
         n,
         seed,

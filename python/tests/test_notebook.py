@@ -14,9 +14,13 @@ import pytest
 import lidarsim
 from conftest import ROOT
 
+# Each child installs Python's own SIGINT handler: a process started in the background by a
+# shell (a CI job, `nohup … &`) inherits SIGINT ignored, and Python then leaves it ignored; a
+# terminal or a notebook kernel delivers Ctrl-C to this handler.
 LONG_RUN = textwrap.dedent(
     """
-    import sys, time, lidarsim
+    import signal, sys, time, lidarsim
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     scene = lidarsim.Scene.default()
     print("started", flush=True)
     t = time.monotonic()
@@ -40,7 +44,8 @@ def test_ctrl_c_stops_a_run_within_a_second():
 
 LONG_STUDY = textwrap.dedent(
     """
-    import sys, time, lidarsim
+    import signal, sys, time, lidarsim
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     scene = lidarsim.Scene.from_toml(sys.argv[1])
     print("started", flush=True)
     try:

@@ -76,6 +76,9 @@ def test_every_kind_of_bad_value_names_its_key(edit, starts):
     d = lidarsim.Scene.from_toml(C1).to_dict()
     edit(d)
     assert message_of(lambda: lidarsim.Scene(d, base_dir=C1.parent)).startswith(starts)
+    e = pytest.raises(lidarsim.SceneError, lidarsim.Scene, d, base_dir=C1.parent).value
+    assert e.line is None and e.path is None
+    assert e.key is None or str(e).startswith(e.key + ": ")
 
 
 def test_relative_paths_are_taken_from_base_dir(tmp_path):

@@ -83,3 +83,14 @@ def test_study_arguments_are_checked():
         lidarsim.dial(ensemble=2, budget={"pressure": 1})
     with pytest.raises(ValueError, match="no .retrieval."):
         lidarsim.dial(ROOT / "scenes" / "bissonnette_c1.toml", ensemble=2)
+    # The ranges of the command line's options hold for the arguments too, named by argument.
+    with pytest.raises(ValueError, match="budget step humidity_fraction"):
+        lidarsim.dial(ensemble=2, budget={"humidity_fraction": 50.0})
+    with pytest.raises(ValueError, match="layer_m: "):
+        lidarsim.select_lines(off_cm1=6360.61, co2_ppm=420, layer_m=-250.0)
+    with pytest.raises(ValueError, match="co2_ppm: "):
+        lidarsim.select_lines(off_cm1=6360.61, co2_ppm=float("nan"))
+    with pytest.raises(ValueError, match="co2_std_ppm: "):
+        lidarsim.profiles.ensemble(3, seed=1, co2_std_ppm=-1.0)
+    with pytest.raises(ValueError, match="rh_over"):
+        lidarsim.profiles.ensemble(3, seed=1, rh_over="steam")

@@ -11,13 +11,12 @@ use std::path::PathBuf;
 use anyhow::Context;
 
 use lidarsim::atmosphere::StandardAtmosphere;
-use lidarsim::input::Bounds;
 use lidarsim::output;
 use lidarsim::products;
 use lidarsim::shard::ShardSpec;
 use lidarsim::study::select::Uncertainties;
 use lidarsim::study::select_shard;
-use lidarsim::study::select_study::{SelectOptions, SelectSource, SelectStudy};
+use lidarsim::study::select_study::{SelectOptions, SelectSource, SelectStudy, ranges};
 
 /// Arguments of `lidarsim select-lines`.
 #[derive(clap::Args, Debug)]
@@ -55,19 +54,19 @@ pub struct Args {
     lines: Vec<PathBuf>,
     /// On-line positions [cm⁻¹], comma-separated. Without: scan the band's lines (--max-j,
     /// --offsets-ghz).
-    #[arg(long, value_delimiter = ',', allow_negative_numbers = true, value_parser = super::real(Bounds::positive(1e6)))]
+    #[arg(long, value_delimiter = ',', allow_negative_numbers = true, value_parser = super::real(ranges::WAVENUMBER_CM1))]
     on_cm1: Vec<f64>,
     /// The off-line [cm⁻¹].
-    #[arg(long, allow_negative_numbers = true, value_parser = super::real(Bounds::positive(1e6)))]
+    #[arg(long, allow_negative_numbers = true, value_parser = super::real(ranges::WAVENUMBER_CM1))]
     off_cm1: f64,
     /// CO2 dry-air column average of every profile [ppm] (rescaled, or set if absent).
-    #[arg(long, allow_negative_numbers = true, value_parser = super::real(Bounds::open(0.0, 1e6)))]
+    #[arg(long, allow_negative_numbers = true, value_parser = super::real(ranges::CO2_PPM))]
     co2_ppm: f64,
     /// Output directory.
     #[arg(long)]
     out: PathBuf,
     /// Scan: largest J″ of the band's lines.
-    #[arg(long, default_value_t = 40, allow_negative_numbers = true, value_parser = super::count_u32(0, 200))]
+    #[arg(long, default_value_t = 40, allow_negative_numbers = true, value_parser = super::count_u32(0, ranges::MAX_J))]
     max_j: u32,
     /// Scan: offsets from each line's centre [GHz], comma-separated.
     #[arg(
@@ -75,32 +74,32 @@ pub struct Args {
         value_delimiter = ',',
         allow_negative_numbers = true,
         default_value = "-3,-2.5,-2,-1.5,-1,-0.5,0,0.5,1,1.5,2,2.5,3",
-        value_parser = super::real(Bounds::closed(-1e3, 1e3)),
+        value_parser = super::real(ranges::OFFSET_GHZ),
     )]
     offsets_ghz: Vec<f64>,
     /// Layer thickness of the grid [m].
-    #[arg(long, default_value_t = 250.0, allow_negative_numbers = true, value_parser = super::real(Bounds::positive(1e5)))]
+    #[arg(long, default_value_t = 250.0, allow_negative_numbers = true, value_parser = super::real(ranges::LAYER_M))]
     layer_m: f64,
     /// Top of the grid [km] (clipped to the lowest top of the profiles).
-    #[arg(long, default_value_t = 60.0, allow_negative_numbers = true, value_parser = super::real(Bounds::positive(1e3)))]
+    #[arg(long, default_value_t = 60.0, allow_negative_numbers = true, value_parser = super::real(ranges::TOP_KM))]
     top_km: f64,
     /// Line wing cutoff [cm⁻¹].
-    #[arg(long, default_value_t = 25.0, allow_negative_numbers = true, value_parser = super::real(Bounds::positive(1e3)))]
+    #[arg(long, default_value_t = 25.0, allow_negative_numbers = true, value_parser = super::real(ranges::WING_CM1))]
     wing_cm1: f64,
     /// Scene whose instrument sets the random error (default: the embedded default scene).
     #[arg(long, value_name = "FILE")]
     scene: Option<PathBuf>,
     /// Uncertainty of the assumed temperature [K] (total error).
-    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true, value_parser = super::real(Bounds::closed(0.0, 100.0)))]
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true, value_parser = super::real(ranges::TEMPERATURE_K))]
     temperature_uncertainty_k: f64,
     /// Uncertainty of the laser frequency [MHz] (total error).
-    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true, value_parser = super::real(Bounds::closed(0.0, 1e5)))]
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true, value_parser = super::real(ranges::FREQUENCY_MHZ))]
     frequency_uncertainty_mhz: f64,
     /// Uncertainty of the assumed surface pressure [hPa] (total error).
-    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true, value_parser = super::real(Bounds::closed(0.0, 100.0)))]
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true, value_parser = super::real(ranges::SURFACE_PRESSURE_HPA))]
     surface_pressure_uncertainty_hpa: f64,
     /// Uncertainty of the assumed humidity [%] (total error).
-    #[arg(long, default_value_t = 10.0, allow_negative_numbers = true, value_parser = super::real(Bounds::closed(0.0, 1000.0)))]
+    #[arg(long, default_value_t = 10.0, allow_negative_numbers = true, value_parser = super::real(ranges::H2O_PERCENT))]
     h2o_uncertainty_percent: f64,
     /// Lines drawn in the figures, comma-separated labels.
     #[arg(long, value_delimiter = ',', default_value = "R16e,R26e")]

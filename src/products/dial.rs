@@ -90,6 +90,7 @@ impl DialRequest {
         source: ProfileSource,
     ) -> Result<StudyInputs, ProductError> {
         let args = self;
+        args.steps.check().map_err(ProductError::Request)?;
         let retrieval = scene.retrieval.as_ref().ok_or_else(|| {
             ProductError::Request("the scene has no [retrieval]: nothing to study".into())
         })?;

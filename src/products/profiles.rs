@@ -94,6 +94,46 @@ pub struct GenerateRequest {
     pub rh_over: String,
 }
 
+impl GenerateRequest {
+    /// Every number inside the range `profiles generate`'s options allow (its parser checks
+    /// them; a request built in code, the Python package's, is checked here): an error names
+    /// the field.
+    pub fn check(&self) -> Result<(), ProductError> {
+        use crate::input::{Bounds, check_finite_range as check};
+        let bad =
+            |name: &'static str| move |m: String| ProductError::Request(format!("{name}: {m}"));
+        if self.n == 0 {
+            return Err(ProductError::Request("n: at least one member".into()));
+        }
+        let optional = [
+            ("co2_ppm", self.co2_ppm, Bounds::positive(1e6)),
+            (
+                "localization_lnp",
+                self.localization_lnp,
+                Bounds::positive(100.0),
+            ),
+            ("t_corr_length", self.t_corr_length, Bounds::positive(100.0)),
+            ("q_corr_length", self.q_corr_length, Bounds::positive(100.0)),
+            ("ps_std_hpa", self.ps_std_hpa, Bounds::closed(0.0, 100.0)),
+            ("co2_std_ppm", self.co2_std_ppm, Bounds::closed(0.0, 1e3)),
+        ];
+        for (name, v, bounds) in optional {
+            if let Some(v) = v {
+                check(v, bounds).map_err(bad(name))?;
+            }
+        }
+        check(self.co2_corr_length, Bounds::positive(100.0)).map_err(bad("co2_corr_length"))?;
+        check(self.max_rh_percent, Bounds::positive(200.0)).map_err(bad("max_rh_percent"))?;
+        if self.rh_over != "water" && self.rh_over != "ice" {
+            return Err(ProductError::Request(format!(
+                "rh_over: `{}` (known: water, ice)",
+                self.rh_over
+            )));
+        }
+        Ok(())
+    }
+}
+
 /// The ensemble of `a` and the covariance it was drawn with; each line of its report (the
 /// bias removed, a repair, the humidity cap, the covariance's notes) is handed to `say` as it
 /// is known.
@@ -101,6 +141,7 @@ pub fn generate(
     a: &GenerateRequest,
     say: &mut dyn FnMut(&str) -> Result<(), ProductError>,
 ) -> Result<(ProfileSet, Covariance), ProductError> {
+    a.check()?;
     let (mut mean, source) = mean_member(a)?;
     // Before the covariance is built: a huge ensemble is refused at once.
     crate::limits::check_product(

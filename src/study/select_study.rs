@@ -221,13 +221,75 @@ impl SelectOptions {
     }
 }
 
+/// The ranges of the study's numbers: the command line's options are parsed against them, and
+/// [`SelectOptions::check`] holds options built in code (the Python package's) to them.
+pub mod ranges {
+    use crate::input::Bounds;
+    /// `on_cm1`, `off_cm1` \[cm⁻¹\].
+    pub const WAVENUMBER_CM1: Bounds = Bounds::positive(1e6);
+    /// `co2_ppm`.
+    pub const CO2_PPM: Bounds = Bounds::open(0.0, 1e6);
+    /// `max_j`: at most.
+    pub const MAX_J: u32 = 200;
+    /// `offsets_ghz`.
+    pub const OFFSET_GHZ: Bounds = Bounds::closed(-1e3, 1e3);
+    /// `layer_m`.
+    pub const LAYER_M: Bounds = Bounds::positive(1e5);
+    /// `top_km`.
+    pub const TOP_KM: Bounds = Bounds::positive(1e3);
+    /// `wing_cm1`.
+    pub const WING_CM1: Bounds = Bounds::positive(1e3);
+    /// Uncertainty of temperature \[K\].
+    pub const TEMPERATURE_K: Bounds = Bounds::closed(0.0, 100.0);
+    /// Uncertainty of frequency \[MHz\].
+    pub const FREQUENCY_MHZ: Bounds = Bounds::closed(0.0, 1e5);
+    /// Uncertainty of surface pressure \[hPa\].
+    pub const SURFACE_PRESSURE_HPA: Bounds = Bounds::closed(0.0, 100.0);
+    /// Uncertainty of water vapour \[%\].
+    pub const H2O_PERCENT: Bounds = Bounds::closed(0.0, 1000.0);
+}
+
+impl SelectOptions {
+    /// Every number inside its range ([`ranges`]); an error names the field (`layer_m: …`).
+    pub fn check(&self) -> Result<(), SelectError> {
+        use crate::input::check_finite_range as check;
+        let at = |name: &'static str| move |m: String| usage(format!("{name}: {m}"));
+        for v in &self.on_cm1 {
+            check(*v, ranges::WAVENUMBER_CM1).map_err(at("on_cm1"))?;
+        }
+        check(self.off_cm1, ranges::WAVENUMBER_CM1).map_err(at("off_cm1"))?;
+        check(self.co2_ppm, ranges::CO2_PPM).map_err(at("co2_ppm"))?;
+        if self.max_j > ranges::MAX_J {
+            return Err(usage(format!(
+                "max_j: {} is above {}",
+                self.max_j,
+                ranges::MAX_J
+            )));
+        }
+        for v in &self.offsets_ghz {
+            check(*v, ranges::OFFSET_GHZ).map_err(at("offsets_ghz"))?;
+        }
+        check(self.layer_m, ranges::LAYER_M).map_err(at("layer_m"))?;
+        check(self.top_km, ranges::TOP_KM).map_err(at("top_km"))?;
+        check(self.wing_cm1, ranges::WING_CM1).map_err(at("wing_cm1"))?;
+        let u = &self.uncertainties;
+        check(u.temperature_k, ranges::TEMPERATURE_K).map_err(at("temperature_uncertainty_k"))?;
+        check(u.frequency_mhz, ranges::FREQUENCY_MHZ).map_err(at("frequency_uncertainty_mhz"))?;
+        check(u.surface_pressure_hpa, ranges::SURFACE_PRESSURE_HPA)
+            .map_err(at("surface_pressure_uncertainty_hpa"))?;
+        check(u.h2o_percent, ranges::H2O_PERCENT).map_err(at("h2o_uncertainty_percent"))?;
+        Ok(())
+    }
+}
+
 impl SelectStudy {
     /// Set up the study of `options` with the instrument of `scene`: read the line files,
     /// place the on-line positions, check that the lines reach them and the off-line, and
     /// build the groups of profiles. Every refusal names the option.
     pub fn build(options: SelectOptions, scene: Scene) -> Result<SelectStudy, SelectError> {
         let o = &options;
-        // Each number was checked by the argument parser; here the size of the grid.
+        // Each number (the command line's parser checked them already), then the grid's size.
+        o.check()?;
         crate::limits::check_product(
             "--layer-m",
             &[("layers", (o.top_km * 1e3 / o.layer_m).ceil() as u64)],

@@ -85,6 +85,46 @@ pub struct BudgetSteps {
     pub linewidth_fraction: f64,
 }
 
+impl BudgetSteps {
+    /// Every step finite and inside the range `lidarsim dial`'s options allow (the humidity
+    /// and line-width steps as fractions: −50 … 1000 % and above −100 … 1000 %); an error names
+    /// the step.
+    pub fn check(&self) -> Result<(), String> {
+        use crate::input::{Bounds, check_finite_range as check};
+        let steps = [
+            (
+                "temperature_k",
+                self.temperature_k,
+                Bounds::closed(-100.0, 100.0),
+            ),
+            (
+                "humidity_fraction",
+                self.humidity_fraction,
+                Bounds::closed(-0.5, 10.0),
+            ),
+            (
+                "surface_pressure_hpa",
+                self.surface_pressure_hpa,
+                Bounds::closed(-100.0, 100.0),
+            ),
+            (
+                "frequency_offset_mhz",
+                self.frequency_offset_mhz,
+                Bounds::closed(-1e5, 1e5),
+            ),
+            (
+                "linewidth_fraction",
+                self.linewidth_fraction,
+                Bounds::above(-1.0, 10.0),
+            ),
+        ];
+        for (name, v, bounds) in steps {
+            check(v, bounds).map_err(|m| format!("budget step {name}: {m}"))?;
+        }
+        Ok(())
+    }
+}
+
 impl Default for BudgetSteps {
     fn default() -> Self {
         BudgetSteps {
