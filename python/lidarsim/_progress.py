@@ -4,21 +4,25 @@ import sys
 
 
 class _Bar:
-    """A tqdm bar driven by (done, total) reports."""
+    """A tqdm bar driven by (done, total) reports, made at the first report (when the total
+    is known)."""
 
     def __init__(self, desc, unit):
         from tqdm.auto import tqdm
 
-        self._bar = tqdm(desc=desc, unit=unit, total=None, leave=True)
+        self._tqdm, self._desc, self._unit, self._bar = tqdm, desc, unit, None
 
     def __call__(self, done, total):
-        if total and self._bar.total != total:
+        if self._bar is None:
+            self._bar = self._tqdm(desc=self._desc, unit=self._unit, total=total or None)
+        elif total and self._bar.total != total:
             self._bar.total = total
             self._bar.refresh()
         self._bar.update(done - self._bar.n)
 
     def close(self):
-        self._bar.close()
+        if self._bar is not None:
+            self._bar.close()
 
 
 class _Lines:
