@@ -61,10 +61,12 @@ def run(scene=None, *, photons=None, seed=None, threads=None, progress=False):
     Returns
     -------
     xarray.Dataset
-        What ``run.nc`` holds: ``energy_j`` and ``energy_stderr_j`` [J] on (source, channel,
+        What ``run.nc`` holds: ``energy_j`` and ``stderr_j`` [J] on (source, channel,
         fov_full_angle_mrad, range_m, order) — source ``mc`` and ``analytic``, order ``total``,
-        ``1``, …, ``N+`` (a bin a source does not compute is NaN) — with a receiver the
-        signals, with a retrieval its products; units and CF names in the attributes, the
+        ``1``, …, ``N+`` (a bin a source does not compute is NaN) — with polarised light
+        ``polarised_energy_j`` on a last dimension ``polarisation`` (co, cross) and
+        ``depolarisation_ratio``, with a receiver the signals, with a retrieval its products
+        (``mixing_ratio_*`` and others, one row per product); units and CF names in the attributes, the
         scene's TOML text in ``attrs["scene"]``. The GIL is released while it runs; Ctrl-C
         stops it within a second (KeyboardInterrupt).
     """
@@ -130,7 +132,7 @@ def cross_section(lines, pressure_pa, temperature_k, wavenumbers_cm1=None, *, wa
         Instead of ``wavenumbers_cm1``: vacuum wavelengths [nm] (ν = 10⁷/λ).
     molecule : str, optional
         Which molecule (``CO2``); needed when the lines hold several.
-    line_shape : {"voigt", "sdvoigt", "hartmann-tran"}
+    line_shape : {"voigt", "sdvoigt", "ht"}
         Line profile; ``line_mixing`` adds first-order line mixing where the lines carry it.
     vmr : float
         The gas's volume mixing ratio, for self-broadening [mol/mol].
