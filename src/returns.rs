@@ -344,7 +344,9 @@ pub fn depolarisation_ratio(
                 sx / a
             } else {
                 let rel = (sa / a).powi(2) + (sx / x).powi(2) - 2.0 * cov[i] / (a * x);
-                delta.abs() * rel.max(0.0).sqrt()
+                // Rounding can leave a nearly perfectly correlated pair's variance a hair below
+                // 0; an unknown error (NaN) stays unknown (`f64::max` would make it 0).
+                delta.abs() * if rel < 0.0 { 0.0 } else { rel.sqrt() }
             }
         }
     };

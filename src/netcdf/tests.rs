@@ -386,3 +386,107 @@ fn non_finite_values_are_fill_or_refused() {
     let e = nc.encode().unwrap_err().to_string();
     assert!(e.contains("the global attribute `g`"), "{e}");
 }
+
+/// With polarised light: co and cross of each bin on the last dimension, at the bin of
+/// `energy_j`'s grid their source and order name; δ = cross/co with the propagated error where
+/// co > 0 (Monte Carlo, with the covariance) or 0 (analytic), fill where co is 0 or absent.
+#[test]
+fn polarised_returns_land_in_their_bins_with_the_depolarisation_ratio() {
+    let (mc, analytic) = returns();
+    let scaled = |r: &Returns, f: f64| {
+        let mut r = r.clone();
+        r.energy_j.iter_mut().for_each(|e| *e *= f);
+        r.stderr_j.iter_mut().for_each(|s| *s *= f);
+        r
+    };
+    let (mc_co, mc_cross) = (scaled(&mc, 0.75), scaled(&mc, 0.25));
+    let mut an_co = scaled(&analytic, -1.0);
+    an_co.energy_j[0] = 0.0; // no co-polarised return: no ratio
+    let an_cross = scaled(&analytic, -0.5);
+    // Correlation ½ between co and cross, each with the relative error r of its bin: then
+    // σ²_δ/δ² = r² + r² − 2·½r² = r², so σ_δ = δ r.
+    let cov: Vec<f64> = (0..mc.energy_j.len())
+        .map(|i| 0.5 * mc_co.stderr_j[i] * mc_cross.stderr_j[i])
+        .collect();
+    let polarised = [
+        PolarisedSet {
+            co: &mc_co,
+            cross: &mc_cross,
+            cov_j2: Some(&cov),
+        },
+        PolarisedSet {
+            co: &an_co,
+            cross: &an_cross,
+            cov_j2: None,
+        },
+    ];
+    let ds = run_dataset(&RunFile {
+        returns: &[&mc, &analytic],
+        gates: &gates(),
+        lines: &[],
+        polarised: &polarised,
+        signals: &[],
+        products: &[],
+        gas: None,
+        attributes: &attributes(),
+    })
+    .unwrap();
+    let var = |name: &str| ds.vars.iter().find(|v| v.name == name).unwrap();
+    let f64s = |name: &str| match &var(name).values {
+        Values::F64(x) => x.clone(),
+        Values::Char(_) => panic!("{name} is text"),
+    };
+    assert_eq!(
+        var("polarised_energy_j").dims.last().unwrap(),
+        "polarisation"
+    );
+    let (energy, stderr, delta, delta_se) = (
+        f64s("polarised_energy_j"),
+        f64s("polarised_stderr_j"),
+        f64s("depolarisation_ratio"),
+        f64s("depolarisation_ratio_stderr"),
+    );
+    // Grid: source × channel (2) × fov (2) × gate (3) × order (total, 1, 2+).
+    let j =
+        |s: usize, c: usize, f: usize, g: usize, o: usize| (((s * 2 + c) * 2 + f) * 3 + g) * 3 + o;
+    for c in 0..2 {
+        for f in 0..2 {
+            for g in 0..3 {
+                for o in 0..3 {
+                    let (i, k) = (mc.index(c, f, g, o), j(0, c, f, g, o));
+                    assert_eq!(energy[2 * k], mc_co.energy_j[i]);
+                    assert_eq!(energy[2 * k + 1], mc_cross.energy_j[i]);
+                    let se = mc_cross.stderr_j[i];
+                    assert_eq!(
+                        stderr[2 * k + 1],
+                        if se.is_nan() { NC_FILL_F64 } else { se }
+                    );
+                    let want =
+                        crate::returns::depolarisation_ratio(&mc_co, &mc_cross, Some(&cov), i);
+                    assert!((delta[k] - 1.0 / 3.0).abs() < 1e-15);
+                    assert_eq!(delta[k], want.0);
+                    if want.1.is_finite() {
+                        assert_eq!(delta_se[k], want.1);
+                        let r = mc.stderr_j[i] / mc.energy_j[i];
+                        assert!((delta_se[k] / (r / 3.0) - 1.0).abs() < 1e-12);
+                    } else {
+                        assert_eq!(delta_se[k], NC_FILL_F64);
+                    }
+                }
+                // Analytic: order 1 only (index 1 of the grid's orders), error 0.
+                let (i, k) = (analytic.index(c, f, g, 0), j(1, c, f, g, 1));
+                assert_eq!(energy[2 * k], an_co.energy_j[i]);
+                assert_eq!(energy[2 * k + 1], an_cross.energy_j[i]);
+                if i == 0 {
+                    assert_eq!((delta[k], delta_se[k]), (NC_FILL_F64, NC_FILL_F64));
+                } else {
+                    assert_eq!((delta[k], delta_se[k]), (0.5, 0.0));
+                }
+                for o in [0, 2] {
+                    assert_eq!(energy[2 * j(1, c, f, g, o)], NC_FILL_F64);
+                    assert_eq!(delta[j(1, c, f, g, o)], NC_FILL_F64);
+                }
+            }
+        }
+    }
+}

@@ -328,3 +328,70 @@ fn mean_member(a: &GenerateRequest) -> Result<(SetMember, String), ProductError>
         "no mean profile: give --class, --atmosphere, --set or --mean-profile".into(),
     ))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn request() -> GenerateRequest {
+        GenerateRequest {
+            n: 3,
+            seed: 1,
+            class: None,
+            atmosphere: None,
+            set: None,
+            mean_profile: None,
+            profile_id: None,
+            co2_ppm: Some(420.0),
+            covariance: None,
+            error_model: None,
+            pairs: None,
+            localization_lnp: None,
+            t_corr_length: None,
+            q_corr_length: None,
+            ps_std_hpa: Some(0.0),
+            co2_std_ppm: Some(1e3),
+            co2_corr_length: 0.35,
+            no_class_scaling: false,
+            repair_covariance: false,
+            max_rh_percent: 200.0,
+            rh_over: "ice".into(),
+        }
+    }
+
+    /// A request built in code is held to `profiles generate`'s ranges, each refusal naming
+    /// the field; the ends the options allow pass.
+    #[test]
+    fn requests_are_held_to_the_options_ranges() {
+        assert!(request().check().is_ok());
+        let with = |f: fn(&mut GenerateRequest)| {
+            let mut r = request();
+            f(&mut r);
+            r.check().map_err(|e| e.to_string())
+        };
+        for (bad, name) in [
+            (with(|r| r.n = 0), "n:"),
+            (with(|r| r.co2_ppm = Some(0.0)), "co2_ppm"),
+            (
+                with(|r| r.localization_lnp = Some(-1.0)),
+                "localization_lnp",
+            ),
+            (with(|r| r.t_corr_length = Some(101.0)), "t_corr_length"),
+            (
+                with(|r| r.q_corr_length = Some(f64::INFINITY)),
+                "q_corr_length",
+            ),
+            (with(|r| r.ps_std_hpa = Some(-0.1)), "ps_std_hpa"),
+            (with(|r| r.co2_std_ppm = Some(1001.0)), "co2_std_ppm"),
+            (with(|r| r.co2_corr_length = 0.0), "co2_corr_length"),
+            (with(|r| r.max_rh_percent = 200.1), "max_rh_percent"),
+            (with(|r| r.rh_over = "steam".into()), "rh_over"),
+        ] {
+            assert!(
+                bad.as_ref().is_err_and(|m| m.contains(name)),
+                "{name}: {bad:?}"
+            );
+        }
+        assert!(with(|r| r.rh_over = "water".into()).is_ok());
+    }
+}

@@ -515,3 +515,86 @@ impl GroupSummary {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn options() -> SelectOptions {
+        SelectOptions {
+            source: SelectSource::Atmospheres(vec![StandardAtmosphere::UsStandard]),
+            seed: 1,
+            class: "all".into(),
+            per_profile: false,
+            lines: Vec::new(),
+            on_cm1: vec![6358.655],
+            off_cm1: 6360.61,
+            co2_ppm: 420.0,
+            max_j: 40,
+            offsets_ghz: vec![-3.0, 0.0, 3.0],
+            layer_m: 250.0,
+            top_km: 60.0,
+            wing_cm1: 25.0,
+            uncertainties: Uncertainties {
+                temperature_k: 1.0,
+                frequency_mhz: 1.0,
+                surface_pressure_hpa: 1.0,
+                h2o_percent: 10.0,
+            },
+            figure_lines: Vec::new(),
+            plots: false,
+        }
+    }
+
+    /// Options built in code are held to the command line's ranges, each refusal naming the
+    /// field; the ends the options allow pass.
+    #[test]
+    fn options_are_held_to_the_command_lines_ranges() {
+        assert!(options().check().is_ok());
+        let with = |f: fn(&mut SelectOptions)| {
+            let mut o = options();
+            f(&mut o);
+            o.check().map_err(|e| e.to_string())
+        };
+        for edge in [
+            with(|o| o.max_j = ranges::MAX_J),
+            with(|o| o.offsets_ghz = vec![-1e3, 1e3]),
+            with(|o| o.uncertainties.temperature_k = 0.0),
+            with(|o| o.uncertainties.h2o_percent = 1000.0),
+            with(|o| o.layer_m = 1e5),
+        ] {
+            assert!(edge.is_ok(), "{edge:?}");
+        }
+        for (bad, name) in [
+            (with(|o| o.on_cm1 = vec![6358.0, -1.0]), "on_cm1"),
+            (with(|o| o.off_cm1 = 0.0), "off_cm1"),
+            (with(|o| o.co2_ppm = f64::NAN), "co2_ppm"),
+            (with(|o| o.max_j = ranges::MAX_J + 1), "max_j"),
+            (with(|o| o.offsets_ghz = vec![1001.0]), "offsets_ghz"),
+            (with(|o| o.layer_m = -250.0), "layer_m"),
+            (with(|o| o.top_km = 1e4), "top_km"),
+            (with(|o| o.wing_cm1 = 0.0), "wing_cm1"),
+            (
+                with(|o| o.uncertainties.temperature_k = -1.0),
+                "temperature_uncertainty_k",
+            ),
+            (
+                with(|o| o.uncertainties.frequency_mhz = 2e5),
+                "frequency_uncertainty_mhz",
+            ),
+            (
+                with(|o| o.uncertainties.surface_pressure_hpa = 101.0),
+                "surface_pressure_uncertainty_hpa",
+            ),
+            (
+                with(|o| o.uncertainties.h2o_percent = 1001.0),
+                "h2o_uncertainty_percent",
+            ),
+        ] {
+            assert!(
+                bad.as_ref().is_err_and(|m| m.contains(name)),
+                "{name}: {bad:?}"
+            );
+        }
+    }
+}
