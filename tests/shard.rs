@@ -477,6 +477,31 @@ fn library_shards_fold_into_the_pipelines_result() {
     assert_eq!(merged.shards, 3);
 }
 
+/// A run watched for a stop (the Python package's path, `Prepared::trace_until`) is the
+/// pipeline's run while the flag stays down, and ends with `Stopped` once it is up.
+#[test]
+fn a_watched_run_is_the_run_until_it_is_stopped() {
+    use std::sync::atomic::AtomicBool;
+    let mut scene = shard::read_scene(Some(Path::new(&c1_scene()))).unwrap();
+    scene
+        .override_simulation(Some(1000), None, Some(1))
+        .unwrap();
+    let whole = lidarsim::pipeline::run(&scene).unwrap();
+    let prepared = lidarsim::pipeline::prepare(&scene).unwrap();
+    let watched = prepared
+        .trace_until(&lidarsim::transport::quiet, &AtomicBool::new(false))
+        .unwrap()
+        .unwrap();
+    assert_eq!(whole.mc.unwrap().returns, watched.returns);
+    let stopped = prepared.trace_until(&lidarsim::transport::quiet, &AtomicBool::new(true));
+    assert!(matches!(
+        stopped,
+        Err(lidarsim::pipeline::RunError::Transport(
+            lidarsim::transport::TransportError::Stopped
+        ))
+    ));
+}
+
 /// `lidarsim dial SCENE --ensemble 4 --on on,side` (12 profiles, analytic) with extra
 /// arguments, into `out`.
 fn dial(scene: &Path, out: &Path, extra: &[&str]) -> String {

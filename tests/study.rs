@@ -994,3 +994,17 @@ fn a_monte_carlo_study_without_energy_in_a_window_writes_empty_fields() {
         );
     }
 }
+
+/// A study watched for a stop (the Python package's path, `dial::run_until`) is the study
+/// while the flag stays down, and ends with `Stopped` once it is up.
+#[test]
+fn a_watched_study_is_the_study_until_it_is_stopped() {
+    use std::sync::atomic::AtomicBool;
+    let s = scene();
+    let (set, _) = class_ensemble(LatitudeClass::Mid, 3, 4).unwrap();
+    let whole = dial::run(&s, &set, &options(&s), &|| {}).unwrap();
+    let watched = dial::run_until(&s, &set, &options(&s), &|| {}, &AtomicBool::new(false)).unwrap();
+    assert_eq!(whole.outcomes, watched.outcomes);
+    let stopped = dial::run_until(&s, &set, &options(&s), &|| {}, &AtomicBool::new(true));
+    assert!(matches!(stopped, Err(dial::StudyError::Stopped)));
+}

@@ -597,4 +597,17 @@ mod tests {
             );
         }
     }
+
+    /// A study watched for a stop (the Python package's path) is the study while the flag
+    /// stays down, and `None` once it is up.
+    #[test]
+    fn a_watched_study_is_the_study_until_it_is_stopped() {
+        let scene = Scene::default_scene().unwrap();
+        let study = SelectStudy::build(options(), scene).unwrap();
+        let whole = study.study(0..study.len(), &|| {});
+        let watched = study.study_until(&|| {}, &AtomicBool::new(false)).unwrap();
+        assert_eq!(whole.len(), watched.len());
+        assert_eq!(format!("{whole:?}"), format!("{watched:?}"));
+        assert!(study.study_until(&|| {}, &AtomicBool::new(true)).is_none());
+    }
 }
