@@ -352,3 +352,54 @@ pub fn depolarisation_ratio(
     };
     (delta, se)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn one_bin(source: Source, energy_j: f64, stderr_j: f64) -> Returns {
+        let mut r = Returns::zeros(
+            source,
+            vec!["c".into()],
+            vec![1.0],
+            vec![100.0],
+            vec![Order::Total],
+        );
+        r.energy_j[0] = energy_j;
+        r.stderr_j[0] = stderr_j;
+        r
+    }
+
+    /// δ = cross/co with σ²_δ = δ²(σ²_x/x² + σ²_c/c² − 2 cov/(x c)) (first-order
+    /// propagation), against values worked by hand: uncorrelated, correlated ½ (σ_δ = δ r for
+    /// equal relative errors r), a covariance past the Cauchy–Schwarz bound by rounding (the
+    /// variance a hair below 0: error 0, not NaN), an unknown error (NaN stays NaN), no cross
+    /// return (the cross error over co), no co return (no ratio), analytic (error 0).
+    #[test]
+    fn depolarisation_ratio_and_its_error_by_hand() {
+        let mc = Source::MonteCarlo;
+        let (co, cross) = (one_bin(mc, 4.0, 0.4), one_bin(mc, 1.0, 0.2));
+        let (d, se) = depolarisation_ratio(&co, &cross, Some(&[0.0]), 0);
+        assert_eq!(d, 0.25);
+        assert!((se - 0.25 * (0.01f64 + 0.04).sqrt()).abs() < 1e-15);
+        let same = one_bin(mc, 1.0, 0.1);
+        let (d, se) = depolarisation_ratio(&co, &same, Some(&[0.5 * 0.4 * 0.1]), 0);
+        assert!((se - d * 0.1).abs() < 1e-15);
+        let (_, se) = depolarisation_ratio(&co, &same, Some(&[1.000001 * 0.4 * 0.1]), 0);
+        assert_eq!(se, 0.0);
+        let unknown = one_bin(mc, 1.0, f64::NAN);
+        assert!(
+            depolarisation_ratio(&co, &unknown, Some(&[0.0]), 0)
+                .1
+                .is_nan()
+        );
+        let none = one_bin(mc, 0.0, 0.0);
+        assert_eq!(
+            depolarisation_ratio(&co, &none, Some(&[0.0]), 0),
+            (0.0, 0.0)
+        );
+        let (d, se) = depolarisation_ratio(&none, &cross, Some(&[0.0]), 0);
+        assert!(d.is_nan() && se.is_nan());
+        assert_eq!(depolarisation_ratio(&co, &cross, None, 0), (0.25, 0.0));
+    }
+}
