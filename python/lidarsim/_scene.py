@@ -144,21 +144,19 @@ class Scene:
         scene's ``co2_ppm`` still rescales CO2; layer optics and line lists are kept."""
         if isinstance(profile, dict):
             name = str(profile.get("name", "profile"))
-            levels = {k: np.asarray(profile[k], dtype=float) for k in ("altitude_m", "pressure_pa", "temperature_k")}
-            gases = [(g, np.asarray(v, dtype=float)) for g, v in profile.get("gases", {}).items()]
+            gases = list(profile.get("gases", {}).items())
         else:  # an xarray Dataset of one profile
             if "profile" in profile.dims:
                 raise ValueError("with_profile takes one profile: select it with ds.isel(profile=i)")
             name = str(profile["profile"].values) if "profile" in profile.coords else "profile"
-            levels = {k: np.asarray(profile[k].values, dtype=float) for k in ("altitude_m", "pressure_pa", "temperature_k")}
-            gases = [
-                (profile[v].attrs["gas"], np.asarray(profile[v].values, dtype=float))
-                for v in profile.data_vars
-                if "gas" in profile[v].attrs
-            ]
-        keep = np.isfinite(levels["altitude_m"])
-        args = [levels[k][keep].tolist() for k in ("altitude_m", "pressure_pa", "temperature_k")]
-        gases = [(g, v[keep].tolist()) for g, v in gases]
+            gases = [(profile[v].attrs["gas"], profile[v]) for v in profile.data_vars if "gas" in profile[v].attrs]
+
+        def levels(values):  # bottom up, without the NaN padding of a shorter profile
+            return np.asarray(values, dtype=float)[keep].tolist()
+
+        keep = np.isfinite(np.asarray(profile["altitude_m"], dtype=float))
+        args = [levels(profile[k]) for k in ("altitude_m", "pressure_pa", "temperature_k")]
+        gases = [(g, levels(v)) for g, v in gases]
         return Scene._wrap(self._inner.with_profile(name, *args, gases))
 
     @property

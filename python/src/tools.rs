@@ -163,27 +163,23 @@ pub fn cross_section<'py>(
     Ok(out)
 }
 
-/// The grid `nu` is, if evenly spaced (to 1e-9 of a step) and long enough for the multigrid.
+/// The grid `nu` is, if it is start + i·step bit for bit (what the multigrid evaluates) for a
+/// step found from its ends (numpy's `linspace`) or from its first two points (`start +
+/// arange(n) * step`, `lidarsim lbl`'s grid); `None` sends it point by point.
 fn even_grid(nu: &[f64]) -> Option<WavenumberGrid> {
     if nu.len() < 2 {
         return None;
     }
-    let step = (nu[nu.len() - 1] - nu[0]) / (nu.len() - 1) as f64;
-    let even = step > 0.0
-        && nu
-            .iter()
-            .enumerate()
-            .all(|(i, v)| (v - (nu[0] + i as f64 * step)).abs() <= 1e-9 * step);
-    if !even {
-        return None;
-    }
-    let grid = WavenumberGrid {
-        start_cm1: nu[0],
-        step_cm1: step,
-        len: nu.len(),
-    };
-    // The multigrid evaluates at start + i·step; the caller's points must be those, bit for bit.
-    (0..nu.len()).all(|i| grid.at(i) == nu[i]).then_some(grid)
+    let n = nu.len();
+    [(nu[n - 1] - nu[0]) / (n - 1) as f64, nu[1] - nu[0]]
+        .into_iter()
+        .filter(|step| *step > 0.0)
+        .map(|step_cm1| WavenumberGrid {
+            start_cm1: nu[0],
+            step_cm1,
+            len: n,
+        })
+        .find(|g| (0..n).all(|i| g.at(i) == nu[i]))
 }
 
 /// Mie theory for spheres of refractive index `m` (imaginary part ≥ 0 absorbs) at every size

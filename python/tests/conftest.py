@@ -31,6 +31,17 @@ def as_written(v, digits):
     return f"{mantissa}e{int(exponent)}"
 
 
+def same_but_history(a, b):
+    """Two Datasets identical in every variable, coordinate and attribute but `history` (when
+    and by what each was made)."""
+    import xarray as xr
+
+    a, b = a.copy(), b.copy()
+    a.attrs.pop("history")
+    b.attrs.pop("history")
+    xr.testing.assert_identical(a, b)
+
+
 @pytest.fixture(scope="session")
 def cli():
     """Run the command line: cli("run", "--out", d, …) → CompletedProcess (checked)."""

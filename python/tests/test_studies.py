@@ -6,14 +6,7 @@ import pytest
 import xarray as xr
 
 import lidarsim
-from conftest import ROOT
-
-
-def same_but_history(a, b):
-    a, b = a.copy(), b.copy()
-    a.attrs.pop("history")
-    b.attrs.pop("history")
-    xr.testing.assert_identical(a, b)
+from conftest import ROOT, same_but_history
 
 
 def same_table(ds, path):

@@ -218,16 +218,29 @@ impl Resolver<'_> {
         let rayleigh_on = a.rayleigh.unwrap_or(true);
         // Bucholtz's depolarisation and cross-section are needed only with Rayleigh scattering
         // on; a channel outside their range is an error then, and only then.
-        if let Some(depolarisation_factor) = kept_depolarisation {
-            return Ok(Atmosphere {
-                profile,
-                layer_thickness_m,
-                top_m,
-                rayleigh: rayleigh_on,
-                depolarisation_factor,
-                co2_ppm: a.co2_ppm,
-            });
-        }
+        let depolarisation_factor = match kept_depolarisation {
+            Some(kept) => kept,
+            None => self.depolarisation(a, &sec, channels, rayleigh_on)?,
+        };
+        Ok(Atmosphere {
+            profile,
+            layer_thickness_m,
+            top_m,
+            rayleigh: rayleigh_on,
+            depolarisation_factor,
+            co2_ppm: a.co2_ppm,
+        })
+    }
+
+    /// The molecular depolarisation factor of each channel: given, Bucholtz's with Rayleigh
+    /// scattering on (each channel then inside his range), none without.
+    fn depolarisation(
+        &self,
+        a: &AtmosphereDescription,
+        sec: &KeyPath,
+        channels: &[Channel],
+        rayleigh_on: bool,
+    ) -> Result<Vec<f64>, InputError> {
         let depolarisation_factor = match &a.depolarization_factor {
             Some(v) => self.per_channel(&sec.key("depolarization_factor"), v, channels.len())?,
             None if rayleigh_on => channels
@@ -243,14 +256,7 @@ impl Resolver<'_> {
                     .map_err(|e| self.err(&KeyPath::array("channel", i), e.to_string()))?;
             }
         }
-        Ok(Atmosphere {
-            profile,
-            layer_thickness_m,
-            top_m,
-            rayleigh: rayleigh_on,
-            depolarisation_factor,
-            co2_ppm: a.co2_ppm,
-        })
+        Ok(depolarisation_factor)
     }
 
     /// One profile of a profile-set file (lidarsim's set format, `docs/atmosphere.md`), the file
