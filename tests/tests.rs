@@ -25,6 +25,8 @@ mod fuzz_cli;
 /// Scattering matrices: Mie matrices against reference amplitudes and BH's output,
 /// the dipole limit, the Mueller inequalities, C.1 near backscatter, scalar tables unchanged.
 mod matrices;
+/// Multiple scattering as a measured quantity: the `2+` rows' errors, Jacobians.
+mod multiple_scattering;
 /// `run.nc` read by xarray and netCDF4-python against the CSV files.
 mod netcdf;
 /// Output written whole or not at all; CSV quoting.

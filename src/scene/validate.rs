@@ -118,7 +118,9 @@ impl Validator<'_> {
         let n_channels = channels_and_sums.saturating_sub(n_lines);
         let gates_n = p.gates.count as u64;
         let fovs = p.lidar.fov_full_angle_mrad.len() as u64;
-        let order_bins = u64::from(p.simulation.max_order) + 2;
+        // total, 1..=N, N+ and (N ≥ 2) 2+.
+        let order_bins =
+            u64::from(p.simulation.max_order) + 2 + u64::from(p.simulation.max_order >= 2);
         let blame = [
             (gates_n, KeyPath::table("gates").key("width_m")),
             (fovs, KeyPath::table("lidar").key("fov_full_angle_mrad")),

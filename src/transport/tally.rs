@@ -74,7 +74,7 @@ impl Flux {
 pub(crate) struct Accumulator {
     shape: TallyShape,
     n_batches: usize,
-    /// Reported bins: [channel][fov][gate][order: total, 1..=N, N+].
+    /// Reported bins: [channel][fov][gate][order: total, 1..=N, N+, then 2+ when N ≥ 2].
     mean: Vec<f64>,
     m2: Vec<f64>,
     /// Per-bin scale of `m2` ([`stats::welford_add_scaled`]).
@@ -87,6 +87,15 @@ pub(crate) struct Accumulator {
     scratch: Vec<f64>,
     /// Combined channels, folded batch by batch so that their errors and covariances are right.
     combined: Option<Combined>,
+}
+
+/// Reported order bins per (channel, FOV, gate): the total, the exact orders 1..=N, the
+/// overflow N+ and, when N ≥ 2, the multiple scattering 2+ (orders ≥ 2). The 2+ bin is summed
+/// batch by batch, so its standard error is its own: `total − 1` from two rows would carry the
+/// single-scattering noise, which dominates it (on C.1 the error of `total` is several times
+/// the scatter of `total − 1` between seeds).
+pub(crate) fn reported_orders(n_order_bins: usize) -> usize {
+    n_order_bins + 1 + usize::from(n_order_bins >= 3)
 }
 
 /// Running moments of combined channels and of chosen pairs of them.
@@ -112,7 +121,8 @@ impl Accumulator {
     /// `n_flux`: the channels of the flux tally (those of the tally's shape, but in a polarised
     /// run, where the shape counts co- and cross-polarised returns as channels of their own).
     pub fn new(shape: TallyShape, n_flux: usize, fov_of_annulus: Vec<usize>) -> Self {
-        let reported = shape.n_channels * shape.n_fov * shape.n_gates * (shape.n_order_bins + 1);
+        let reported =
+            shape.n_channels * shape.n_fov * shape.n_gates * reported_orders(shape.n_order_bins);
         Accumulator {
             shape,
             n_batches: 0,
@@ -139,7 +149,7 @@ impl Accumulator {
             return self;
         }
         let s = self.shape;
-        let bins = s.n_fov * s.n_gates * (s.n_order_bins + 1);
+        let bins = s.n_fov * s.n_gates * reported_orders(s.n_order_bins);
         let n = combos.len();
         self.combined = Some(Combined {
             combos,
@@ -157,11 +167,11 @@ impl Accumulator {
     }
 
     /// Index of the total (order bin 0) of (channel, FOV, gate) in the reported layout; the
-    /// exact orders and the overflow follow it.
+    /// exact orders, the overflow and the 2+ bin follow it.
     #[inline]
     fn reported_start(&self, k: usize, fov: usize, gate: usize) -> usize {
         let s = &self.shape;
-        ((k * s.n_fov + fov) * s.n_gates + gate) * (s.n_order_bins + 1)
+        ((k * s.n_fov + fov) * s.n_gates + gate) * reported_orders(s.n_order_bins)
     }
 
     /// Fold one batch (already normalised to energy per pulse) into the running moments.
@@ -169,6 +179,8 @@ impl Accumulator {
         let s = self.shape;
         self.scratch.iter_mut().for_each(|v| *v = 0.0);
         let mut acc = vec![0.0; s.n_channels];
+        // The 2+ bin's offset from the total, if there is one.
+        let ms = (s.n_order_bins >= 3).then_some(s.n_order_bins + 1);
         for gate in 0..s.n_gates {
             for ob in 0..s.n_order_bins {
                 // Cumulative over annuli: FOV j holds every annulus up to its own.
@@ -181,6 +193,9 @@ impl Accumulator {
                         let i = self.reported_start(k, fov, gate);
                         self.scratch[i + 1 + ob] = acc[k];
                         self.scratch[i] += acc[k];
+                        if let Some(m) = ms.filter(|_| ob >= 1) {
+                            self.scratch[i + m] += acc[k];
+                        }
                     }
                 }
             }
@@ -223,6 +238,9 @@ impl Accumulator {
         let mut orders = vec![Order::Total];
         orders.extend((1..=n_exact).map(Order::Exactly));
         orders.push(Order::AtLeast(n_exact + 1));
+        if n_exact >= 2 {
+            orders.push(Order::AtLeast(2));
+        }
         let mut r = Returns::zeros(
             Source::MonteCarlo,
             channels,
