@@ -304,6 +304,7 @@ fn receive(
             absorbed: part(2),
             cut: part(3),
         },
+        jacobian: Vec::new(),
         stats: RunStats {
             photons: head[1],
             collisions: head[2],

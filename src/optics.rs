@@ -53,6 +53,11 @@ pub struct Component {
     /// Index into [`OpticalAtmosphere::phases`] (and [`OpticalAtmosphere::matrices`]) per
     /// channel.
     pub phase: Vec<u32>,
+    /// Absorption by these scatterers per channel [1/m]: a particle layer's extinction times
+    /// 1 − its albedo (0 for molecules); already in the layer's total absorption.
+    pub sigma_a_per_m: Vec<f64>,
+    /// Molecules (Rayleigh scattering) rather than particles.
+    pub molecular: bool,
 }
 
 /// Layers × channels of scattering and absorption; see the module documentation.
@@ -181,6 +186,8 @@ impl OpticalAtmosphere {
                     comps.push(Component {
                         sigma_s_per_m: s,
                         phase: phase.clone(),
+                        sigma_a_per_m: vec![0.0; nch],
+                        molecular: true,
                     });
                 }
             }
@@ -198,6 +205,13 @@ impl OpticalAtmosphere {
                         comps.push(Component {
                             sigma_s_per_m: s,
                             phase: layer_phases[j].clone(),
+                            sigma_a_per_m: (0..nch)
+                                .map(|k| {
+                                    layer.extinction_per_m[k]
+                                        * (1.0 - layer.single_scattering_albedo[k])
+                                })
+                                .collect(),
+                            molecular: false,
                         });
                     }
                 }
@@ -278,7 +292,9 @@ impl OpticalAtmosphere {
         Ok(())
     }
 
-    fn accumulate(&mut self) {
+    /// Recompute the cumulative optical depths from the layers' coefficients (after a caller
+    /// changed them, e.g. a derivative's check by finite differences).
+    pub fn accumulate(&mut self) {
         let nch = self.n_channels;
         let n = self.edges_m.len();
         self.cum_tau_s = vec![0.0; n * nch];

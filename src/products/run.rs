@@ -14,8 +14,9 @@ use crate::returns::{self, Order, Returns, Source};
 use crate::scene::Scene;
 
 /// Every file `run` may write into its directory.
-pub const FILES: [&str; 9] = [
+pub const FILES: [&str; 10] = [
     "returns.csv",
+    "jacobians.csv",
     "depolarisation.csv",
     "depolarisation.png",
     crate::netcdf::RUN_FILE,
@@ -43,6 +44,9 @@ pub fn write(
     files.replaces(out_dir, &FILES)?;
     let sets = returns_sets(run);
     files.write(out_dir.join("returns.csv"), returns_csv(run))?;
+    if let Some(j) = run.mc.as_ref().and_then(|m| m.jacobians.as_ref()) {
+        files.write(out_dir.join("jacobians.csv"), j.to_csv())?;
+    }
     if let Some(s) = depolarisation_csv(run) {
         files.write(out_dir.join("depolarisation.csv"), s)?;
     }

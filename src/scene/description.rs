@@ -426,6 +426,9 @@ pub struct SimulationDescription {
     pub multiple_scattering: Option<String>,
     /// The multiple-scattering share below which `auto` skips the Monte Carlo.
     pub multiple_scattering_tolerance: Option<f64>,
+    /// Tally the returns' derivatives with respect to each layer's absorption, scattering
+    /// and extinction (default false).
+    pub jacobians: Option<bool>,
 }
 
 /// One number for every channel, or a list with one number per channel.

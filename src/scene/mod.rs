@@ -340,6 +340,10 @@ pub struct Simulation {
     /// The multiple-scattering share of a return below which `"auto"` skips the Monte Carlo
     /// (`multiple_scattering_tolerance`, default [`MULTIPLE_SCATTERING_TOLERANCE`]).
     pub multiple_scattering_tolerance: f64,
+    /// Tally the Monte Carlo returns' derivatives with respect to every layer's absorption,
+    /// molecular and particle scattering and particle extinction, from the same photons
+    /// (`jacobians`; `docs/transport.md`, "Jacobians").
+    pub jacobians: bool,
     /// The Monte Carlo's variance reductions (not in the scene file: defaults, which the
     /// command line and the benchmarks may change).
     pub variance_reduction: VarianceReduction,

@@ -58,6 +58,13 @@ impl Validator<'_> {
         let lines = self.channels(d)?;
         let gates = self.gates(d)?;
         let simulation = self.simulation(d)?;
+        if simulation.jacobians && lidar.polarisation != Polarisation::None {
+            return Err(self.err(
+                &KeyPath::table("simulation").key("jacobians"),
+                "Jacobians are tallied for unpolarised light only: set \
+                 `[lidar] polarisation = \"none\"` or leave `jacobians` out",
+            ));
+        }
         // A first look at the size with what is known (each line is at least one channel and
         // one line sum), so that a huge problem is refused before Mie theory and line-by-line
         // work on each of its channels.
@@ -356,6 +363,7 @@ impl Validator<'_> {
                     self.range(&sec.key("multiple_scattering_tolerance"), v, MS_TOLERANCE)?
                 }
             },
+            jacobians: s.jacobians.unwrap_or(false),
             variance_reduction: VarianceReduction::default(),
         };
         check_count(sim.max_order.into(), 1, 1000)

@@ -145,6 +145,7 @@ impl ShardFile {
                     absorbed: part(2),
                     cut: part(3),
                 },
+                jacobian: Vec::new(),
                 stats,
             }
         })

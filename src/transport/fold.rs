@@ -95,6 +95,7 @@ pub(super) fn pair_covariances(r: &Returns, first: usize, count: usize) -> Vec<f
 pub struct Fold<'p> {
     pub(super) plan: &'p Plan<'p>,
     pub(super) acc: Accumulator,
+    pub(super) jac: Option<super::jacobian::JacFold>,
     pub(super) stats: RunStats,
     pub(super) next: usize,
 }
@@ -123,7 +124,20 @@ impl Fold<'_> {
         for part in batch.flux.parts_mut() {
             part.iter_mut().for_each(|v| *v *= flux_scale);
         }
+        let want = self.plan.setup.jac.as_ref().map_or(0, |js| js.len(&shape));
+        if batch.jacobian.len() != want {
+            return Err(TransportError::Options(format!(
+                "batch {} has {} Jacobian values where the run has {want}: Jacobians are \
+                 traced on one machine (not by shards or MPI ranks)",
+                batch.index,
+                batch.jacobian.len()
+            )));
+        }
         self.acc.add_batch(&batch.bins, &batch.flux);
+        if let Some(j) = &mut self.jac {
+            batch.jacobian.iter_mut().for_each(|v| *v *= scale);
+            j.add_batch(&batch.jacobian);
+        }
         self.stats.add(&batch.stats);
         self.next += 1;
         Ok(())
@@ -189,7 +203,15 @@ impl Fold<'_> {
             }
             (_, combined) => (returns, combined, None),
         };
+        let jacobians = self.jac.as_ref().map(|j| {
+            j.finish(
+                plan.channels.clone(),
+                plan.fov_full_angle_mrad.clone(),
+                plan.range_m.clone(),
+            )
+        });
         Ok(McResult {
+            jacobians,
             returns,
             combined,
             flux,

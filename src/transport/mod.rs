@@ -12,6 +12,7 @@
 mod cone;
 mod crossing;
 mod fold;
+mod jacobian;
 mod photon;
 mod plan;
 mod setup;
@@ -35,6 +36,7 @@ use crate::scene::{BeamProfile, Polarisation, Scene};
 
 pub use fold::Fold;
 use fold::PolarisedLayout;
+pub use jacobian::{JacobianQuantity, Jacobians};
 pub use plan::{BatchTally, Plan, STOP_CHECK_PHOTONS};
 pub(crate) use setup::Setup;
 pub use tally::Flux;
@@ -174,6 +176,9 @@ pub struct McResult {
     pub flux_stderr: Flux,
     /// Co- and cross-polarised returns, when the lidar's light is polarised.
     pub polarised: Option<PolarisedMc>,
+    /// Derivatives of the returns with respect to the layers' properties, when the scene
+    /// asks for them (`[simulation] jacobians`).
+    pub jacobians: Option<Jacobians>,
     /// Counters.
     pub stats: RunStats,
     /// Wall-clock time of the transport \[s\].

@@ -17,6 +17,9 @@ pub struct BatchTally {
     pub flux: Flux,
     /// Counters of the batch.
     pub stats: RunStats,
+    /// The Jacobian tally of the batch (`super::jacobian`; empty unless the scene asks for
+    /// Jacobians), in the same units as `bins`.
+    pub jacobian: Vec<f64>,
 }
 
 /// Photons a batch traces between two looks at its plan's stop flag: a few milliseconds in
@@ -186,6 +189,7 @@ impl<'a> Plan<'a> {
             bins: tracer.bins,
             flux: tracer.flux,
             stats: tracer.stats,
+            jacobian: tracer.jbins,
         }
     }
 
@@ -198,6 +202,14 @@ impl<'a> Plan<'a> {
                 self.fov_order.clone(),
             )
             .with_combinations(self.combinations.clone(), self.combination_pairs.clone()),
+            jac: self.setup.jac.as_ref().map(|js| {
+                super::jacobian::JacFold::new(
+                    js,
+                    self.setup.atm,
+                    self.setup.shape,
+                    self.fov_order.clone(),
+                )
+            }),
             plan: self,
             stats: RunStats::default(),
             next: 0,

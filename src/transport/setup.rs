@@ -70,6 +70,8 @@ pub(crate) struct Setup<'a> {
     /// The aperture seen from close by: where, per layer, the local estimates use the energy
     /// it collects instead of the point-receiver value (`crate::aperture`).
     pub(super) aperture: Aperture,
+    /// The Jacobian tally's layers, when the scene asks for Jacobians (`super::jacobian`).
+    pub(super) jac: Option<super::jacobian::JacSetup>,
 }
 
 impl<'a> Setup<'a> {
@@ -148,6 +150,8 @@ impl<'a> Setup<'a> {
             },
             matrices: atm.matrices.iter().map(|m| (**m).clone()).collect(),
             aperture: Aperture::new(lidar.telescope_diameter_m, atm),
+            jac: (scene.simulation.jacobians && lidar.polarisation == Polarisation::None)
+                .then(|| super::jacobian::JacSetup::new(atm)),
         };
         setup.place_ddis(widest_fov_mrad);
         setup.place_estimates(vr);
@@ -430,6 +434,21 @@ impl Setup<'_> {
     #[inline]
     pub(super) fn order_bin(&self, order: u32) -> usize {
         (order.min(self.max_order + 1) - 1) as usize
+    }
+
+    /// The molecular share of a scattering in `layer` through the angle of cosine μ, channel
+    /// k: σ_mol P_mol(μ)/Σ_j σ_j P_j(μ) (`super::jacobian`); 0 without molecules.
+    pub(super) fn molecular_share(&self, layer: usize, k: usize, mu: f64) -> f64 {
+        let comps = &self.atm.components[layer];
+        let (mut mol, mut all) = (0.0, 0.0);
+        for c in comps {
+            let v = c.sigma_s_per_m[k] * self.atm.phases[c.phase[k] as usize].eval(mu);
+            all += v;
+            if c.molecular {
+                mol += v;
+            }
+        }
+        if all > 0.0 { mol / all } else { 0.0 }
     }
 
     /// Phase function of the scatterer mixture of `layer` for channel k at μ.

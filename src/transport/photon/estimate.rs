@@ -105,8 +105,10 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
             self.score_polarised(layer, dir, omega, base);
             return;
         }
+        let jac = s.jac.is_some();
         for k in 0..nch {
             if self.w[k] == 0.0 {
+                self.le[k] = 0.0;
                 continue;
             }
             let tau = s.tau_to_receiver(x.z, omega.z, d, layer, k, self.ts[k] + self.ta[k]);
@@ -115,6 +117,14 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
                 e *= s.receiver_phase(layer, k, mu_s, band);
             }
             self.bins[base + k] += e;
+            self.le[k] = e;
+        }
+        if jac {
+            // The path's own end: the scattering toward the receiver and the leg to it.
+            let mut v = Virtual::default();
+            v.event(layer, mu_s);
+            v.leg(x.z, s.receiver.z, omega.z, d, layer);
+            self.jac_score(gate, order, annulus, &v);
         }
     }
 
@@ -211,6 +221,7 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
             }
         };
         let base = self.shape.base(gate, s.order_bin(order), annulus);
+        let jac = s.jac.is_some();
         for k in 0..nch {
             if self.w[k] == 0.0 {
                 self.le[k] = 0.0;
@@ -236,10 +247,23 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
                 }
             } else {
                 self.bins[base + k] += e;
+                self.le[k] = e;
             }
         }
         if polarised {
             self.score_polarised(layer, dir, omega, base);
+        } else if jac {
+            // The flight's collision at y, its scattering toward the receiver and the leg to
+            // it; after a DDIS crossing also the virtual scattering that started the flight.
+            let mut v = Virtual::default();
+            if let Some((z0, l0, mu0)) = self.jac_extra {
+                v.point(z0, -1.0 / mu);
+                v.event(l0, mu0);
+            }
+            v.point(y.z, 1.0 / mu);
+            v.event(layer, mu_s);
+            v.leg(y.z, s.receiver.z, omega.z, d, layer);
+            self.jac_score(gate, order, annulus, &v);
         }
     }
 
@@ -317,6 +341,9 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
         }
         let (s_end, _) = s.useful_length(pos, omega, budget, (to_rx, d0));
         std::mem::swap(&mut self.w, &mut self.virt);
+        if s.jac.is_some() {
+            self.jac_extra = Some((pos.z, layer, mu_in));
+        }
         self.score_crossing(
             pos,
             omega,
@@ -328,6 +355,7 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
             layer,
             rng,
         );
+        self.jac_extra = None;
         std::mem::swap(&mut self.w, &mut self.virt);
         if polarised {
             std::mem::swap(&mut self.pol, &mut self.pol_virt);
@@ -433,6 +461,10 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
             let t2 = Turn::new(e_xy, t1.e1, -omega);
             (t1, t2, an.toward(-omega, t2.e1))
         });
+        let jac = s.jac.is_some();
+        if jac {
+            self.le[..nch].fill(0.0);
+        }
         for k in 0..nch {
             if self.w[k] == 0.0 {
                 continue;
@@ -472,8 +504,18 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
                     s.receiver_phase(layer_y, k, mu_y, band),
                 )
             };
-            self.bins[base + k] +=
-                self.w[k] * sigma_y * px * py * factor * (-(tau_xy + tau_back)).exp();
+            let e = self.w[k] * sigma_y * px * py * factor * (-(tau_xy + tau_back)).exp();
+            self.bins[base + k] += e;
+            self.le[k] = e;
+        }
+        if jac && polarised.is_none() {
+            // Both of the estimate's scatterings and its two legs.
+            let mut v = Virtual::default();
+            v.leg(x.z, y.z, e_xy.z, l, p.layer);
+            v.event(p.layer, mu_x);
+            v.event(layer_y, mu_y);
+            v.leg(y.z, s.receiver.z, -omega.z, r, layer_y);
+            self.jac_score(gate, order + 1, a, &v);
         }
     }
 }

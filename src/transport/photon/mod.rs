@@ -48,6 +48,7 @@ mod tests;
 mod walk;
 
 use super::cone::Prev;
+use super::jacobian::{JacState, Virtual};
 use super::stokes::{self, Reduced, Turn};
 use super::tally::{Flux, TallyShape};
 use super::{RunStats, Setup};
@@ -62,6 +63,8 @@ const ROULETTE_SURVIVOR: f64 = 5e-2;
 const MIN_COLLISION_PROBABILITY: f64 = 0.5;
 /// Direction cosines below this are treated as horizontal (the flight stays in its layer).
 const HORIZONTAL: f64 = 1e-12;
+/// The same, for the Jacobian tally's legs.
+pub(super) const HORIZONTAL_MU: f64 = HORIZONTAL;
 
 /// Alignment splitting and the roulette's alignment importance weigh a photon by the phase
 /// function toward the receiver, P(Θ_rx), because a photon turned into a forward peak toward the
@@ -98,6 +101,8 @@ struct PhotonCopy {
     /// Polarised runs: its reference axis and reduced Stokes vectors ([`Tracer::e1`]).
     e1: DVec3,
     pol: Vec<Reduced>,
+    /// Jacobian runs: its path's points and scatterings.
+    jac: JacState,
 }
 
 /// Per-batch state: buffers reused by every photon of the batch.
@@ -133,8 +138,18 @@ pub(crate) struct Tracer<'a, const ONE_CHANNEL: bool> {
     pol_pre: Vec<Reduced>,
     e1_virt: DVec3,
     pol_virt: Vec<Reduced>,
-    /// Scratch: a local estimate's factor per channel, without the scattering matrix.
+    /// Scratch: a local estimate's factor per channel, without the scattering matrix; in
+    /// Jacobian runs, every estimate's score per channel.
     le: Vec<f64>,
+    /// Jacobian runs (`super::jacobian`): the photon's path so far, the batch's tally, the
+    /// state before a scattering that alignment splitting repeats, scratch for molecular
+    /// shares, and the virtual scattering of a DDIS crossing (altitude, layer, cosine of its
+    /// angle).
+    jac: JacState,
+    pub jbins: Vec<f64>,
+    jac_pre: JacState,
+    jac_u: Vec<f64>,
+    jac_extra: Option<(f64, usize, f64)>,
     pub flux: Flux,
     pub stats: RunStats,
     shape: TallyShape,
@@ -173,6 +188,15 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
             e1_virt: DVec3::X,
             pol_virt: vec![[0.0; 3]; nch],
             le: vec![0.0; nch],
+            jac: s.jac.as_ref().map(JacState::new).unwrap_or_default(),
+            jbins: s
+                .jac
+                .as_ref()
+                .map(|j| vec![0.0; j.len(&s.shape)])
+                .unwrap_or_default(),
+            jac_pre: s.jac.as_ref().map(JacState::new).unwrap_or_default(),
+            jac_u: vec![0.0; nch],
+            jac_extra: None,
             flux: Flux::zeros(nch),
             stats: RunStats::default(),
             shape: s.shape,
@@ -220,10 +244,17 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
             self.e1 = e1;
             self.pol.iter_mut().for_each(|x| *x = p);
         }
+        if self.s.jac.is_some() {
+            self.jac.clear();
+            self.jac_depart(self.s.receiver.z, dir.z);
+        }
         self.follow(self.s.receiver, dir, 0.0, 0, None, rng);
         while let Some(copy) = self.split.pop() {
             self.w[..nch].copy_from_slice(&copy.w);
             self.cross_mis = copy.cross_mis;
+            if self.s.jac.is_some() {
+                self.jac.copy_from(&copy.jac);
+            }
             if self.s.analyser.is_some() {
                 self.e1 = copy.e1;
                 self.pol.copy_from_slice(&copy.pol);
@@ -318,6 +349,68 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
             } else {
                 Vec::new()
             },
+            jac: if self.s.jac.is_some() {
+                self.jac.snapshot()
+            } else {
+                JacState::default()
+            },
+        });
+    }
+
+    /// Jacobian runs: the photon leaves altitude z with direction cosine μ.
+    #[inline]
+    fn jac_depart(&mut self, z: f64, mu: f64) {
+        if let Some(js) = &self.s.jac
+            && mu.abs() > HORIZONTAL
+        {
+            self.jac.point(js, self.s.atm, z, -1.0 / mu);
+        }
+    }
+
+    /// Jacobian runs: the photon arrives at altitude z along a leg of direction cosine μ and
+    /// `length` (inside `layer` if horizontal).
+    #[inline]
+    fn jac_arrive(&mut self, z: f64, mu: f64, layer: usize, length: f64) {
+        if let Some(js) = &self.s.jac {
+            if mu.abs() > HORIZONTAL {
+                self.jac.point(js, self.s.atm, z, 1.0 / mu);
+            } else {
+                self.jac.direct(layer, length);
+            }
+        }
+    }
+
+    /// Jacobian runs: the photon scatters in `layer` through the angle of cosine μ.
+    #[inline]
+    fn jac_event(&mut self, layer: usize, mu: f64) {
+        if self.s.jac.is_none() {
+            return;
+        }
+        let nch = self.nch();
+        if self.s.atm.grey_scattering {
+            let u = self.s.molecular_share(layer, 0, mu);
+            self.jac_u[..nch].fill(u);
+        } else {
+            for k in 0..nch {
+                self.jac_u[k] = self.s.molecular_share(layer, k, mu);
+            }
+        }
+        self.jac.event(layer, &self.jac_u[..nch]);
+    }
+
+    /// Jacobian runs: add the estimate whose scores per channel are in `self.le`, of a path of
+    /// `order` scatterings reaching `gate` in `annulus`, with its own last legs `v`.
+    #[inline]
+    fn jac_score(&mut self, gate: usize, order: u32, annulus: usize, v: &Virtual) {
+        let Some(js) = &self.s.jac else { return };
+        let s = self.s;
+        let nch = self.nch();
+        let base = js.base(&self.shape, gate, order, annulus);
+        let score = &self.le[..nch];
+        self.jac.score(&mut self.jbins, base, score);
+        let grey = s.atm.grey_scattering;
+        v.score(js, s.atm, &mut self.jbins, base, score, |l, k, mu| {
+            s.molecular_share(l, if grey { 0 } else { k }, mu)
         });
     }
 

@@ -9,7 +9,7 @@ use super::*;
 impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
     /// Expected surface contribution of a flight that heads for the surface point `hit`; the
     /// uncollided weights are w_k e^{−tmp_k}.
-    pub(super) fn score_surface(&mut self, hit: DVec3, path: f64, order: u32) {
+    pub(super) fn score_surface(&mut self, hit: DVec3, mu_in: f64, path: f64, order: u32) {
         let s = self.s;
         let Some(albedo) = &s.surface else { return };
         let v = s.receiver - hit;
@@ -47,7 +47,15 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
                 self.bins[base + n + k] += 0.5 * e;
             } else {
                 self.bins[base + k] += e;
+                self.le[k] = e;
             }
+        }
+        if s.jac.is_some() {
+            // The flight's arrival at the surface and the leg from it to the receiver.
+            let mut v = Virtual::default();
+            v.point(hit.z, 1.0 / mu_in);
+            v.leg(hit.z, s.receiver.z, omega.z, d, 0);
+            self.jac_score(gate, order, annulus, &v);
         }
     }
 

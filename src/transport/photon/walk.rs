@@ -118,6 +118,7 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
             };
             let collision = self.sample_collision(&walk, &flight, rng);
             self.advance(&mut walk, &collision);
+            self.jac_arrive(walk.pos.z, flight.mu, collision.layer, collision.s_coll);
             if !self.collision_weights(&walk, &flight, &collision, branch) {
                 self.stats.zero_weight += 1;
                 return;
@@ -266,7 +267,7 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
         let ncls = self.ncls();
         if f.end == End::Surface {
             let hit = walk.pos + walk.dir * f.s_end;
-            self.score_surface(hit, walk.path + f.s_end, walk.order + 1);
+            self.score_surface(hit, f.mu, walk.path + f.s_end, walk.order + 1);
             let q = if f.scatters {
                 (f.p_any / ncls as f64).max(MIN_COLLISION_PROBABILITY)
             } else {
@@ -290,6 +291,8 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
                 self.cross_mis = 1.0;
                 self.set_altitude(walk.pos.z);
                 walk.dir = lambertian(rng.random(), rng.random());
+                self.jac_arrive(walk.pos.z, f.mu, 0, f.s_end);
+                self.jac_depart(walk.pos.z, walk.dir.z);
                 // A Lambertian surface reflects unpolarised light.
                 if s.analyser.is_some() {
                     self.e1 = walk.dir.any_orthonormal_vector();
@@ -486,6 +489,9 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
                 self.e1_pre = self.e1;
                 self.pol_pre.copy_from_slice(&self.pol);
             }
+            if s.jac.is_some() {
+                self.jac_pre.copy_from(&self.jac);
+            }
         }
         // DDIS crossing: one more direction drawn about the receiver's, as DDIS draws it,
         // and the crossing estimate along it, combined with the walk's own crossing estimate
@@ -501,8 +507,13 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
                     self.e1 = self.e1_pre;
                     self.pol.copy_from_slice(&self.pol_pre);
                 }
+                if s.jac.is_some() {
+                    self.jac.copy_from(&self.jac_pre);
+                }
             }
             let new_dir = self.scatter_once(walk, site, n_here, ddis_crossing, rng);
+            self.jac_event(layer, walk.dir.dot(new_dir));
+            self.jac_depart(walk.pos.z, new_dir.z);
             if j + 1 < n_split {
                 self.push_copy(walk.pos, new_dir, walk.path, walk.order, site.here);
             } else {

@@ -1,0 +1,611 @@
+//! Jacobians from the same photons: the derivatives of every Monte Carlo return with respect to
+//! each layer's absorption coefficient, molecular and particle scattering coefficients and
+//! particle extinction (at a fixed single-scattering albedo), tallied along the paths that make
+//! the returns (`docs/transport.md`, "Jacobians").
+//!
+//! A return is E = ∫ f(x̄) dx̄ over photon paths x̄; every estimator of the walk, whatever it
+//! samples (free paths on the scattering coefficient, DDIS, the cone and crossing estimates,
+//! splitting, roulette), scores f(x̄)/p(x̄) with multiple-importance weights that sum to one.
+//! The sampling densities do not depend on the layer property θ that is differentiated, or
+//! their dependence is immaterial: ∂E/∂θ = ∫ ∂f/∂θ dx̄ is estimated without bias by scoring
+//! f/p · ∂ln f/∂θ with the same weights (the "differential" or "perturbation" Monte Carlo of
+//! Marchuk et al. 1980, *The Monte Carlo Methods in Atmospheric Optics*, ch. 4). For a path
+//! with legs of length ℓ_L inside layer L and scatterings e in L,
+//!
+//! * absorption:  ∂ln f/∂k_L = −ℓ_L
+//! * scattering of species i: ∂ln f/∂σ_i,L = Σ_e P_i(Θ_e)/Σ_j σ_j P_j(Θ_e) − ℓ_L
+//!
+//! (the collision factor of f is Σ_j σ_j P_j(Θ)/4π, its transmission e^{−∫(k+σ)}).
+//!
+//! **Lengths in O(1) per leg.** With ov_L(z) = clamp(z − b_L, 0, h_L) (the part of layer L
+//! below z), a leg from z_a to z_b with direction cosine μ has ℓ_L = (ov_L(z_b) − ov_L(z_a))/μ,
+//! so a path's ℓ_L is Σ_p a_p ov_L(z_p) over its points, a_p = 1/μ_in − 1/μ_out. A photon
+//! therefore carries, per layer holding a point, Σ a_p and Σ a_p (z_p − b_L); an estimate adds
+//! its score times these into per-layer tallies G and H, and the fold recovers
+//! ℓ-weighted sums for every layer as h_L Σ_{λ>L} G_λ + H_L. An order-1 estimate touches two
+//! layers however many it crosses.
+//!
+//! **Shares.** Per layer the photon also carries its number of scatterings n_L and, per
+//! channel, the molecular share u = σ_mol P_mol(Θ)/Σ_j σ_j P_j(Θ) summed over them; the
+//! particle share is 1 − u. Then ∂ln f/∂σ_mol = U/σ_mol − ℓ, ∂ln f/∂σ_part = (n − U)/σ_part − ℓ
+//! and, at a fixed albedo ω = σ_part/ε_part, ∂ln f/∂ε_part = (n − U)/ε_part − ℓ.
+
+use super::tally::TallyShape;
+use crate::optics::OpticalAtmosphere;
+use crate::returns::Order;
+use crate::stats;
+
+/// Tally quantities per (layer, channel): Σ s·a, Σ s·(a·offset + direct length), Σ s·n, Σ s·U.
+const Q: usize = 4;
+/// Order groups of the tally: single scattering and orders ≥ 2.
+const JORDERS: usize = 2;
+
+/// What a derivative is taken with respect to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum JacobianQuantity {
+    /// The layer's absorption coefficient (gas and particles alike) [1/m].
+    Absorption,
+    /// The layer's molecular (Rayleigh) scattering coefficient [1/m].
+    MolecularScattering,
+    /// The scattering coefficient of the layer's particles, all species in proportion [1/m].
+    ParticleScattering,
+    /// The particles' extinction coefficient at a fixed single-scattering albedo [1/m].
+    ParticleExtinction,
+}
+
+impl JacobianQuantity {
+    /// Every quantity, in the order of [`Jacobians::index`].
+    pub const ALL: [JacobianQuantity; 4] = [
+        JacobianQuantity::Absorption,
+        JacobianQuantity::MolecularScattering,
+        JacobianQuantity::ParticleScattering,
+        JacobianQuantity::ParticleExtinction,
+    ];
+
+    /// The `quantity` column value.
+    pub fn label(self) -> &'static str {
+        match self {
+            JacobianQuantity::Absorption => "absorption",
+            JacobianQuantity::MolecularScattering => "molecular_scattering",
+            JacobianQuantity::ParticleScattering => "particle_scattering",
+            JacobianQuantity::ParticleExtinction => "particle_extinction",
+        }
+    }
+}
+
+/// Derivatives of the Monte Carlo returns with respect to layer properties, with standard
+/// errors from the same batches as the returns: ∂E/∂θ \[J·m\] (energy per unit coefficient
+/// in 1/m) per channel, FOV, gate, order (total, 1, 2+), layer and quantity.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Jacobians {
+    /// Channel names.
+    pub channels: Vec<String>,
+    /// Fields of view (full angles) \[mrad\].
+    pub fov_full_angle_mrad: Vec<f64>,
+    /// Gate centres \[m\].
+    pub range_m: Vec<f64>,
+    /// Order bins: total, 1 and 2+.
+    pub orders: Vec<Order>,
+    /// Bottom and top of each layer of the optical atmosphere \[m\].
+    pub layer_bottom_m: Vec<f64>,
+    /// Top of each layer \[m\].
+    pub layer_top_m: Vec<f64>,
+    /// ∂E/∂θ \[J·m\], index [`Jacobians::index`].
+    pub value: Vec<f64>,
+    /// Standard error of `value` \[J·m\].
+    pub stderr: Vec<f64>,
+    /// Whether a derivative exists, index `(layer * 4 + quantity) * channels + channel`:
+    /// absorption always; scattering and extinction where the layer has that scatterer.
+    pub defined: Vec<bool>,
+}
+
+impl Jacobians {
+    /// Flat index of (channel, FOV, gate, order bin, layer, quantity).
+    pub fn index(
+        &self,
+        channel: usize,
+        fov: usize,
+        gate: usize,
+        order: usize,
+        layer: usize,
+        quantity: usize,
+    ) -> usize {
+        ((((channel * self.fov_full_angle_mrad.len() + fov) * self.range_m.len() + gate)
+            * self.orders.len()
+            + order)
+            * self.layer_bottom_m.len()
+            + layer)
+            * Q
+            + quantity
+    }
+
+    /// Whether the derivative of `quantity` in `layer` exists for `channel`.
+    pub fn is_defined(&self, channel: usize, layer: usize, quantity: usize) -> bool {
+        self.defined[(layer * Q + quantity) * self.channels.len() + channel]
+    }
+
+    /// One derivative and its standard error, if defined.
+    pub fn get(
+        &self,
+        channel: usize,
+        fov: usize,
+        gate: usize,
+        order: Order,
+        layer: usize,
+        quantity: JacobianQuantity,
+    ) -> Option<(f64, f64)> {
+        let o = self.orders.iter().position(|x| *x == order)?;
+        let q = JacobianQuantity::ALL.iter().position(|x| *x == quantity)?;
+        if !self.is_defined(channel, layer, q) {
+            return None;
+        }
+        let i = self.index(channel, fov, gate, o, layer, q);
+        Some((self.value[i], self.stderr[i]))
+    }
+}
+
+/// The layers' geometry and scatterers as the Jacobian tally needs them.
+#[derive(Debug, Clone)]
+pub(crate) struct JacSetup {
+    pub n_layers: usize,
+    nch: usize,
+    edges_m: Vec<f64>,
+    /// Index of the molecular component of each layer, if it has one.
+    pub molecular: Vec<Option<usize>>,
+}
+
+impl JacSetup {
+    pub fn new(atm: &OpticalAtmosphere) -> Self {
+        JacSetup {
+            n_layers: atm.n_layers(),
+            nch: atm.n_channels,
+            edges_m: atm.edges_m.clone(),
+            molecular: atm
+                .components
+                .iter()
+                .map(|c| c.iter().position(|x| x.molecular))
+                .collect(),
+        }
+    }
+
+    /// Values per (gate, order group, annulus): (layers + the region above them) × Q × channels.
+    #[inline]
+    fn block(&self) -> usize {
+        (self.n_layers + 1) * Q * self.nch
+    }
+
+    /// Length of a batch's Jacobian tally.
+    pub fn len(&self, shape: &TallyShape) -> usize {
+        shape.n_gates * JORDERS * shape.n_fov * self.block()
+    }
+
+    /// Start of the block of (gate, order, annulus).
+    #[inline]
+    pub fn base(&self, shape: &TallyShape, gate: usize, order: u32, annulus: usize) -> usize {
+        let jo = usize::from(order >= 2);
+        ((gate * JORDERS + jo) * shape.n_fov + annulus) * self.block()
+    }
+
+    /// Where altitude z is: its layer (n_layers above the top) and its height above the
+    /// layer's bottom; None below the bottom (where ov_L(z) = 0 for every layer).
+    #[inline]
+    pub fn locate(&self, atm: &OpticalAtmosphere, z: f64) -> Option<(usize, f64)> {
+        let (bottom, top) = (self.edges_m[0], self.edges_m[self.n_layers]);
+        if !(z > bottom) {
+            return None;
+        }
+        if z >= top {
+            return Some((self.n_layers, 0.0));
+        }
+        let l = atm.layer_of(z);
+        Some((l, z - self.edges_m[l]))
+    }
+}
+
+/// One layer's entry of a photon's Jacobian state.
+#[derive(Debug, Clone, Copy)]
+struct Entry {
+    layer: usize,
+    /// Σ a_p over the photon's points in the layer.
+    a: f64,
+    /// Σ a_p (z_p − b_L), plus the lengths of horizontal legs in the layer.
+    b: f64,
+    /// Scatterings in the layer.
+    n: f64,
+}
+
+/// What a photon carries for the Jacobians: per layer holding one of its points (sparse).
+#[derive(Debug, Clone, Default)]
+pub(crate) struct JacState {
+    entries: Vec<Entry>,
+    /// Molecular share summed over the layer's scatterings, per channel (entry-major).
+    u: Vec<f64>,
+    /// Entry of each layer (n_layers + 1 slots), u32::MAX where none.
+    slot: Vec<u32>,
+    nch: usize,
+}
+
+impl JacState {
+    pub fn new(js: &JacSetup) -> Self {
+        JacState {
+            entries: Vec::new(),
+            u: Vec::new(),
+            slot: vec![u32::MAX; js.n_layers + 1],
+            nch: js.nch,
+        }
+    }
+
+    pub fn clear(&mut self) {
+        for e in &self.entries {
+            self.slot[e.layer] = u32::MAX;
+        }
+        self.entries.clear();
+        self.u.clear();
+    }
+
+    /// Become a copy of `other` (a state of the same run).
+    pub fn copy_from(&mut self, other: &JacState) {
+        self.clear();
+        self.entries.extend_from_slice(&other.entries);
+        self.u.extend_from_slice(&other.u);
+        for (i, e) in self.entries.iter().enumerate() {
+            self.slot[e.layer] = i as u32;
+        }
+    }
+
+    /// A copy without the slot table (what a stacked photon keeps).
+    pub fn snapshot(&self) -> JacState {
+        JacState {
+            entries: self.entries.clone(),
+            u: self.u.clone(),
+            slot: Vec::new(),
+            nch: self.nch,
+        }
+    }
+
+    #[inline]
+    fn entry(&mut self, layer: usize) -> usize {
+        let s = self.slot[layer];
+        if s != u32::MAX {
+            return s as usize;
+        }
+        self.entries.push(Entry {
+            layer,
+            a: 0.0,
+            b: 0.0,
+            n: 0.0,
+        });
+        self.u.extend(std::iter::repeat_n(0.0, self.nch));
+        let i = self.entries.len() - 1;
+        self.slot[layer] = i as u32;
+        i
+    }
+
+    /// A point of the path at altitude z with coefficient `coef` (±1/μ of the legs it joins).
+    #[inline]
+    pub fn point(&mut self, js: &JacSetup, atm: &OpticalAtmosphere, z: f64, coef: f64) {
+        if let Some((l, off)) = js.locate(atm, z) {
+            let i = self.entry(l);
+            self.entries[i].a += coef;
+            self.entries[i].b += coef * off;
+        }
+    }
+
+    /// A horizontal leg of `length` inside `layer`.
+    #[inline]
+    pub fn direct(&mut self, layer: usize, length: f64) {
+        let i = self.entry(layer);
+        self.entries[i].b += length;
+    }
+
+    /// A scattering in `layer` with molecular shares `u` (one per channel).
+    #[inline]
+    pub fn event(&mut self, layer: usize, u: &[f64]) {
+        let i = self.entry(layer);
+        self.entries[i].n += 1.0;
+        let nch = self.nch;
+        for (d, s) in self.u[i * nch..(i + 1) * nch].iter_mut().zip(u) {
+            *d += s;
+        }
+    }
+
+    /// Add `score[k]` times the state to the tally block at `base`.
+    #[inline]
+    pub fn score(&self, jbins: &mut [f64], base: usize, score: &[f64]) {
+        let nch = self.nch;
+        for (i, e) in self.entries.iter().enumerate() {
+            let o = base + e.layer * Q * nch;
+            let u = &self.u[i * nch..(i + 1) * nch];
+            for (k, s) in score.iter().enumerate().take(nch) {
+                if *s == 0.0 {
+                    continue;
+                }
+                jbins[o + k] += s * e.a;
+                jbins[o + nch + k] += s * e.b;
+                jbins[o + 2 * nch + k] += s * e.n;
+                jbins[o + 3 * nch + k] += s * u[k];
+            }
+        }
+    }
+}
+
+/// An estimate's own part of the path, which the photon does not carry: its last legs to the
+/// receiver and the scatterings that turn it there.
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct Virtual {
+    points: [(f64, f64); 6],
+    np: usize,
+    direct: [(usize, f64); 2],
+    nd: usize,
+    events: [(usize, f64); 2],
+    ne: usize,
+}
+
+impl Virtual {
+    /// A leg from altitude `z_from` to `z_to` with direction cosine `mu` and `length`, in
+    /// `layer` if it is horizontal.
+    #[inline]
+    pub fn leg(&mut self, z_from: f64, z_to: f64, mu: f64, length: f64, layer: usize) {
+        if mu.abs() <= super::photon::HORIZONTAL_MU {
+            self.direct[self.nd] = (layer, length);
+            self.nd += 1;
+        } else {
+            self.point(z_from, -1.0 / mu);
+            self.point(z_to, 1.0 / mu);
+        }
+    }
+
+    /// One point with its coefficient.
+    #[inline]
+    pub fn point(&mut self, z: f64, coef: f64) {
+        self.points[self.np] = (z, coef);
+        self.np += 1;
+    }
+
+    /// A scattering in `layer` through the angle whose cosine is `mu`.
+    #[inline]
+    pub fn event(&mut self, layer: usize, mu: f64) {
+        self.events[self.ne] = (layer, mu);
+        self.ne += 1;
+    }
+
+    /// Add `score[k]` times these terms to the tally block at `base`; `share(layer, k, mu)`
+    /// gives a scattering's molecular share.
+    #[inline]
+    pub fn score(
+        &self,
+        js: &JacSetup,
+        atm: &OpticalAtmosphere,
+        jbins: &mut [f64],
+        base: usize,
+        score: &[f64],
+        share: impl Fn(usize, usize, f64) -> f64,
+    ) {
+        let nch = js.nch;
+        for &(z, coef) in &self.points[..self.np] {
+            let Some((l, off)) = js.locate(atm, z) else {
+                continue;
+            };
+            let o = base + l * Q * nch;
+            for (k, s) in score.iter().enumerate().take(nch) {
+                jbins[o + k] += s * coef;
+                jbins[o + nch + k] += s * coef * off;
+            }
+        }
+        for &(l, length) in &self.direct[..self.nd] {
+            let o = base + l * Q * nch;
+            for (k, s) in score.iter().enumerate().take(nch) {
+                jbins[o + nch + k] += s * length;
+            }
+        }
+        for &(l, mu) in &self.events[..self.ne] {
+            let o = base + l * Q * nch;
+            for (k, s) in score.iter().enumerate().take(nch) {
+                if *s == 0.0 {
+                    continue;
+                }
+                jbins[o + 2 * nch + k] += s;
+                jbins[o + 3 * nch + k] += s * share(l, k, mu);
+            }
+        }
+    }
+}
+
+/// Running means and M2 over batches of the Jacobians (reported layout: channel, FOV, gate,
+/// order total/1/2+, layer, quantity).
+pub(crate) struct JacFold {
+    js: JacSetup,
+    shape: TallyShape,
+    fov_of_annulus: Vec<usize>,
+    thickness_m: Vec<f64>,
+    /// Per (layer, channel): 1/σ_mol, 1/σ_part, 1/ε_part (0 where absent).
+    inv: Vec<[f64; 3]>,
+    n_batches: usize,
+    mean: Vec<f64>,
+    m2: Vec<f64>,
+    scale: Vec<f64>,
+    scratch: Vec<f64>,
+}
+
+impl JacFold {
+    pub fn new(
+        js: &JacSetup,
+        atm: &OpticalAtmosphere,
+        shape: TallyShape,
+        fov_of_annulus: Vec<usize>,
+    ) -> Self {
+        let (nl, nch) = (js.n_layers, js.nch);
+        let mut inv = vec![[0.0; 3]; nl * nch];
+        for l in 0..nl {
+            for k in 0..nch {
+                let (mut mol, mut part, mut ext) = (0.0, 0.0, 0.0);
+                for (c, comp) in atm.components[l].iter().enumerate() {
+                    if js.molecular[l] == Some(c) {
+                        mol += comp.sigma_s_per_m[k];
+                    } else {
+                        part += comp.sigma_s_per_m[k];
+                        ext += comp.sigma_s_per_m[k] + comp.sigma_a_per_m[k];
+                    }
+                }
+                let r = |x: f64| if x > 0.0 { 1.0 / x } else { 0.0 };
+                inv[l * nch + k] = [r(mol), r(part), r(ext)];
+            }
+        }
+        let n = nch * shape.n_fov * shape.n_gates * 3 * nl * Q;
+        JacFold {
+            thickness_m: (0..nl).map(|l| js.edges_m[l + 1] - js.edges_m[l]).collect(),
+            js: js.clone(),
+            shape,
+            fov_of_annulus,
+            inv,
+            n_batches: 0,
+            mean: vec![0.0; n],
+            m2: vec![0.0; n],
+            scale: vec![0.0; n],
+            scratch: vec![0.0; n],
+        }
+    }
+
+    #[inline]
+    fn reported(&self, k: usize, fov: usize, gate: usize, order: usize, layer: usize) -> usize {
+        let s = &self.shape;
+        ((((k * s.n_fov + fov) * s.n_gates + gate) * 3 + order) * self.js.n_layers + layer) * Q
+    }
+
+    /// Fold one batch's tally (already in energy per pulse).
+    pub fn add_batch(&mut self, jbins: &[f64]) {
+        let s = self.shape;
+        let (nl, nch) = (self.js.n_layers, self.js.nch);
+        let block = self.js.block();
+        self.scratch.iter_mut().for_each(|v| *v = 0.0);
+        let mut acc = vec![0.0; block];
+        for gate in 0..s.n_gates {
+            for jo in 0..JORDERS {
+                acc.iter_mut().for_each(|v| *v = 0.0);
+                for a in 0..s.n_fov {
+                    let start = ((gate * JORDERS + jo) * s.n_fov + a) * block;
+                    for (d, v) in acc.iter_mut().zip(&jbins[start..start + block]) {
+                        *d += v;
+                    }
+                    let fov = self.fov_of_annulus[a];
+                    for k in 0..nch {
+                        // Σ over the regions above layer L of G, from the top down.
+                        let mut above = acc[nl * Q * nch + k];
+                        for l in (0..nl).rev() {
+                            let o = l * Q * nch;
+                            let (g, h, n, u) = (
+                                acc[o + k],
+                                acc[o + nch + k],
+                                acc[o + 2 * nch + k],
+                                acc[o + 3 * nch + k],
+                            );
+                            let j_abs = -(self.thickness_m[l] * above + h);
+                            above += g;
+                            let [im, ip, ie] = self.inv[l * nch + k];
+                            let vals = [
+                                j_abs,
+                                u * im + j_abs,
+                                (n - u) * ip + j_abs,
+                                (n - u) * ie + j_abs,
+                            ];
+                            let r1 = self.reported(k, fov, gate, 1 + jo, l);
+                            let r0 = self.reported(k, fov, gate, 0, l);
+                            for (q, v) in vals.iter().enumerate() {
+                                self.scratch[r1 + q] = *v;
+                                self.scratch[r0 + q] += *v;
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        let n = self.n_batches + 1;
+        for (i, v) in self.scratch.iter().enumerate() {
+            stats::welford_add_scaled(
+                &mut self.mean[i],
+                &mut self.m2[i],
+                &mut self.scale[i],
+                n,
+                *v,
+            );
+        }
+        self.n_batches = n;
+    }
+
+    /// The Jacobians with their standard errors.
+    pub fn finish(
+        &self,
+        channels: Vec<String>,
+        fov_full_angle_mrad: Vec<f64>,
+        range_m: Vec<f64>,
+    ) -> Jacobians {
+        let (nl, nch) = (self.js.n_layers, self.js.nch);
+        let mut defined = vec![false; nl * Q * nch];
+        for l in 0..nl {
+            for k in 0..nch {
+                let [im, ip, ie] = self.inv[l * nch + k];
+                for (q, ok) in [true, im > 0.0, ip > 0.0, ie > 0.0].into_iter().enumerate() {
+                    defined[(l * Q + q) * nch + k] = ok;
+                }
+            }
+        }
+        let n = self.n_batches;
+        Jacobians {
+            channels,
+            fov_full_angle_mrad,
+            range_m,
+            orders: vec![Order::Total, Order::Exactly(1), Order::AtLeast(2)],
+            layer_bottom_m: self.js.edges_m[..nl].to_vec(),
+            layer_top_m: self.js.edges_m[1..=nl].to_vec(),
+            value: self.mean.clone(),
+            stderr: (0..self.m2.len())
+                .map(|i| stats::std_error_scaled(self.m2[i], self.scale[i], n))
+                .collect(),
+            defined,
+        }
+    }
+}
+
+/// The header line of `jacobians.csv`.
+pub const CSV_HEADER: &str = "source,channel,fov_full_angle_mrad,range_m,order,layer,\
+layer_bottom_m,layer_top_m,quantity,derivative_j_m,stderr_j_m";
+
+impl Jacobians {
+    /// `jacobians.csv`: one row per defined derivative, ordered by channel, FOV, gate, order,
+    /// layer and quantity; ∂E/∂θ in J per (1/m), i.e. J·m.
+    pub fn to_csv(&self) -> String {
+        use crate::output::{csv_field, csv_number};
+        use std::fmt::Write as _;
+        let mut out = String::with_capacity(1 << 16);
+        out.push_str(CSV_HEADER);
+        out.push('\n');
+        let labels: Vec<String> = self.orders.iter().map(|o| o.label()).collect();
+        for (c, ch) in self.channels.iter().enumerate() {
+            let ch = csv_field(ch);
+            for (f, fov) in self.fov_full_angle_mrad.iter().enumerate() {
+                for (g, r) in self.range_m.iter().enumerate() {
+                    for (o, label) in labels.iter().enumerate() {
+                        for l in 0..self.layer_bottom_m.len() {
+                            for (q, quantity) in JacobianQuantity::ALL.iter().enumerate() {
+                                if !self.is_defined(c, l, q) {
+                                    continue;
+                                }
+                                let i = self.index(c, f, g, o, l, q);
+                                let _ = writeln!(
+                                    out,
+                                    "mc,{ch},{fov},{r},{label},{l},{},{},{},{:.9e},{:.9e}",
+                                    self.layer_bottom_m[l],
+                                    self.layer_top_m[l],
+                                    quantity.label(),
+                                    csv_number(self.value[i]),
+                                    csv_number(self.stderr[i])
+                                );
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        out
+    }
+}
