@@ -151,7 +151,7 @@ def layer_lines(case, k, lo, hi, ext, ssa, phase):
 def simulation_block(max_order):
     return ["[simulation]", "photons = 1000000", "seed = 1", f"max_order = {max_order}",
             "# Issue 40: per-layer Jacobians are not in lidarsim yet; the lead switches them on here.",
-            "# jacobians = true", ""]
+            "jacobians = true", ""]
 
 
 def main():
