@@ -15,8 +15,10 @@
 //! **Conventions.** CF-1.8 (Eaton et al., *NetCDF Climate and Forecast (CF) Metadata
 //! Conventions*, version 1.8, 2020): every variable has `units` and `long_name`, and a
 //! `standard_name` where the CF standard-name table (version 93) has one that fits
-//! (`dry_atmosphere_mole_fraction_of_carbon_dioxide` / `_of_methane`); range, field of view,
-//! wavenumber, received energy and photo-electrons have none. Range gates have `bounds` (§7.1); an
+//! (`dry_atmosphere_mole_fraction_of_carbon_dioxide` / `_of_methane`, and
+//! `volume_attenuated_backwards_scattering_function_in_air` for the attenuated backscatter, as
+//! COSP's CALIPSO simulator writes it); range, field of view, wavenumber, received energy,
+//! range-corrected signal and photo-electrons have none. Range gates have `bounds` (§7.1); an
 //! estimate names its standard error in `ancillary_variables` (§3.4); a bin with no value
 //! holds `_FillValue` (§2.5.1; the CSV writes those as empty fields). No file holds `NaN` or
 //! `inf`: a variable without `_FillValue` (a coordinate, bounds, a count) that holds one is
@@ -594,6 +596,14 @@ fn backscatter_variables(
             .fill();
         if n % 2 == 0 {
             var.attrs([("ancillary_variables", NAMES[n + 1].0)]);
+        }
+        if n == 0 {
+            // CF's name for β′ (the backscatter attenuated by the two-way transmission); with a
+            // field of view narrower than the beam it also holds the overlap, as a lidar's does.
+            var.attrs([(
+                "standard_name",
+                "volume_attenuated_backwards_scattering_function_in_air",
+            )]);
         }
     }
     Ok(())

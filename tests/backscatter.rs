@@ -253,8 +253,7 @@ fn c1_backscatter_rows_and_monte_carlo_order_one_against_analytic() {
             .unwrap();
     let last: Vec<f64> = table
         .lines()
-        .filter(|l| !l.trim().is_empty() && !l.trim_start().starts_with('#'))
-        .next_back()
+        .rfind(|l| !l.trim().is_empty() && !l.trim_start().starts_with('#'))
         .unwrap()
         .split(',')
         .map(|f| num(f.trim()))
