@@ -14,6 +14,7 @@
 //! | optical atmosphere | [`optics`] | [`optics::OpticalAtmosphere`], the one input of transport |
 //! | Monte Carlo | [`transport`] | [`returns::Returns`] by channel, FOV, gate and order |
 //! | analytic single scatter | [`lidar_eq`] | [`returns::Returns`], order 1 |
+//! | attenuated backscatter | [`backscatter`] | β′ and the range-corrected signal of returns |
 //! | the aperture seen from close by | [`aperture`] | the factors both estimators share |
 //! | what a scene does not need | [`skip`] | whether the Monte Carlo runs, and why |
 //! | retrievals | [`retrieval`] | IPDA and DIAL [`retrieval::Product`]s against the truth |
@@ -66,6 +67,7 @@
 
 pub mod aperture;
 pub mod atmosphere;
+pub mod backscatter;
 pub mod benchmark;
 pub mod constants;
 pub mod digest;

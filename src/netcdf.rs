@@ -15,8 +15,10 @@
 //! **Conventions.** CF-1.8 (Eaton et al., *NetCDF Climate and Forecast (CF) Metadata
 //! Conventions*, version 1.8, 2020): every variable has `units` and `long_name`, and a
 //! `standard_name` where the CF standard-name table (version 93) has one that fits
-//! (`dry_atmosphere_mole_fraction_of_carbon_dioxide` / `_of_methane`); range, field of view,
-//! wavenumber, received energy and photo-electrons have none. Range gates have `bounds` (§7.1); an
+//! (`dry_atmosphere_mole_fraction_of_carbon_dioxide` / `_of_methane`, and
+//! `volume_attenuated_backwards_scattering_function_in_air` for the attenuated backscatter, as
+//! COSP's CALIPSO simulator writes it); range, field of view, wavenumber, received energy,
+//! range-corrected signal and photo-electrons have none. Range gates have `bounds` (§7.1); an
 //! estimate names its standard error in `ancillary_variables` (§3.4); a bin with no value
 //! holds `_FillValue` (§2.5.1; the CSV writes those as empty fields). No file holds `NaN` or
 //! `inf`: a variable without `_FillValue` (a coordinate, bounds, a count) that holds one is
@@ -86,6 +88,10 @@ pub struct RunAttributes {
 pub struct RunFile<'a> {
     /// The sets of line returns of `returns.csv`, in its order (Monte Carlo, then analytic).
     pub returns: &'a [&'a Returns],
+    /// The lidar constant C = E₀ η A_tel of each channel of the returns \[J m²\]
+    /// ([`crate::backscatter`]): with it the file holds `backscatter.csv`'s attenuated
+    /// backscatter and range-corrected signal; `None`, only the energies.
+    pub lidar_constant_j_m2: Option<&'a [f64]>,
     /// The range gates of the returns (for the gate edges).
     pub gates: &'a Gates,
     /// The laser lines (each channel's wavenumber, where a channel is one of them).
@@ -126,8 +132,17 @@ pub fn run_dataset(run: &RunFile) -> Result<Dataset, NetcdfError> {
     globals(&mut nc, run.attributes);
     coordinates(&mut nc, &grid, run)?;
     returns_variables(&mut nc, &grid, run.returns);
+    if let Some(constants) = run.lidar_constant_j_m2 {
+        backscatter_variables(&mut nc, &grid, run, constants)?;
+    }
     if !run.polarised.is_empty() {
-        polarised_variables(&mut nc, &grid, run.polarised)?;
+        polarised_variables(
+            &mut nc,
+            &grid,
+            run.polarised,
+            run.lidar_constant_j_m2,
+            run.gates,
+        )?;
     }
     if !run.signals.is_empty() {
         signal_variables(&mut nc, &grid, run.signals)?;
@@ -504,6 +519,96 @@ fn returns_variables(nc: &mut Dataset, grid: &Grid, sets: &[&Returns]) {
         .fill();
 }
 
+/// `backscatter.csv`'s numbers ([`crate::backscatter`]): the lidar constant of each channel,
+/// the attenuated backscatter β′ = E r₁ r₂/(C Δr) and the range-corrected signal E r_c² of
+/// every bin of the returns, with their standard errors.
+fn backscatter_variables(
+    nc: &mut Dataset,
+    grid: &Grid,
+    run: &RunFile,
+    constants: &[f64],
+) -> Result<(), NetcdfError> {
+    if constants.len() != grid.channels.len() {
+        return Err(NetcdfError::Layout(format!(
+            "{} lidar constants for {} channels",
+            constants.len(),
+            grid.channels.len()
+        )));
+    }
+    const NAMES: [(&str, &str, &str); 4] = [
+        (
+            "attenuated_backscatter_per_m_sr",
+            "attenuated backscatter coefficient of the range gate, beta' = E r1 r2 / (C (r2 - r1)): the 1/r^2-weighted gate mean of beta T^2 O (lidar_constant_j_m2 is C; the overlap O is not in C)",
+            "m-1 sr-1",
+        ),
+        (
+            "attenuated_backscatter_stderr_per_m_sr",
+            "standard error of attenuated_backscatter_per_m_sr (0 for analytic returns)",
+            "m-1 sr-1",
+        ),
+        (
+            "range_corrected_signal_j_m2",
+            "range-corrected signal E r^2, r the centre of the range gate",
+            "J m2",
+        ),
+        (
+            "range_corrected_signal_stderr_j_m2",
+            "standard error of range_corrected_signal_j_m2 (0 for analytic returns)",
+            "J m2",
+        ),
+    ];
+    let mut values: Vec<Vec<f64>> = vec![vec![f64::NAN; grid.len()]; NAMES.len()];
+    for (s, r) in run.returns.iter().enumerate() {
+        let b = crate::backscatter::Backscatter::of(r, run.gates.width_m, constants);
+        for (o, order) in r.orders.iter().enumerate() {
+            let go = Grid::position(&grid.orders, "order", &order.label())?;
+            for c in 0..grid.channels.len() {
+                for f in 0..grid.fov_full_angle_mrad.len() {
+                    for g in 0..grid.range_m.len() {
+                        let i = b.index(c, f, g, o);
+                        let j = grid.index(s, c, f, g, go);
+                        for (v, x) in values.iter_mut().zip([
+                            &b.attenuated_backscatter_per_m_sr,
+                            &b.attenuated_backscatter_stderr_per_m_sr,
+                            &b.range_corrected_signal_j_m2,
+                            &b.range_corrected_signal_stderr_j_m2,
+                        ]) {
+                            v[j] = x[i];
+                        }
+                    }
+                }
+            }
+        }
+    }
+    nc.f64("lidar_constant_j_m2", &["channel"], constants.to_vec())
+        .attrs([
+            (
+                "long_name",
+                "lidar constant C = pulse energy x receiver optical efficiency x telescope area (without the overlap)",
+            ),
+            ("units", "J m2"),
+        ])
+        .fill();
+    for (n, ((name, long_name, units), v)) in NAMES.into_iter().zip(values).enumerate() {
+        let var = nc
+            .f64(name, &GRID_DIMS, v)
+            .attrs([("long_name", long_name), ("units", units)])
+            .fill();
+        if n % 2 == 0 {
+            var.attrs([("ancillary_variables", NAMES[n + 1].0)]);
+        }
+        if n == 0 {
+            // CF's name for β′ (the backscatter attenuated by the two-way transmission); with a
+            // field of view narrower than the beam it also holds the overlap, as a lidar's does.
+            var.attrs([(
+                "standard_name",
+                "volume_attenuated_backwards_scattering_function_in_air",
+            )]);
+        }
+    }
+    Ok(())
+}
+
 /// With polarised light: the co- and cross-polarised returns on a last dimension
 /// `polarisation` (`co`, `cross`), and the depolarisation ratio with its standard error
 /// (`depolarisation.csv`'s numbers).
@@ -511,6 +616,8 @@ fn polarised_variables(
     nc: &mut Dataset,
     grid: &Grid,
     sets: &[PolarisedSet],
+    constants: Option<&[f64]>,
+    gates: &Gates,
 ) -> Result<(), NetcdfError> {
     nc.dim("polarisation", 2);
     nc.text("polarisation", "polarisation", &["co".to_string(), "cross".to_string()])
@@ -521,6 +628,13 @@ fn polarised_variables(
     let n = grid.len();
     let (mut energy, mut stderr) = (vec![f64::NAN; 2 * n], vec![f64::NAN; 2 * n]);
     let (mut delta, mut delta_se) = (vec![f64::NAN; n], vec![f64::NAN; n]);
+    // β′ of each part: the energy times the factor of its channel and gate (Eq. B1).
+    let (mut beta, mut beta_se) = (vec![f64::NAN; 2 * n], vec![f64::NAN; 2 * n]);
+    let factor = |c: usize, g: usize| {
+        constants.and_then(|k| k.get(c)).map_or(f64::NAN, |k| {
+            crate::backscatter::backscatter_factor(grid.range_m[g], gates.width_m, *k)
+        })
+    };
     for set in sets {
         let s = Grid::position(&grid.sources, "source", set.co.source.label())?;
         for (o, order) in set.co.orders.iter().enumerate() {
@@ -530,9 +644,12 @@ fn polarised_variables(
                     for g in 0..grid.range_m.len() {
                         let i = set.co.index(c, f, g, o);
                         let j = grid.index(s, c, f, g, go);
+                        let b = factor(c, g);
                         for (p, part) in [set.co, set.cross].iter().enumerate() {
                             energy[2 * j + p] = part.energy_j[i];
                             stderr[2 * j + p] = part.stderr_j[i];
+                            beta[2 * j + p] = b * part.energy_j[i];
+                            beta_se[2 * j + p] = b * part.stderr_j[i];
                         }
                         (delta[j], delta_se[j]) =
                             crate::returns::depolarisation_ratio(set.co, set.cross, set.cov_j2, i);
@@ -565,6 +682,34 @@ fn polarised_variables(
             ("units", "J"),
         ])
         .fill();
+    if constants.is_some() {
+        nc.f64("polarised_attenuated_backscatter_per_m_sr", &dims, beta)
+            .attrs([
+                (
+                    "long_name",
+                    "attenuated_backscatter_per_m_sr in each polarisation (co + cross = attenuated_backscatter_per_m_sr)",
+                ),
+                ("units", "m-1 sr-1"),
+                (
+                    "ancillary_variables",
+                    "polarised_attenuated_backscatter_stderr_per_m_sr",
+                ),
+            ])
+            .fill();
+        nc.f64(
+            "polarised_attenuated_backscatter_stderr_per_m_sr",
+            &dims,
+            beta_se,
+        )
+        .attrs([
+            (
+                "long_name",
+                "standard error of polarised_attenuated_backscatter_per_m_sr",
+            ),
+            ("units", "m-1 sr-1"),
+        ])
+        .fill();
+    }
     nc.f64("depolarisation_ratio", &GRID_DIMS, delta)
         .attrs([
             (

@@ -10,7 +10,8 @@ The file is opened twice: with xarray (as users read it: CF decoding, `_FillValu
 NaN, char arrays as strings) and with netCDF4-python (the netCDF-C library's own reader, for the
 attributes and the raw fill values). The CSV files are read with Python's csv module. Checked:
 
-* every row of returns.csv, signals.csv and retrieval.csv has its value in the file, and every
+* every row of returns.csv, backscatter.csv, signals.csv and retrieval.csv has its value in
+  the file (backscatter.csv's lidar constant too, by channel), and every
   bin of the file that holds a value has its row (no extra numbers). returns.csv and
   signals.csv print 10 significant digits (`{:.9e}`), so a value of the file is compared as
   Python's `'%.9e'` prints it (both round correctly, half to even): exact equality of the text.
@@ -101,6 +102,17 @@ def check_grid_file(ds, csv_path, columns, what):
         if extra.any():
             fail(f"{c}: {int(extra.sum())} values in run.nc that {what} does not have")
     return len(rows)
+
+
+def check_lidar_constant(ds, csv_path):
+    """backscatter.csv's lidar_constant_j_m2 of every row is run.nc's of its channel."""
+    header, rows = read_csv(csv_path)
+    ch, col = header.index("channel"), header.index("lidar_constant_j_m2")
+    pos = positions(ds, "channel")
+    values = ds["lidar_constant_j_m2"].values
+    for n, row in enumerate(rows, start=2):
+        if not same_e9(row[col], float(values[pos[row[ch]]])):
+            fail(f"{csv_path} line {n}: lidar constant {row[col]}, run.nc {values[pos[row[ch]]]!r}")
 
 
 UNITS = {"ppm": "1e-6", "molecules/m2": "m-2", "molecules/m3": "m-3"}
@@ -292,6 +304,18 @@ def main(args):
         check_attributes(path, out, None if scene == "-" else scene)
         with xr.open_dataset(path) as ds:
             n_ret = check_grid_file(ds, f"{out}/returns.csv", ["energy_j", "stderr_j"], "returns.csv")
+            check_grid_file(
+                ds,
+                f"{out}/backscatter.csv",
+                [
+                    "attenuated_backscatter_per_m_sr",
+                    "attenuated_backscatter_stderr_per_m_sr",
+                    "range_corrected_signal_j_m2",
+                    "range_corrected_signal_stderr_j_m2",
+                ],
+                "backscatter.csv",
+            )
+            check_lidar_constant(ds, f"{out}/backscatter.csv")
             n_sig = n_prod = 0
             try:
                 open(f"{out}/signals.csv").close()

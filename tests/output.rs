@@ -104,6 +104,7 @@ fn a_run_replaces_every_file_of_an_earlier_run() {
     assert_eq!(
         file_names(&root.path().join("out")),
         [
+            "backscatter.csv",
             "notes.txt",
             "retrieval.csv",
             "returns.csv",
@@ -315,8 +316,8 @@ fn retrieval_csv_holds_no_nan_and_leaves_what_cannot_be_computed_empty() {
     // And no other file of the run holds NaN or inf either.
     assert_eq!(
         assert_no_non_finite(dir.path()).len(),
-        4,
-        "3 CSV files and run.nc"
+        5,
+        "4 CSV files (backscatter.csv too) and run.nc"
     );
 }
 
@@ -371,8 +372,8 @@ fn depolarisation_csv_leaves_bins_without_a_co_polarised_return_empty() {
     ]);
     assert_eq!(
         assert_no_non_finite(&out).len(),
-        3,
-        "two CSV files and run.nc"
+        4,
+        "three CSV files (backscatter.csv too) and run.nc"
     );
     // The co-polarised energy of every bin: (source, range, order) → J.
     let mut co = std::collections::HashMap::new();
@@ -434,6 +435,7 @@ fn a_run_or_merge_removes_the_earlier_outputs_it_does_not_rewrite() {
         assert_eq!(
             file_names(out),
             [
+                "backscatter.csv",
                 "dial.png",
                 "notes.txt",
                 "profiles.csv",
@@ -458,7 +460,13 @@ fn a_run_or_merge_removes_the_earlier_outputs_it_does_not_rewrite() {
     ]);
     assert_eq!(
         file_names(&out),
-        ["notes.txt", "profiles.csv", "returns.csv", "summary.json"]
+        [
+            "backscatter.csv",
+            "notes.txt",
+            "profiles.csv",
+            "returns.csv",
+            "summary.json"
+        ]
     );
     assert_eq!(
         std::fs::read_to_string(out.join("notes.txt")).unwrap(),
@@ -496,6 +504,7 @@ fn a_run_or_merge_removes_the_earlier_outputs_it_does_not_rewrite() {
     assert_eq!(
         file_names(&merged),
         [
+            "backscatter.csv",
             "notes.txt",
             "profiles.csv",
             "returns.csv",
@@ -514,6 +523,7 @@ fn a_run_or_merge_removes_the_earlier_outputs_it_does_not_rewrite() {
     assert_eq!(
         file_names(&shards),
         [
+            "backscatter.csv",
             "returns.csv",
             "run.nc",
             "shard-0-of-2.lshard",

@@ -5,6 +5,9 @@ mod util;
 
 /// Atmospheric state: standard atmospheres, profile sets, ensembles.
 mod atmosphere;
+/// Attenuated backscatter and the range-corrected signal: the analytic order 1 against β T² O
+/// by hand, the Monte Carlo against it on C.1, `backscatter.csv` against `returns.csv`.
+mod backscatter;
 /// Beyond-Voigt line shapes against HAPI, HITRAN conventions, CSV line lists.
 mod beyond_voigt;
 /// The command line.

@@ -204,9 +204,14 @@ pub const TEXT_COLUMNS: [&str; 22] = [
 
 /// Columns that are energies, counts, standard deviations, cross-sections or optical depths:
 /// never negative.
-pub const NON_NEGATIVE_COLUMNS: [&str; 15] = [
+pub const NON_NEGATIVE_COLUMNS: [&str; 20] = [
     "energy_j",
     "stderr_j",
+    "attenuated_backscatter_per_m_sr",
+    "attenuated_backscatter_stderr_per_m_sr",
+    "range_corrected_signal_j_m2",
+    "range_corrected_signal_stderr_j_m2",
+    "lidar_constant_j_m2",
     "signal_photoelectrons",
     "background_photoelectrons",
     "dark_electrons",

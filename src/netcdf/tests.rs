@@ -95,6 +95,7 @@ fn write(products: &[Product]) -> Vec<u8> {
     }];
     run_file(&RunFile {
         returns: &[&mc, &analytic],
+        lidar_constant_j_m2: None,
         gates: &gates(),
         lines: &lines,
         polarised: &[],
@@ -206,6 +207,98 @@ fn returns_land_in_their_bins_and_missing_bins_are_fill() {
     );
 }
 
+/// With lidar constants (2 and 4 J m² for the two channels): the lidar constant by channel,
+/// and β′ = E r₁ r₂/(C Δr) and E r_c² in every bin the energy is in, worked by hand from the
+/// gates [100 + 30 g, 130 + 30 g] m (not from the module's factor); errors scaled alike, an
+/// unknown error fill; the bins without an energy fill; CF units and ancillary variables.
+/// Constants that do not match the channels are refused.
+#[test]
+fn backscatter_variables_are_the_energies_times_the_lidar_equation_factors() {
+    let (mc, analytic) = returns();
+    let lines = [Line {
+        name: "on".into(),
+        wavenumber_cm1: 6360.04,
+    }];
+    let constants = [2.0, 4.0];
+    let file = |constants: &[f64]| {
+        run_file(&RunFile {
+            returns: &[&mc, &analytic],
+            lidar_constant_j_m2: Some(constants),
+            gates: &gates(),
+            lines: &lines,
+            polarised: &[],
+            signals: &[],
+            products: &[],
+            gas: None,
+            attributes: &attributes(),
+        })
+    };
+    let mut r = read(file(&constants).unwrap());
+    assert_eq!(r.read_var_f64("lidar_constant_j_m2").unwrap(), constants);
+    let beta = r.read_var_f64("attenuated_backscatter_per_m_sr").unwrap();
+    let beta_se = r
+        .read_var_f64("attenuated_backscatter_stderr_per_m_sr")
+        .unwrap();
+    let rcs = r.read_var_f64("range_corrected_signal_j_m2").unwrap();
+    let rcs_se = r
+        .read_var_f64("range_corrected_signal_stderr_j_m2")
+        .unwrap();
+    let at =
+        |s: usize, c: usize, f: usize, g: usize, o: usize| (((s * 2 + c) * 2 + f) * 3 + g) * 3 + o;
+    let close = |a: f64, b: f64| a == b || (a / b - 1.0).abs() < 1e-15;
+    for c in 0..2 {
+        for f in 0..2 {
+            for g in 0..3 {
+                let (r1, r2) = (100.0 + 30.0 * g as f64, 130.0 + 30.0 * g as f64);
+                let factor = r1 * r2 / (30.0 * constants[c]);
+                let rc2 = (0.5 * (r1 + r2)) * (0.5 * (r1 + r2));
+                for o in 0..3 {
+                    let i = mc.index(c, f, g, o);
+                    let j = at(0, c, f, g, o);
+                    assert!(close(beta[j], factor * mc.energy_j[i]), "{j}");
+                    assert!(close(rcs[j], rc2 * mc.energy_j[i]), "{j}");
+                    if mc.stderr_j[i].is_nan() {
+                        assert_eq!((beta_se[j], rcs_se[j]), (NC_FILL_F64, NC_FILL_F64));
+                    } else {
+                        assert!(close(beta_se[j], factor * mc.stderr_j[i]), "{j}");
+                        assert!(close(rcs_se[j], rc2 * mc.stderr_j[i]), "{j}");
+                    }
+                }
+                let e = analytic.energy_j[analytic.index(c, f, g, 0)];
+                assert!(close(beta[at(1, c, f, g, 1)], factor * e));
+                assert_eq!(beta_se[at(1, c, f, g, 1)], 0.0);
+                for o in [0, 2] {
+                    assert_eq!(beta[at(1, c, f, g, o)], NC_FILL_F64);
+                    assert_eq!(rcs[at(1, c, f, g, o)], NC_FILL_F64);
+                }
+            }
+        }
+    }
+    let ds = r.data_set();
+    let attr = |v: &str, k: &str| ds.get_var_attr_as_string(v, k);
+    assert_eq!(
+        attr("attenuated_backscatter_per_m_sr", "units").as_deref(),
+        Some("m-1 sr-1")
+    );
+    assert_eq!(
+        attr("attenuated_backscatter_per_m_sr", "ancillary_variables").as_deref(),
+        Some("attenuated_backscatter_stderr_per_m_sr")
+    );
+    assert_eq!(
+        attr("range_corrected_signal_j_m2", "units").as_deref(),
+        Some("J m2")
+    );
+    assert_eq!(
+        attr("lidar_constant_j_m2", "units").as_deref(),
+        Some("J m2")
+    );
+    let e = file(&constants[..1]).unwrap_err();
+    assert!(
+        e.to_string().contains("1 lidar constants for 2 channels"),
+        "{e}"
+    );
+}
+
 #[test]
 fn global_attributes_record_the_run() {
     let r = read(write(&[]));
@@ -297,6 +390,7 @@ fn returns_on_different_grids_are_refused() {
     analytic.range_m[1] += 1.0;
     let e = run_file(&RunFile {
         returns: &[&mc, &analytic],
+        lidar_constant_j_m2: None,
         gates: &gates(),
         lines: &[],
         polarised: &[],
@@ -422,6 +516,7 @@ fn polarised_returns_land_in_their_bins_with_the_depolarisation_ratio() {
     ];
     let ds = run_dataset(&RunFile {
         returns: &[&mc, &analytic],
+        lidar_constant_j_m2: None,
         gates: &gates(),
         lines: &[],
         polarised: &polarised,

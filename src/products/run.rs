@@ -1,11 +1,13 @@
 //! The products of `lidarsim run` (and of `lidarsim merge` of its shards, whose files must be
-//! the same): `returns.csv`, `depolarisation.csv`, `signals.csv`, `retrieval.csv`, `run.nc` and
-//! `summary.json` from a [`RunOutput`], and the report a run prints.
+//! the same): `returns.csv`, `backscatter.csv`, `depolarisation.csv`, `signals.csv`,
+//! `retrieval.csv`, `run.nc` and `summary.json` from a [`RunOutput`], and the report a run
+//! prints.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use super::ProductError;
+use crate::backscatter::{self, Backscatter};
 use crate::instrument::signals;
 use crate::output::{OutputError, OutputSet};
 use crate::pipeline::RunOutput;
@@ -14,9 +16,10 @@ use crate::returns::{self, Order, Returns, Source};
 use crate::scene::Scene;
 
 /// Every file `run` may write into its directory.
-pub const FILES: [&str; 10] = [
+pub const FILES: [&str; 11] = [
     "returns.csv",
     "jacobians.csv",
+    "backscatter.csv",
     "depolarisation.csv",
     "depolarisation.png",
     crate::netcdf::RUN_FILE,
@@ -44,6 +47,7 @@ pub fn write(
     files.replaces(out_dir, &FILES)?;
     let sets = returns_sets(run);
     files.write(out_dir.join("returns.csv"), returns_csv(run))?;
+    files.write(out_dir.join("backscatter.csv"), backscatter_csv(scene, run))?;
     if let Some(j) = run.mc.as_ref().and_then(|m| m.jacobians.as_ref()) {
         files.write(out_dir.join("jacobians.csv"), j.to_csv())?;
     }
@@ -76,6 +80,11 @@ fn returns_sets(run: &RunOutput) -> Vec<&Returns> {
 
 /// `returns.csv`: every set's total, then with polarised light its co and cross rows.
 pub fn returns_csv(run: &RunOutput) -> String {
+    returns::to_csv(&labelled_sets(run))
+}
+
+/// The sets of `returns.csv` with their `polarisation` labels, in its order.
+fn labelled_sets(run: &RunOutput) -> Vec<(&Returns, &'static str)> {
     let sets = returns_sets(run);
     let mut labelled: Vec<(&Returns, &str)> = sets.iter().map(|r| (*r, "total")).collect();
     if let Some(p) = &run.polarised {
@@ -94,7 +103,53 @@ pub fn returns_csv(run: &RunOutput) -> String {
             ));
         }
     }
-    returns::to_csv(&labelled)
+    labelled
+}
+
+/// The lidar constant C = E₀ η A_tel \[J m²\] of each channel of `returns` (line returns:
+/// each line's own pulse energy; [`crate::backscatter`]): NaN for a name that is not one of
+/// the scene's laser lines.
+pub fn lidar_constants(scene: &Scene, returns: &Returns) -> Vec<f64> {
+    let lidar = &scene.lidar;
+    returns
+        .channels
+        .iter()
+        .map(|name| {
+            scene
+                .sampling
+                .lines
+                .iter()
+                .position(|l| l.name == *name)
+                .and_then(|l| scene.laser.pulse_energy_j.get(l))
+                .map_or(f64::NAN, |e0| {
+                    backscatter::lidar_constant_j_m2(
+                        *e0,
+                        lidar.optical_efficiency,
+                        lidar.telescope_area_m2(),
+                    )
+                })
+        })
+        .collect()
+}
+
+/// The attenuated backscatter and range-corrected signal of one set of line returns.
+pub fn backscatter_of(scene: &Scene, returns: &Returns) -> Backscatter {
+    Backscatter::of(
+        returns,
+        scene.gates.width_m,
+        &lidar_constants(scene, returns),
+    )
+}
+
+/// `backscatter.csv`: β′ and the range-corrected signal of every row of `returns.csv`, in
+/// its order ([`crate::backscatter`]).
+pub fn backscatter_csv(scene: &Scene, run: &RunOutput) -> String {
+    let sets: Vec<(Backscatter, &str)> = labelled_sets(run)
+        .into_iter()
+        .map(|(r, label)| (backscatter_of(scene, r), label))
+        .collect();
+    let refs: Vec<(&Backscatter, &str)> = sets.iter().map(|(b, l)| (b, *l)).collect();
+    backscatter::to_csv(&refs)
 }
 
 /// `depolarisation.csv`, with polarised light.
@@ -442,8 +497,11 @@ fn dataset_of(
             cov_j2: None,
         });
     }
+    // The lines are the channels of every set (one grid, `netcdf::Grid`).
+    let constants = returns.first().map(|r| lidar_constants(scene, r));
     netcdf::run_dataset(&netcdf::RunFile {
         returns,
+        lidar_constant_j_m2: constants.as_deref(),
         gates: &scene.gates,
         lines: &scene.sampling.lines,
         polarised: &polarised,
