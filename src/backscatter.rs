@@ -25,7 +25,7 @@
 //!
 //! i.e. the 1/r²-weighted mean over the gate of β T² O. Where β T² O is constant over a gate,
 //! β′ is that constant exactly; in a homogeneous layer it is β O times the 1/r²-weighted mean
-//! of T² over the gate, the point value at the gate centre to O((σ Δr)²). Applied to the
+//! of T² over the gate, the point value at the 1/r²-weighted mean range r₁r₂ ln(r₂/r₁)/Δr to O((σ Δr)²). Applied to the
 //! analytic single-scatter returns (which integrate the gate exactly, [`crate::lidar_eq`]),
 //! order 1 is this mean of β T² O to rounding: the identity the tests check against formulas
 //! worked by hand. This is the range-resolved quantity the Klett (1981) and Fernald (1984)
@@ -40,13 +40,14 @@
 //! A gate that holds a hard target's echo (a surface, or the gate cut short by it) gets the
 //! same formulas: its β′ is the volume backscatter that would return the echo's energy, not a
 //! property of the air. A value that cannot be computed (no lidar constant for a channel, a
-//! gate starting at r₁ ≤ 0, an overflow) is not finite and is written as an empty field or
-//! `_FillValue`.
+//! gate starting at r₁ < 0, an overflow) is not finite and is written as an empty field or
+//! `_FillValue`; a gate from r₁ = 0 has β′ = 0 (its ∫ dr/r² diverges).
 
 use std::fmt::Write as _;
 
 use crate::output::{csv_field, csv_number};
 use crate::returns::{Order, Returns, Source};
+use crate::scene::Gates;
 
 /// The lidar constant C = E₀ · η · A_tel \[J m²\] (module documentation): pulse energy
 /// \[J\], receiver optical efficiency and telescope collecting area \[m²\]. The overlap is not
@@ -55,20 +56,18 @@ pub fn lidar_constant_j_m2(pulse_energy_j: f64, optical_efficiency: f64, area_m2
     pulse_energy_j * optical_efficiency * area_m2
 }
 
-/// The factor f with β′ = f · E (Eq. B1) for the gate [r₁, r₂] = [r_c − Δr/2, r_c + Δr/2]
-/// and lidar constant C: f = r₁ r₂ / (C Δr) \[m⁻¹ sr⁻¹ J⁻¹\]; NaN where it does not exist
-/// (r₁ ≤ 0: ∫ dr/r² diverges; C or Δr not positive and finite).
-pub fn backscatter_factor(range_centre_m: f64, gate_width_m: f64, lidar_constant_j_m2: f64) -> f64 {
-    let (r1, r2) = (
-        range_centre_m - 0.5 * gate_width_m,
-        range_centre_m + 0.5 * gate_width_m,
-    );
-    let ok = |x: f64| x > 0.0 && x.is_finite();
-    if !(ok(r1) && ok(gate_width_m) && ok(lidar_constant_j_m2)) {
+/// The factor f with β′ = f · E (Eq. B1) for the gate [r₁, r₂] \[m\] and lidar constant C:
+/// f = r₁ r₂ / (C Δr) \[m⁻¹ sr⁻¹ J⁻¹\], Δr = r₂ − r₁; 0 for r₁ = 0 (∫ dr/r² diverges, the
+/// limit of β′ is 0); NaN where it does not exist (r₁ < 0, r₂ ≤ r₁, C not positive, a value
+/// not finite).
+pub fn backscatter_factor(r1_m: f64, r2_m: f64, lidar_constant_j_m2: f64) -> f64 {
+    let finite = r1_m.is_finite() && r2_m.is_finite() && lidar_constant_j_m2.is_finite();
+    if !(finite && r1_m >= 0.0 && r2_m > r1_m && lidar_constant_j_m2 > 0.0) {
         return f64::NAN;
     }
-    // r₁ r₂/Δr first, then /C: the product of two ranges cannot overflow (ranges ≤ 1e8 m).
-    r1 * r2 / gate_width_m / lidar_constant_j_m2
+    // r₁ (r₂/Δr) first, then /C: no product of two ranges (≤ 1e8 m) can overflow, and a
+    // tiny r₁ (a gate starting at 1e-297 m) gives a tiny factor, not an underflow to NaN.
+    r1_m * (r2_m / (r2_m - r1_m)) / lidar_constant_j_m2
 }
 
 /// Attenuated backscatter and range-corrected signal on the grid of one set of returns
@@ -99,10 +98,11 @@ pub struct Backscatter {
 }
 
 impl Backscatter {
-    /// β′ and the range-corrected signal of every bin of `returns`, for gates `gate_width_m`
-    /// wide around the returns' centres and the lidar constant of each of its channels
-    /// (`lidar_constant_j_m2[k]` for channel k; a channel without one gets NaN values).
-    pub fn of(returns: &Returns, gate_width_m: f64, lidar_constant_j_m2: &[f64]) -> Backscatter {
+    /// β′ and the range-corrected signal of every bin of `returns`, whose gate g is
+    /// [r₁, r₂] = [start + g w, r₁ + w] of `gates` (the edges the lidar equation integrates
+    /// over, `crate::lidar_eq`), and the lidar constant of each of its channels
+    /// (`lidar_constant_j_m2[k]` for channel k; a channel without one gets NaN β′).
+    pub fn of(returns: &Returns, gates: &Gates, lidar_constant_j_m2: &[f64]) -> Backscatter {
         let nch = returns.channels.len();
         let constants: Vec<f64> = (0..nch)
             .map(|k| lidar_constant_j_m2.get(k).copied().unwrap_or(f64::NAN))
@@ -123,7 +123,8 @@ impl Backscatter {
         for (k, c) in constants.iter().enumerate() {
             for f in 0..returns.fov_full_angle_mrad.len() {
                 for (g, r) in returns.range_m.iter().enumerate() {
-                    let beta_factor = backscatter_factor(*r, gate_width_m, *c);
+                    let r1 = gates.start_m + g as f64 * gates.width_m;
+                    let beta_factor = backscatter_factor(r1, r1 + gates.width_m, *c);
                     let rcs_factor = r * r;
                     for o in 0..returns.orders.len() {
                         let i = returns.index(k, f, g, o);
@@ -222,6 +223,12 @@ pub fn to_csv(sets: &[(&Backscatter, &str)]) -> String {
 mod tests {
     use super::*;
 
+    const GATES: Gates = Gates {
+        start_m: 1000.0,
+        width_m: 10.0,
+        count: 2,
+    };
+
     fn returns(orders: Vec<Order>) -> Returns {
         let mut r = Returns::zeros(
             Source::MonteCarlo,
@@ -252,7 +259,7 @@ mod tests {
             Order::Exactly(2),
         ];
         let r = returns(orders);
-        let b = Backscatter::of(&r, 10.0, &[2.0, 4.0]);
+        let b = Backscatter::of(&r, &GATES, &[2.0, 4.0]);
         for (k, c) in [2.0, 4.0].iter().enumerate() {
             for (g, (r1, r2, rc)) in [(1000.0, 1010.0, 1005.0), (1010.0, 1020.0, 1015.0)]
                 .iter()
@@ -290,18 +297,23 @@ mod tests {
         assert_eq!(b.attenuated_backscatter(0, 0, 2, Order::Total), None);
     }
 
-    /// No value where none exists: a channel without a lidar constant, a gate reaching r ≤ 0,
-    /// a zero or infinite constant: NaN (an empty field), never ±inf; the CSV has no `NaN`.
+    /// No value where none exists: a channel without a lidar constant, a gate reaching r < 0,
+    /// an empty gate, a zero or infinite constant: NaN (an empty field), never ±inf; the CSV
+    /// has no `NaN`. A gate starting at r₁ = 0 has β′ = 0 (∫ dr/r² diverges), one starting at
+    /// 1e-297 m a factor of about 1e-297 (found by the scene fuzzer: r_c − Δr/2 rounds to 0).
     #[test]
     fn values_that_do_not_exist_are_nan_and_empty_fields() {
-        assert!(backscatter_factor(4.0, 10.0, 1.0).is_nan());
-        assert!(backscatter_factor(5.0, 10.0, 1.0).is_nan());
-        assert!(backscatter_factor(100.0, 10.0, 0.0).is_nan());
-        assert!(backscatter_factor(100.0, 10.0, f64::INFINITY).is_nan());
-        assert!(backscatter_factor(100.0, 0.0, 1.0).is_nan());
-        assert_eq!(backscatter_factor(10.0, 10.0, 1.0), 5.0 * 15.0 / 10.0);
+        assert!(backscatter_factor(-1.0, 10.0, 1.0).is_nan());
+        assert!(backscatter_factor(10.0, 10.0, 1.0).is_nan());
+        assert!(backscatter_factor(100.0, 110.0, 0.0).is_nan());
+        assert!(backscatter_factor(100.0, 110.0, f64::INFINITY).is_nan());
+        assert!(backscatter_factor(f64::NAN, 110.0, 1.0).is_nan());
+        assert_eq!(backscatter_factor(0.0, 10.0, 1.0), 0.0);
+        let tiny = backscatter_factor(1e-297, 10.0 + 1e-297, 2.0);
+        assert!((tiny / 0.5e-297 - 1.0).abs() < 1e-12, "{tiny}");
+        assert_eq!(backscatter_factor(5.0, 15.0, 1.0), 5.0 * 15.0 / 10.0);
         let r = returns(vec![Order::Total]);
-        let b = Backscatter::of(&r, 10.0, &[1.0]);
+        let b = Backscatter::of(&r, &GATES, &[1.0]);
         for (i, v) in b.attenuated_backscatter_per_m_sr.iter().enumerate() {
             assert_eq!(v.is_nan(), i >= 2, "{i}: {v}");
             assert!(b.range_corrected_signal_j_m2[i].is_finite());

@@ -559,7 +559,7 @@ fn backscatter_variables(
     ];
     let mut values: Vec<Vec<f64>> = vec![vec![f64::NAN; grid.len()]; NAMES.len()];
     for (s, r) in run.returns.iter().enumerate() {
-        let b = crate::backscatter::Backscatter::of(r, run.gates.width_m, constants);
+        let b = crate::backscatter::Backscatter::of(r, run.gates, constants);
         for (o, order) in r.orders.iter().enumerate() {
             let go = Grid::position(&grid.orders, "order", &order.label())?;
             for c in 0..grid.channels.len() {
@@ -631,8 +631,9 @@ fn polarised_variables(
     // β′ of each part: the energy times the factor of its channel and gate (Eq. B1).
     let (mut beta, mut beta_se) = (vec![f64::NAN; 2 * n], vec![f64::NAN; 2 * n]);
     let factor = |c: usize, g: usize| {
+        let r1 = gates.start_m + g as f64 * gates.width_m;
         constants.and_then(|k| k.get(c)).map_or(f64::NAN, |k| {
-            crate::backscatter::backscatter_factor(grid.range_m[g], gates.width_m, *k)
+            crate::backscatter::backscatter_factor(r1, r1 + gates.width_m, *k)
         })
     };
     for set in sets {

@@ -134,11 +134,7 @@ pub fn lidar_constants(scene: &Scene, returns: &Returns) -> Vec<f64> {
 
 /// The attenuated backscatter and range-corrected signal of one set of line returns.
 pub fn backscatter_of(scene: &Scene, returns: &Returns) -> Backscatter {
-    Backscatter::of(
-        returns,
-        scene.gates.width_m,
-        &lidar_constants(scene, returns),
-    )
+    Backscatter::of(returns, &scene.gates, &lidar_constants(scene, returns))
 }
 
 /// `backscatter.csv`: β′ and the range-corrected signal of every row of `returns.csv`, in
