@@ -48,7 +48,12 @@ pub fn write(
     let sets = returns_sets(run);
     files.write(out_dir.join("returns.csv"), returns_csv(run))?;
     files.write(out_dir.join("backscatter.csv"), backscatter_csv(scene, run))?;
-    if let Some(j) = run.mc.as_ref().and_then(|m| m.jacobians.as_ref()) {
+    // Per line where the run has lines (as `returns.csv`), else per channel.
+    if let Some(j) = run
+        .mc
+        .as_ref()
+        .and_then(|m| m.jacobians_combined.as_ref().or(m.jacobians.as_ref()))
+    {
         files.write(out_dir.join("jacobians.csv"), j.to_csv())?;
     }
     if let Some(s) = depolarisation_csv(run) {

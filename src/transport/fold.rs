@@ -210,8 +210,12 @@ impl Fold<'_> {
                 plan.range_m.clone(),
             )
         });
+        let jacobians_combined = self.jac.as_ref().and_then(|j| {
+            j.finish_combined(plan.fov_full_angle_mrad.clone(), plan.range_m.clone())
+        });
         Ok(McResult {
             jacobians,
+            jacobians_combined,
             returns,
             combined,
             flux,

@@ -425,9 +425,32 @@ pub(crate) struct JacFold {
     m2: Vec<f64>,
     scale: Vec<f64>,
     scratch: Vec<f64>,
+    /// Combinations of channels (laser lines), folded from each batch's channel values.
+    combos: Vec<crate::returns::Combination>,
+    cmean: Vec<f64>,
+    cm2: Vec<f64>,
+    cscale: Vec<f64>,
+    cvalues: Vec<f64>,
 }
 
 impl JacFold {
+    /// Also fold these combinations of channels (the laser lines), so that their derivatives
+    /// have standard errors of their own.
+    pub fn with_combinations(mut self, combos: &[crate::returns::Combination]) -> Self {
+        let n = combos.len() * self.per_channel();
+        self.combos = combos.to_vec();
+        self.cmean = vec![0.0; n];
+        self.cm2 = vec![0.0; n];
+        self.cscale = vec![0.0; n];
+        self.cvalues = vec![0.0; n];
+        self
+    }
+
+    /// Reported values per channel.
+    fn per_channel(&self) -> usize {
+        self.shape.n_fov * self.shape.n_gates * 3 * self.js.n_layers * Q
+    }
+
     pub fn new(
         js: &JacSetup,
         atm: &OpticalAtmosphere,
@@ -463,6 +486,11 @@ impl JacFold {
             m2: vec![0.0; n],
             scale: vec![0.0; n],
             scratch: vec![0.0; n],
+            combos: Vec::new(),
+            cmean: Vec::new(),
+            cm2: Vec::new(),
+            cscale: Vec::new(),
+            cvalues: Vec::new(),
         }
     }
 
@@ -529,7 +557,63 @@ impl JacFold {
                 *v,
             );
         }
+        if !self.combos.is_empty() {
+            let b = self.per_channel();
+            self.cvalues.iter_mut().for_each(|v| *v = 0.0);
+            for (j, c) in self.combos.iter().enumerate() {
+                let dst = &mut self.cvalues[j * b..(j + 1) * b];
+                for (k, coef) in &c.terms {
+                    for (d, s) in dst.iter_mut().zip(&self.scratch[k * b..(k + 1) * b]) {
+                        *d += coef * s;
+                    }
+                }
+            }
+            for (i, v) in self.cvalues.iter().enumerate() {
+                stats::welford_add_scaled(
+                    &mut self.cmean[i],
+                    &mut self.cm2[i],
+                    &mut self.cscale[i],
+                    n,
+                    *v,
+                );
+            }
+        }
         self.n_batches = n;
+    }
+
+    /// The Jacobians of the combinations (laser lines), if any: a derivative is defined where
+    /// it is for every channel of the combination.
+    pub fn finish_combined(
+        &self,
+        fov_full_angle_mrad: Vec<f64>,
+        range_m: Vec<f64>,
+    ) -> Option<Jacobians> {
+        if self.combos.is_empty() {
+            return None;
+        }
+        let channels = self.finish(Vec::new(), fov_full_angle_mrad, range_m);
+        let (nl, nch, m) = (self.js.n_layers, self.js.nch, self.combos.len());
+        let mut defined = vec![true; nl * Q * m];
+        for (j, c) in self.combos.iter().enumerate() {
+            for l in 0..nl {
+                for q in 0..Q {
+                    defined[(l * Q + q) * m + j] = c
+                        .terms
+                        .iter()
+                        .all(|(k, _)| channels.defined[(l * Q + q) * nch + k]);
+                }
+            }
+        }
+        let n = self.n_batches;
+        Some(Jacobians {
+            channels: self.combos.iter().map(|c| c.name.clone()).collect(),
+            value: self.cmean.clone(),
+            stderr: (0..self.cm2.len())
+                .map(|i| stats::std_error_scaled(self.cm2[i], self.cscale[i], n))
+                .collect(),
+            defined,
+            ..channels
+        })
     }
 
     /// The Jacobians with their standard errors.

@@ -179,6 +179,8 @@ pub struct McResult {
     /// Derivatives of the returns with respect to the layers' properties, when the scene
     /// asks for them (`[simulation] jacobians`).
     pub jacobians: Option<Jacobians>,
+    /// The same for the combinations of [`TallyLayout::combinations`] (the laser lines).
+    pub jacobians_combined: Option<Jacobians>,
     /// Counters.
     pub stats: RunStats,
     /// Wall-clock time of the transport \[s\].

@@ -209,6 +209,7 @@ impl<'a> Plan<'a> {
                     self.setup.shape,
                     self.fov_order.clone(),
                 )
+                .with_combinations(&self.combinations)
             }),
             plan: self,
             stats: RunStats::default(),
