@@ -84,6 +84,9 @@ pub struct OpticalAtmosphere {
     pub cum_tau_s: Vec<f64>,
     /// Cumulative vertical absorption optical depth, same index.
     pub cum_tau_a: Vec<f64>,
+    /// The line-by-line gases' part of `sigma_a_per_m` [1/m], same index (zeros without
+    /// `[gas_absorption]`): what the Jacobians' `gas_amount` derivative scales.
+    pub gas_sigma_a_per_m: Vec<f64>,
     /// True when every scatterer has the same coefficient and phase function in every channel:
     /// then only absorption differs between channels and the transport skips the ALIS
     /// scattering-ratio weights.
@@ -237,6 +240,7 @@ impl OpticalAtmosphere {
             matrices,
             cum_tau_s: Vec::new(),
             cum_tau_a: Vec::new(),
+            gas_sigma_a_per_m: vec![0.0; n_layers * nch],
             grey_scattering,
             gas_note: None,
             gas_source: None,
@@ -257,6 +261,12 @@ impl OpticalAtmosphere {
                 )),
                 other => other,
             })?;
+            for l in 0..n_layers {
+                let h = atm.edges_m[l + 1] - atm.edges_m[l];
+                for k in 0..nch {
+                    atm.gas_sigma_a_per_m[l * nch + k] = tau[l * nch + k] / h;
+                }
+            }
             atm.gas_note = Some(note);
             atm.gas_source = Some(source);
         }

@@ -51,9 +51,9 @@ fn run_default_scene_writes_contract_columns() {
             other => panic!("source {other}"),
         }
     }
-    // Default scene: 2 lines, 2 FOVs, 201 gates; MC orders total, 1..5, 6+.
+    // Default scene: 2 lines, 2 FOVs, 201 gates; MC orders total, 1..5, 6+ and 2+.
     assert_eq!(analytic, 2 * 2 * 201);
-    assert_eq!(mc, 2 * 2 * 201 * 7);
+    assert_eq!(mc, 2 * 2 * 201 * 8);
     assert!(dir.path().join("summary.json").is_file());
 }
 

@@ -170,6 +170,12 @@ fn perturb(
     let i = l * nch + k;
     match quantity {
         JacobianQuantity::Absorption => atm.sigma_a_per_m[i] += delta,
+        // delta is the relative change of the gases.
+        JacobianQuantity::GasAmount => {
+            let d = delta * atm.gas_sigma_a_per_m[i];
+            atm.sigma_a_per_m[i] += d;
+            atm.gas_sigma_a_per_m[i] += d;
+        }
         JacobianQuantity::MolecularScattering => {
             let c = atm.components[l]
                 .iter_mut()
@@ -216,6 +222,14 @@ fn coefficient(atm: &OpticalAtmosphere, l: usize, quantity: JacobianQuantity) ->
     let comps = &atm.components[l];
     match quantity {
         JacobianQuantity::Absorption => atm.sigma_a_per_m[l * atm.n_channels],
+        // The derivative is with respect to a relative change.
+        JacobianQuantity::GasAmount => {
+            if atm.gas_sigma_a_per_m[l * atm.n_channels] > 0.0 {
+                1.0
+            } else {
+                0.0
+            }
+        }
         JacobianQuantity::MolecularScattering => comps
             .iter()
             .filter(|c| c.molecular)

@@ -244,8 +244,9 @@ max_order = 2
         let e: f64 = rec[5].parse().unwrap();
         assert!(e.is_finite() && e >= 0.0);
     }
-    // Both channels have the same rows: mc (9 gates × total, 1, 2, 3+) and analytic (9 × 1).
-    assert_eq!(rows, [9 * 4 + 9, 9 * 4 + 9]);
+    // Both channels have the same rows: mc (9 gates × total, 1, 2, 3+, 2+) and analytic
+    // (9 × 1).
+    assert_eq!(rows, [9 * 5 + 9, 9 * 5 + 9]);
 }
 
 /// Found by the scene fuzz: the shipped airborne DIAL scene at 2000 photons has far DIAL cells
@@ -404,9 +405,9 @@ fn depolarisation_csv_leaves_bins_without_a_co_polarised_return_empty() {
         }
     }
     assert_eq!(rows, co.len());
-    // Below the cloud (4 gates) every row; above it orders 1 and 2 of the Monte Carlo and the
-    // analytic row (5 gates).
-    assert_eq!(empty, 4 * 5 + 5 * 3, "{rows} rows");
+    // Below the cloud (4 gates) every row (Monte Carlo total, 1, 2, 3+, 2+ and the analytic
+    // one); above it orders 1 and 2 of the Monte Carlo and the analytic row (5 gates).
+    assert_eq!(empty, 4 * 6 + 5 * 3, "{rows} rows");
 }
 
 /// Issue 37, item 5: a second run into a directory removes the earlier run's outputs it does

@@ -53,6 +53,9 @@ pub struct RunOutput {
     pub retrieval: Option<Retrieval>,
     /// Retrieved products, for every set of signals and field of view.
     pub products: Vec<Product>,
+    /// The weighting functions of the Monte Carlo products, single-scatter (order 1) and
+    /// aware of multiple scattering (total), when the scene asks for Jacobians.
+    pub weighting: Vec<crate::retrieval::Weighting>,
     /// Co- and cross-polarised line returns, when the lidar's light is polarised.
     pub polarised: Option<PolarisedLines>,
 }
@@ -285,7 +288,20 @@ impl<'s> Prepared<'s> {
             }
         }
         let polarised = polarised_lines(scene, &atmosphere, mc.as_ref());
+        let mut weighting = Vec::new();
+        if let (Some(r), Some(lines), Some(jac)) = (
+            retrieval.as_ref(),
+            &mc_lines,
+            mc.as_ref().and_then(|m| m.jacobians_combined.as_ref()),
+        ) {
+            for order in [Order::Exactly(1), Order::Total] {
+                for fov in 0..lines.mean.fov_full_angle_mrad.len() {
+                    weighting.extend(r.weighting(lines, jac, order, fov));
+                }
+            }
+        }
         Ok(RunOutput {
+            weighting,
             atmosphere,
             analytic,
             analytic_lines,

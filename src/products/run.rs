@@ -16,8 +16,9 @@ use crate::returns::{self, Order, Returns, Source};
 use crate::scene::Scene;
 
 /// Every file `run` may write into its directory.
-pub const FILES: [&str; 11] = [
+pub const FILES: [&str; 12] = [
     "returns.csv",
+    "weighting.csv",
     "jacobians.csv",
     "backscatter.csv",
     "depolarisation.csv",
@@ -49,18 +50,31 @@ pub fn write(
     files.write(out_dir.join("returns.csv"), returns_csv(run))?;
     files.write(out_dir.join("backscatter.csv"), backscatter_csv(scene, run))?;
     // Per line where the run has lines (as `returns.csv`), else per channel.
-    if let Some(j) = run
-        .mc
-        .as_ref()
-        .and_then(|m| m.jacobians_combined.as_ref().or(m.jacobians.as_ref()))
-    {
-        files.write(out_dir.join("jacobians.csv"), j.to_csv())?;
+    if let Some(m) = &run.mc {
+        let lines = scene.sampling.lines.len();
+        match (&m.jacobians_combined, &m.jacobians) {
+            (Some(j), _) => files.write(
+                out_dir.join("jacobians.csv"),
+                j.first_channels(lines).to_csv(),
+            )?,
+            (None, Some(j)) => files.write(out_dir.join("jacobians.csv"), j.to_csv())?,
+            (None, None) => {}
+        }
     }
     if let Some(s) = depolarisation_csv(run) {
         files.write(out_dir.join("depolarisation.csv"), s)?;
     }
     if let Some(s) = signals_csv(run) {
         files.write(out_dir.join("signals.csv"), s)?;
+    }
+    if !run.weighting.is_empty() {
+        let mut s = String::from(crate::retrieval::products::WEIGHTING_HEADER);
+        s.push('\n');
+        for w in &run.weighting {
+            s.push_str(&w.csv_row());
+            s.push('\n');
+        }
+        files.write(out_dir.join("weighting.csv"), s)?;
     }
     if let Some(s) = retrieval_csv(run) {
         files.write(out_dir.join("retrieval.csv"), s)?;

@@ -11,7 +11,7 @@ pub use config::{AssumedSpectroscopy, DialCells, HardTarget, RetrievalConfig, Ta
 pub mod products;
 pub mod reference;
 
-pub use products::{Geometry, Method, Product, Quantity, Retrieval};
+pub use products::{Geometry, Method, Product, Quantity, Retrieval, Weighting};
 pub use reference::{AssumedInstrument, LayerColumns, PathDepths, ReferenceState};
 
 /// Why a retrieval cannot be done.

@@ -40,6 +40,7 @@ use crate::instrument::laser::{Laser, LineReturns};
 use crate::instrument::signals::{Signals, WindowSignal};
 use crate::returns::{Order, Source};
 use crate::rng::{self, Stream};
+use crate::transport::{JacobianQuantity, Jacobians};
 
 /// Fewest valid realisations, as a fraction, for a simulated error to be reported.
 const MIN_VALID_FRACTION: f64 = 0.9;
@@ -138,6 +139,61 @@ pub struct Product {
     pub simulated_first_averaged: f64,
     /// Shot pairs averaged.
     pub shots_averaged: u64,
+}
+
+/// One layer's part of a retrieved product: its weighting function times the layer's gas
+/// (`weighting.csv`; [`Retrieval::weighting`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Weighting {
+    /// How.
+    pub method: Method,
+    /// What.
+    pub quantity: Quantity,
+    /// Scattering order of the returns (1: the single-scatter weighting function; total:
+    /// aware of multiple scattering).
+    pub order: Order,
+    /// `on/off`.
+    pub channel_pair: String,
+    /// Field of view \[mrad\].
+    pub fov_full_angle_mrad: f64,
+    /// The product's range interval \[m\].
+    pub range_m: (f64, f64),
+    /// Layer of the optical atmosphere, and its bottom and top \[m\].
+    pub layer: usize,
+    /// Bottom and top of the layer \[m\].
+    pub layer_m: (f64, f64),
+    /// ∂(product)/∂ln n_gas of the layer, in the product's unit.
+    pub value: f64,
+    /// Its Monte Carlo standard error as if the on- and off-line derivatives and the returns
+    /// were independent: they share the photons and are strongly correlated, so this overstates
+    /// it (by 50× for the IPDA's sum over layers in the airborne DIAL scene, whose own error is
+    /// the product's `mc_stderr`).
+    pub stderr: f64,
+}
+
+/// Header of `weighting.csv`.
+pub const WEIGHTING_HEADER: &str = "method,order,channel_pair,fov_full_angle_mrad,range_start_m,range_end_m,quantity,unit,layer,layer_bottom_m,layer_top_m,derivative,stderr_independent";
+
+impl Weighting {
+    /// The row of `weighting.csv` (no newline).
+    pub fn csv_row(&self) -> String {
+        format!(
+            "{},{},{},{},{},{},{},{},{},{},{},{:.9e},{:.9e}",
+            self.method.label(),
+            self.order.label(),
+            crate::output::csv_field(&self.channel_pair),
+            self.fov_full_angle_mrad,
+            self.range_m.0,
+            self.range_m.1,
+            self.quantity.label(),
+            self.quantity.unit(),
+            self.layer,
+            self.layer_m.0,
+            self.layer_m.1,
+            crate::output::csv_number(self.value),
+            crate::output::csv_number(self.stderr),
+        )
+    }
 }
 
 /// Header of `retrieval.csv`, one row per product.
@@ -594,6 +650,97 @@ impl Retrieval {
             });
         }
         Ok(products)
+    }
+
+    /// The weighting functions of every product retrieved from `returns` (line returns of
+    /// `order`, field of view `fov`): per layer L of the optical atmosphere, the product's
+    /// change per relative change of the gases in L, ∂P/∂ln n_L = dP/dD · ∂D/∂ln n_L, with
+    ///   ∂D/∂ln n_L = Σ_windows ± ½ (G_off/P_off − G_on/P_on),
+    /// G a line's `gas_amount` Jacobian summed over the window (the Monte Carlo's, from the
+    /// same photons as its returns). Their sum over the layers is the product itself for an
+    /// exact retrieval; in order 1 it is the single-scatter weighting function, with all
+    /// orders the multiple-scattering-aware one, and the difference of the two sums is the
+    /// bias multiple scattering brings (to first order in it). Standard errors from those of G
+    /// alone, as if independent ([`Weighting::stderr`]). Empty without the lines' Jacobians.
+    pub fn weighting(
+        &self,
+        returns: &LineReturns,
+        jac: &Jacobians,
+        order: Order,
+        fov: usize,
+    ) -> Vec<Weighting> {
+        let (on, off) = (self.config.on, self.config.off);
+        let mean = &returns.mean;
+        let (Some(o), Some(jo)) = (
+            mean.order_index(order),
+            jac.orders.iter().position(|x| *x == order),
+        ) else {
+            return Vec::new();
+        };
+        let find = |line: usize| jac.channels.iter().position(|c| *c == mean.channels[line]);
+        let (Some(j_on), Some(j_off)) = (find(on), find(off)) else {
+            return Vec::new();
+        };
+        let q = JacobianQuantity::ALL
+            .iter()
+            .position(|x| *x == JacobianQuantity::GasAmount)
+            .expect("gas amount is a quantity");
+        let e_on = self.laser.pulse_energy_j[on];
+        let e_off = self.laser.pulse_energy_j[off];
+        let n_layers = jac.layer_bottom_m.len();
+        let mut out = Vec::new();
+        for t in &self.targets {
+            let ipda = t.windows.len() == 1;
+            let p = |line: usize, w: &Range<usize>| -> f64 {
+                w.clone()
+                    .map(|g| mean.energy_j[mean.index(line, fov, g, o)])
+                    .sum()
+            };
+            let mut d = 0.0;
+            for (k, w) in t.windows.iter().enumerate() {
+                let energy = if ipda { (e_on / e_off).ln() } else { 0.0 };
+                d += t.window_sign(k) * 0.5 * ((p(off, w) / p(on, w)).ln() + energy);
+            }
+            let (_, slope) = self.value(t, d);
+            if !slope.is_finite() {
+                continue;
+            }
+            for l in 0..n_layers {
+                if !(jac.is_defined(j_on, l, q) && jac.is_defined(j_off, l, q)) {
+                    continue;
+                }
+                let (mut dd, mut var) = (0.0, 0.0);
+                for (k, w) in t.windows.iter().enumerate() {
+                    let (p_on, p_off) = (p(on, w), p(off, w));
+                    let g = |j: usize| -> (f64, f64) {
+                        w.clone().fold((0.0, 0.0), |(v, e2), gate| {
+                            let i = jac.index(j, fov, gate, jo, l, q);
+                            (v + jac.value[i], e2 + jac.stderr[i].powi(2))
+                        })
+                    };
+                    let ((g_on, v_on), (g_off, v_off)) = (g(j_on), g(j_off));
+                    dd += t.window_sign(k) * 0.5 * (g_off / p_off - g_on / p_on);
+                    var += 0.25 * (v_off / (p_off * p_off) + v_on / (p_on * p_on));
+                }
+                let value = slope * dd;
+                if value == 0.0 || !value.is_finite() {
+                    continue;
+                }
+                out.push(Weighting {
+                    method: t.method,
+                    quantity: t.quantity,
+                    order,
+                    channel_pair: self.pair.clone(),
+                    fov_full_angle_mrad: mean.fov_full_angle_mrad[fov],
+                    range_m: t.range_m,
+                    layer: l,
+                    layer_m: (jac.layer_bottom_m[l], jac.layer_top_m[l]),
+                    value,
+                    stderr: slope.abs() * var.sqrt(),
+                });
+            }
+        }
+        out
     }
 
     /// The analytic variance of D per shot pair of target `t`, measured on the windows `ids` of

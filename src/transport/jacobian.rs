@@ -37,6 +37,8 @@ use crate::stats;
 
 /// Tally quantities per (layer, channel): Σ s·a, Σ s·(a·offset + direct length), Σ s·n, Σ s·U.
 const Q: usize = 4;
+/// Reported quantities per (layer, channel): [`JacobianQuantity::ALL`].
+const QR: usize = 5;
 /// Order groups of the tally: single scattering and orders ≥ 2.
 const JORDERS: usize = 2;
 
@@ -51,15 +53,20 @@ pub enum JacobianQuantity {
     ParticleScattering,
     /// The particles' extinction coefficient at a fixed single-scattering albedo [1/m].
     ParticleExtinction,
+    /// The amount of the line-by-line gases in the layer, relatively: ∂E/∂ln n_gas = the
+    /// absorption derivative times the gases' absorption coefficient \[J\] (what a DIAL or
+    /// IPDA weighting function is made of).
+    GasAmount,
 }
 
 impl JacobianQuantity {
     /// Every quantity, in the order of [`Jacobians::index`].
-    pub const ALL: [JacobianQuantity; 4] = [
+    pub const ALL: [JacobianQuantity; 5] = [
         JacobianQuantity::Absorption,
         JacobianQuantity::MolecularScattering,
         JacobianQuantity::ParticleScattering,
         JacobianQuantity::ParticleExtinction,
+        JacobianQuantity::GasAmount,
     ];
 
     /// The `quantity` column value.
@@ -69,6 +76,15 @@ impl JacobianQuantity {
             JacobianQuantity::MolecularScattering => "molecular_scattering",
             JacobianQuantity::ParticleScattering => "particle_scattering",
             JacobianQuantity::ParticleExtinction => "particle_extinction",
+            JacobianQuantity::GasAmount => "gas_amount",
+        }
+    }
+
+    /// The unit of the derivative.
+    pub fn unit(self) -> &'static str {
+        match self {
+            JacobianQuantity::GasAmount => "J",
+            _ => "J m",
         }
     }
 }
@@ -94,8 +110,9 @@ pub struct Jacobians {
     pub value: Vec<f64>,
     /// Standard error of `value` \[J·m\].
     pub stderr: Vec<f64>,
-    /// Whether a derivative exists, index `(layer * 4 + quantity) * channels + channel`:
-    /// absorption always; scattering and extinction where the layer has that scatterer.
+    /// Whether a derivative exists, index `(layer * 5 + quantity) * channels + channel`:
+    /// absorption always; scattering and extinction where the layer has that scatterer, gas
+    /// amount where it has line-by-line gas absorption.
     pub defined: Vec<bool>,
 }
 
@@ -115,13 +132,13 @@ impl Jacobians {
             + order)
             * self.layer_bottom_m.len()
             + layer)
-            * Q
+            * QR
             + quantity
     }
 
     /// Whether the derivative of `quantity` in `layer` exists for `channel`.
     pub fn is_defined(&self, channel: usize, layer: usize, quantity: usize) -> bool {
-        self.defined[(layer * Q + quantity) * self.channels.len() + channel]
+        self.defined[(layer * QR + quantity) * self.channels.len() + channel]
     }
 
     /// One derivative and its standard error, if defined.
@@ -420,6 +437,8 @@ pub(crate) struct JacFold {
     thickness_m: Vec<f64>,
     /// Per (layer, channel): 1/σ_mol, 1/σ_part, 1/ε_part (0 where absent).
     inv: Vec<[f64; 3]>,
+    /// Per (layer, channel): the line-by-line gases' absorption coefficient [1/m].
+    gas: Vec<f64>,
     n_batches: usize,
     mean: Vec<f64>,
     m2: Vec<f64>,
@@ -448,7 +467,7 @@ impl JacFold {
 
     /// Reported values per channel.
     fn per_channel(&self) -> usize {
-        self.shape.n_fov * self.shape.n_gates * 3 * self.js.n_layers * Q
+        self.shape.n_fov * self.shape.n_gates * 3 * self.js.n_layers * QR
     }
 
     pub fn new(
@@ -474,8 +493,9 @@ impl JacFold {
                 inv[l * nch + k] = [r(mol), r(part), r(ext)];
             }
         }
-        let n = nch * shape.n_fov * shape.n_gates * 3 * nl * Q;
+        let n = nch * shape.n_fov * shape.n_gates * 3 * nl * QR;
         JacFold {
+            gas: atm.gas_sigma_a_per_m.clone(),
             thickness_m: (0..nl).map(|l| js.edges_m[l + 1] - js.edges_m[l]).collect(),
             js: js.clone(),
             shape,
@@ -497,7 +517,7 @@ impl JacFold {
     #[inline]
     fn reported(&self, k: usize, fov: usize, gate: usize, order: usize, layer: usize) -> usize {
         let s = &self.shape;
-        ((((k * s.n_fov + fov) * s.n_gates + gate) * 3 + order) * self.js.n_layers + layer) * Q
+        ((((k * s.n_fov + fov) * s.n_gates + gate) * 3 + order) * self.js.n_layers + layer) * QR
     }
 
     /// Fold one batch's tally (already in energy per pulse).
@@ -535,6 +555,7 @@ impl JacFold {
                                 u * im + j_abs,
                                 (n - u) * ip + j_abs,
                                 (n - u) * ie + j_abs,
+                                j_abs * self.gas[l * nch + k],
                             ];
                             let r1 = self.reported(k, fov, gate, 1 + jo, l);
                             let r0 = self.reported(k, fov, gate, 0, l);
@@ -593,14 +614,14 @@ impl JacFold {
         }
         let channels = self.finish(Vec::new(), fov_full_angle_mrad, range_m);
         let (nl, nch, m) = (self.js.n_layers, self.js.nch, self.combos.len());
-        let mut defined = vec![true; nl * Q * m];
+        let mut defined = vec![true; nl * QR * m];
         for (j, c) in self.combos.iter().enumerate() {
             for l in 0..nl {
-                for q in 0..Q {
-                    defined[(l * Q + q) * m + j] = c
+                for q in 0..QR {
+                    defined[(l * QR + q) * m + j] = c
                         .terms
                         .iter()
-                        .all(|(k, _)| channels.defined[(l * Q + q) * nch + k]);
+                        .all(|(k, _)| channels.defined[(l * QR + q) * nch + k]);
                 }
             }
         }
@@ -624,12 +645,16 @@ impl JacFold {
         range_m: Vec<f64>,
     ) -> Jacobians {
         let (nl, nch) = (self.js.n_layers, self.js.nch);
-        let mut defined = vec![false; nl * Q * nch];
+        let mut defined = vec![false; nl * QR * nch];
         for l in 0..nl {
             for k in 0..nch {
                 let [im, ip, ie] = self.inv[l * nch + k];
-                for (q, ok) in [true, im > 0.0, ip > 0.0, ie > 0.0].into_iter().enumerate() {
-                    defined[(l * Q + q) * nch + k] = ok;
+                let gas = self.gas[l * nch + k] > 0.0;
+                for (q, ok) in [true, im > 0.0, ip > 0.0, ie > 0.0, gas]
+                    .into_iter()
+                    .enumerate()
+                {
+                    defined[(l * QR + q) * nch + k] = ok;
                 }
             }
         }
@@ -652,11 +677,13 @@ impl JacFold {
 
 /// The header line of `jacobians.csv`.
 pub const CSV_HEADER: &str = "source,channel,fov_full_angle_mrad,range_m,order,layer,\
-layer_bottom_m,layer_top_m,quantity,derivative_j_m,stderr_j_m";
+layer_bottom_m,layer_top_m,quantity,unit,derivative,stderr";
 
 impl Jacobians {
-    /// `jacobians.csv`: one row per defined derivative, ordered by channel, FOV, gate, order,
-    /// layer and quantity; ∂E/∂θ in J per (1/m), i.e. J·m.
+    /// `jacobians.csv`: one row per defined, nonzero derivative (a layer the gate's photons
+    /// cannot reach in time has none), ordered by channel, FOV, gate, order,
+    /// layer and quantity; ∂E/∂θ in J per (1/m), i.e. J·m (`gas_amount`: J per unit relative
+    /// change).
     pub fn to_csv(&self) -> String {
         use crate::output::{csv_field, csv_number};
         use std::fmt::Write as _;
@@ -675,12 +702,17 @@ impl Jacobians {
                                     continue;
                                 }
                                 let i = self.index(c, f, g, o, l, q);
+                                // Paths that cannot reach the gate in time: exactly zero.
+                                if self.value[i] == 0.0 && self.stderr[i] == 0.0 {
+                                    continue;
+                                }
                                 let _ = writeln!(
                                     out,
-                                    "mc,{ch},{fov},{r},{label},{l},{},{},{},{:.9e},{:.9e}",
+                                    "mc,{ch},{fov},{r},{label},{l},{},{},{},{},{:.9e},{:.9e}",
                                     self.layer_bottom_m[l],
                                     self.layer_top_m[l],
                                     quantity.label(),
+                                    quantity.unit(),
                                     csv_number(self.value[i]),
                                     csv_number(self.stderr[i])
                                 );
@@ -691,5 +723,27 @@ impl Jacobians {
             }
         }
         out
+    }
+}
+
+impl Jacobians {
+    /// The first `n` channels (a run's laser lines, which come before the combinations that
+    /// differentiate them in frequency).
+    pub fn first_channels(&self, n: usize) -> Jacobians {
+        let n = n.min(self.channels.len());
+        let per = self.value.len() / self.channels.len().max(1);
+        let m = self.channels.len();
+        let nl = self.layer_bottom_m.len();
+        let mut defined = Vec::with_capacity(nl * QR * n);
+        for lq in 0..nl * QR {
+            defined.extend_from_slice(&self.defined[lq * m..lq * m + n]);
+        }
+        Jacobians {
+            channels: self.channels[..n].to_vec(),
+            value: self.value[..n * per].to_vec(),
+            stderr: self.stderr[..n * per].to_vec(),
+            defined,
+            ..self.clone()
+        }
     }
 }
