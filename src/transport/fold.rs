@@ -203,7 +203,7 @@ impl Fold<'_> {
             }
             (_, combined) => (returns, combined, None),
         };
-        let jacobians = self.jac.as_ref().map(|j| {
+        let jacobians = self.jac.as_ref().and_then(|j| {
             j.finish(
                 plan.channels.clone(),
                 plan.fov_full_angle_mrad.clone(),

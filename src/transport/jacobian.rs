@@ -102,7 +102,10 @@ pub struct Jacobians {
     pub range_m: Vec<f64>,
     /// Order bins: total, 1 and 2+.
     pub orders: Vec<Order>,
-    /// Bottom and top of each layer of the optical atmosphere \[m\].
+    /// Index in the optical atmosphere of the first layer reported: the layers are those a
+    /// path can reach within the last gate's time (the others' derivatives are exactly 0).
+    pub first_layer: usize,
+    /// Bottom of each layer reported \[m\].
     pub layer_bottom_m: Vec<f64>,
     /// Top of each layer \[m\].
     pub layer_top_m: Vec<f64>,
@@ -164,6 +167,9 @@ impl Jacobians {
 /// The layers' geometry and scatterers as the Jacobian tally needs them.
 #[derive(Debug, Clone)]
 pub(crate) struct JacSetup {
+    /// The window of layers a path can reach within the last gate's time: the first (index
+    /// into the optical atmosphere) and how many.
+    pub first: usize,
     pub n_layers: usize,
     nch: usize,
     edges_m: Vec<f64>,
@@ -172,17 +178,31 @@ pub(crate) struct JacSetup {
 }
 
 impl JacSetup {
-    pub fn new(atm: &OpticalAtmosphere) -> Self {
+    /// The layers of `atm` within `reach_m` of the receiver's altitude `z_rx`: a path to the
+    /// last gate (range r_end) is 2 r_end long, so it never gets further than r_end from the
+    /// receiver, and the derivatives of every layer beyond are exactly 0 (an airborne lidar at
+    /// 8 km then leaves out the 500 layers up to 60 km).
+    pub fn new(atm: &OpticalAtmosphere, z_rx: f64, reach_m: f64) -> Self {
+        let n = atm.n_layers();
+        let e = &atm.edges_m;
+        let first = (0..n).find(|&l| e[l + 1] > z_rx - reach_m).unwrap_or(n);
+        let end = (first..n).find(|&l| e[l] >= z_rx + reach_m).unwrap_or(n);
         JacSetup {
-            n_layers: atm.n_layers(),
+            first,
+            n_layers: end - first,
             nch: atm.n_channels,
-            edges_m: atm.edges_m.clone(),
-            molecular: atm
-                .components
+            edges_m: e[first..=end.max(first)].to_vec(),
+            molecular: atm.components[first..end]
                 .iter()
                 .map(|c| c.iter().position(|x| x.molecular))
                 .collect(),
         }
+    }
+
+    /// The window's index of a layer of the optical atmosphere, if it is in the window.
+    #[inline]
+    pub fn local(&self, layer: usize) -> Option<usize> {
+        layer.checked_sub(self.first).filter(|l| *l < self.n_layers)
     }
 
     /// Values per (gate, order group, annulus): (layers + the region above them) × Q × channels.
@@ -214,7 +234,7 @@ impl JacSetup {
         if z >= top {
             return Some((self.n_layers, 0.0));
         }
-        let l = atm.layer_of(z);
+        let l = (atm.layer_of(z).saturating_sub(self.first)).min(self.n_layers - 1);
         Some((l, z - self.edges_m[l]))
     }
 }
@@ -410,19 +430,21 @@ impl Virtual {
             }
         }
         for &(l, length) in &self.direct[..self.nd] {
+            let Some(l) = js.local(l) else { continue };
             let o = base + l * Q * nch;
             for (k, s) in score.iter().enumerate().take(nch) {
                 jbins[o + nch + k] += s * length;
             }
         }
-        for &(l, mu) in &self.events[..self.ne] {
+        for &(l_atm, mu) in &self.events[..self.ne] {
+            let Some(l) = js.local(l_atm) else { continue };
             let o = base + l * Q * nch;
             for (k, s) in score.iter().enumerate().take(nch) {
                 if *s == 0.0 {
                     continue;
                 }
                 jbins[o + 2 * nch + k] += s;
-                jbins[o + 3 * nch + k] += s * share(l, k, mu);
+                jbins[o + 3 * nch + k] += s * share(l_atm, k, mu);
             }
         }
     }
@@ -444,8 +466,12 @@ pub(crate) struct JacFold {
     m2: Vec<f64>,
     scale: Vec<f64>,
     scratch: Vec<f64>,
-    /// Combinations of channels (laser lines), folded from each batch's channel values.
+    /// Combinations of channels (laser lines), folded from each batch's channel values; with
+    /// them the channels' own are not kept (a run reports its lines, and a line-shape
+    /// quadrature's nodes would multiply the memory by their number).
     combos: Vec<crate::returns::Combination>,
+    /// Per channel: the combinations it enters, with its coefficient.
+    terms_of: Vec<Vec<(usize, f64)>>,
     cmean: Vec<f64>,
     cm2: Vec<f64>,
     cscale: Vec<f64>,
@@ -456,8 +482,21 @@ impl JacFold {
     /// Also fold these combinations of channels (the laser lines), so that their derivatives
     /// have standard errors of their own.
     pub fn with_combinations(mut self, combos: &[crate::returns::Combination]) -> Self {
+        if combos.is_empty() {
+            return self;
+        }
         let n = combos.len() * self.per_channel();
         self.combos = combos.to_vec();
+        self.terms_of = vec![Vec::new(); self.js.nch];
+        for (j, c) in combos.iter().enumerate() {
+            for &(k, coef) in &c.terms {
+                self.terms_of[k].push((j, coef));
+            }
+        }
+        self.mean = Vec::new();
+        self.m2 = Vec::new();
+        self.scale = Vec::new();
+        self.scratch = Vec::new();
         self.cmean = vec![0.0; n];
         self.cm2 = vec![0.0; n];
         self.cscale = vec![0.0; n];
@@ -481,7 +520,7 @@ impl JacFold {
         for l in 0..nl {
             for k in 0..nch {
                 let (mut mol, mut part, mut ext) = (0.0, 0.0, 0.0);
-                for (c, comp) in atm.components[l].iter().enumerate() {
+                for (c, comp) in atm.components[js.first + l].iter().enumerate() {
                     if js.molecular[l] == Some(c) {
                         mol += comp.sigma_s_per_m[k];
                     } else {
@@ -495,7 +534,7 @@ impl JacFold {
         }
         let n = nch * shape.n_fov * shape.n_gates * 3 * nl * QR;
         JacFold {
-            gas: atm.gas_sigma_a_per_m.clone(),
+            gas: atm.gas_sigma_a_per_m[js.first * nch..(js.first + nl) * nch].to_vec(),
             thickness_m: (0..nl).map(|l| js.edges_m[l + 1] - js.edges_m[l]).collect(),
             js: js.clone(),
             shape,
@@ -507,6 +546,7 @@ impl JacFold {
             scale: vec![0.0; n],
             scratch: vec![0.0; n],
             combos: Vec::new(),
+            terms_of: Vec::new(),
             cmean: Vec::new(),
             cm2: Vec::new(),
             cscale: Vec::new(),
@@ -525,7 +565,9 @@ impl JacFold {
         let s = self.shape;
         let (nl, nch) = (self.js.n_layers, self.js.nch);
         let block = self.js.block();
+        let keep = self.combos.is_empty();
         self.scratch.iter_mut().for_each(|v| *v = 0.0);
+        self.cvalues.iter_mut().for_each(|v| *v = 0.0);
         let mut acc = vec![0.0; block];
         for gate in 0..s.n_gates {
             for jo in 0..JORDERS {
@@ -557,11 +599,22 @@ impl JacFold {
                                 (n - u) * ie + j_abs,
                                 j_abs * self.gas[l * nch + k],
                             ];
-                            let r1 = self.reported(k, fov, gate, 1 + jo, l);
-                            let r0 = self.reported(k, fov, gate, 0, l);
-                            for (q, v) in vals.iter().enumerate() {
-                                self.scratch[r1 + q] = *v;
-                                self.scratch[r0 + q] += *v;
+                            if keep {
+                                let r1 = self.reported(k, fov, gate, 1 + jo, l);
+                                let r0 = self.reported(k, fov, gate, 0, l);
+                                for (q, v) in vals.iter().enumerate() {
+                                    self.scratch[r1 + q] = *v;
+                                    self.scratch[r0 + q] += *v;
+                                }
+                            }
+                            for &(j, coef) in self.terms_of.get(k).map_or(&[][..], |v| v.as_slice())
+                            {
+                                let r1 = self.reported(j, fov, gate, 1 + jo, l);
+                                let r0 = self.reported(j, fov, gate, 0, l);
+                                for (q, v) in vals.iter().enumerate() {
+                                    self.cvalues[r1 + q] += coef * v;
+                                    self.cvalues[r0 + q] += coef * v;
+                                }
                             }
                         }
                     }
@@ -579,16 +632,6 @@ impl JacFold {
             );
         }
         if !self.combos.is_empty() {
-            let b = self.per_channel();
-            self.cvalues.iter_mut().for_each(|v| *v = 0.0);
-            for (j, c) in self.combos.iter().enumerate() {
-                let dst = &mut self.cvalues[j * b..(j + 1) * b];
-                for (k, coef) in &c.terms {
-                    for (d, s) in dst.iter_mut().zip(&self.scratch[k * b..(k + 1) * b]) {
-                        *d += coef * s;
-                    }
-                }
-            }
             for (i, v) in self.cvalues.iter().enumerate() {
                 stats::welford_add_scaled(
                     &mut self.cmean[i],
@@ -612,7 +655,7 @@ impl JacFold {
         if self.combos.is_empty() {
             return None;
         }
-        let channels = self.finish(Vec::new(), fov_full_angle_mrad, range_m);
+        let channel_defined = self.channel_defined();
         let (nl, nch, m) = (self.js.n_layers, self.js.nch, self.combos.len());
         let mut defined = vec![true; nl * QR * m];
         for (j, c) in self.combos.iter().enumerate() {
@@ -621,29 +664,29 @@ impl JacFold {
                     defined[(l * QR + q) * m + j] = c
                         .terms
                         .iter()
-                        .all(|(k, _)| channels.defined[(l * QR + q) * nch + k]);
+                        .all(|(k, _)| channel_defined[(l * QR + q) * nch + k]);
                 }
             }
         }
         let n = self.n_batches;
         Some(Jacobians {
             channels: self.combos.iter().map(|c| c.name.clone()).collect(),
+            fov_full_angle_mrad,
+            range_m,
+            orders: vec![Order::Total, Order::Exactly(1), Order::AtLeast(2)],
+            first_layer: self.js.first,
+            layer_bottom_m: self.js.edges_m[..nl].to_vec(),
+            layer_top_m: self.js.edges_m[1..=nl].to_vec(),
             value: self.cmean.clone(),
             stderr: (0..self.cm2.len())
                 .map(|i| stats::std_error_scaled(self.cm2[i], self.cscale[i], n))
                 .collect(),
             defined,
-            ..channels
         })
     }
 
-    /// The Jacobians with their standard errors.
-    pub fn finish(
-        &self,
-        channels: Vec<String>,
-        fov_full_angle_mrad: Vec<f64>,
-        range_m: Vec<f64>,
-    ) -> Jacobians {
+    /// Which derivatives exist, per channel (layout of [`Jacobians::defined`]).
+    fn channel_defined(&self) -> Vec<bool> {
         let (nl, nch) = (self.js.n_layers, self.js.nch);
         let mut defined = vec![false; nl * QR * nch];
         for l in 0..nl {
@@ -658,12 +701,29 @@ impl JacFold {
                 }
             }
         }
+        defined
+    }
+
+    /// The channels' Jacobians with their standard errors; `None` where only the
+    /// combinations are kept ([`Self::with_combinations`]).
+    pub fn finish(
+        &self,
+        channels: Vec<String>,
+        fov_full_angle_mrad: Vec<f64>,
+        range_m: Vec<f64>,
+    ) -> Option<Jacobians> {
+        if !self.combos.is_empty() {
+            return None;
+        }
+        let nl = self.js.n_layers;
+        let defined = self.channel_defined();
         let n = self.n_batches;
-        Jacobians {
+        Some(Jacobians {
             channels,
             fov_full_angle_mrad,
             range_m,
             orders: vec![Order::Total, Order::Exactly(1), Order::AtLeast(2)],
+            first_layer: self.js.first,
             layer_bottom_m: self.js.edges_m[..nl].to_vec(),
             layer_top_m: self.js.edges_m[1..=nl].to_vec(),
             value: self.mean.clone(),
@@ -671,7 +731,7 @@ impl JacFold {
                 .map(|i| stats::std_error_scaled(self.m2[i], self.scale[i], n))
                 .collect(),
             defined,
-        }
+        })
     }
 }
 
@@ -708,7 +768,8 @@ impl Jacobians {
                                 }
                                 let _ = writeln!(
                                     out,
-                                    "mc,{ch},{fov},{r},{label},{l},{},{},{},{},{:.9e},{:.9e}",
+                                    "mc,{ch},{fov},{r},{label},{},{},{},{},{},{:.9e},{:.9e}",
+                                    self.first_layer + l,
                                     self.layer_bottom_m[l],
                                     self.layer_top_m[l],
                                     quantity.label(),

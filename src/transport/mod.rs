@@ -236,8 +236,14 @@ pub fn run_plan(plan: &Plan, progress: Progress) -> Result<McResult, TransportEr
     let started = Instant::now();
     // Chunks keep at most a few batch buffers alive, and no more than the memory limit allows;
     // their size does not change the numbers.
+    let per_batch = plan.setup.shape.len()
+        + plan
+            .setup
+            .jac
+            .as_ref()
+            .map_or(0, |j| j.len(&plan.setup.shape));
     let chunk = (4 * threads)
-        .min(crate::limits::MAX_LIVE_TALLY_VALUES / plan.setup.shape.len().max(1))
+        .min(crate::limits::MAX_LIVE_TALLY_VALUES / per_batch.max(1))
         .max(1);
     let mut start = 0;
     while start < batches {

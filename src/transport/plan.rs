@@ -82,6 +82,29 @@ impl<'a> Plan<'a> {
             n_channels: if polarised_run { 2 * nch } else { nch },
         };
         let setup = Setup::new(scene, atm, layout, fov_cos, shape);
+        if let Some(js) = &setup.jac {
+            // A batch's tally and the fold's running moments (mean, M2, scale and a batch's
+            // values) of the lines (or, without lines, the channels).
+            let series = if layout.combinations.is_empty() {
+                nch
+            } else {
+                layout.combinations.len()
+            };
+            let reported = series * shape.n_fov * shape.n_gates * 3 * js.n_layers * 5;
+            let need = 2 * js.len(&shape) + 4 * reported;
+            if need > crate::limits::MAX_LIVE_TALLY_VALUES {
+                return Err(TransportError::Options(format!(
+                    "`jacobians = true`: {} layers × {} gates × {} fields of view × {nch} \
+                     channels need {need} tally values, at most {} fit in memory: ask for \
+                     fewer gates (`[gates]`), fields of view or layers (a coarser \
+                     `[atmosphere] layer_thickness_m`, a lower `top_m`)",
+                    js.n_layers,
+                    shape.n_gates,
+                    shape.n_fov,
+                    crate::limits::MAX_LIVE_TALLY_VALUES
+                )));
+            }
+        }
 
         let batches = sim.batches;
         let per_batch = sim.photons.div_ceil(batches as u64);

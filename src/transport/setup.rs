@@ -151,7 +151,7 @@ impl<'a> Setup<'a> {
             matrices: atm.matrices.iter().map(|m| (**m).clone()).collect(),
             aperture: Aperture::new(lidar.telescope_diameter_m, atm),
             jac: (scene.simulation.jacobians && lidar.polarisation == Polarisation::None)
-                .then(|| super::jacobian::JacSetup::new(atm)),
+                .then(|| super::jacobian::JacSetup::new(atm, receiver.z, scene.gates.end_m())),
         };
         setup.place_ddis(widest_fov_mrad);
         setup.place_estimates(vr);

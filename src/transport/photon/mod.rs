@@ -374,8 +374,8 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
         if let Some(js) = &self.s.jac {
             if mu.abs() > HORIZONTAL {
                 self.jac.point(js, self.s.atm, z, 1.0 / mu);
-            } else {
-                self.jac.direct(layer, length);
+            } else if let Some(l) = js.local(layer) {
+                self.jac.direct(l, length);
             }
         }
     }
@@ -383,9 +383,9 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
     /// Jacobian runs: the photon scatters in `layer` through the angle of cosine μ.
     #[inline]
     fn jac_event(&mut self, layer: usize, mu: f64) {
-        if self.s.jac.is_none() {
+        let Some(l) = self.s.jac.as_ref().and_then(|js| js.local(layer)) else {
             return;
-        }
+        };
         let nch = self.nch();
         if self.s.atm.grey_scattering {
             let u = self.s.molecular_share(layer, 0, mu);
@@ -395,7 +395,7 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
                 self.jac_u[k] = self.s.molecular_share(layer, k, mu);
             }
         }
-        self.jac.event(layer, &self.jac_u[..nch]);
+        self.jac.event(l, &self.jac_u[..nch]);
     }
 
     /// Jacobian runs: add the estimate whose scores per channel are in `self.le`, of a path of
