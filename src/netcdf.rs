@@ -1,6 +1,6 @@
 //! The results of a run as one CF-conventions NetCDF file, `run.nc`: the numbers of
-//! `returns.csv`, `signals.csv` and `retrieval.csv` on named dimensions, for xarray and every
-//! other NetCDF client.
+//! `returns.csv`, `backscatter.csv`, `signals.csv`, `retrieval.csv` and `jacobians.csv` on
+//! named dimensions, for xarray and every other NetCDF client.
 //!
 //! **Format.** NetCDF-3 "64-bit offset" (CDF-2), as the NetCDF User Guide's *File Format
 //! Specification* defines it (Unidata, NUG §"Classic Format Specification": big-endian
@@ -31,6 +31,11 @@
 //! analytic returns above order 1, say) is `_FillValue`. Retrievals are tables, one per
 //! quantity (its unit differs: ppm, m⁻², m⁻³), with a dimension `<quantity>_product` and the
 //! columns of `retrieval.csv` as `<quantity>_<column>` variables, rows in the CSV's order.
+//! Jacobians (with `[simulation] jacobians`) are Monte Carlo only: `jacobian_j_m` and its
+//! standard error over (`channel`, `fov_full_angle_mrad`, `range_m`, `jacobian_order`,
+//! `layer`, `jacobian_quantity`), the order of `jacobians.csv`'s rows, with the layers' edges
+//! `layer_bottom_m`, `layer_top_m`; a derivative the layer does not have is `_FillValue`.
+//! Without Jacobians none of these dimensions or variables is in the file.
 
 use std::time::{SystemTime, UNIX_EPOCH};
 
@@ -41,6 +46,7 @@ use crate::instrument::signals::Signals;
 use crate::retrieval::{Product, Quantity};
 use crate::returns::Returns;
 use crate::scene::Gates;
+use crate::transport::{JacobianQuantity, Jacobians};
 
 /// The CF version the file declares in its `Conventions` attribute.
 pub const CONVENTIONS: &str = "CF-1.8";
@@ -103,6 +109,9 @@ pub struct RunFile<'a> {
     pub signals: &'a [Signals],
     /// The rows of `retrieval.csv` (may be empty).
     pub products: &'a [Product],
+    /// The derivatives of the Monte Carlo returns of `jacobians.csv` (with `[simulation]
+    /// jacobians`), per laser line: those of the channels of the returns go into the file.
+    pub jacobians: Option<&'a Jacobians>,
     /// The retrieved gas (`CO2`, …), for the mixing ratio's standard name.
     pub gas: Option<&'a str>,
     /// Global attributes.
@@ -146,6 +155,9 @@ pub fn run_dataset(run: &RunFile) -> Result<Dataset, NetcdfError> {
     }
     if !run.signals.is_empty() {
         signal_variables(&mut nc, &grid, run.signals)?;
+    }
+    if let Some(j) = run.jacobians {
+        jacobian_variables(&mut nc, &grid, j)?;
     }
     for q in [
         Quantity::MixingRatio,
@@ -787,6 +799,140 @@ fn signal_variables(nc: &mut Dataset, grid: &Grid, signals: &[Signals]) -> Resul
             .attrs([("long_name", long_name), ("units", "1")])
             .fill();
     }
+    Ok(())
+}
+
+/// `jacobians.csv`'s numbers: ∂E/∂θ and its standard error over (channel,
+/// fov_full_angle_mrad, range_m, jacobian_order, layer, jacobian_quantity), the layout of
+/// [`Jacobians::index`] with the returns' channels; a derivative the layer does not have (the
+/// molecular scattering of a layer without molecules) is `_FillValue`, as is a channel of the
+/// returns without Jacobians. The layers are a dimension `layer` (index from the bottom, as
+/// the CSV's `layer`) with `layer_bottom_m` and `layer_top_m`.
+fn jacobian_variables(nc: &mut Dataset, grid: &Grid, j: &Jacobians) -> Result<(), NetcdfError> {
+    if j.fov_full_angle_mrad != grid.fov_full_angle_mrad || j.range_m != grid.range_m {
+        return Err(NetcdfError::Layout(
+            "the Jacobians are not on the grid of the returns".into(),
+        ));
+    }
+    let (n_orders, n_layers, n_q) = (
+        j.orders.len(),
+        j.layer_bottom_m.len(),
+        JacobianQuantity::ALL.len(),
+    );
+    let per_channel =
+        grid.fov_full_angle_mrad.len() * grid.range_m.len() * n_orders * n_layers * n_q;
+    let n = grid.channels.len() * per_channel;
+    let (mut value, mut stderr) = (vec![f64::NAN; n], vec![f64::NAN; n]);
+    let mut found = 0;
+    for (c, name) in grid.channels.iter().enumerate() {
+        // The Jacobians of combinations that are not lines (a jittered line's slope and
+        // curvature) are `jacobians.csv`'s only.
+        let Some(jc) = j.channels.iter().position(|x| x == name) else {
+            continue;
+        };
+        found += 1;
+        for f in 0..grid.fov_full_angle_mrad.len() {
+            for g in 0..grid.range_m.len() {
+                for o in 0..n_orders {
+                    for l in 0..n_layers {
+                        for q in 0..n_q {
+                            if !j.is_defined(jc, l, q) {
+                                continue;
+                            }
+                            let i = j.index(jc, f, g, o, l, q);
+                            let k = ((((c * grid.fov_full_angle_mrad.len() + f)
+                                * grid.range_m.len()
+                                + g)
+                                * n_orders
+                                + o)
+                                * n_layers
+                                + l)
+                                * n_q
+                                + q;
+                            value[k] = j.value[i];
+                            stderr[k] = j.stderr[i];
+                        }
+                    }
+                }
+            }
+        }
+    }
+    if found == 0 {
+        return Err(NetcdfError::Layout(format!(
+            "Jacobians of {:?}, returns of {:?}: no channel in common",
+            j.channels, grid.channels
+        )));
+    }
+    nc.dim("jacobian_order", n_orders);
+    nc.dim("layer", n_layers);
+    nc.dim("jacobian_quantity", n_q);
+    let orders: Vec<String> = j.orders.iter().map(|o| o.label()).collect();
+    nc.text("jacobian_order", "jacobian_order", &orders)
+        .attrs([(
+            "long_name",
+            "scattering-order bin of the Jacobians: total = all orders, 1 = single scattering, 2+ = multiple scattering",
+        )]);
+    nc.f64(
+        "layer",
+        &["layer"],
+        (0..n_layers).map(|l| l as f64).collect(),
+    )
+    .attrs([
+        (
+            "long_name",
+            "layer of the optical atmosphere, index from the bottom (molecular layers split at every particle layer's edges)",
+        ),
+        ("units", "1"),
+    ]);
+    nc.f64("layer_bottom_m", &["layer"], j.layer_bottom_m.clone())
+        .attrs([
+            ("long_name", "altitude of the bottom of the layer"),
+            ("units", "m"),
+        ]);
+    nc.f64("layer_top_m", &["layer"], j.layer_top_m.clone())
+        .attrs([
+            ("long_name", "altitude of the top of the layer"),
+            ("units", "m"),
+        ]);
+    let quantities: Vec<String> = JacobianQuantity::ALL
+        .iter()
+        .map(|q| q.label().to_string())
+        .collect();
+    nc.text("jacobian_quantity", "jacobian_quantity", &quantities)
+        .attrs([(
+            "long_name",
+            "coefficient the derivative is taken with respect to: absorption = the layer's absorption coefficient (gas and particles), molecular_scattering = its molecular scattering coefficient, particle_scattering = its particles' scattering coefficient (absorption fixed), particle_extinction = its particles' extinction coefficient at a fixed single-scattering albedo; all in 1/m",
+        )]);
+    let dims = [
+        GRID_DIMS[1],
+        GRID_DIMS[2],
+        GRID_DIMS[3],
+        "jacobian_order",
+        "layer",
+        "jacobian_quantity",
+    ];
+    let coordinates = "layer_bottom_m layer_top_m";
+    nc.f64("jacobian_j_m", &dims, value)
+        .attrs([
+            (
+                "long_name",
+                "derivative dE/dtheta of the Monte Carlo energy_j (source mc) with respect to the layer's coefficient theta in 1/m named by jacobian_quantity, from the same photons (J per 1/m); _FillValue where the layer has no such scatterer",
+            ),
+            ("units", "J m"),
+            ("ancillary_variables", "jacobian_stderr_j_m"),
+            ("coordinates", coordinates),
+        ])
+        .fill();
+    nc.f64("jacobian_stderr_j_m", &dims, stderr)
+        .attrs([
+            (
+                "long_name",
+                "standard error of jacobian_j_m (from the batches of the returns)",
+            ),
+            ("units", "J m"),
+            ("coordinates", coordinates),
+        ])
+        .fill();
     Ok(())
 }
 

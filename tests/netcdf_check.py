@@ -10,7 +10,7 @@ The file is opened twice: with xarray (as users read it: CF decoding, `_FillValu
 NaN, char arrays as strings) and with netCDF4-python (the netCDF-C library's own reader, for the
 attributes and the raw fill values). The CSV files are read with Python's csv module. Checked:
 
-* every row of returns.csv, backscatter.csv, signals.csv and retrieval.csv has its value in
+* every row of returns.csv, backscatter.csv, signals.csv, retrieval.csv and jacobians.csv has its value in
   the file (backscatter.csv's lidar constant too, by channel), and every
   bin of the file that holds a value has its row (no extra numbers). returns.csv and
   signals.csv print 10 significant digits (`{:.9e}`), so a value of the file is compared as
@@ -113,6 +113,69 @@ def check_lidar_constant(ds, csv_path):
     for n, row in enumerate(rows, start=2):
         if not same_e9(row[col], float(values[pos[row[ch]]])):
             fail(f"{csv_path} line {n}: lidar constant {row[col]}, run.nc {values[pos[row[ch]]]!r}")
+
+
+JACOBIAN_DIMS = ("channel", "fov_full_angle_mrad", "range_m", "jacobian_order", "layer", "jacobian_quantity")
+
+
+def check_jacobians(ds, out):
+    """jacobians.csv against jacobian_j_m and jacobian_stderr_j_m: every row in its bin (the
+    file's channels are the lines; a row of a combination that is no line, `line:d_dnu_per_mhz`,
+    is the CSV's only), the layer's edges as the CSV writes them, and every other bin
+    `_FillValue`, read raw by netCDF4 (never NaN). Returns (rows checked, rows the CSV only)."""
+    header, rows = read_csv(f"{out}/jacobians.csv")
+    col = {name: header.index(name) for name in header}
+    for c in ["jacobian_j_m", "jacobian_stderr_j_m"]:
+        if ds[c].dims != JACOBIAN_DIMS:
+            fail(f"{c} has dimensions {ds[c].dims}")
+        if ds[c].attrs.get("units") != "J m":
+            fail(f"{c} has units {ds[c].attrs.get('units')!r}")
+    if ds["jacobian_j_m"].attrs.get("ancillary_variables") != "jacobian_stderr_j_m":
+        fail("jacobian_j_m: ancillary_variables")
+    if ds["layer_bottom_m"].attrs.get("units") != "m" or ds["layer_top_m"].attrs.get("units") != "m":
+        fail("layer_bottom_m / layer_top_m: units")
+    pos = {c: positions(ds, c) for c in ["channel", "fov_full_angle_mrad", "range_m", "jacobian_order", "jacobian_quantity"]}
+    layers = positions(ds, "layer")
+    bottom, top = ds["layer_bottom_m"].values, ds["layer_top_m"].values
+    value, stderr = ds["jacobian_j_m"].values, ds["jacobian_stderr_j_m"].values
+    seen = np.zeros(value.shape, dtype=bool)
+    only_csv = 0
+    for n, row in enumerate(rows, start=2):
+        if row[col["source"]] != "mc":
+            fail(f"jacobians.csv line {n}: source {row[col['source']]!r}")
+        if row[col["channel"]] not in pos["channel"] and ":" in row[col["channel"]]:
+            only_csv += 1
+            continue
+        try:
+            l = layers[float(row[col["layer"]])]
+            idx = (
+                pos["channel"][row[col["channel"]]],
+                pos["fov_full_angle_mrad"][float(row[col["fov_full_angle_mrad"]])],
+                pos["range_m"][float(row[col["range_m"]])],
+                pos["jacobian_order"][row[col["order"]]],
+                l,
+                pos["jacobian_quantity"][row[col["quantity"]]],
+            )
+        except KeyError as e:
+            fail(f"jacobians.csv line {n}: coordinate {e} is not in run.nc")
+        if seen[idx]:
+            fail(f"jacobians.csv line {n}: a second row for one bin")
+        seen[idx] = True
+        if float(row[col["layer_bottom_m"]]) != bottom[l] or float(row[col["layer_top_m"]]) != top[l]:
+            fail(f"jacobians.csv line {n}: layer edges {row[col['layer_bottom_m']]}, {row[col['layer_top_m']]}")
+        for c, v in [("derivative_j_m", value[idx]), ("stderr_j_m", stderr[idx])]:
+            if not same_e9(row[col[c]], float(v)):
+                fail(f"jacobians.csv line {n}, {c}: CSV {row[col[c]]}, run.nc {float(v)!r}")
+    with netCDF4.Dataset(f"{out}/run.nc") as nc:
+        for c in ["jacobian_j_m", "jacobian_stderr_j_m"]:
+            v = nc.variables[c]
+            v.set_auto_mask(False)
+            raw = v[:]
+            if np.isnan(raw).any():
+                fail(f"{c} holds NaN")
+            if not (raw[~seen] == v.getncattr("_FillValue")).all():
+                fail(f"{c}: {int((raw[~seen] != v.getncattr('_FillValue')).sum())} values that jacobians.csv does not have")
+    return len(rows) - only_csv, only_csv
 
 
 UNITS = {"ppm": "1e-6", "molecules/m2": "m-2", "molecules/m3": "m-3"}
@@ -336,6 +399,20 @@ def main(args):
             except FileNotFoundError:
                 if any(d.endswith("_product") for d in ds.sizes):
                     fail("run.nc has retrievals but there is no retrieval.csv")
+            n_jac = 0
+            try:
+                open(f"{out}/jacobians.csv").close()
+                has_jacobians = True
+            except FileNotFoundError:
+                has_jacobians = False
+            if has_jacobians:
+                n_jac, only_csv = check_jacobians(ds, out)
+                print(
+                    f"netcdf check: {out}: {n_jac} jacobians.csv rows equal in jacobian_j_m "
+                    f"({only_csv} rows of combinations that are no line)"
+                )
+            elif any(d in ds.sizes for d in ["jacobian_order", "layer", "jacobian_quantity"]):
+                fail("run.nc has Jacobians but there is no jacobians.csv")
         print(
             f"netcdf check: {out}: {n_ret} returns, {n_sig} signal and {n_prod} retrieval rows "
             f"equal in run.nc (xarray {xr.__version__}, netCDF4 {netCDF4.__version__}, "

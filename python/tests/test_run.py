@@ -200,3 +200,96 @@ def test_polarised_returns_are_the_csv_rows(cli, tmp_path):
     assert checked > 200
     # Single scattering by spheres keeps the polarisation: the analytic δ is 0 in the cloud.
     assert float(ds["depolarisation_ratio"].sel(source="analytic", order="1").max()) == 0.0
+
+
+JACOBIAN_SCENE = """
+description = "Jacobians: a cloud in a coarse molecular atmosphere, a cloud above its top"
+
+[lidar]
+altitude_m = 0.0
+zenith_angle_deg = 0.0
+pulse_energy_j = 0.1
+beam_divergence_full_angle_mrad = 0.2
+telescope_diameter_m = 0.5
+optical_efficiency = 0.5
+fov_full_angle_mrad = [0.5, 2.0]
+
+[[channel]]
+name = "532"
+wavelength_nm = 532.0
+
+[[channel]]
+name = "1064"
+wavelength_nm = 1064.0
+
+[gates]
+start_m = 900.0
+end_m = 1500.0
+width_m = 50.0
+
+[atmosphere]
+standard = "us_standard"
+layer_thickness_m = 500.0
+top_m = 1300.0
+
+[[layer]]
+name = "cloud"
+base_m = 1000.0
+top_m = 1200.0
+extinction_per_km = 5.0
+single_scattering_albedo = 0.99
+phase = { kind = "henyey_greenstein", g = 0.8 }
+
+[[layer]]
+name = "cloud above the molecules"
+base_m = 1300.0
+top_m = 1450.0
+extinction_per_km = 2.0
+single_scattering_albedo = 0.9
+phase = { kind = "henyey_greenstein", g = 0.7 }
+
+[simulation]
+photons = 4000
+max_order = 4
+jacobians = true
+"""
+
+
+def test_jacobians_are_the_command_line_and_jacobians_csv(cli, tmp_path):
+    """With `jacobians = true` the Dataset is run.nc as xarray opens it (bit for bit, at
+    another thread count), and jacobian_j_m / jacobian_stderr_j_m hold jacobians.csv's rows
+    as written, on (channel, fov, gate, jacobian_order, layer, jacobian_quantity); every bin
+    no row names is NaN (a layer without the scatterer), and there are such bins."""
+    scene_file = tmp_path / "jac.toml"
+    scene_file.write_text(JACOBIAN_SCENE)
+    cli("run", scene_file, "--out", tmp_path / "out", "--seed", 4, "--threads", 2, "--no-plots")
+    ds = lidarsim.run(lidarsim.Scene.from_toml(scene_file), seed=4, threads=1)
+    with xr.open_dataset(tmp_path / "out" / "run.nc") as f:
+        same_but_history(ds, f.load())
+    j, se = ds["jacobian_j_m"], ds["jacobian_stderr_j_m"]
+    assert j.dims == ("channel", "fov_full_angle_mrad", "range_m", "jacobian_order", "layer", "jacobian_quantity")
+    assert j.attrs["units"] == "J m" and se.attrs["units"] == "J m"
+    assert list(ds["jacobian_order"].values) == ["total", "1", "2+"]
+    assert list(ds["jacobian_quantity"].values) == [
+        "absorption", "molecular_scattering", "particle_scattering", "particle_extinction"]
+    seen = np.zeros(j.shape, dtype=bool)
+    with open(tmp_path / "out" / "jacobians.csv") as f:
+        for r in csv.DictReader(f):
+            at = dict(channel=r["channel"], fov_full_angle_mrad=float(r["fov_full_angle_mrad"]),
+                      range_m=float(r["range_m"]), jacobian_order=r["order"], layer=float(r["layer"]),
+                      jacobian_quantity=r["quantity"])
+            assert as_written(j.sel(at).item(), 9) == r["derivative_j_m"]
+            assert as_written(se.sel(at).item(), 9) == r["stderr_j_m"]
+            layer = ds["layer"].sel(layer=float(r["layer"]))
+            assert float(r["layer_bottom_m"]) == layer["layer_bottom_m"].item()
+            assert float(r["layer_top_m"]) == layer["layer_top_m"].item()
+            index = tuple(int(np.flatnonzero(ds[d].values == v)[0]) for d, v in at.items())
+            seen[index] = True
+    assert seen.sum() > 1000
+    assert np.isnan(j.values[~seen]).all() and np.isnan(se.values[~seen]).all()
+    assert (~seen).any()
+    # The molecular-scattering derivative is undefined exactly above the molecules' top.
+    mol = j.sel(jacobian_quantity="molecular_scattering").isel(channel=0, fov_full_angle_mrad=0, range_m=0,
+                                                              jacobian_order=0)
+    above = ds["layer_bottom_m"] >= 1300.0
+    assert np.isnan(mol.where(above, drop=True)).all() and np.isfinite(mol.where(~above, drop=True)).all()

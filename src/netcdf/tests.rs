@@ -102,6 +102,7 @@ fn write(products: &[Product]) -> Vec<u8> {
         signals: &[],
         products,
         gas: Some("CO2"),
+        jacobians: None,
         attributes: &attributes(),
     })
     .unwrap()
@@ -230,6 +231,7 @@ fn backscatter_variables_are_the_energies_times_the_lidar_equation_factors() {
             signals: &[],
             products: &[],
             gas: None,
+            jacobians: None,
             attributes: &attributes(),
         })
     };
@@ -397,6 +399,7 @@ fn returns_on_different_grids_are_refused() {
         signals: &[],
         products: &[],
         gas: None,
+        jacobians: None,
         attributes: &attributes(),
     })
     .unwrap_err();
@@ -523,6 +526,7 @@ fn polarised_returns_land_in_their_bins_with_the_depolarisation_ratio() {
         signals: &[],
         products: &[],
         gas: None,
+        jacobians: None,
         attributes: &attributes(),
     })
     .unwrap();
@@ -584,4 +588,184 @@ fn polarised_returns_land_in_their_bins_with_the_depolarisation_ratio() {
             }
         }
     }
+}
+
+/// Jacobians on the returns' grid: channels named as the grid's but listed in another order,
+/// and a combination that is no line (a jittered line's slope), two layers (the lower without
+/// particles, the upper without molecules), each derivative a distinct number.
+fn jacobians() -> Jacobians {
+    let (mc, _) = returns();
+    let channels = vec![
+        "off, \"ref\"".to_string(),
+        "on:d_dnu_per_mhz".to_string(),
+        "on".to_string(),
+    ];
+    let (nl, nq) = (2, JacobianQuantity::ALL.len());
+    let n = channels.len() * mc.fov_full_angle_mrad.len() * mc.range_m.len() * 3 * nl * nq;
+    let mut defined = vec![true; nl * nq * channels.len()];
+    for k in 0..channels.len() {
+        // Layer 0: no particles; layer 1: no molecules.
+        for q in [2, 3] {
+            defined[q * channels.len() + k] = false;
+        }
+        defined[(nq + 1) * channels.len() + k] = false;
+    }
+    Jacobians {
+        channels,
+        fov_full_angle_mrad: mc.fov_full_angle_mrad.clone(),
+        range_m: mc.range_m.clone(),
+        orders: vec![Order::Total, Order::Exactly(1), Order::AtLeast(2)],
+        layer_bottom_m: vec![0.0, 150.5],
+        layer_top_m: vec![150.5, 1000.0],
+        value: (0..n).map(|i| -1e-9 * (i as f64 + 1.0) / 7.0).collect(),
+        stderr: (0..n).map(|i| 1e-12 * (i as f64 + 1.0) / 3.0).collect(),
+        defined,
+    }
+}
+
+/// `jacobian_j_m` and its standard error read back over (channel, fov, gate, jacobian_order,
+/// layer, jacobian_quantity): each bin holds the derivative of the channel of the same name,
+/// `_FillValue` where the layer lacks the scatterer; the coordinates are the CSV's labels
+/// and the layers' edges; a combination that is no line is left out.
+#[test]
+fn jacobians_land_in_their_bins_with_fill_where_undefined() {
+    let (mc, analytic) = returns();
+    let j = jacobians();
+    let bytes = run_file(&RunFile {
+        returns: &[&mc, &analytic],
+        lidar_constant_j_m2: None,
+        gates: &gates(),
+        lines: &[],
+        polarised: &[],
+        signals: &[],
+        products: &[],
+        gas: None,
+        jacobians: Some(&j),
+        attributes: &attributes(),
+    })
+    .unwrap();
+    let mut r = read(bytes);
+    let ds = r.data_set();
+    for (dim, len) in [
+        ("jacobian_order", 3),
+        ("layer", 2),
+        ("jacobian_quantity", 4),
+    ] {
+        assert_eq!(ds.dim_size(dim), Some(len), "{dim}");
+    }
+    let dims: Vec<String> = ds
+        .get_var("jacobian_j_m")
+        .unwrap()
+        .get_dims()
+        .iter()
+        .map(|d| d.name())
+        .collect();
+    assert_eq!(
+        dims,
+        [
+            "channel",
+            "fov_full_angle_mrad",
+            "range_m",
+            "jacobian_order",
+            "layer",
+            "jacobian_quantity"
+        ]
+    );
+    let attr = |var: &str, name: &str| ds.get_var_attr_as_string(var, name).unwrap_or_default();
+    assert_eq!(attr("jacobian_j_m", "units"), "J m");
+    assert_eq!(attr("jacobian_stderr_j_m", "units"), "J m");
+    assert_eq!(
+        attr("jacobian_j_m", "ancillary_variables"),
+        "jacobian_stderr_j_m"
+    );
+    assert_eq!(
+        attr("jacobian_j_m", "coordinates"),
+        "layer_bottom_m layer_top_m"
+    );
+    assert!(attr("jacobian_j_m", "long_name").contains("1/m"));
+    assert_eq!(attr("layer_bottom_m", "units"), "m");
+    assert_eq!(texts(&mut r, "jacobian_order"), ["total", "1", "2+"]);
+    assert_eq!(
+        texts(&mut r, "jacobian_quantity"),
+        [
+            "absorption",
+            "molecular_scattering",
+            "particle_scattering",
+            "particle_extinction"
+        ]
+    );
+    assert_eq!(texts(&mut r, "channel"), ["on", "off, \"ref\""]);
+    assert_eq!(r.read_var_f64("layer").unwrap(), [0.0, 1.0]);
+    assert_eq!(r.read_var_f64("layer_bottom_m").unwrap(), [0.0, 150.5]);
+    assert_eq!(r.read_var_f64("layer_top_m").unwrap(), [150.5, 1000.0]);
+    let (value, stderr) = (
+        r.read_var_f64("jacobian_j_m").unwrap(),
+        r.read_var_f64("jacobian_stderr_j_m").unwrap(),
+    );
+    assert_eq!(value.len(), 2 * 2 * 3 * 3 * 2 * 4);
+    let (mut defined, mut fill) = (0, 0);
+    for (c, jc) in [(0, 2), (1, 0)] {
+        for f in 0..2 {
+            for g in 0..3 {
+                for (o, order) in j.orders.iter().enumerate() {
+                    for l in 0..2 {
+                        for (q, quantity) in JacobianQuantity::ALL.iter().enumerate() {
+                            let k = ((((c * 2 + f) * 3 + g) * 3 + o) * 2 + l) * 4 + q;
+                            match j.get(jc, f, g, *order, l, *quantity) {
+                                Some((v, s)) => {
+                                    assert_eq!((value[k], stderr[k]), (v, s));
+                                    defined += 1;
+                                }
+                                None => {
+                                    assert_eq!((value[k], stderr[k]), (NC_FILL_F64, NC_FILL_F64));
+                                    fill += 1;
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+    // Per (channel, fov, gate, order): layer 0 absorption and molecular scattering, layer 1
+    // absorption and both particle quantities.
+    assert_eq!((defined, fill), (36 * 5, 36 * 3));
+}
+
+/// Without Jacobians the file has none of their dimensions or variables; Jacobians on
+/// another grid, or of no channel of the returns, are refused.
+#[test]
+fn jacobians_are_absent_without_and_refused_off_the_grid() {
+    let (mc, analytic) = returns();
+    let file = |j: Option<&Jacobians>| {
+        run_dataset(&RunFile {
+            returns: &[&mc, &analytic],
+            lidar_constant_j_m2: None,
+            gates: &gates(),
+            lines: &[],
+            polarised: &[],
+            signals: &[],
+            products: &[],
+            gas: None,
+            jacobians: j,
+            attributes: &attributes(),
+        })
+    };
+    let ds = file(None).unwrap();
+    assert!(
+        ds.dims
+            .iter()
+            .all(|(d, _)| !d.contains("jacobian") && d != "layer")
+    );
+    assert!(
+        ds.vars
+            .iter()
+            .all(|v| !v.name.contains("jacobian") && !v.name.starts_with("layer"))
+    );
+    let mut off_grid = jacobians();
+    off_grid.range_m[0] += 1.0;
+    assert!(matches!(file(Some(&off_grid)), Err(NetcdfError::Layout(_))));
+    let mut no_line = jacobians();
+    no_line.channels = vec!["a".into(), "b".into(), "c".into()];
+    assert!(matches!(file(Some(&no_line)), Err(NetcdfError::Layout(_))));
 }

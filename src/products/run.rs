@@ -523,6 +523,11 @@ fn dataset_of(
         signals: &run.signals,
         products: &run.products,
         gas: run.retrieval.as_ref().map(|r| r.config.gas.as_str()),
+        // Those of `jacobians.csv` (`write`): per line.
+        jacobians: run
+            .mc
+            .as_ref()
+            .and_then(|m| m.jacobians_combined.as_ref().or(m.jacobians.as_ref())),
         attributes: &attributes,
     })
 }
