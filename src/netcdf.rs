@@ -814,10 +814,15 @@ fn jacobian_variables(nc: &mut Dataset, grid: &Grid, j: &Jacobians) -> Result<()
             "the Jacobians are not on the grid of the returns".into(),
         ));
     }
+    // The quantities in J per (1/m); `gas_amount` (J per relative change) is the CSV's and
+    // weighting.csv's.
     let (n_orders, n_layers, n_q) = (
         j.orders.len(),
         j.layer_bottom_m.len(),
-        JacobianQuantity::ALL.len(),
+        JacobianQuantity::ALL
+            .iter()
+            .filter(|q| q.unit() == "J m")
+            .count(),
     );
     let per_channel =
         grid.fov_full_angle_mrad.len() * grid.range_m.len() * n_orders * n_layers * n_q;
@@ -875,7 +880,7 @@ fn jacobian_variables(nc: &mut Dataset, grid: &Grid, j: &Jacobians) -> Result<()
     nc.f64(
         "layer",
         &["layer"],
-        (0..n_layers).map(|l| l as f64).collect(),
+        (0..n_layers).map(|l| (j.first_layer + l) as f64).collect(),
     )
     .attrs([
         (
@@ -894,7 +899,7 @@ fn jacobian_variables(nc: &mut Dataset, grid: &Grid, j: &Jacobians) -> Result<()
             ("long_name", "altitude of the top of the layer"),
             ("units", "m"),
         ]);
-    let quantities: Vec<String> = JacobianQuantity::ALL
+    let quantities: Vec<String> = JacobianQuantity::ALL[..n_q]
         .iter()
         .map(|q| q.label().to_string())
         .collect();

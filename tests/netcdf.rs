@@ -334,6 +334,10 @@ fn run_nc_jacobians_are_the_rows_of_jacobians_csv() {
     let mut seen = vec![false; value.len()];
     for row in &rows {
         assert_eq!(row[col("source")], "mc");
+        // The derivative per relative change of the gases is the CSV's only.
+        if row[col("quantity")] == "gas_amount" {
+            continue;
+        }
         let l = findf(&layer, &row[col("layer")]);
         let idx = [
             find(&channels, &row[col("channel")]),
@@ -353,23 +357,26 @@ fn run_nc_jacobians_are_the_rows_of_jacobians_csv() {
         assert_eq!(row[col("layer_top_m")].parse::<f64>().unwrap(), top[l]);
         assert_eq!(
             format!("{:.9e}", value[k]),
-            row[col("derivative_j_m")],
+            row[col("derivative")],
             "{row:?}"
         );
-        assert_eq!(
-            format!("{:.9e}", stderr[k]),
-            row[col("stderr_j_m")],
-            "{row:?}"
-        );
+        assert_eq!(format!("{:.9e}", stderr[k]), row[col("stderr")], "{row:?}");
     }
     for (k, s) in seen.iter().enumerate() {
         if !s {
-            assert_eq!((value[k], stderr[k]), (fill, fill), "bin {k}");
+            // Undefined, or exactly 0 (light cannot reach the layer in the gate's time: the
+            // CSV leaves such rows out).
+            assert!(
+                (value[k], stderr[k]) == (fill, fill) || (value[k], stderr[k]) == (0.0, 0.0),
+                "bin {k}: {} {}",
+                value[k],
+                stderr[k]
+            );
         }
     }
     // Undefined derivatives exist (no molecules in the top layers, no particles in the
     // lowest), and so do defined ones of every quantity.
-    let missing = seen.iter().filter(|s| !**s).count();
+    let missing = value.iter().filter(|v| **v == fill).count();
     assert!(missing > 0 && missing < seen.len() / 2, "{missing}");
     for q in &quantities {
         assert!(rows.iter().any(|r| r[col("quantity")] == *q), "{q}");

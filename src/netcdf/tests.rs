@@ -615,6 +615,7 @@ fn jacobians() -> Jacobians {
         fov_full_angle_mrad: mc.fov_full_angle_mrad.clone(),
         range_m: mc.range_m.clone(),
         orders: vec![Order::Total, Order::Exactly(1), Order::AtLeast(2)],
+        first_layer: 0,
         layer_bottom_m: vec![0.0, 150.5],
         layer_top_m: vec![150.5, 1000.0],
         value: (0..n).map(|i| -1e-9 * (i as f64 + 1.0) / 7.0).collect(),

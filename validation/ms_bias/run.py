@@ -1,0 +1,174 @@
+"""XCO2 bias from multiple scattering: the space IPDA and the airborne DIAL/IPDA against the
+optical depth of an ice cloud between the lidar and the surface and the receiver's field of
+view, with and without a low water cloud just above the target (issue 40, item 3).
+
+For every case one `lidarsim run` with the Monte Carlo (all fields of view in one run) gives
+retrieval.csv; the bias of the IPDA XCO2 from multiple scattering is all orders minus order 1
+of the same photons (its error: the product's Monte Carlo standard error), next to the total
+bias against the truth. One case per instrument (ice cloud τ = 1) is also run with
+`jacobians = true`: its weighting.csv gives the single-scatter and the multiple-scattering-aware
+weighting functions, drawn in weighting.png, and Σ_layers of their difference, which equals the
+bias (`tests/multiple_scattering.rs` checks this in every product).
+
+Usage: python run.py [LIDARSIM] [PHOTONS]   (defaults: target/release/lidarsim, 200000)
+Writes ms_bias.csv, ms_bias.png, weighting.csv (the two cases' IPDA rows) and weighting.png.
+"""
+import csv
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parents[1]
+LIDARSIM = sys.argv[1] if len(sys.argv) > 1 else str(ROOT / "target/release/lidarsim")
+PHOTONS = int(sys.argv[2]) if len(sys.argv) > 2 else 200_000
+TAUS = [0.0, 0.01, 0.03, 0.1, 0.3, 1.0, 3.0]
+FOVS = [0.1, 0.2, 0.5, 1.0, 2.0]
+INSTRUMENTS = {
+    # scene, ice cloud base and top [m] (the aircraft flies at 8 km)
+    "space_ipda": ("spaceborne_co2_ipda.toml", 10_000.0, 11_000.0),
+    "airborne_dial": ("airborne_co2_dial.toml", 5_000.0, 5_500.0),
+}
+LOW_CLOUD = (1_000.0, 1_300.0, 0.3)  # base, top [m], optical depth: water, just above the target
+
+
+def layer(name, base, top, tau, g):
+    ext_km = tau / ((top - base) / 1000.0)
+    return (f'\n[[layer]]\nname = "{name}"\nbase_m = {base}\ntop_m = {top}\n'
+            f"extinction_per_km = {ext_km}\nsingle_scattering_albedo = 1.0\n"
+            f'phase = {{ kind = "henyey_greenstein", g = {g} }}\n')
+
+
+def scene_text(instrument, tau, low, jacobians):
+    name, base, top = INSTRUMENTS[instrument]
+    text = (ROOT / "scenes" / name).read_text()
+    fovs = ", ".join(str(f) for f in FOVS)
+    text = text.replace("fov_full_angle_mrad = [0.2, 0.5]", f"fov_full_angle_mrad = [{fovs}]")
+    text = text.replace("fov_full_angle_mrad = [0.2, 1.0]", f"fov_full_angle_mrad = [{fovs}]")
+    extra = ""
+    if tau > 0:
+        extra += layer("ice cloud", base, top, tau, 0.85)
+    if low:
+        extra += layer("low water cloud", LOW_CLOUD[0], LOW_CLOUD[1], LOW_CLOUD[2], 0.85)
+    text = text.replace("[surface]", extra + "\n[surface]")
+    if jacobians:
+        # Only the gates near the surface (the IPDA's target window; the Jacobians' memory
+        # grows with layers × gates × fields of view × channels).
+        text = text.replace("start_m = 440000.0", "start_m = 449000.0")
+        text = text.replace("start_m = 1000.0", "start_m = 7000.0")
+    # The run's settings: the Monte Carlo always (a thin cloud's multiple scattering is the
+    # point of the study), orders to 5, and Jacobians where asked.
+    keys = ("multiple_scattering", "max_order", "jacobians")
+    lines = [l for l in text.splitlines() if not l.split("=")[0].strip() in keys]
+    i = lines.index("[simulation]")
+    lines[i + 1:i + 1] = ['multiple_scattering = "always"', "max_order = 5"] + (
+        ["jacobians = true"] if jacobians else [])
+    return "\n".join(lines) + "\n"
+
+
+def run(instrument, tau, low, jacobians=False):
+    with tempfile.TemporaryDirectory() as d:
+        scene = ROOT / "scenes" / f"_ms_bias_{instrument}.toml"
+        scene.write_text(scene_text(instrument, tau, low, jacobians))
+        try:
+            subprocess.run([LIDARSIM, "run", str(scene), "--photons", str(PHOTONS), "--out", d,
+                            "--no-plots", "--no-netcdf"], check=True, capture_output=True)
+        finally:
+            scene.unlink()
+        rows = list(csv.DictReader(open(Path(d) / "retrieval.csv")))
+        weighting = list(csv.DictReader(open(Path(d) / "weighting.csv"))) if jacobians else []
+    return rows, weighting
+
+
+def ipda(rows, source, order, fov):
+    for r in rows:
+        if (r["method"], r["source"], r["order"]) == ("ipda", source, order) \
+                and float(r["fov_full_angle_mrad"]) == fov:
+            return r
+    raise KeyError((source, order, fov))
+
+
+def main():
+    out = []
+    for instrument in INSTRUMENTS:
+        for low in (False, True):
+            for tau in TAUS:
+                rows, _ = run(instrument, tau, low)
+                for fov in FOVS:
+                    t = ipda(rows, "mc", "total", fov)
+                    s = ipda(rows, "mc", "1", fov)
+                    out.append({
+                        "instrument": instrument, "low_cloud": int(low), "ice_cloud_tau": tau,
+                        "fov_full_angle_mrad": fov, "truth_ppm": t["truth"],
+                        "bias_ppm": t["bias"],
+                        "ms_bias_ppm": float(t["retrieved"]) - float(s["retrieved"]),
+                        "ms_bias_stderr_ppm": t["mc_stderr"],
+                        "single_scatter_bias_ppm": s["bias"],
+                    })
+                print(instrument, "low cloud" if low else "", tau, "done", flush=True)
+    with open(HERE / "ms_bias.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(out[0]))
+        w.writeheader()
+        w.writerows(out)
+    weights = []
+    for instrument in INSTRUMENTS:
+        _, wrows = run(instrument, 1.0, False, jacobians=True)
+        weights += [dict(r, instrument=instrument) for r in wrows if r["method"] == "ipda"]
+    with open(HERE / "weighting.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(weights[0]))
+        w.writeheader()
+        w.writerows(weights)
+    plot(out, weights)
+
+
+def plot(out, weights):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    colours = plt.get_cmap("viridis")(range(0, 256, 256 // len(FOVS)))
+    fig, axes = plt.subplots(2, 2, figsize=(11, 8), sharex=True, constrained_layout=True)
+    for i, instrument in enumerate(INSTRUMENTS):
+        for j, low in enumerate((False, True)):
+            ax = axes[j][i]
+            for c, fov in zip(colours, FOVS):
+                pts = [r for r in out if r["instrument"] == instrument and r["low_cloud"] == int(low)
+                       and r["fov_full_angle_mrad"] == fov and r["ice_cloud_tau"] > 0]
+                x = [r["ice_cloud_tau"] for r in pts]
+                y = [r["ms_bias_ppm"] for r in pts]
+                e = [float(r["ms_bias_stderr_ppm"]) for r in pts]
+                ax.errorbar(x, y, yerr=e, color=c, marker="o", ms=3, label=f"{fov:g} mrad")
+            ax.set_xscale("log")
+            ax.set_yscale("symlog", linthresh=1e-3)
+            ax.axhline(0, color="0.6", lw=0.5)
+            ax.set_title(f"{instrument.replace('_', ' ')}, "
+                         f"{'with' if low else 'no'} low cloud above the target", fontsize=10)
+            ax.set_ylabel("XCO2 bias from multiple scattering [ppm]")
+            if j == 1:
+                ax.set_xlabel("ice cloud optical depth")
+    axes[0][1].legend(title="FOV", loc="upper left", bbox_to_anchor=(1.02, 1.0))
+    fig.suptitle("IPDA XCO2 bias from multiple scattering (all orders − order 1, same photons)")
+    fig.savefig(HERE / "ms_bias.png", dpi=130)
+
+    fig, axes = plt.subplots(1, 2, figsize=(11, 5), constrained_layout=True)
+    for ax, instrument in zip(axes, INSTRUMENTS):
+        for c, fov in zip(colours, FOVS):
+            for order, style in (("1", ":"), ("total", "-")):
+                pts = [r for r in weights if r["instrument"] == instrument and r["order"] == order
+                       and float(r["fov_full_angle_mrad"]) == fov]
+                z = [0.5e-3 * (float(r["layer_bottom_m"]) + float(r["layer_top_m"])) for r in pts]
+                dz = [1e-3 * (float(r["layer_top_m"]) - float(r["layer_bottom_m"])) for r in pts]
+                wf = [float(r["derivative"]) / d for r, d in zip(pts, dz)]
+                ax.plot(wf, z, style, color=c,
+                        label=f"{fov:g} mrad, {'single scattering' if order == '1' else 'all orders'}"
+                        if fov in (FOVS[0], FOVS[-1]) else None)
+        ax.set_xlabel("∂XCO2/∂ln n_CO2 per km of layer [ppm/km]")
+        ax.set_ylabel("altitude [km]")
+        ax.set_title(f"{instrument.replace('_', ' ')}: ice cloud τ = 1", fontsize=10)
+    axes[1].legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8)
+    fig.suptitle("IPDA weighting functions: single scattering (dotted) and with multiple scattering")
+    fig.savefig(HERE / "weighting.png", dpi=130)
+
+
+if __name__ == "__main__":
+    main()
