@@ -11,6 +11,7 @@ weighting functions, drawn in weighting.png, and Σ_layers of their difference, 
 bias (`tests/multiple_scattering.rs` checks this in every product).
 
 Usage: python run.py [LIDARSIM] [PHOTONS]   (defaults: target/release/lidarsim, 200000)
+       python run.py --plot-only             (the figures from the CSV files)
 Writes ms_bias.csv, ms_bias.png, weighting.csv (the two cases' IPDA rows) and weighting.png.
 """
 import csv
@@ -21,8 +22,9 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
-LIDARSIM = sys.argv[1] if len(sys.argv) > 1 else str(ROOT / "target/release/lidarsim")
-PHOTONS = int(sys.argv[2]) if len(sys.argv) > 2 else 200_000
+ARGS = [a for a in sys.argv[1:] if not a.startswith("--")]
+LIDARSIM = ARGS[0] if ARGS else str(ROOT / "target/release/lidarsim")
+PHOTONS = int(ARGS[1]) if len(ARGS) > 1 else 200_000
 TAUS = [0.0, 0.01, 0.03, 0.1, 0.3, 1.0, 3.0]
 FOVS = [0.1, 0.2, 0.5, 1.0, 2.0]
 INSTRUMENTS = {
@@ -126,49 +128,79 @@ def plot(out, weights):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    colours = plt.get_cmap("viridis")(range(0, 256, 256 // len(FOVS)))
+    # Colour-blind-safe, one colour per field of view everywhere.
+    colours = plt.get_cmap("viridis")([0.0, 0.25, 0.5, 0.72, 0.9])
     fig, axes = plt.subplots(2, 2, figsize=(11, 8), sharex=True, constrained_layout=True)
     for i, instrument in enumerate(INSTRUMENTS):
         for j, low in enumerate((False, True)):
             ax = axes[j][i]
+            ys = []
             for c, fov in zip(colours, FOVS):
                 pts = [r for r in out if r["instrument"] == instrument and r["low_cloud"] == int(low)
                        and r["fov_full_angle_mrad"] == fov and r["ice_cloud_tau"] > 0]
                 x = [r["ice_cloud_tau"] for r in pts]
-                y = [r["ms_bias_ppm"] for r in pts]
+                y = [float(r["ms_bias_ppm"]) for r in pts]
                 e = [float(r["ms_bias_stderr_ppm"]) for r in pts]
-                ax.errorbar(x, y, yerr=e, color=c, marker="o", ms=3, label=f"{fov:g} mrad")
+                ys += y
+                ax.errorbar(x, y, yerr=e, color=c, marker="o", ms=3, capsize=2,
+                            label=f"{fov:g} mrad")
             ax.set_xscale("log")
-            ax.set_yscale("symlog", linthresh=1e-3)
-            ax.axhline(0, color="0.6", lw=0.5)
-            ax.set_title(f"{instrument.replace('_', ' ')}, "
-                         f"{'with' if low else 'no'} low cloud above the target", fontsize=10)
+            if min(ys) > 0:
+                ax.set_yscale("log")
+            else:
+                ax.set_yscale("symlog", linthresh=min(abs(y) for y in ys if y != 0))
+            ax.set_title(f"{instrument.replace('_', ' ')}: "
+                         f"{'with a' if low else 'no'} low cloud above the target", fontsize=10)
             ax.set_ylabel("XCO2 bias from multiple scattering [ppm]")
             if j == 1:
-                ax.set_xlabel("ice cloud optical depth")
-    axes[0][1].legend(title="FOV", loc="upper left", bbox_to_anchor=(1.02, 1.0))
-    fig.suptitle("IPDA XCO2 bias from multiple scattering (all orders − order 1, same photons)")
+                ax.set_xlabel("optical depth of the ice cloud")
+    axes[0][1].legend(title="field of view", loc="upper left", bbox_to_anchor=(1.02, 1.0))
+    fig.suptitle("IPDA XCO2 bias from multiple scattering (all orders − order 1, same photons; "
+                 "error bars: 1 standard error)")
     fig.savefig(HERE / "ms_bias.png", dpi=130)
 
-    fig, axes = plt.subplots(1, 2, figsize=(11, 5), constrained_layout=True)
-    for ax, instrument in zip(axes, INSTRUMENTS):
+    fig, axes = plt.subplots(2, 2, figsize=(11, 9), constrained_layout=True)
+    for col, instrument in enumerate(INSTRUMENTS):
+        def profile(order, fov):
+            pts = [r for r in weights if r["instrument"] == instrument and r["order"] == order
+                   and float(r["fov_full_angle_mrad"]) == fov]
+            by_layer = {int(r["layer"]): r for r in pts}
+            return by_layer
         for c, fov in zip(colours, FOVS):
-            for order, style in (("1", ":"), ("total", "-")):
-                pts = [r for r in weights if r["instrument"] == instrument and r["order"] == order
-                       and float(r["fov_full_angle_mrad"]) == fov]
-                z = [0.5e-3 * (float(r["layer_bottom_m"]) + float(r["layer_top_m"])) for r in pts]
-                dz = [1e-3 * (float(r["layer_top_m"]) - float(r["layer_bottom_m"])) for r in pts]
-                wf = [float(r["derivative"]) / d for r, d in zip(pts, dz)]
-                ax.plot(wf, z, style, color=c,
-                        label=f"{fov:g} mrad, {'single scattering' if order == '1' else 'all orders'}"
-                        if fov in (FOVS[0], FOVS[-1]) else None)
-        ax.set_xlabel("∂XCO2/∂ln n_CO2 per km of layer [ppm/km]")
-        ax.set_ylabel("altitude [km]")
-        ax.set_title(f"{instrument.replace('_', ' ')}: ice cloud τ = 1", fontsize=10)
-    axes[1].legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8)
-    fig.suptitle("IPDA weighting functions: single scattering (dotted) and with multiple scattering")
+            one, total = profile("1", fov), profile("total", fov)
+            layers = sorted(set(one) | set(total))
+            z = [0.5e-3 * (float((one.get(l) or total[l])["layer_bottom_m"])
+                           + float((one.get(l) or total[l])["layer_top_m"])) for l in layers]
+            dz = [1e-3 * (float((one.get(l) or total[l])["layer_top_m"])
+                          - float((one.get(l) or total[l])["layer_bottom_m"])) for l in layers]
+            w1 = [float(one[l]["derivative"]) if l in one else 0.0 for l in layers]
+            wt = [float(total[l]["derivative"]) if l in total else 0.0 for l in layers]
+            if fov in (FOVS[0], FOVS[-1]):
+                axes[0][col].plot([w / d for w, d in zip(w1, dz)], z, ":", color=c,
+                                  label=f"{fov:g} mrad, single scattering")
+                axes[0][col].plot([w / d for w, d in zip(wt, dz)], z, "-", color=c, lw=0.8,
+                                  label=f"{fov:g} mrad, all orders")
+            diff = [(b - a) / d for a, b, d in zip(w1, wt, dz)]
+            axes[1][col].plot(diff, z, color=c,
+                              label=f"{fov:g} mrad: Σ = {sum(b - a for a, b in zip(w1, wt)):.2e} ppm")
+        axes[0][col].set_title(f"{instrument.replace('_', ' ')}, ice cloud τ = 1", fontsize=10)
+        axes[0][col].set_xlabel("∂XCO2/∂ln n(CO2) of the layer, per km [ppm/km]")
+        axes[1][col].set_xlabel("all orders − single scattering [ppm/km]")
+        axes[1][col].set_xscale("symlog", linthresh=1e-6)
+        for row in (0, 1):
+            axes[row][col].set_ylabel("altitude [km]")
+        axes[1][col].legend(fontsize=7, loc="upper left", bbox_to_anchor=(0.0, -0.12), ncol=2)
+    axes[0][1].legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.02, 1.0))
+    fig.suptitle("IPDA weighting functions (above) and their change by multiple scattering "
+                 "(below; Σ over the layers = the bias)")
     fig.savefig(HERE / "weighting.png", dpi=130)
 
 
 if __name__ == "__main__":
-    main()
+    if "--plot-only" in sys.argv:
+        read = lambda name: list(csv.DictReader(open(HERE / name)))
+        rows = [dict(r, ice_cloud_tau=float(r["ice_cloud_tau"]), low_cloud=int(r["low_cloud"]),
+                     fov_full_angle_mrad=float(r["fov_full_angle_mrad"])) for r in read("ms_bias.csv")]
+        plot(rows, read("weighting.csv"))
+    else:
+        main()
