@@ -12,7 +12,7 @@
 //! | particles | [`particles`] | phase functions, Rayleigh and Mie optics |
 //! | laser lines, receiver, noise | [`instrument`] | channels of each line, line returns, [`instrument::signals::Signals`] |
 //! | optical atmosphere | [`optics`] | [`optics::OpticalAtmosphere`], the one input of transport |
-//! | Monte Carlo | [`transport`] | [`returns::Returns`] by channel, FOV, gate and order |
+//! | Monte Carlo | [`transport`] | [`returns::Returns`] by channel, FOV, gate and order; with `jacobians`, [`jacobians::Jacobians`] from the same photons |
 //! | analytic single scatter | [`lidar_eq`] | [`returns::Returns`], order 1 |
 //! | attenuated backscatter | [`backscatter`] | β′ and the range-corrected signal of returns |
 //! | the aperture seen from close by | [`aperture`] | the factors both estimators share |
@@ -75,6 +75,7 @@ pub mod digest;
 pub mod distributed;
 pub mod input;
 pub mod instrument;
+pub mod jacobians;
 pub mod lidar_eq;
 pub mod limits;
 pub mod netcdf;

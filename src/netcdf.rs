@@ -43,10 +43,10 @@ use thiserror::Error;
 
 use crate::instrument::laser::Line;
 use crate::instrument::signals::Signals;
+use crate::jacobians::{JacobianQuantity, Jacobians};
 use crate::retrieval::{Product, Quantity};
 use crate::returns::Returns;
 use crate::scene::Gates;
-use crate::transport::{JacobianQuantity, Jacobians};
 
 /// The CF version the file declares in its `Conventions` attribute.
 pub const CONVENTIONS: &str = "CF-1.8";

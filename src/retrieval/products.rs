@@ -38,9 +38,9 @@ use super::reference::{LayerColumns, PathDepths, ReferenceState};
 use crate::instrument::detector::photon_energy_j;
 use crate::instrument::laser::{Laser, LineReturns};
 use crate::instrument::signals::{Signals, WindowSignal};
+use crate::jacobians::{JacobianQuantity, Jacobians};
 use crate::returns::{Order, Source};
 use crate::rng::{self, Stream};
-use crate::transport::{JacobianQuantity, Jacobians};
 
 /// Fewest valid realisations, as a fraction, for a simulated error to be reported.
 const MIN_VALID_FRACTION: f64 = 0.9;
