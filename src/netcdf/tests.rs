@@ -710,7 +710,8 @@ fn jacobians_land_in_their_bins_with_fill_where_undefined() {
             for g in 0..3 {
                 for (o, order) in j.orders.iter().enumerate() {
                     for l in 0..2 {
-                        for (q, quantity) in JacobianQuantity::ALL.iter().enumerate() {
+                        // The four in J m (gas_amount, in J, is the CSV's only).
+                        for (q, quantity) in JacobianQuantity::ALL[..4].iter().enumerate() {
                             let k = ((((c * 2 + f) * 3 + g) * 3 + o) * 2 + l) * 4 + q;
                             match j.get(jc, f, g, *order, l, *quantity) {
                                 Some((v, s)) => {
