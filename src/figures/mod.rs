@@ -36,6 +36,23 @@ pub fn init_font() {
     });
 }
 
+/// The house palette's i-th colour (Okabe and Ito 2008, *Color Universal Design*: told apart
+/// with every common colour-vision deficiency), repeating after eight.
+pub fn palette(i: usize) -> plotters::style::RGBColor {
+    use plotters::style::RGBColor;
+    const C: [RGBColor; 8] = [
+        RGBColor(0, 114, 178),
+        RGBColor(213, 94, 0),
+        RGBColor(0, 158, 115),
+        RGBColor(204, 121, 167),
+        RGBColor(230, 159, 0),
+        RGBColor(86, 180, 233),
+        RGBColor(240, 228, 66),
+        RGBColor(0, 0, 0),
+    ];
+    C[i % C.len()]
+}
+
 /// Draw a chart's series legend in the house style (translucent white box, black border).
 pub fn draw_legend<'a, DB, CT>(
     chart: &mut plotters::chart::ChartContext<'a, DB, CT>,

@@ -10,7 +10,7 @@ use plotters::prelude::*;
 use super::{FONT, init_font};
 use lidarsim::output::{OutputError, OutputSet};
 use lidarsim::pipeline::RunOutput;
-use lidarsim::retrieval::{Method, Product, Quantity};
+use lidarsim::retrieval::{Method, Product, Quantity, Weighting};
 use lidarsim::returns::{Order, Returns, Source};
 use lidarsim::scene::Scene;
 
@@ -55,6 +55,120 @@ fn draw_retrieval(
     if !dial.is_empty() {
         files.write_via(dir.join("dial.png"), |p| dial_figure(p, &dial))?;
     }
+    let ipda: Vec<&Weighting> = run
+        .weighting
+        .iter()
+        .filter(|w| w.method == Method::Ipda)
+        .collect();
+    if !ipda.is_empty() {
+        files.write_via(dir.join("weighting.png"), |p| weighting_figure(p, &ipda))?;
+    }
+    Ok(())
+}
+
+/// The IPDA's weighting functions, per km of layer against altitude: left the single-scatter
+/// one (order 1), right its change by multiple scattering (all orders − order 1, whose sum
+/// over the layers, in the legend, is the bias multiple scattering brings), one colour per
+/// field of view.
+fn weighting_figure(path: &Path, rows: &[&Weighting]) -> DrawResult {
+    let root = BitMapBackend::new(path, (1100, 700)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let pair = rows[0].channel_pair.clone();
+    let root = root.titled(
+        &format!("IPDA weighting functions ({pair}): single scattering and the change by multiple scattering"),
+        (FONT, 18),
+    )?;
+    let (left, right) = root.split_horizontally(500);
+    let mut fovs: Vec<f64> = rows.iter().map(|w| w.fov_full_angle_mrad).collect();
+    fovs.sort_by(f64::total_cmp);
+    fovs.dedup();
+    // Per FOV: (altitude [km], order-1 per km, (total − order 1) per km), and the sum.
+    let profile = |fov: f64| -> (Vec<(f64, f64, f64)>, f64) {
+        let mut by_layer: std::collections::BTreeMap<usize, (f64, f64, f64, f64)> =
+            Default::default();
+        for w in rows.iter().filter(|w| w.fov_full_angle_mrad == fov) {
+            let e = by_layer.entry(w.layer).or_insert((
+                0.5e-3 * (w.layer_m.0 + w.layer_m.1),
+                1e-3 * (w.layer_m.1 - w.layer_m.0),
+                0.0,
+                0.0,
+            ));
+            match w.order {
+                Order::Exactly(1) => e.2 = w.value,
+                _ => e.3 = w.value,
+            }
+        }
+        let sum = by_layer.values().map(|(_, _, a, b)| b - a).sum();
+        (
+            by_layer
+                .values()
+                .map(|(z, dz, a, b)| (*z, a / dz, (b - a) / dz))
+                .collect(),
+            sum,
+        )
+    };
+    let profiles: Vec<_> = fovs.iter().map(|f| profile(*f)).collect();
+    let z_hi = profiles
+        .iter()
+        .flat_map(|(p, _)| p.iter().map(|x| x.0))
+        .fold(0.0f64, f64::max)
+        .max(1e-3);
+    let range = |f: &dyn Fn(&(f64, f64, f64)) -> f64| {
+        let (lo, hi) = profiles
+            .iter()
+            .flat_map(|(p, _)| p.iter().map(f))
+            .fold((0.0f64, 0.0f64), |(a, b), v| (a.min(v), b.max(v)));
+        let pad = 0.05 * (hi - lo).max(1e-30);
+        (lo - pad)..(hi + pad)
+    };
+    let colour = |i: usize| super::palette(i);
+    let mut chart = ChartBuilder::on(&left)
+        .caption("single scattering", (FONT, 15))
+        .margin(12)
+        .x_label_area_size(45)
+        .y_label_area_size(60)
+        .build_cartesian_2d(range(&|x| x.1), 0.0..z_hi)?;
+    chart
+        .configure_mesh()
+        .x_desc("∂XCO2/∂ln n(gas) per km of layer [ppm/km]")
+        .y_desc("altitude [km]")
+        .label_style((FONT, 13))
+        .draw()?;
+    for (i, (fov, (p, _))) in fovs.iter().zip(&profiles).enumerate() {
+        let c = colour(i);
+        chart
+            .draw_series(LineSeries::new(
+                p.iter().map(|x| (x.1, x.0)),
+                c.stroke_width(2),
+            ))?
+            .label(format!("{fov} mrad"))
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
+    }
+    super::draw_legend(&mut chart)?;
+    let mut chart = ChartBuilder::on(&right)
+        .caption("all orders − single scattering", (FONT, 15))
+        .margin(12)
+        .x_label_area_size(45)
+        .y_label_area_size(60)
+        .build_cartesian_2d(range(&|x| x.2), 0.0..z_hi)?;
+    chart
+        .configure_mesh()
+        .x_desc("[ppm/km]")
+        .y_desc("altitude [km]")
+        .label_style((FONT, 13))
+        .draw()?;
+    for (i, (fov, (p, sum))) in fovs.iter().zip(&profiles).enumerate() {
+        let c = colour(i);
+        chart
+            .draw_series(LineSeries::new(
+                p.iter().map(|x| (x.2, x.0)),
+                c.stroke_width(2),
+            ))?
+            .label(format!("{fov} mrad: bias {sum:.2e} ppm"))
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
+    }
+    super::draw_legend(&mut chart)?;
+    root.present()?;
     Ok(())
 }
 

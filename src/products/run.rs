@@ -16,7 +16,8 @@ use crate::returns::{self, Order, Returns, Source};
 use crate::scene::Scene;
 
 /// Every file `run` may write into its directory.
-pub const FILES: [&str; 12] = [
+pub const FILES: [&str; 13] = [
+    "weighting.png",
     "returns.csv",
     "weighting.csv",
     "jacobians.csv",

@@ -547,21 +547,35 @@ impl JacFold {
                 }
             }
         }
-        let n = self.n_batches;
-        Some(Jacobians {
-            channels: self.combos.iter().map(|c| c.name.clone()).collect(),
+        let names = self.combos.iter().map(|c| c.name.clone()).collect();
+        let moments = (&self.cmean[..], &self.cm2[..], &self.cscale[..]);
+        Some(self.assemble(names, fov_full_angle_mrad, range_m, moments, defined))
+    }
+
+    /// Jacobians from running moments (mean, M2, scale) of `channels`.
+    fn assemble(
+        &self,
+        channels: Vec<String>,
+        fov_full_angle_mrad: Vec<f64>,
+        range_m: Vec<f64>,
+        (mean, m2, scale): (&[f64], &[f64], &[f64]),
+        defined: Vec<bool>,
+    ) -> Jacobians {
+        let (nl, n) = (self.js.n_layers, self.n_batches);
+        Jacobians {
+            channels,
             fov_full_angle_mrad,
             range_m,
             orders: vec![Order::Total, Order::Exactly(1), Order::AtLeast(2)],
             first_layer: self.js.first,
             layer_bottom_m: self.js.edges_m[..nl].to_vec(),
             layer_top_m: self.js.edges_m[1..=nl].to_vec(),
-            value: self.cmean.clone(),
-            stderr: (0..self.cm2.len())
-                .map(|i| stats::std_error_scaled(self.cm2[i], self.cscale[i], n))
+            value: mean.to_vec(),
+            stderr: (0..m2.len())
+                .map(|i| stats::std_error_scaled(m2[i], scale[i], n))
                 .collect(),
             defined,
-        })
+        }
     }
 
     /// Which derivatives exist, per channel (layout of [`Jacobians::defined`]).
@@ -594,22 +608,8 @@ impl JacFold {
         if !self.combos.is_empty() {
             return None;
         }
-        let nl = self.js.n_layers;
+        let moments = (&self.mean[..], &self.m2[..], &self.scale[..]);
         let defined = self.channel_defined();
-        let n = self.n_batches;
-        Some(Jacobians {
-            channels,
-            fov_full_angle_mrad,
-            range_m,
-            orders: vec![Order::Total, Order::Exactly(1), Order::AtLeast(2)],
-            first_layer: self.js.first,
-            layer_bottom_m: self.js.edges_m[..nl].to_vec(),
-            layer_top_m: self.js.edges_m[1..=nl].to_vec(),
-            value: self.mean.clone(),
-            stderr: (0..self.m2.len())
-                .map(|i| stats::std_error_scaled(self.m2[i], self.scale[i], n))
-                .collect(),
-            defined,
-        })
+        Some(self.assemble(channels, fov_full_angle_mrad, range_m, moments, defined))
     }
 }

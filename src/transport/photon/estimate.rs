@@ -108,7 +108,9 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
         let jac = s.jac.is_some();
         for k in 0..nch {
             if self.w[k] == 0.0 {
-                self.le[k] = 0.0;
+                if jac {
+                    self.le[k] = 0.0;
+                }
                 continue;
             }
             let tau = s.tau_to_receiver(x.z, omega.z, d, layer, k, self.ts[k] + self.ta[k]);
@@ -117,7 +119,9 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
                 e *= s.receiver_phase(layer, k, mu_s, band);
             }
             self.bins[base + k] += e;
-            self.le[k] = e;
+            if jac {
+                self.le[k] = e;
+            }
         }
         if jac {
             // The path's own end: the scattering toward the receiver and the leg to it.
@@ -247,7 +251,9 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
                 }
             } else {
                 self.bins[base + k] += e;
-                self.le[k] = e;
+                if jac {
+                    self.le[k] = e;
+                }
             }
         }
         if polarised {
@@ -506,7 +512,9 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
             };
             let e = self.w[k] * sigma_y * px * py * factor * (-(tau_xy + tau_back)).exp();
             self.bins[base + k] += e;
-            self.le[k] = e;
+            if jac {
+                self.le[k] = e;
+            }
         }
         if jac && polarised.is_none() {
             // Both of the estimate's scatterings and its two legs.

@@ -37,6 +37,7 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
         let base = self.shape.base(gate, s.order_bin(order), annulus);
         let layer = 0;
         let n = self.nch();
+        let jac = s.jac.is_some();
         for k in 0..n {
             let (ts, ta) = s.atm.cumulative_tau(hit.z, k);
             let tau_back = s.tau_to_receiver(hit.z, omega.z, d, layer, k, ts + ta);
@@ -47,10 +48,12 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
                 self.bins[base + n + k] += 0.5 * e;
             } else {
                 self.bins[base + k] += e;
-                self.le[k] = e;
+                if jac {
+                    self.le[k] = e;
+                }
             }
         }
-        if s.jac.is_some() {
+        if jac {
             // The flight's arrival at the surface and the leg from it to the receiver.
             let mut v = Virtual::default();
             v.point(hit.z, 1.0 / mu_in);
