@@ -262,6 +262,13 @@ fn jacobians_of_single_scattering_are_the_lidar_equations() {
     let j = mc.jacobians.as_ref().expect("jacobians");
     let nl = atm.n_layers();
     let o1 = Order::Exactly(1);
+    // No line-by-line gas: no gas-amount derivative anywhere (not a derivative of 0).
+    for l in 0..j.layer_bottom_m.len() {
+        assert!(
+            j.get(0, 0, 0, o1, l, JacobianQuantity::GasAmount).is_none(),
+            "{l}"
+        );
+    }
     let (mut judged, mut exact) = (0, 0);
     for l in 0..nl {
         for q in JacobianQuantity::ALL {

@@ -613,3 +613,34 @@ impl JacFold {
         Some(self.assemble(channels, fov_full_angle_mrad, range_m, moments, defined))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::Scene;
+
+    /// A horizontal leg adds its length to its layer directly, and a slanted one its part of
+    /// each layer through the ov_L points: a score of 2 on a path of 3 m across layer 0 and
+    /// 100 m down from 600 m to its bottom (500 m) puts 2 × 103 m into the layer's lengths.
+    #[test]
+    fn horizontal_and_slanted_legs_give_the_path_length_in_the_layer() {
+        let scene = Scene::from_toml(
+            std::path::Path::new("s.toml"),
+            crate::transport::testing::CLOUD,
+        )
+        .unwrap();
+        let atm = OpticalAtmosphere::build(&scene).unwrap();
+        let js = JacSetup::new(&atm, 0.0, 10_000.0);
+        assert_eq!((js.first, js.n_layers), (0, 1));
+        let mut v = Virtual::default();
+        v.leg(600.0, 600.0, 0.0, 3.0, 0);
+        v.leg(600.0, 0.0, -1.0, 600.0, 0);
+        let mut jbins = vec![0.0; js.block()];
+        v.score(&js, &atm, &mut jbins, 0, &[2.0], |_, _, _| 0.0);
+        // Layer 0: G (Σ s a) = 2 × 1 from the point at 600 m; H (Σ s a (z − b) + s ℓ_direct)
+        // = 2 × 1 × 100 + 2 × 3; the point at 0 m is below the layers.
+        assert_eq!(&jbins[..2], &[2.0, 206.0]);
+        // The fold's ℓ_0 = h_0 Σ_{λ>0} G + H_0: nothing above, so H_0 / score = 103 m.
+        assert_eq!(jbins[Q], 0.0);
+    }
+}
