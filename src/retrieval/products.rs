@@ -705,13 +705,15 @@ impl Retrieval {
             if !slope.is_finite() {
                 continue;
             }
+            // Each window's on- and off-line returns, once for all the layers.
+            let windows: Vec<(&Range<usize>, f64, f64)> =
+                t.windows.iter().map(|w| (w, p(on, w), p(off, w))).collect();
             for l in 0..n_layers {
                 if !(jac.is_defined(j_on, l, q) && jac.is_defined(j_off, l, q)) {
                     continue;
                 }
                 let (mut dd, mut var) = (0.0, 0.0);
-                for (k, w) in t.windows.iter().enumerate() {
-                    let (p_on, p_off) = (p(on, w), p(off, w));
+                for (k, &(w, p_on, p_off)) in windows.iter().enumerate() {
                     let g = |j: usize| -> (f64, f64) {
                         w.clone().fold((0.0, 0.0), |(v, e2), gate| {
                             let i = jac.index(j, fov, gate, jo, l, q);
@@ -733,7 +735,8 @@ impl Retrieval {
                     channel_pair: self.pair.clone(),
                     fov_full_angle_mrad: mean.fov_full_angle_mrad[fov],
                     range_m: t.range_m,
-                    layer: l,
+                    // The optical atmosphere's index, as in `jacobians.csv`.
+                    layer: jac.first_layer + l,
                     layer_m: (jac.layer_bottom_m[l], jac.layer_top_m[l]),
                     value,
                     stderr: slope.abs() * var.sqrt(),
