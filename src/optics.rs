@@ -362,6 +362,47 @@ impl OpticalAtmosphere {
         i.saturating_sub(1).min(self.n_layers().saturating_sub(1))
     }
 
+    /// [`Self::layer_of`] starting from a layer `hint` that is usually right or next to it (a
+    /// photon moves between neighbouring layers far more often than it jumps): three
+    /// comparisons instead of a search through hundreds of edges.
+    #[inline]
+    pub fn layer_near(&self, z: f64, hint: usize) -> usize {
+        let e = &self.edges_m;
+        let n = self.n_layers();
+        if hint < n {
+            let inside = |l: usize| (l == 0 || e[l] <= z) && (l + 1 == n || z < e[l + 1]);
+            if inside(hint) {
+                return hint;
+            }
+            if hint + 1 < n && inside(hint + 1) {
+                return hint + 1;
+            }
+            if hint > 0 && inside(hint - 1) {
+                return hint - 1;
+            }
+        }
+        self.layer_of(z)
+    }
+
+    /// Every channel's cumulative vertical optical depths at an altitude z in layer l (clamped
+    /// to it), into `ts` (scattering) and `ta` (absorption): [`Self::cumulative_tau_in`] for all
+    /// channels at once, one contiguous pass over the layer's rows.
+    #[inline]
+    pub fn cumulative_taus_in(&self, l: usize, z: f64, ts: &mut [f64], ta: &mut [f64]) {
+        let nch = self.n_channels;
+        let dz = z.clamp(self.edges_m[l], self.edges_m[l + 1]) - self.edges_m[l];
+        let row = l * nch..(l + 1) * nch;
+        let (cs, ss) = (
+            &self.cum_tau_s[row.clone()],
+            &self.sigma_s_per_m[row.clone()],
+        );
+        let (ca, sa) = (&self.cum_tau_a[row.clone()], &self.sigma_a_per_m[row]);
+        for k in 0..nch.min(ts.len()).min(ta.len()) {
+            ts[k] = cs[k] + dz * ss[k];
+            ta[k] = ca[k] + dz * sa[k];
+        }
+    }
+
     /// Cumulative vertical optical depth (scattering, absorption) of channel k at altitude z:
     /// T(z) = cum\[l\] + (z − edge_l) σ_l, constant outside the atmosphere.
     #[inline]

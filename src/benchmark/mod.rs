@@ -10,9 +10,12 @@
 //!   per latitude class (3N in all), every one of its 10 on-lines against the off-line, IPDA and
 //!   DIAL, with the whole error budget, analytic lidar equation.
 //! - [`scene_variants`] and [`crate::pipeline::compare_skip`]: what skipping saves on whole scene runs.
+//! - [`channels`]: the cost of a scattering event against the number of channels (the default
+//!   scene at 2, 4 and 16 channels beside C.1's one).
 //! - [`depth`]: the figure of merit of C.1's multiple scattering at every gate and field of view
 //!   against the plain local estimate.
 
+pub mod channels;
 pub mod depth;
 
 use std::path::Path;

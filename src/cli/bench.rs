@@ -6,7 +6,7 @@
 
 use std::path::{Path, PathBuf};
 
-use lidarsim::benchmark::{self, FORCED_PHOTONS, depth};
+use lidarsim::benchmark::{self, FORCED_PHOTONS, channels, depth};
 use lidarsim::input::Bounds;
 use lidarsim::output::{OutputSet, write_file};
 use lidarsim::scene::{Simulation, VarianceReduction};
@@ -93,6 +93,11 @@ pub struct Args {
     /// the Monte Carlo forced on, and the same for the scene without its particle layers.
     #[arg(long, value_name = "SCENE", num_args = 1.., conflicts_with = "study")]
     pub scenes: Vec<PathBuf>,
+    /// Instead: the cost of a scattering event against the channel count, on the first of
+    /// `--threads`: C.1's one-channel walk and the default scene at 2, 4 and 16 channels, each
+    /// with `--photons`.
+    #[arg(long, conflicts_with_all = ["study", "scenes", "depth", "write_plain"])]
+    pub channels: bool,
 }
 
 /// What skipping saves on whole scene runs ([`lidarsim::pipeline::compare_skip`]).
@@ -201,6 +206,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     if !args.scenes.is_empty() {
         return scenes_bench(&args);
+    }
+    if args.channels {
+        let w = channels::workloads(args.photons, args.seed)?;
+        let rows = channels::measure(&w, first_threads, args.repeat, method)?;
+        outln!("{}", channels::table(&rows, first_threads));
+        return write_json(&args, &[channels::json(&rows, first_threads)]);
     }
     let w = benchmark::TransportWorkload::new(args.photons, args.seed)?;
     outln!("{}", w.header());

@@ -202,7 +202,8 @@ impl Setup<'_> {
         let tau = if e.z.abs() < 1e-12 {
             cls.sigma[p.layer] * l
         } else {
-            (self.class_tau_at(0, y.z) - self.class_tau_at(0, p.pos.z)).abs() / e.z.abs()
+            (self.class_tau_in(0, layer_y, y.z) - self.class_tau_in(0, p.layer, p.pos.z)).abs()
+                / e.z.abs()
         };
         phase * (0.25 / std::f64::consts::PI) * sigma * (-tau).exp() / l2
     }

@@ -17,6 +17,10 @@ pub(crate) struct Setup<'a> {
     /// Cosine of the widest half-angle.
     pub(super) fov_cos_widest: f64,
     pub(super) has_layers: bool,
+    /// Every scatterer has one phase function for all channels (its coefficients may still
+    /// differ): a mixture's phase function is then evaluated once per scatterer for all
+    /// channels ([`Setup::mixture_phases`]).
+    pub(super) phase_shared: bool,
     pub(super) bottom_m: f64,
     pub(super) top_m: f64,
     pub(super) shape: TallyShape,
@@ -103,6 +107,11 @@ impl<'a> Setup<'a> {
             atm,
             fov_cos_widest: widest,
             has_layers: atm.n_layers() > 0,
+            phase_shared: atm
+                .components
+                .iter()
+                .flatten()
+                .all(|c| c.phase.iter().all(|p| *p == c.phase[0])),
             bottom_m: atm.bottom_m(),
             top_m: atm.top_m(),
             receiver,
@@ -469,6 +478,57 @@ impl Setup<'_> {
             / total
     }
 
+    /// [`Self::mixture_phase`] of every channel at once, into `out` (one value per channel):
+    /// where the scatterers share their phase functions across channels
+    /// ([`Setup::phase_shared`]), each is evaluated once and weighted per channel in one
+    /// contiguous pass, with the same arithmetic as the one-channel function.
+    #[inline]
+    pub(super) fn mixture_phases(&self, layer: usize, mu: f64, out: &mut [f64]) {
+        let atm = self.atm;
+        let comps = &atm.components[layer];
+        if !self.phase_shared {
+            for (k, o) in out.iter_mut().enumerate() {
+                *o = self.mixture_phase(layer, k, mu);
+            }
+            return;
+        }
+        if let [c] = &comps[..] {
+            out.fill(atm.phases[c.phase[0] as usize].eval(mu));
+            return;
+        }
+        let nch = out.len();
+        out.fill(0.0);
+        for c in comps {
+            let p = atm.phases[c.phase[0] as usize].eval(mu);
+            for (o, sigma) in out.iter_mut().zip(&c.sigma_s_per_m[..nch]) {
+                *o += sigma * p;
+            }
+        }
+        let total = &atm.sigma_s_per_m[layer * atm.n_channels..][..nch];
+        for (o, t) in out.iter_mut().zip(total) {
+            *o = if *t <= 0.0 { 0.0 } else { *o / t };
+        }
+    }
+
+    /// [`Self::receiver_phase`] of every channel at once, into `out`.
+    #[inline]
+    pub(super) fn receiver_phases(
+        &self,
+        layer: usize,
+        mu: f64,
+        band: Option<(f64, f64)>,
+        out: &mut [f64],
+    ) {
+        match band {
+            None => self.mixture_phases(layer, mu, out),
+            Some(b) => {
+                for (k, o) in out.iter_mut().enumerate() {
+                    *o = self.mixture_band(layer, k, b);
+                }
+            }
+        }
+    }
+
     /// The phase function a local estimate toward the receiver uses: its value at μ, or
     /// close to the receiver its mean over the aperture's band (`crate::aperture`).
     #[inline]
@@ -600,6 +660,18 @@ impl Setup<'_> {
             .partition_point(|x| *x <= z)
             .saturating_sub(1)
             .min(cls.sigma.len() - 1);
+        cls.cum[l] + (z - e[l]) * cls.sigma[l]
+    }
+
+    /// [`Self::class_tau_at`] at an altitude z known to lie in layer l: no search.
+    #[inline]
+    pub(super) fn class_tau_in(&self, c: usize, l: usize, z: f64) -> f64 {
+        if !self.has_layers {
+            return 0.0;
+        }
+        let cls = &self.classes[c];
+        let e = &self.atm.edges_m;
+        let z = z.clamp(e[l], e[l + 1]);
         cls.cum[l] + (z - e[l]) * cls.sigma[l]
     }
 

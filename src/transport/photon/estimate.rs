@@ -106,6 +106,9 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
             return;
         }
         let jac = s.jac.is_some();
+        if !grey {
+            s.receiver_phases(layer, mu_s, band, &mut self.phase[..nch]);
+        }
         for k in 0..nch {
             if self.w[k] == 0.0 {
                 if jac {
@@ -116,7 +119,7 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
             let tau = s.tau_to_receiver(x.z, omega.z, d, layer, k, self.ts[k] + self.ta[k]);
             let mut e = self.w[k] * geometric * (-tau).exp();
             if !grey {
-                e *= s.receiver_phase(layer, k, mu_s, band);
+                e *= self.phase[k];
             }
             self.bins[base + k] += e;
             if jac {
@@ -226,6 +229,9 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
         };
         let base = self.shape.base(gate, s.order_bin(order), annulus);
         let jac = s.jac.is_some();
+        if !grey && !polarised {
+            s.receiver_phases(layer, mu_s, band, &mut self.phase[..nch]);
+        }
         for k in 0..nch {
             if self.w[k] == 0.0 {
                 self.le[k] = 0.0;
@@ -239,7 +245,7 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
                 f *= if polarised {
                     ratio * (-(dts - tau_star)).exp()
                 } else {
-                    ratio * (-(dts - tau_star)).exp() * s.receiver_phase(layer, k, mu_s, band)
+                    ratio * (-(dts - tau_star)).exp() * self.phase[k]
                 };
             }
             let tau = s.tau_to_receiver(y.z, omega.z, d, layer, k, ts_y + ta_y);
@@ -320,13 +326,14 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
         let p0 = s.mixture_phase(layer, 0, mu_in);
         let q = (1.0 - s.ddis_epsilon) * p0 + s.ddis_epsilon * p_b;
         let norm = 1.0 / (q + p_b);
-        for k in 0..self.nch() {
-            let pk = if atm.grey_scattering {
-                p0
-            } else {
-                s.mixture_phase(layer, k, mu_in)
-            };
-            self.virt[k] = self.w[k] * pk * norm;
+        let nch = self.nch();
+        if atm.grey_scattering {
+            self.phase[..nch].fill(p0);
+        } else {
+            s.mixture_phases(layer, mu_in, &mut self.phase[..nch]);
+        }
+        for k in 0..nch {
+            self.virt[k] = self.w[k] * self.phase[k] * norm;
         }
         let polarised = s.analyser.is_some();
         if polarised {
@@ -471,6 +478,13 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
         if jac {
             self.le[..nch].fill(0.0);
         }
+        // Every channel's optical depths at y, and (not grey) the phase functions at x and y,
+        // at once.
+        atm.cumulative_taus_in(layer_y, y.z, &mut self.ts_y[..nch], &mut self.ta_y[..nch]);
+        if !grey && polarised.is_none() {
+            s.mixture_phases(p.layer, mu_x, &mut self.phase[..nch]);
+            s.receiver_phases(layer_y, mu_y, band, &mut self.phase_y[..nch]);
+        }
         for k in 0..nch {
             if self.w[k] == 0.0 {
                 continue;
@@ -480,7 +494,7 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
             if !(sigma_y > 0.0) {
                 continue;
             }
-            let (tsy, tay) = atm.cumulative_tau(y.z, k);
+            let (tsy, tay) = (self.ts_y[k], self.ta_y[k]);
             let tau_xy = if horizontal {
                 let ix = p.layer * nch + k;
                 (atm.sigma_s_per_m[ix] + atm.sigma_a_per_m[ix]) * l
@@ -505,10 +519,7 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
             let (px, py) = if grey {
                 (px0, py0)
             } else {
-                (
-                    s.mixture_phase(p.layer, k, mu_x),
-                    s.receiver_phase(layer_y, k, mu_y, band),
-                )
+                (self.phase[k], self.phase_y[k])
             };
             let e = self.w[k] * sigma_y * px * py * factor * (-(tau_xy + tau_back)).exp();
             self.bins[base + k] += e;

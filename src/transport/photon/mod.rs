@@ -115,6 +115,12 @@ pub(crate) struct Tracer<'a, const ONE_CHANNEL: bool> {
     ta: Vec<f64>,
     /// Scratch per channel.
     tmp: Vec<f64>,
+    /// Scratch per channel: the cumulative optical depths at a second point (scattering,
+    /// absorption), and phase-function values at two scatterings.
+    ts_y: Vec<f64>,
+    ta_y: Vec<f64>,
+    phase: Vec<f64>,
+    phase_y: Vec<f64>,
     /// Per scattering class: scattering optical depth of the flight and 1 − e^{−τ} (collision
     /// probability), then scratch for the optical depth to the collision.
     cls_tau: Vec<f64>,
@@ -174,6 +180,10 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
             ts: vec![0.0; nch],
             ta: vec![0.0; nch],
             tmp: vec![0.0; nch],
+            ts_y: vec![0.0; nch],
+            ta_y: vec![0.0; nch],
+            phase: vec![0.0; nch],
+            phase_y: vec![0.0; nch],
             cls_tau: vec![0.0; s.classes.len()],
             cls_p: vec![0.0; s.classes.len()],
             split: Vec::new(),
@@ -217,13 +227,18 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
         if ONE_CHANNEL { 1 } else { self.s.classes.len() }
     }
 
-    /// Update the cumulative optical depths for altitude z.
+    /// Update the cumulative optical depths for altitude z in layer l (`Walk::at_layer`):
+    /// every channel in one pass over the layer's row.
     #[inline]
-    fn set_altitude(&mut self, z: f64) {
-        for k in 0..self.nch() {
-            let (s, a) = self.s.atm.cumulative_tau(z, k);
-            self.ts[k] = s;
-            self.ta[k] = a;
+    fn set_altitude_in(&mut self, l: usize, z: f64) {
+        let nch = self.nch();
+        if self.s.has_layers {
+            self.s
+                .atm
+                .cumulative_taus_in(l, z, &mut self.ts[..nch], &mut self.ta[..nch]);
+        } else {
+            self.ts[..nch].fill(0.0);
+            self.ta[..nch].fill(0.0);
         }
     }
 

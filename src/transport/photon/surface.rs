@@ -38,8 +38,18 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
         let layer = 0;
         let n = self.nch();
         let jac = s.jac.is_some();
+        // The surface is the bottom of layer 0: every channel's optical depths there at once.
+        if s.has_layers {
+            let z = hit.z.clamp(s.bottom_m, s.top_m);
+            let l = s.atm.layer_near(z, 0);
+            s.atm
+                .cumulative_taus_in(l, z, &mut self.ts_y[..n], &mut self.ta_y[..n]);
+        } else {
+            self.ts_y[..n].fill(0.0);
+            self.ta_y[..n].fill(0.0);
+        }
         for k in 0..n {
-            let (ts, ta) = s.atm.cumulative_tau(hit.z, k);
+            let (ts, ta) = (self.ts_y[k], self.ta_y[k]);
             let tau_back = s.tau_to_receiver(hit.z, omega.z, d, layer, k, ts + ta);
             let e = self.w[k] * (-self.tmp[k]).exp() * albedo[k] * geometric * (-tau_back).exp();
             if s.analyser.is_some() {

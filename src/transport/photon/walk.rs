@@ -93,7 +93,12 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
         rng: &mut Rng,
     ) {
         let s = self.s;
-        self.set_altitude(pos.z);
+        let at_layer = match prev {
+            Some(p) if s.has_layers => s.atm.layer_near(pos.z, p.layer),
+            _ if s.has_layers => s.atm.layer_of(pos.z),
+            _ => 0,
+        };
+        self.set_altitude_in(at_layer, pos.z);
         let mut walk = Walk {
             pos,
             dir,
@@ -101,11 +106,7 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
             order,
             prev,
             carried: None,
-            at_layer: if s.has_layers {
-                s.atm.layer_of(pos.z)
-            } else {
-                0
-            },
+            at_layer,
         };
         loop {
             let Some(flight) = self.fly(&mut walk, rng) else {
@@ -201,7 +202,7 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
         // Scattering optical depth of the flight for each class (class 0: channel 0's).
         let inside = pos.z >= s.bottom_m && pos.z <= s.top_m && s.has_layers;
         let layer0 = if horizontal && inside {
-            atm.layer_of(pos.z)
+            atm.layer_near(pos.z, walk.at_layer)
         } else {
             0
         };
@@ -225,19 +226,38 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
         // Per-channel extinction to the end of the flight (into tmp), only where needed.
         let need_end_tau = end == End::Surface || s.flux_tally;
         if need_end_tau {
-            let z_end = pos.z + mu * s_end;
-            for k in 0..nch {
-                self.tmp[k] = if horizontal {
-                    if inside {
-                        let i = layer0 * nch + k;
-                        (atm.sigma_s_per_m[i] + atm.sigma_a_per_m[i]) * s_end
-                    } else {
-                        0.0
+            let tmp = &mut self.tmp[..nch];
+            if horizontal {
+                if inside {
+                    let row = layer0 * nch..(layer0 + 1) * nch;
+                    let (ss, sa) = (&atm.sigma_s_per_m[row.clone()], &atm.sigma_a_per_m[row]);
+                    for k in 0..nch {
+                        tmp[k] = (ss[k] + sa[k]) * s_end;
                     }
                 } else {
-                    let (ts1, ta1) = atm.cumulative_tau(z_end, k);
-                    ((ts1 - self.ts[k]) + (ta1 - self.ta[k])).abs() * inv_mu
-                };
+                    tmp.fill(0.0);
+                }
+            } else {
+                // The end's layer: the bottom one at the surface, found once for all channels.
+                let z_end = pos.z + mu * s_end;
+                if s.has_layers {
+                    let hint = match end {
+                        End::Top => atm.n_layers() - 1,
+                        End::Bottom | End::Surface => 0,
+                        End::Cut => walk.at_layer,
+                    };
+                    let z = z_end.clamp(s.bottom_m, s.top_m);
+                    let l = atm.layer_near(z, hint);
+                    atm.cumulative_taus_in(l, z, &mut self.ts_y[..nch], &mut self.ta_y[..nch]);
+                } else {
+                    self.ts_y[..nch].fill(0.0);
+                    self.ta_y[..nch].fill(0.0);
+                }
+                let (ts, ta) = (&self.ts[..nch], &self.ta[..nch]);
+                let (ts1, ta1) = (&self.ts_y[..nch], &self.ta_y[..nch]);
+                for k in 0..nch {
+                    tmp[k] = ((ts1[k] - ts[k]) + (ta1[k] - ta[k])).abs() * inv_mu;
+                }
             }
         }
         if s.flux_tally {
@@ -289,7 +309,7 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
                 self.stats.surface_reflections += 1;
                 walk.prev = None;
                 self.cross_mis = 1.0;
-                self.set_altitude(walk.pos.z);
+                self.set_altitude_in(0, walk.pos.z);
                 walk.dir = lambertian(rng.random(), rng.random());
                 self.jac_arrive(walk.pos.z, f.mu, 0, f.s_end);
                 self.jac_depart(walk.pos.z, walk.dir.z);
@@ -575,20 +595,21 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
                 _ => (mean_phase(mu_s), mean_phase(omega_rx.dot(new_dir))),
             };
             let q = (1.0 - s.ddis_epsilon) * p0 + s.ddis_epsilon * p_rx;
-            for k in 0..nch {
-                let pk = if atm.grey_scattering {
-                    p0
-                } else {
-                    s.mixture_phase(layer, k, mu_s)
-                };
-                self.w[k] *= pk / q;
+            if atm.grey_scattering {
+                self.w[..nch].iter_mut().for_each(|w| *w *= p0 / q);
+            } else {
+                s.mixture_phases(layer, mu_s, &mut self.phase[..nch]);
+                for k in 0..nch {
+                    self.w[k] *= self.phase[k] / q;
+                }
             }
             // Against the DDIS crossing made here, whose direction density is P(Θ_rx).
             self.cross_mis = if virtual_done { q / (q + p_rx) } else { 1.0 };
         } else if !atm.grey_scattering {
             let p_mean = mean_phase(mu_sampled);
+            s.mixture_phases(layer, mu_sampled, &mut self.phase[..nch]);
             for k in 0..nch {
-                self.w[k] *= s.mixture_phase(layer, k, mu_sampled) / p_mean;
+                self.w[k] *= self.phase[k] / p_mean;
             }
         }
         if s.analyser.is_some() {

@@ -131,24 +131,38 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
                 0.0
             } else if horizontal {
                 s.classes[0].sigma[layer] * s_coll
+            } else if in_layers {
+                (s.class_tau_in(0, layer, pos.z) - self.ts[0]).abs() * inv_mu
             } else {
                 (s.class_tau_at(0, pos.z) - self.ts[0]).abs() * inv_mu
             };
-            let known = in_layers.then_some(layer);
+            self.step_to(pos.z, in_layers.then_some(layer));
+            let (ss, sa) = (
+                &atm.sigma_s_per_m[i..i + nch],
+                &atm.sigma_a_per_m[i..i + nch],
+            );
+            let (ts0, ta0) = (&self.ts[..nch], &self.ta[..nch]);
+            let (ts1, ta1) = (&self.ts_y[..nch], &self.ta_y[..nch]);
+            let w = &mut self.w[..nch];
             for k in 0..nch {
-                let (ts_new, ta_new, dts, dta) =
-                    self.channel_step(k, pos.z, known, inv_mu, horizontal, s_coll, i + k);
+                let (dts, dta) = if horizontal {
+                    (ss[k] * s_coll, sa[k] * s_coll)
+                } else {
+                    (
+                        (ts1[k] - ts0[k]).abs() * inv_mu,
+                        (ta1[k] - ta0[k]).abs() * inv_mu,
+                    )
+                };
                 let mut f = collide_factor;
                 if dta > 0.0 {
                     f *= exp_neg(dta);
                 }
                 if !atm.grey_scattering {
-                    f *= atm.sigma_s_per_m[i + k] / atm.sigma_s_per_m[i] * (-(dts - dts_ref)).exp();
+                    f *= ss[k] / ss[0] * (-(dts - dts_ref)).exp();
                 }
-                self.w[k] *= f;
-                self.ts[k] = ts_new;
-                self.ta[k] = ta_new;
+                w[k] *= f;
             }
+            self.arrive();
             true
         } else {
             self.mixture_weights(
@@ -218,53 +232,61 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
         if !(g > 0.0 && g.is_finite()) {
             return false;
         }
-        let known = in_layers.then_some(layer);
+        self.step_to(pos.z, in_layers.then_some(layer));
+        let i = layer * nch;
+        let (ss, sa) = (
+            &atm.sigma_s_per_m[i..i + nch],
+            &atm.sigma_a_per_m[i..i + nch],
+        );
+        let (ts0, ta0) = (&self.ts[..nch], &self.ta[..nch]);
+        let (ts1, ta1) = (&self.ts_y[..nch], &self.ta_y[..nch]);
         for k in 0..nch {
-            let i = layer * nch + k;
-            let (ts_new, ta_new, dts, dta) =
-                self.channel_step(k, pos.z, known, inv_mu, horizontal, s_coll, i);
-            let sigma_k = atm.sigma_s_per_m[i];
+            let (dts, dta) = if horizontal {
+                (ss[k] * s_coll, sa[k] * s_coll)
+            } else {
+                (
+                    (ts1[k] - ts0[k]).abs() * inv_mu,
+                    (ta1[k] - ta0[k]).abs() * inv_mu,
+                )
+            };
+            let sigma_k = ss[k];
             // σ_k = 0: this channel cannot scatter here (and e^{τ_min − τ_k} may be huge).
             self.w[k] *= if sigma_k > 0.0 && in_layers {
                 sigma_k * (-(dts - tau_min) - dta).exp() / g
             } else {
                 0.0
             };
-            self.ts[k] = ts_new;
-            self.ta[k] = ta_new;
         }
+        self.arrive();
         true
     }
 
-    /// Channel k over a flight of length `s_coll` (slant factor `inv_mu` = 1/|μ|) ending at
-    /// altitude z, in layer `layer` if known (index `i` of its layer and channel): the
-    /// cumulative scattering and absorption optical depths there, and the flight's scattering
-    /// and absorption optical depths.
-    #[allow(clippy::too_many_arguments)]
+    /// Every channel's cumulative optical depths at altitude z, in layer `layer` if known
+    /// (otherwise found once for all), into `ts_y`, `ta_y`: where a flight ends.
     #[inline]
-    pub(super) fn channel_step(
-        &self,
-        k: usize,
-        z: f64,
-        layer: Option<usize>,
-        inv_mu: f64,
-        horizontal: bool,
-        s_coll: f64,
-        i: usize,
-    ) -> (f64, f64, f64, f64) {
-        let atm = self.s.atm;
-        let (ts_new, ta_new) = match layer {
-            Some(l) => atm.cumulative_tau_in(l, z, k),
-            None => atm.cumulative_tau(z, k),
-        };
-        let (dts, dta) = if horizontal {
-            (atm.sigma_s_per_m[i] * s_coll, atm.sigma_a_per_m[i] * s_coll)
-        } else {
-            (
-                (ts_new - self.ts[k]).abs() * inv_mu,
-                (ta_new - self.ta[k]).abs() * inv_mu,
-            )
-        };
-        (ts_new, ta_new, dts, dta)
+    pub(super) fn step_to(&mut self, z: f64, layer: Option<usize>) {
+        let s = self.s;
+        let nch = self.nch();
+        let (ts, ta) = (&mut self.ts_y[..nch], &mut self.ta_y[..nch]);
+        if !s.has_layers {
+            ts.fill(0.0);
+            ta.fill(0.0);
+            return;
+        }
+        match layer {
+            Some(l) => s.atm.cumulative_taus_in(l, z, ts, ta),
+            None => {
+                let z = z.clamp(s.bottom_m, s.top_m);
+                s.atm.cumulative_taus_in(s.atm.layer_of(z), z, ts, ta);
+            }
+        }
+    }
+
+    /// The photon has arrived where [`Self::step_to`] looked: its optical depths become the
+    /// current ones.
+    #[inline]
+    pub(super) fn arrive(&mut self) {
+        std::mem::swap(&mut self.ts, &mut self.ts_y);
+        std::mem::swap(&mut self.ta, &mut self.ta_y);
     }
 }
