@@ -647,6 +647,35 @@ impl Setup<'_> {
         (t_here - self.tau_rx[k]).abs() / omega_z.abs()
     }
 
+    /// [`Self::tau_to_receiver`] of every channel at once, from the cumulative optical depths
+    /// `ts`, `ta` at z, into `out`.
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    pub(super) fn taus_to_receiver(
+        &self,
+        z: f64,
+        omega_z: f64,
+        d: f64,
+        layer: usize,
+        ts: &[f64],
+        ta: &[f64],
+        out: &mut [f64],
+    ) {
+        let n = out.len();
+        let (ts, ta) = (&ts[..n], &ta[..n]);
+        if omega_z.abs() < 1e-12 {
+            for k in 0..n {
+                out[k] = self.tau_to_receiver(z, omega_z, d, layer, k, ts[k] + ta[k]);
+            }
+            return;
+        }
+        let slant = omega_z.abs();
+        let rx = &self.tau_rx[..n];
+        for k in 0..n {
+            out[k] = (ts[k] + ta[k] - rx[k]).abs() / slant;
+        }
+    }
+
     /// Cumulative vertical scattering optical depth of class `c` at altitude z.
     #[inline]
     pub(super) fn class_tau_at(&self, c: usize, z: f64) -> f64 {

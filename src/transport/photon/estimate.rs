@@ -106,25 +106,23 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
             return;
         }
         let jac = s.jac.is_some();
-        if !grey {
+        // Every channel in one branch-free pass (`lanes`): a channel of zero weight scores 0.
+        let (ts, ta) = (&self.ts[..nch], &self.ta[..nch]);
+        s.taus_to_receiver(x.z, omega.z, d, layer, ts, ta, &mut self.tau[..nch]);
+        let (w, tau, le) = (&self.w[..nch], &self.tau[..nch], &mut self.le[..nch]);
+        if grey {
+            for k in 0..nch {
+                le[k] = w[k] * geometric * Self::exp(-tau[k]);
+            }
+        } else {
             s.receiver_phases(layer, mu_s, band, &mut self.phase[..nch]);
+            let phase = &self.phase[..nch];
+            for k in 0..nch {
+                le[k] = w[k] * geometric * Self::exp(-tau[k]) * phase[k];
+            }
         }
-        for k in 0..nch {
-            if self.w[k] == 0.0 {
-                if jac {
-                    self.le[k] = 0.0;
-                }
-                continue;
-            }
-            let tau = s.tau_to_receiver(x.z, omega.z, d, layer, k, self.ts[k] + self.ta[k]);
-            let mut e = self.w[k] * geometric * (-tau).exp();
-            if !grey {
-                e *= self.phase[k];
-            }
-            self.bins[base + k] += e;
-            if jac {
-                self.le[k] = e;
-            }
+        for (b, e) in self.bins[base..base + nch].iter_mut().zip(&*le) {
+            *b += e;
         }
         if jac {
             // The path's own end: the scattering toward the receiver and the leg to it.
@@ -229,40 +227,55 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
         };
         let base = self.shape.base(gate, s.order_bin(order), annulus);
         let jac = s.jac.is_some();
-        if !grey && !polarised {
-            s.receiver_phases(layer, mu_s, band, &mut self.phase[..nch]);
-        }
-        for k in 0..nch {
-            if self.w[k] == 0.0 {
-                self.le[k] = 0.0;
-                continue;
-            }
-            let (ts_y, ta_y) = atm.cumulative_tau_in(layer, y.z, k);
-            let mut f = exp_neg((ta_y - self.ta[k]).abs() * inv_mu);
-            if !grey {
-                let dts = (ts_y - self.ts[k]).abs() * inv_mu;
-                let ratio = atm.sigma_s_per_m[i0 + k] / atm.sigma_s_per_m[i0];
-                f *= if polarised {
-                    ratio * (-(dts - tau_star)).exp()
-                } else {
-                    ratio * (-(dts - tau_star)).exp() * self.phase[k]
-                };
-            }
-            let tau = s.tau_to_receiver(y.z, omega.z, d, layer, k, ts_y + ta_y);
-            let e = self.w[k] * f * geometric * (-tau).exp();
-            if polarised {
-                self.le[k] = e;
-                if band.is_some() {
-                    self.le[k] *= s.band_over_point(layer, k, mu_s, band);
+        if !polarised {
+            // Every channel in one branch-free pass (`lanes`): the absorption along the flight
+            // to y, ALIS's scattering ratio there, and the leg to the receiver in one exponent.
+            let (ts_y, ta_y) = (&mut self.ts_y[..nch], &mut self.ta_y[..nch]);
+            atm.cumulative_taus_in(layer, y.z, ts_y, ta_y);
+            s.taus_to_receiver(y.z, omega.z, d, layer, ts_y, ta_y, &mut self.tau[..nch]);
+            let (ts, ta) = (&self.ts[..nch], &self.ta[..nch]);
+            let (w, tau, le) = (&self.w[..nch], &self.tau[..nch], &mut self.le[..nch]);
+            if grey {
+                for k in 0..nch {
+                    let dta = (ta_y[k] - ta[k]).abs() * inv_mu;
+                    le[k] = w[k] * Self::exp(-(dta + tau[k])) * geometric;
                 }
             } else {
-                self.bins[base + k] += e;
-                if jac {
-                    self.le[k] = e;
+                s.receiver_phases(layer, mu_s, band, &mut self.phase[..nch]);
+                let phase = &self.phase[..nch];
+                let ss = &atm.sigma_s_per_m[i0..i0 + nch];
+                for k in 0..nch {
+                    let dta = (ta_y[k] - ta[k]).abs() * inv_mu;
+                    let dts = (ts_y[k] - ts[k]).abs() * inv_mu;
+                    let ratio = ss[k] / ss[0];
+                    let f = ratio * Self::exp(-(dta + (dts - tau_star) + tau[k])) * phase[k];
+                    le[k] = w[k] * f * geometric;
                 }
+            }
+            for (b, e) in self.bins[base..base + nch].iter_mut().zip(&*le) {
+                *b += e;
             }
         }
         if polarised {
+            // The scattering matrix instead of the phase function: per channel.
+            for k in 0..nch {
+                if self.w[k] == 0.0 {
+                    self.le[k] = 0.0;
+                    continue;
+                }
+                let (ts_y, ta_y) = atm.cumulative_tau_in(layer, y.z, k);
+                let mut f = exp_neg((ta_y - self.ta[k]).abs() * inv_mu);
+                if !grey {
+                    let dts = (ts_y - self.ts[k]).abs() * inv_mu;
+                    let ratio = atm.sigma_s_per_m[i0 + k] / atm.sigma_s_per_m[i0];
+                    f *= ratio * (-(dts - tau_star)).exp();
+                }
+                let tau = s.tau_to_receiver(y.z, omega.z, d, layer, k, ts_y + ta_y);
+                self.le[k] = self.w[k] * f * geometric * (-tau).exp();
+                if band.is_some() {
+                    self.le[k] *= s.band_over_point(layer, k, mu_s, band);
+                }
+            }
             self.score_polarised(layer, dir, omega, base);
         } else if jac {
             // The flight's collision at y, its scattering toward the receiver and the leg to
@@ -475,34 +488,27 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
             (t1, t2, an.toward(-omega, t2.e1))
         });
         let jac = s.jac.is_some();
-        if jac {
-            self.le[..nch].fill(0.0);
-        }
-        // Every channel's optical depths at y, and (not grey) the phase functions at x and y,
-        // at once.
+        // Every channel's optical depths at y at once.
         atm.cumulative_taus_in(layer_y, y.z, &mut self.ts_y[..nch], &mut self.ta_y[..nch]);
-        if !grey && polarised.is_none() {
-            s.mixture_phases(p.layer, mu_x, &mut self.phase[..nch]);
-            s.receiver_phases(layer_y, mu_y, band, &mut self.phase_y[..nch]);
-        }
-        for k in 0..nch {
-            if self.w[k] == 0.0 {
-                continue;
-            }
-            let iy = layer_y * nch + k;
-            let sigma_y = atm.sigma_s_per_m[iy];
-            if !(sigma_y > 0.0) {
-                continue;
-            }
-            let (tsy, tay) = (self.ts_y[k], self.ta_y[k]);
-            let tau_xy = if horizontal {
-                let ix = p.layer * nch + k;
-                (atm.sigma_s_per_m[ix] + atm.sigma_a_per_m[ix]) * l
-            } else {
-                ((tsy + tay) - (self.ts[k] + self.ta[k])).abs() / e_xy.z.abs()
-            };
-            let tau_back = s.tau_to_receiver(y.z, -omega.z, r, layer_y, k, tsy + tay);
-            if let Some((t1, t2, analysis)) = &polarised {
+        if let Some((t1, t2, analysis)) = &polarised {
+            // The scattering matrices instead of the phase functions: per channel.
+            for k in 0..nch {
+                if self.w[k] == 0.0 {
+                    continue;
+                }
+                let iy = layer_y * nch + k;
+                let sigma_y = atm.sigma_s_per_m[iy];
+                if !(sigma_y > 0.0) {
+                    continue;
+                }
+                let (tsy, tay) = (self.ts_y[k], self.ta_y[k]);
+                let tau_xy = if horizontal {
+                    let ix = p.layer * nch + k;
+                    (atm.sigma_s_per_m[ix] + atm.sigma_a_per_m[ix]) * l
+                } else {
+                    ((tsy + tay) - (self.ts[k] + self.ta[k])).abs() / e_xy.z.abs()
+                };
+                let tau_back = s.tau_to_receiver(y.z, -omega.z, r, layer_y, k, tsy + tay);
                 // The phase functions' product becomes I after x times co (cross) after y.
                 let mut e = self.w[k] * sigma_y * factor * (-(tau_xy + tau_back)).exp();
                 if band.is_some() {
@@ -514,20 +520,48 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
                 let (co, cross) = analysis.split(s2);
                 self.bins[base + k] += e * i1 * co;
                 self.bins[base + nch + k] += e * i1 * cross;
-                continue;
             }
-            let (px, py) = if grey {
-                (px0, py0)
-            } else {
-                (self.phase[k], self.phase_y[k])
-            };
-            let e = self.w[k] * sigma_y * px * py * factor * (-(tau_xy + tau_back)).exp();
-            self.bins[base + k] += e;
-            if jac {
-                self.le[k] = e;
+            return;
+        }
+        // Every channel in one branch-free pass (`lanes`): both legs' optical depths, then the
+        // estimate (0 for a channel of zero weight or that does not scatter at y).
+        let (ts, ta) = (&self.ts[..nch], &self.ta[..nch]);
+        let (ts_y, ta_y) = (&self.ts_y[..nch], &self.ta_y[..nch]);
+        let tau_xy = &mut self.tau[..nch];
+        if horizontal {
+            let row = p.layer * nch..(p.layer + 1) * nch;
+            let (ss, sa) = (&atm.sigma_s_per_m[row.clone()], &atm.sigma_a_per_m[row]);
+            for k in 0..nch {
+                tau_xy[k] = (ss[k] + sa[k]) * l;
+            }
+        } else {
+            let slant = e_xy.z.abs();
+            for k in 0..nch {
+                tau_xy[k] = ((ts_y[k] + ta_y[k]) - (ts[k] + ta[k])).abs() / slant;
             }
         }
-        if jac && polarised.is_none() {
+        s.taus_to_receiver(y.z, -omega.z, r, layer_y, ts_y, ta_y, &mut self.tau2[..nch]);
+        let (w, tau_xy, tau_back) = (&self.w[..nch], &self.tau[..nch], &self.tau2[..nch]);
+        let sigma_y = &atm.sigma_s_per_m[layer_y * nch..(layer_y + 1) * nch];
+        let le = &mut self.le[..nch];
+        if grey {
+            for k in 0..nch {
+                let t = Self::exp(-(tau_xy[k] + tau_back[k]));
+                le[k] = w[k] * sigma_y[k] * px0 * py0 * factor * t;
+            }
+        } else {
+            s.mixture_phases(p.layer, mu_x, &mut self.phase[..nch]);
+            s.receiver_phases(layer_y, mu_y, band, &mut self.phase_y[..nch]);
+            let (px, py) = (&self.phase[..nch], &self.phase_y[..nch]);
+            for k in 0..nch {
+                let t = Self::exp(-(tau_xy[k] + tau_back[k]));
+                le[k] = w[k] * sigma_y[k] * px[k] * py[k] * factor * t;
+            }
+        }
+        for (b, e) in self.bins[base..base + nch].iter_mut().zip(&*le) {
+            *b += e;
+        }
+        if jac {
             // Both of the estimate's scatterings and its two legs.
             let mut v = Virtual::default();
             v.leg(x.z, y.z, e_xy.z, l, p.layer);

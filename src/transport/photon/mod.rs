@@ -41,6 +41,7 @@ use glam::DVec3;
 use rand::RngExt;
 
 mod estimate;
+mod lanes;
 mod sampling;
 mod surface;
 #[cfg(test)]
@@ -121,6 +122,9 @@ pub(crate) struct Tracer<'a, const ONE_CHANNEL: bool> {
     ta_y: Vec<f64>,
     phase: Vec<f64>,
     phase_y: Vec<f64>,
+    /// Scratch per channel: optical depths of an estimate's legs.
+    tau: Vec<f64>,
+    tau2: Vec<f64>,
     /// Per scattering class: scattering optical depth of the flight and 1 − e^{−τ} (collision
     /// probability), then scratch for the optical depth to the collision.
     cls_tau: Vec<f64>,
@@ -184,6 +188,8 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
             ta_y: vec![0.0; nch],
             phase: vec![0.0; nch],
             phase_y: vec![0.0; nch],
+            tau: vec![0.0; nch],
+            tau2: vec![0.0; nch],
             cls_tau: vec![0.0; s.classes.len()],
             cls_p: vec![0.0; s.classes.len()],
             split: Vec::new(),
@@ -219,6 +225,14 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
     #[inline(always)]
     fn nch(&self) -> usize {
         if ONE_CHANNEL { 1 } else { self.w.len() }
+    }
+
+    /// e^x in the per-channel loops: the branch-free [`lanes::exp`], which those loops vectorise,
+    /// where there are several channels; the library's where there is one (faster alone, and
+    /// one-channel runs keep their numbers).
+    #[inline(always)]
+    fn exp(x: f64) -> f64 {
+        if ONE_CHANNEL { x.exp() } else { lanes::exp(x) }
     }
 
     /// Scattering classes (`super::scatter_classes`): one channel has one.

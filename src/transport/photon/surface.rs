@@ -51,7 +51,8 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
         for k in 0..n {
             let (ts, ta) = (self.ts_y[k], self.ta_y[k]);
             let tau_back = s.tau_to_receiver(hit.z, omega.z, d, layer, k, ts + ta);
-            let e = self.w[k] * (-self.tmp[k]).exp() * albedo[k] * geometric * (-tau_back).exp();
+            // Both legs' attenuation in one exponent (`lanes`).
+            let e = self.w[k] * Self::exp(-(self.tmp[k] + tau_back)) * albedo[k] * geometric;
             if s.analyser.is_some() {
                 // A Lambertian surface reflects unpolarised light: half of it each way.
                 self.bins[base + k] += 0.5 * e;

@@ -297,7 +297,7 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
             if rng.random::<f64>() >= q {
                 // Reach the surface and reflect (its signal was scored above).
                 for k in 0..nch {
-                    let arriving = self.w[k] * (-self.tmp[k]).exp();
+                    let arriving = self.w[k] * Self::exp(-self.tmp[k]);
                     self.flux.down[k] += arriving * (1.0 - albedo[k]);
                     self.w[k] = arriving / (1.0 - q) * albedo[k];
                 }

@@ -144,6 +144,8 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
             let (ts0, ta0) = (&self.ts[..nch], &self.ta[..nch]);
             let (ts1, ta1) = (&self.ts_y[..nch], &self.ta_y[..nch]);
             let w = &mut self.w[..nch];
+            // Every channel in one branch-free pass (`lanes`), absorption and ALIS's
+            // scattering difference in one exponent.
             for k in 0..nch {
                 let (dts, dta) = if horizontal {
                     (ss[k] * s_coll, sa[k] * s_coll)
@@ -153,14 +155,11 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
                         (ta1[k] - ta0[k]).abs() * inv_mu,
                     )
                 };
-                let mut f = collide_factor;
-                if dta > 0.0 {
-                    f *= exp_neg(dta);
-                }
-                if !atm.grey_scattering {
-                    f *= ss[k] / ss[0] * (-(dts - dts_ref)).exp();
-                }
-                w[k] *= f;
+                w[k] *= if atm.grey_scattering {
+                    collide_factor * Self::exp(-dta)
+                } else {
+                    collide_factor * (ss[k] / ss[0] * Self::exp(-(dta + (dts - dts_ref))))
+                };
             }
             self.arrive();
             true
@@ -252,7 +251,7 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
             let sigma_k = ss[k];
             // σ_k = 0: this channel cannot scatter here (and e^{τ_min − τ_k} may be huge).
             self.w[k] *= if sigma_k > 0.0 && in_layers {
-                sigma_k * (-(dts - tau_min) - dta).exp() / g
+                sigma_k * Self::exp(-(dts - tau_min) - dta) / g
             } else {
                 0.0
             };
