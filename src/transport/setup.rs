@@ -669,11 +669,7 @@ impl Setup<'_> {
             }
             return;
         }
-        let slant = omega_z.abs();
-        let rx = &self.tau_rx[..n];
-        for k in 0..n {
-            out[k] = (ts[k] + ta[k] - rx[k]).abs() / slant;
-        }
+        super::lanes::to_receiver(out, ts, ta, &self.tau_rx, omega_z.abs());
     }
 
     /// Cumulative vertical scattering optical depth of class `c` at altitude z.

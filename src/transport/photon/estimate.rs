@@ -111,19 +111,12 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
         s.taus_to_receiver(x.z, omega.z, d, layer, ts, ta, &mut self.tau[..nch]);
         let (w, tau, le) = (&self.w[..nch], &self.tau[..nch], &mut self.le[..nch]);
         if grey {
-            for k in 0..nch {
-                le[k] = w[k] * geometric * Self::exp(-tau[k]);
-            }
+            lanes::estimate(Self::exp, le, w, tau, geometric);
         } else {
             s.receiver_phases(layer, mu_s, band, &mut self.phase[..nch]);
-            let phase = &self.phase[..nch];
-            for k in 0..nch {
-                le[k] = w[k] * geometric * Self::exp(-tau[k]) * phase[k];
-            }
+            lanes::estimate_phase(Self::exp, le, w, tau, &self.phase, geometric);
         }
-        for (b, e) in self.bins[base..base + nch].iter_mut().zip(&*le) {
-            *b += e;
-        }
+        lanes::accumulate(&mut self.bins[base..base + nch], le);
         if jac {
             // The path's own end: the scattering toward the receiver and the leg to it.
             let mut v = Virtual::default();
@@ -236,25 +229,15 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
             let (ts, ta) = (&self.ts[..nch], &self.ta[..nch]);
             let (w, tau, le) = (&self.w[..nch], &self.tau[..nch], &mut self.le[..nch]);
             if grey {
-                for k in 0..nch {
-                    let dta = (ta_y[k] - ta[k]).abs() * inv_mu;
-                    le[k] = w[k] * Self::exp(-(dta + tau[k])) * geometric;
-                }
+                lanes::crossing_grey(Self::exp, le, w, ta_y, ta, tau, inv_mu, geometric);
             } else {
                 s.receiver_phases(layer, mu_s, band, &mut self.phase[..nch]);
-                let phase = &self.phase[..nch];
                 let ss = &atm.sigma_s_per_m[i0..i0 + nch];
-                for k in 0..nch {
-                    let dta = (ta_y[k] - ta[k]).abs() * inv_mu;
-                    let dts = (ts_y[k] - ts[k]).abs() * inv_mu;
-                    let ratio = ss[k] / ss[0];
-                    let f = ratio * Self::exp(-(dta + (dts - tau_star) + tau[k])) * phase[k];
-                    le[k] = w[k] * f * geometric;
-                }
+                let phase = &self.phase[..nch];
+                #[rustfmt::skip]
+                lanes::crossing(Self::exp, le, w, ts_y, ta_y, ts, ta, tau, ss, phase, inv_mu, tau_star, geometric);
             }
-            for (b, e) in self.bins[base..base + nch].iter_mut().zip(&*le) {
-                *b += e;
-            }
+            lanes::accumulate(&mut self.bins[base..base + nch], le);
         }
         if polarised {
             // The scattering matrix instead of the phase function: per channel.
@@ -535,32 +518,31 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
                 tau_xy[k] = (ss[k] + sa[k]) * l;
             }
         } else {
-            let slant = e_xy.z.abs();
-            for k in 0..nch {
-                tau_xy[k] = ((ts_y[k] + ta_y[k]) - (ts[k] + ta[k])).abs() / slant;
-            }
+            lanes::slant(tau_xy, ts_y, ta_y, ts, ta, e_xy.z.abs());
         }
         s.taus_to_receiver(y.z, -omega.z, r, layer_y, ts_y, ta_y, &mut self.tau2[..nch]);
         let (w, tau_xy, tau_back) = (&self.w[..nch], &self.tau[..nch], &self.tau2[..nch]);
         let sigma_y = &atm.sigma_s_per_m[layer_y * nch..(layer_y + 1) * nch];
         let le = &mut self.le[..nch];
         if grey {
-            for k in 0..nch {
-                let t = Self::exp(-(tau_xy[k] + tau_back[k]));
-                le[k] = w[k] * sigma_y[k] * px0 * py0 * factor * t;
-            }
+            lanes::cone_grey(
+                Self::exp,
+                le,
+                w,
+                sigma_y,
+                px0,
+                py0,
+                factor,
+                tau_xy,
+                tau_back,
+            );
         } else {
             s.mixture_phases(p.layer, mu_x, &mut self.phase[..nch]);
             s.receiver_phases(layer_y, mu_y, band, &mut self.phase_y[..nch]);
             let (px, py) = (&self.phase[..nch], &self.phase_y[..nch]);
-            for k in 0..nch {
-                let t = Self::exp(-(tau_xy[k] + tau_back[k]));
-                le[k] = w[k] * sigma_y[k] * px[k] * py[k] * factor * t;
-            }
+            lanes::cone(Self::exp, le, w, sigma_y, px, py, factor, tau_xy, tau_back);
         }
-        for (b, e) in self.bins[base..base + nch].iter_mut().zip(&*le) {
-            *b += e;
-        }
+        lanes::accumulate(&mut self.bins[base..base + nch], le);
         if jac {
             // Both of the estimate's scatterings and its two legs.
             let mut v = Virtual::default();

@@ -41,7 +41,6 @@ use glam::DVec3;
 use rand::RngExt;
 
 mod estimate;
-mod lanes;
 mod sampling;
 mod surface;
 #[cfg(test)]
@@ -50,6 +49,7 @@ mod walk;
 
 use super::cone::Prev;
 use super::jacobian::{JacState, Virtual};
+use super::lanes;
 use super::stokes::{self, Reduced, Turn};
 use super::tally::{Flux, TallyShape};
 use super::{RunStats, Setup};

@@ -48,21 +48,28 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
             self.ts_y[..n].fill(0.0);
             self.ta_y[..n].fill(0.0);
         }
-        for k in 0..n {
-            let (ts, ta) = (self.ts_y[k], self.ta_y[k]);
-            let tau_back = s.tau_to_receiver(hit.z, omega.z, d, layer, k, ts + ta);
-            // Both legs' attenuation in one exponent (`lanes`).
-            let e = self.w[k] * Self::exp(-(self.tmp[k] + tau_back)) * albedo[k] * geometric;
-            if s.analyser.is_some() {
-                // A Lambertian surface reflects unpolarised light: half of it each way.
-                self.bins[base + k] += 0.5 * e;
-                self.bins[base + n + k] += 0.5 * e;
-            } else {
-                self.bins[base + k] += e;
-                if jac {
-                    self.le[k] = e;
-                }
+        let (ts, ta) = (&self.ts_y[..n], &self.ta_y[..n]);
+        s.taus_to_receiver(hit.z, omega.z, d, layer, ts, ta, &mut self.tau[..n]);
+        // Every channel in one branch-free pass (`lanes`), both legs' attenuation in one
+        // exponent.
+        let le = &mut self.le[..n];
+        lanes::surface(
+            Self::exp,
+            le,
+            &self.w,
+            &self.tmp,
+            &self.tau,
+            albedo,
+            geometric,
+        );
+        if s.analyser.is_some() {
+            // A Lambertian surface reflects unpolarised light: half of it each way.
+            for k in 0..n {
+                self.bins[base + k] += 0.5 * le[k];
+                self.bins[base + n + k] += 0.5 * le[k];
             }
+        } else {
+            lanes::accumulate(&mut self.bins[base..base + n], le);
         }
         if jac {
             // The flight's arrival at the surface and the leg from it to the receiver.

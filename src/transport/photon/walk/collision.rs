@@ -141,25 +141,22 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
                 &atm.sigma_s_per_m[i..i + nch],
                 &atm.sigma_a_per_m[i..i + nch],
             );
-            let (ts0, ta0) = (&self.ts[..nch], &self.ta[..nch]);
-            let (ts1, ta1) = (&self.ts_y[..nch], &self.ta_y[..nch]);
-            let w = &mut self.w[..nch];
-            // Every channel in one branch-free pass (`lanes`), absorption and ALIS's
+            // The flight's scattering and absorption optical depths per channel, then every
+            // channel's weight in one branch-free pass (`lanes`), absorption and ALIS's
             // scattering difference in one exponent.
-            for k in 0..nch {
-                let (dts, dta) = if horizontal {
-                    (ss[k] * s_coll, sa[k] * s_coll)
-                } else {
-                    (
-                        (ts1[k] - ts0[k]).abs() * inv_mu,
-                        (ta1[k] - ta0[k]).abs() * inv_mu,
-                    )
-                };
-                w[k] *= if atm.grey_scattering {
-                    collide_factor * Self::exp(-dta)
-                } else {
-                    collide_factor * (ss[k] / ss[0] * Self::exp(-(dta + (dts - dts_ref))))
-                };
+            let (dts, dta) = (&mut self.tau[..nch], &mut self.tau2[..nch]);
+            if horizontal {
+                lanes::scale(dts, ss, s_coll);
+                lanes::scale(dta, sa, s_coll);
+            } else {
+                lanes::step(dts, &self.ts_y, &self.ts, inv_mu);
+                lanes::step(dta, &self.ta_y, &self.ta, inv_mu);
+            }
+            let w = &mut self.w[..nch];
+            if atm.grey_scattering {
+                lanes::collide_grey(Self::exp, w, dta, collide_factor);
+            } else {
+                lanes::collide(Self::exp, w, dts, dta, ss, collide_factor, dts_ref);
             }
             self.arrive();
             true
