@@ -11,8 +11,8 @@
 
 /// ln 2 split into a part with trailing zero bits (so that n·LN2_HI is exact for |n| < 2²⁰)
 /// and the rest (fdlibm's e_exp.c values).
-const LN2_HI: f64 = 6.931_471_803_691_238_164_90e-1;
-const LN2_LO: f64 = 1.908_214_929_270_587_700_02e-10;
+const LN2_HI: f64 = f64::from_bits(0x3fe6_2e42_fee0_0000);
+const LN2_LO: f64 = f64::from_bits(0x3dea_39ef_3579_3c76);
 /// 1.5·2⁵²: added to a number below 2⁵¹ in magnitude, it rounds it to the nearest integer and
 /// leaves that integer (plus 2⁵¹) in the low bits of the sum's mantissa.
 const ROUND: f64 = 6_755_399_441_055_744.0;
@@ -29,13 +29,7 @@ const OVERFLOW: f64 = 709.0;
 /// (ln 2/2)¹⁴/14! = 4.4e-18, is under the last bit.
 #[inline(always)]
 pub(super) fn exp(x: f64) -> f64 {
-    let xc = if x < UNDERFLOW {
-        UNDERFLOW
-    } else if x > OVERFLOW {
-        OVERFLOW
-    } else {
-        x
-    };
+    let xc = x.clamp(UNDERFLOW, OVERFLOW);
     let t = xc * std::f64::consts::LOG2_E + ROUND;
     let n = t - ROUND;
     let r = (xc - n * LN2_HI) - n * LN2_LO;
