@@ -235,6 +235,23 @@ pub(super) fn surface(
     }
 }
 
+/// The weights of a photon reflected by the surface, of the branch taken with probability
+/// `branch`: w = w·e^{−τ}/branch·ρ, τ the flight's optical depth, ρ the albedo.
+#[inline]
+pub(super) fn reflect(
+    exp: impl Fn(f64) -> f64,
+    w: &mut [f64],
+    tau: &[f64],
+    albedo: &[f64],
+    branch: f64,
+) {
+    let n = w.len();
+    let (tau, albedo) = (&tau[..n], &albedo[..n]);
+    for k in 0..n {
+        w[k] = w[k] * exp(-tau[k]) / branch * albedo[k];
+    }
+}
+
 /// A collision's weights with one scattering class and grey scattering: w ·= f·e^{−τ_a},
 /// τ_a the flight's absorption optical depth per channel.
 #[allow(clippy::too_many_arguments)]

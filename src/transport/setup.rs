@@ -688,6 +688,17 @@ impl Setup<'_> {
         cls.cum[l] + (z - e[l]) * cls.sigma[l]
     }
 
+    /// [`Self::class_tau_at`] at an altitude z usually in or next to layer `hint`
+    /// ([`OpticalAtmosphere::layer_near`]).
+    #[inline]
+    pub(super) fn class_tau_near(&self, c: usize, z: f64, hint: usize) -> f64 {
+        if !self.has_layers {
+            return 0.0;
+        }
+        let z = z.clamp(self.bottom_m, self.top_m);
+        self.class_tau_in(c, self.atm.layer_near(z, hint), z)
+    }
+
     /// [`Self::class_tau_at`] at an altitude z known to lie in layer l: no search.
     #[inline]
     pub(super) fn class_tau_in(&self, c: usize, l: usize, z: f64) -> f64 {

@@ -159,7 +159,7 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
         let mu = dir.z;
         let spans = s.crossing_spans(pos, dir, s_end);
         let t0 = self.ts[s.classes[0].channel];
-        let tau_at = |sv: f64| (s.class_tau_at(0, pos.z + mu * sv) - t0).abs() * inv_mu;
+        let tau_at = |sv: f64| (s.class_tau_near(0, pos.z + mu * sv, at_layer) - t0).abs() * inv_mu;
         // Per span: τ at its start, 1 − e^{−Δτ} across it, and its mass e^{−τ_a}(1 − e^{−Δτ}).
         let mut parts = [(0.0, 0.0, 0.0); 2];
         let mut total = 0.0;
@@ -431,7 +431,7 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
             return;
         }
         let e_xy = (y - x) / l;
-        let layer_y = atm.layer_of(y.z);
+        let layer_y = atm.layer_near(y.z, p.layer);
         if atm.components[layer_y].is_empty() {
             return;
         }

@@ -296,10 +296,14 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
             let albedo = s.surface.as_deref().unwrap_or(&[]);
             if rng.random::<f64>() >= q {
                 // Reach the surface and reflect (its signal was scored above).
-                for k in 0..nch {
-                    let arriving = self.w[k] * Self::exp(-self.tmp[k]);
-                    self.flux.down[k] += arriving * (1.0 - albedo[k]);
-                    self.w[k] = arriving / (1.0 - q) * albedo[k];
+                if s.flux_tally {
+                    for k in 0..nch {
+                        let arriving = self.w[k] * Self::exp(-self.tmp[k]);
+                        self.flux.down[k] += arriving * (1.0 - albedo[k]);
+                        self.w[k] = arriving / (1.0 - q) * albedo[k];
+                    }
+                } else {
+                    lanes::reflect(Self::exp, &mut self.w[..nch], &self.tmp, albedo, 1.0 - q);
                 }
                 walk.pos = hit;
                 walk.pos.z = s.bottom_m;
@@ -324,8 +328,10 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
                 return FlightEnd::Reflected;
             }
             // Collide before the surface; the surface absorbs its share in expectation.
-            for k in 0..nch {
-                self.flux.down[k] += self.w[k] * (-self.tmp[k]).exp() * (1.0 - albedo[k]);
+            if s.flux_tally {
+                for k in 0..nch {
+                    self.flux.down[k] += self.w[k] * (-self.tmp[k]).exp() * (1.0 - albedo[k]);
+                }
             }
             FlightEnd::Collide(q)
         } else {
