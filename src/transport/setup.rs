@@ -388,6 +388,10 @@ const CLASS_TAU_TOLERANCE: f64 = 0.5;
 /// may differ by any factor (few collisions happen there).
 const CLASS_LAYER_TAU: f64 = 0.1;
 
+/// Layers [`Setup::altitude_at_tau`] checks from its hint along the flight before it searches
+/// the whole table.
+const HINT_LAYERS: usize = 4;
+
 /// The half-width of a phase function's forward peak: the scattering angle [rad] at which it
 /// first falls to half its forward value P(0°), π if it never does. A scan in steps of
 /// [`HALF_WIDTH_STEP_RAD`] finds the first step below half, bisection the angle within it.
@@ -679,6 +683,13 @@ impl Setup<'_> {
             return 0.0;
         }
         let cls = &self.classes[c];
+        // Outside the layers (a flight cut above them): the ends of the table, without a
+        // search (the same numbers: the last entry is the last layer's value at its top).
+        if z >= self.top_m {
+            return cls.cum[cls.cum.len() - 1];
+        } else if z <= self.bottom_m {
+            return cls.cum[0];
+        }
         let z = z.clamp(self.bottom_m, self.top_m);
         let e = &self.atm.edges_m;
         let l = e
@@ -750,17 +761,27 @@ impl Setup<'_> {
                 cum < target
             }
         };
-        let l = if hint < n
-            && (hint == 0 || below(cls.cum[hint]))
-            && (hint == n - 1 || !below(cls.cum[hint + 1]))
-        {
-            hint
-        } else {
+        let holds =
+            |l: usize| (l == 0 || below(cls.cum[l])) && (l == n - 1 || !below(cls.cum[l + 1]));
+        // The layer holding the target is unique (the cumulative table is monotone): look a few
+        // layers from the hint along the flight before searching the whole table.
+        let near = (0..HINT_LAYERS)
+            .map(|d| {
+                if mu > 0.0 {
+                    hint.checked_add(d)
+                } else {
+                    hint.checked_sub(d)
+                }
+            })
+            .take_while(|l| l.is_some_and(|l| l < n))
+            .flatten()
+            .find(|&l| holds(l));
+        let l = near.unwrap_or_else(|| {
             cls.cum
                 .partition_point(|c| below(*c))
                 .saturating_sub(1)
                 .min(n - 1)
-        };
+        });
         let e = &self.atm.edges_m;
         let z = if cls.sigma[l] > 0.0 {
             e[l] + (target - cls.cum[l]) * cls.inv_sigma[l]
