@@ -5,9 +5,23 @@
 //! target), so that a 16-channel DIAL scene costs little more per
 //! event than a one-channel one (the idea of pbrt-v4's `SampledSpectrum`). The one operation
 //! per channel that a library call would keep scalar is the exponential: [`exp`] is an inline,
-//! branch-free one. The kernels that need one take it as their first argument: [`exp`] where
-//! there are several channels, the library's in the one-channel tracer (`photon::Tracer::exp`),
-//! whose loops have a single pass.
+//! branch-free one, used where there are several channels (`per_channel!`).
+
+/// Run `$body` for every channel k < n with `$e` the exponential: the library's for a single
+/// channel (faster alone than [`exp`], and the one-channel tracer keeps its numbers whichever
+/// tracer runs it), [`exp`] for several, where the loop is vectorised.
+macro_rules! per_channel {
+    ($n:expr, |$k:ident, $e:ident| $body:block) => {
+        if $n == 1 {
+            let $k = 0;
+            let $e = f64::exp;
+            $body
+        } else {
+            let $e = exp;
+            for $k in 0..$n $body
+        }
+    };
+}
 
 /// ln 2 split into a part with trailing zero bits (so that n·LN2_HI is exact for |n| < 2²⁰)
 /// and the rest (fdlibm's e_exp.c values).
@@ -58,30 +72,23 @@ pub(super) fn exp(x: f64) -> f64 {
 /// A local estimate per channel: le = w·g·e^{−τ}.
 #[allow(clippy::too_many_arguments)]
 #[inline]
-pub(super) fn estimate(exp: impl Fn(f64) -> f64, le: &mut [f64], w: &[f64], tau: &[f64], g: f64) {
+pub(super) fn estimate(le: &mut [f64], w: &[f64], tau: &[f64], g: f64) {
     let n = le.len();
     let (w, tau) = (&w[..n], &tau[..n]);
-    for k in 0..n {
-        le[k] = w[k] * g * exp(-tau[k]);
-    }
+    per_channel!(n, |k, e| {
+        le[k] = w[k] * g * e(-tau[k]);
+    });
 }
 
 /// A local estimate per channel with its own phase function: le = w·g·e^{−τ}·P.
 #[allow(clippy::too_many_arguments)]
 #[inline]
-pub(super) fn estimate_phase(
-    exp: impl Fn(f64) -> f64,
-    le: &mut [f64],
-    w: &[f64],
-    tau: &[f64],
-    phase: &[f64],
-    g: f64,
-) {
+pub(super) fn estimate_phase(le: &mut [f64], w: &[f64], tau: &[f64], phase: &[f64], g: f64) {
     let n = le.len();
     let (w, tau, phase) = (&w[..n], &tau[..n], &phase[..n]);
-    for k in 0..n {
-        le[k] = w[k] * g * exp(-tau[k]) * phase[k];
-    }
+    per_channel!(n, |k, e| {
+        le[k] = w[k] * g * e(-tau[k]) * phase[k];
+    });
 }
 
 /// Add the estimates to the tally: bins += le.
@@ -121,7 +128,6 @@ pub(super) fn to_receiver(out: &mut [f64], ts: &[f64], ta: &[f64], tau_rx: &[f64
 #[allow(clippy::too_many_arguments)]
 #[inline]
 pub(super) fn crossing_grey(
-    exp: impl Fn(f64) -> f64,
     le: &mut [f64],
     w: &[f64],
     ta_y: &[f64],
@@ -132,10 +138,10 @@ pub(super) fn crossing_grey(
 ) {
     let n = le.len();
     let (w, ta_y, ta, tau) = (&w[..n], &ta_y[..n], &ta[..n], &tau[..n]);
-    for k in 0..n {
+    per_channel!(n, |k, e| {
         let dta = (ta_y[k] - ta[k]).abs() * inv_mu;
-        le[k] = w[k] * exp(-(dta + tau[k])) * g;
-    }
+        le[k] = w[k] * e(-(dta + tau[k])) * g;
+    });
 }
 
 /// The crossing estimate per channel (ALIS): le = w·(σ_k/σ_0)·e^{−(τ_a + τ_s − τ* + τ)}·P·g,
@@ -143,7 +149,6 @@ pub(super) fn crossing_grey(
 #[allow(clippy::too_many_arguments)]
 #[inline]
 pub(super) fn crossing(
-    exp: impl Fn(f64) -> f64,
     le: &mut [f64],
     w: &[f64],
     ts_y: &[f64],
@@ -160,13 +165,13 @@ pub(super) fn crossing(
     let n = le.len();
     let (w, ts_y, ta_y, ts, ta) = (&w[..n], &ts_y[..n], &ta_y[..n], &ts[..n], &ta[..n]);
     let (tau, sigma, phase) = (&tau[..n], &sigma[..n], &phase[..n]);
-    for k in 0..n {
+    per_channel!(n, |k, e| {
         let dta = (ta_y[k] - ta[k]).abs() * inv_mu;
         let dts = (ts_y[k] - ts[k]).abs() * inv_mu;
         let ratio = sigma[k] / sigma[0];
-        let f = ratio * exp(-(dta + (dts - tau_star) + tau[k])) * phase[k];
+        let f = ratio * e(-(dta + (dts - tau_star) + tau[k])) * phase[k];
         le[k] = w[k] * f * g;
-    }
+    });
 }
 
 /// The cone estimate per channel with one phase function for all: le = w·σ_y·P_x·P_y·f·
@@ -174,7 +179,6 @@ pub(super) fn crossing(
 #[allow(clippy::too_many_arguments)]
 #[inline]
 pub(super) fn cone_grey(
-    exp: impl Fn(f64) -> f64,
     le: &mut [f64],
     w: &[f64],
     sigma_y: &[f64],
@@ -186,17 +190,16 @@ pub(super) fn cone_grey(
 ) {
     let n = le.len();
     let (w, sigma_y, tau_xy, tau_back) = (&w[..n], &sigma_y[..n], &tau_xy[..n], &tau_back[..n]);
-    for k in 0..n {
-        let t = exp(-(tau_xy[k] + tau_back[k]));
+    per_channel!(n, |k, e| {
+        let t = e(-(tau_xy[k] + tau_back[k]));
         le[k] = w[k] * sigma_y[k] * px * py * factor * t;
-    }
+    });
 }
 
 /// The cone estimate per channel, each with its phase functions at x and y.
 #[allow(clippy::too_many_arguments)]
 #[inline]
 pub(super) fn cone(
-    exp: impl Fn(f64) -> f64,
     le: &mut [f64],
     w: &[f64],
     sigma_y: &[f64],
@@ -209,10 +212,10 @@ pub(super) fn cone(
     let n = le.len();
     let (w, sigma_y, px, py) = (&w[..n], &sigma_y[..n], &px[..n], &py[..n]);
     let (tau_xy, tau_back) = (&tau_xy[..n], &tau_back[..n]);
-    for k in 0..n {
-        let t = exp(-(tau_xy[k] + tau_back[k]));
+    per_channel!(n, |k, e| {
+        let t = e(-(tau_xy[k] + tau_back[k]));
         le[k] = w[k] * sigma_y[k] * px[k] * py[k] * factor * t;
-    }
+    });
 }
 
 /// The surface's expected signal per channel: le = w·e^{−(τ_in + τ_back)}·ρ·g, τ_in the
@@ -220,7 +223,6 @@ pub(super) fn cone(
 #[allow(clippy::too_many_arguments)]
 #[inline]
 pub(super) fn surface(
-    exp: impl Fn(f64) -> f64,
     le: &mut [f64],
     w: &[f64],
     tau_in: &[f64],
@@ -230,38 +232,32 @@ pub(super) fn surface(
 ) {
     let n = le.len();
     let (w, tau_in, tau_back, albedo) = (&w[..n], &tau_in[..n], &tau_back[..n], &albedo[..n]);
-    for k in 0..n {
-        le[k] = w[k] * exp(-(tau_in[k] + tau_back[k])) * albedo[k] * g;
-    }
+    per_channel!(n, |k, e| {
+        le[k] = w[k] * e(-(tau_in[k] + tau_back[k])) * albedo[k] * g;
+    });
 }
 
 /// The weights of a photon reflected by the surface, of the branch taken with probability
 /// `branch`: w = w·e^{−τ}/branch·ρ, τ the flight's optical depth, ρ the albedo.
 #[inline]
-pub(super) fn reflect(
-    exp: impl Fn(f64) -> f64,
-    w: &mut [f64],
-    tau: &[f64],
-    albedo: &[f64],
-    branch: f64,
-) {
+pub(super) fn reflect(w: &mut [f64], tau: &[f64], albedo: &[f64], branch: f64) {
     let n = w.len();
     let (tau, albedo) = (&tau[..n], &albedo[..n]);
-    for k in 0..n {
-        w[k] = w[k] * exp(-tau[k]) / branch * albedo[k];
-    }
+    per_channel!(n, |k, e| {
+        w[k] = w[k] * e(-tau[k]) / branch * albedo[k];
+    });
 }
 
 /// A collision's weights with one scattering class and grey scattering: w ·= f·e^{−τ_a},
 /// τ_a the flight's absorption optical depth per channel.
 #[allow(clippy::too_many_arguments)]
 #[inline]
-pub(super) fn collide_grey(exp: impl Fn(f64) -> f64, w: &mut [f64], dta: &[f64], f: f64) {
+pub(super) fn collide_grey(w: &mut [f64], dta: &[f64], f: f64) {
     let n = w.len();
     let dta = &dta[..n];
-    for k in 0..n {
-        w[k] *= f * exp(-dta[k]);
-    }
+    per_channel!(n, |k, e| {
+        w[k] *= f * e(-dta[k]);
+    });
 }
 
 /// A collision's weights with one scattering class (ALIS): w ·= f·(σ_k/σ_0)·
@@ -269,7 +265,6 @@ pub(super) fn collide_grey(exp: impl Fn(f64) -> f64, w: &mut [f64], dta: &[f64],
 #[allow(clippy::too_many_arguments)]
 #[inline]
 pub(super) fn collide(
-    exp: impl Fn(f64) -> f64,
     w: &mut [f64],
     dts: &[f64],
     dta: &[f64],
@@ -279,9 +274,9 @@ pub(super) fn collide(
 ) {
     let n = w.len();
     let (dts, dta, sigma) = (&dts[..n], &dta[..n], &sigma[..n]);
-    for k in 0..n {
-        w[k] *= f * (sigma[k] / sigma[0] * exp(-(dta[k] + (dts[k] - dts_ref))));
-    }
+    per_channel!(n, |k, e| {
+        w[k] *= f * (sigma[k] / sigma[0] * e(-(dta[k] + (dts[k] - dts_ref))));
+    });
 }
 
 /// Per channel, the difference of the cumulative optical depths at a flight's ends times its
@@ -338,63 +333,59 @@ mod tests {
         assert_eq!(exp(0.0), 1.0);
     }
 
-    /// Each kernel gives, to the bit, the per-channel expression it vectorises (19 channels:
-    /// vector bodies and a remainder).
+    /// Each kernel gives, to the bit, the per-channel expression it vectorises, with [`exp`]
+    /// (19 channels: vector bodies and a remainder), and with the library's for one channel.
     #[test]
     fn kernels_are_their_per_channel_expressions() {
         use super::*;
-        let n = 19;
-        let v = |seed: f64| -> Vec<f64> {
-            (0..n)
-                .map(|k| (seed * (k as f64 + 1.3)).sin().abs() * 3.0)
-                .collect()
-        };
-        let (w, a, b, c, d, e, f) = (v(1.1), v(2.3), v(3.7), v(4.1), v(5.9), v(6.3), v(7.7));
-        let mut out = vec![vec![0.0; n]; 9];
-        estimate_phase(exp, &mut out[0], &w, &a, &b, 0.7);
-        crossing(
-            exp,
-            &mut out[1],
-            &w,
-            &a,
-            &b,
-            &c,
-            &d,
-            &e,
-            &f,
-            &a,
-            1.3,
-            0.2,
-            0.9,
-        );
-        cone(exp, &mut out[2], &w, &a, &b, &c, 0.4, &d, &e);
-        out[3].copy_from_slice(&w);
-        collide(exp, &mut out[3], &a, &b, &c, 0.8, 0.1);
-        slant(&mut out[4], &a, &b, &c, &d, 0.3);
-        crossing_grey(exp, &mut out[5], &w, &a, &b, &c, 1.7, 0.6);
-        out[6].copy_from_slice(&c);
-        accumulate(&mut out[6], &a);
-        surface(exp, &mut out[7], &w, &a, &b, &c, 0.7);
-        to_receiver(&mut out[8], &a, &b, &c, 0.3);
-        for k in 0..n {
-            let same = |i: usize, x: f64| assert_eq!(out[i][k].to_bits(), x.to_bits(), "{i} {k}");
-            same(0, w[k] * 0.7 * exp(-a[k]) * b[k]);
-            let dta = (b[k] - d[k]).abs() * 1.3;
-            let dts = (a[k] - c[k]).abs() * 1.3;
-            same(
-                1,
-                w[k] * (f[k] / f[0] * exp(-(dta + (dts - 0.2) + e[k])) * a[k]) * 0.9,
-            );
-            same(2, w[k] * a[k] * b[k] * c[k] * 0.4 * exp(-(d[k] + e[k])));
-            same(
-                3,
-                w[k] * (0.8 * (c[k] / c[0] * exp(-(b[k] + (a[k] - 0.1))))),
-            );
-            same(4, ((a[k] + b[k]) - (c[k] + d[k])).abs() / 0.3);
-            same(5, w[k] * exp(-((a[k] - b[k]).abs() * 1.7 + c[k])) * 0.6);
-            same(6, c[k] + a[k]);
-            same(7, w[k] * exp(-(a[k] + b[k])) * c[k] * 0.7);
-            same(8, (a[k] + b[k] - c[k]).abs() / 0.3);
+        for n in [19, 1] {
+            let lib = n == 1;
+            let ex = |x: f64| if lib { x.exp() } else { exp(x) };
+            let v = |seed: f64| -> Vec<f64> {
+                (0..n)
+                    .map(|k| (seed * (k as f64 + 1.3)).sin().abs() * 3.0)
+                    .collect()
+            };
+            let (w, a, b, c, d, g, f) = (v(1.1), v(2.3), v(3.7), v(4.1), v(5.9), v(6.3), v(7.7));
+            let mut out = vec![vec![0.0; n]; 10];
+            estimate_phase(&mut out[0], &w, &a, &b, 0.7);
+            crossing(&mut out[1], &w, &a, &b, &c, &d, &g, &f, &a, 1.3, 0.2, 0.9);
+            cone(&mut out[2], &w, &a, &b, &c, 0.4, &d, &g);
+            out[3].copy_from_slice(&w);
+            collide(&mut out[3], &a, &b, &c, 0.8, 0.1);
+            slant(&mut out[4], &a, &b, &c, &d, 0.3);
+            crossing_grey(&mut out[5], &w, &a, &b, &c, 1.7, 0.6);
+            out[6].copy_from_slice(&c);
+            accumulate(&mut out[6], &a);
+            surface(&mut out[7], &w, &a, &b, &c, 0.7);
+            to_receiver(&mut out[8], &a, &b, &c, 0.3);
+            out[9].copy_from_slice(&w);
+            reflect(&mut out[9], &a, &b, 0.6);
+            for k in 0..n {
+                let same = |i: usize, x: f64| {
+                    assert_eq!(
+                        out[i][k].to_bits(),
+                        x.to_bits(),
+                        "kernel {i}, channel {k} of {n}"
+                    )
+                };
+                same(0, w[k] * 0.7 * ex(-a[k]) * b[k]);
+                let dta = (b[k] - d[k]).abs() * 1.3;
+                let dts = (a[k] - c[k]).abs() * 1.3;
+                let ratio = f[k] / f[0];
+                same(
+                    1,
+                    w[k] * (ratio * ex(-(dta + (dts - 0.2) + g[k])) * a[k]) * 0.9,
+                );
+                same(2, w[k] * a[k] * b[k] * c[k] * 0.4 * ex(-(d[k] + g[k])));
+                same(3, w[k] * (0.8 * (c[k] / c[0] * ex(-(b[k] + (a[k] - 0.1))))));
+                same(4, ((a[k] + b[k]) - (c[k] + d[k])).abs() / 0.3);
+                same(5, w[k] * ex(-((a[k] - b[k]).abs() * 1.7 + c[k])) * 0.6);
+                same(6, c[k] + a[k]);
+                same(7, w[k] * ex(-(a[k] + b[k])) * c[k] * 0.7);
+                same(8, (a[k] + b[k] - c[k]).abs() / 0.3);
+                same(9, w[k] * ex(-a[k]) / 0.6 * b[k]);
+            }
         }
     }
 

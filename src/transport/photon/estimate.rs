@@ -111,10 +111,10 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
         s.taus_to_receiver(x.z, omega.z, d, layer, ts, ta, &mut self.tau[..nch]);
         let (w, tau, le) = (&self.w[..nch], &self.tau[..nch], &mut self.le[..nch]);
         if grey {
-            lanes::estimate(Self::exp, le, w, tau, geometric);
+            lanes::estimate(le, w, tau, geometric);
         } else {
             s.receiver_phases(layer, mu_s, band, &mut self.phase[..nch]);
-            lanes::estimate_phase(Self::exp, le, w, tau, &self.phase, geometric);
+            lanes::estimate_phase(le, w, tau, &self.phase, geometric);
         }
         lanes::accumulate(&mut self.bins[base..base + nch], le);
         if jac {
@@ -229,13 +229,13 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
             let (ts, ta) = (&self.ts[..nch], &self.ta[..nch]);
             let (w, tau, le) = (&self.w[..nch], &self.tau[..nch], &mut self.le[..nch]);
             if grey {
-                lanes::crossing_grey(Self::exp, le, w, ta_y, ta, tau, inv_mu, geometric);
+                lanes::crossing_grey(le, w, ta_y, ta, tau, inv_mu, geometric);
             } else {
                 s.receiver_phases(layer, mu_s, band, &mut self.phase[..nch]);
                 let ss = &atm.sigma_s_per_m[i0..i0 + nch];
                 let phase = &self.phase[..nch];
                 #[rustfmt::skip]
-                lanes::crossing(Self::exp, le, w, ts_y, ta_y, ts, ta, tau, ss, phase, inv_mu, tau_star, geometric);
+                lanes::crossing(le, w, ts_y, ta_y, ts, ta, tau, ss, phase, inv_mu, tau_star, geometric);
             }
             lanes::accumulate(&mut self.bins[base..base + nch], le);
         }
@@ -525,22 +525,12 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
         let sigma_y = &atm.sigma_s_per_m[layer_y * nch..(layer_y + 1) * nch];
         let le = &mut self.le[..nch];
         if grey {
-            lanes::cone_grey(
-                Self::exp,
-                le,
-                w,
-                sigma_y,
-                px0,
-                py0,
-                factor,
-                tau_xy,
-                tau_back,
-            );
+            lanes::cone_grey(le, w, sigma_y, px0, py0, factor, tau_xy, tau_back);
         } else {
             s.mixture_phases(p.layer, mu_x, &mut self.phase[..nch]);
             s.receiver_phases(layer_y, mu_y, band, &mut self.phase_y[..nch]);
             let (px, py) = (&self.phase[..nch], &self.phase_y[..nch]);
-            lanes::cone(Self::exp, le, w, sigma_y, px, py, factor, tau_xy, tau_back);
+            lanes::cone(le, w, sigma_y, px, py, factor, tau_xy, tau_back);
         }
         lanes::accumulate(&mut self.bins[base..base + nch], le);
         if jac {

@@ -227,14 +227,6 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
         if ONE_CHANNEL { 1 } else { self.w.len() }
     }
 
-    /// e^x in the per-channel loops: the branch-free [`lanes::exp`], which those loops vectorise,
-    /// where there are several channels; the library's where there is one (faster alone, and
-    /// one-channel runs keep their numbers).
-    #[inline(always)]
-    fn exp(x: f64) -> f64 {
-        if ONE_CHANNEL { x.exp() } else { lanes::exp(x) }
-    }
-
     /// Scattering classes (`super::scatter_classes`): one channel has one.
     #[inline(always)]
     fn ncls(&self) -> usize {

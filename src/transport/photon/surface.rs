@@ -53,15 +53,7 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
         // Every channel in one branch-free pass (`lanes`), both legs' attenuation in one
         // exponent.
         let le = &mut self.le[..n];
-        lanes::surface(
-            Self::exp,
-            le,
-            &self.w,
-            &self.tmp,
-            &self.tau,
-            albedo,
-            geometric,
-        );
+        lanes::surface(le, &self.w, &self.tmp, &self.tau, albedo, geometric);
         if s.analyser.is_some() {
             // A Lambertian surface reflects unpolarised light: half of it each way.
             for k in 0..n {

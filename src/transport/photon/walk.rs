@@ -298,12 +298,12 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
                 // Reach the surface and reflect (its signal was scored above).
                 if s.flux_tally {
                     for k in 0..nch {
-                        let arriving = self.w[k] * Self::exp(-self.tmp[k]);
+                        let arriving = self.w[k] * (-self.tmp[k]).exp();
                         self.flux.down[k] += arriving * (1.0 - albedo[k]);
                         self.w[k] = arriving / (1.0 - q) * albedo[k];
                     }
                 } else {
-                    lanes::reflect(Self::exp, &mut self.w[..nch], &self.tmp, albedo, 1.0 - q);
+                    lanes::reflect(&mut self.w[..nch], &self.tmp, albedo, 1.0 - q);
                 }
                 walk.pos = hit;
                 walk.pos.z = s.bottom_m;

@@ -154,9 +154,9 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
             }
             let w = &mut self.w[..nch];
             if atm.grey_scattering {
-                lanes::collide_grey(Self::exp, w, dta, collide_factor);
+                lanes::collide_grey(w, dta, collide_factor);
             } else {
-                lanes::collide(Self::exp, w, dts, dta, ss, collide_factor, dts_ref);
+                lanes::collide(w, dts, dta, ss, collide_factor, dts_ref);
             }
             self.arrive();
             true
@@ -248,7 +248,7 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
             let sigma_k = ss[k];
             // σ_k = 0: this channel cannot scatter here (and e^{τ_min − τ_k} may be huge).
             self.w[k] *= if sigma_k > 0.0 && in_layers {
-                sigma_k * Self::exp(-(dts - tau_min) - dta) / g
+                sigma_k * (-(dts - tau_min) - dta).exp() / g
             } else {
                 0.0
             };
