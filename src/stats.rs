@@ -53,7 +53,30 @@ pub fn welford_add_scaled(mean: &mut f64, m2: &mut f64, scale: &mut f64, n: usiz
     let delta = x - *mean;
     *mean += delta / n as f64;
     if *scale > 0.0 {
-        *m2 += (delta / *scale) * ((x - *mean) / *scale);
+        // A power of two: multiplying by its reciprocal is the division, exactly.
+        let inv = 1.0 / *scale;
+        *m2 += (delta * inv) * ((x - *mean) * inv);
+    }
+}
+
+/// [`welford_add_scaled`] of `k` zero values at once to moments of `c` values: the pairwise
+/// update of Chan, Golub & LeVeque (1979, "Updating formulae and a pairwise algorithm for
+/// computing sample variances") with a group of k zeros, whose mean and M2 are 0:
+/// x̄ ← x̄ c/(c + k), M2 ← M2 + x̄² c k/(c + k). Equal to k sequential updates within rounding;
+/// a tally that folds only the bins a batch touched ([`crate::transport`]) catches up the others
+/// with it. The scale does not change (zeros never raise it).
+#[inline]
+pub fn welford_add_zeros_scaled(mean: &mut f64, m2: &mut f64, scale: f64, c: usize, k: usize) {
+    if k == 0 || c == 0 {
+        // No zeros, or zeros after nothing but zeros: the moments stay 0.
+        return;
+    }
+    let n = (c + k) as f64;
+    let m = *mean;
+    *mean = m * (c as f64 / n);
+    if scale > 0.0 {
+        let ms = m / scale;
+        *m2 += ms * ms * (c as f64 * k as f64 / n);
     }
 }
 

@@ -161,7 +161,8 @@ impl Fold<'_> {
                 .flat_map(|p| plan.channels.iter().map(move |c| format!("{c} {p}")))
                 .collect(),
         };
-        let (returns, flux, flux_stderr, combined) = self.acc.finish(
+        let mut acc = self.acc;
+        let (returns, flux, flux_stderr, combined) = acc.finish(
             tally_names,
             plan.fov_full_angle_mrad.clone(),
             plan.range_m.clone(),
