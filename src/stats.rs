@@ -43,6 +43,11 @@ fn power_of_two_scale(x: f64) -> f64 {
 /// underflows the result equals [`welford_add`]'s bit for bit (the scalings are exact).
 #[inline]
 pub fn welford_add_scaled(mean: &mut f64, m2: &mut f64, scale: &mut f64, n: usize, x: f64) {
+    // A zero into moments that are all zero changes nothing (the common case of a tally bin
+    // no batch has reached yet: a Jacobian's layers beyond a gate's range, rare orders).
+    if x == 0.0 && *mean == 0.0 {
+        return;
+    }
     let new = power_of_two_scale(x);
     if new > *scale {
         // M2 is 0 while the scale is (every value so far was 0), so r = 0 then is harmless.
