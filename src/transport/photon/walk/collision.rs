@@ -29,12 +29,13 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
         let (s_coll, layer, tau_star) = if let (true, Some((a, b))) = (uniform, window) {
             let s_u = a + rng.random::<f64>() * (b - a);
             let z = pos.z + mu * s_u;
-            let tau = if horizontal {
-                s.classes[0].sigma[layer0] * s_u
+            if horizontal {
+                (s_u, layer0, s.classes[0].sigma[layer0] * s_u)
             } else {
-                (s.class_tau_at(0, z) - self.ts[0]).abs() * inv_mu
-            };
-            (s_u, if horizontal { layer0 } else { atm.layer_of(z) }, tau)
+                // One search for the layer, which gives the optical depth too.
+                let l = atm.layer_of(z);
+                (s_u, l, (s.class_tau_in(0, l, z) - self.ts[0]).abs() * inv_mu)
+            }
         } else {
             let c = if ncls == 1 {
                 0
