@@ -255,3 +255,92 @@ fn a_stopped_plan_ends_without_a_result() {
         Err(TransportError::Stopped)
     ));
 }
+
+/// The lookups done once for every channel give, bit for bit, what the one-channel functions
+/// give channel by channel, on the default scene (16 channels, 800 layers, a two-scatterer
+/// aerosol layer under Rayleigh air): a layer found from any hint is the searched one; every
+/// channel's optical depths at a point, the class optical depth from a known or hinted layer,
+/// the mixture phase functions and the optical depths to the receiver; a collision's layer
+/// found from any hint.
+#[test]
+fn all_channel_lookups_are_the_one_channel_ones() {
+    with_setup(crate::scene::DEFAULT_SCENE_TOML, |s, atm| {
+        let nch = atm.n_channels;
+        assert_eq!(nch, 16);
+        let n = atm.n_layers();
+        let e = &atm.edges_m;
+        let mut zs: Vec<f64> = (0..=2000).map(|i| -500.0 + 41.3 * i as f64).collect();
+        zs.extend(e.iter().flat_map(|z| [*z, z.next_up(), z.next_down()]));
+        zs.extend([1e9, -1e9]);
+        let (mut ts, mut ta, mut tau) = (vec![0.0; nch], vec![0.0; nch], vec![0.0; nch]);
+        for &z in &zs {
+            let l = atm.layer_of(z);
+            for hint in [0, 1, l.saturating_sub(1), l, l + 1, n / 2, n - 1] {
+                assert_eq!(atm.layer_near(z, hint), l, "z {z}, hint {hint}");
+                let zc = z.clamp(s.bottom_m, s.top_m);
+                assert_eq!(
+                    s.class_tau_near(0, z, hint).to_bits(),
+                    s.class_tau_at(0, z).to_bits()
+                );
+                assert_eq!(
+                    s.class_tau_in(0, atm.layer_near(zc, hint), zc).to_bits(),
+                    s.class_tau_at(0, z).to_bits()
+                );
+            }
+            atm.cumulative_taus_in(l, z.clamp(s.bottom_m, s.top_m), &mut ts, &mut ta);
+            for mu in [0.7, -0.3, 0.0] {
+                s.taus_to_receiver(z, mu, 1234.5, l, &ts, &ta, &mut tau);
+                for k in 0..nch {
+                    let (ts_k, ta_k) = atm.cumulative_tau(z, k);
+                    assert_eq!(
+                        (ts[k].to_bits(), ta[k].to_bits()),
+                        (ts_k.to_bits(), ta_k.to_bits())
+                    );
+                    let one = s.tau_to_receiver(z, mu, 1234.5, l, k, ts_k + ta_k);
+                    assert_eq!(
+                        tau[k].to_bits(),
+                        one.to_bits(),
+                        "z {z}, μ {mu}, channel {k}"
+                    );
+                }
+            }
+        }
+        let mut p = vec![0.0; nch];
+        for l in (0..n).step_by(7).chain([0, 1, 14, 15, 16]) {
+            assert!(!atm.components[l].is_empty());
+            for i in 0..=40 {
+                let mu = -1.0 + i as f64 / 20.0;
+                s.mixture_phases(l, mu, &mut p);
+                for (k, v) in p.iter().enumerate() {
+                    assert_eq!(
+                        v.to_bits(),
+                        s.mixture_phase(l, k, mu).to_bits(),
+                        "layer {l}"
+                    );
+                }
+            }
+        }
+        assert!(atm.components[0].len() == 2 && atm.components[n - 1].len() == 1);
+        let top = *s.classes[0].cum.last().unwrap();
+        for i in 0..=400 {
+            let t0 = top * i as f64 / 400.0;
+            for mu in [0.9, -0.9, 0.05, -0.05] {
+                let tau_star = top * 0.003 * (i % 17) as f64;
+                let searched = s.altitude_at_tau(0, t0, mu, tau_star, usize::MAX);
+                for hint in [
+                    0,
+                    n / 3,
+                    n - 1,
+                    searched.1.saturating_sub(2),
+                    searched.1 + 3,
+                ] {
+                    let hinted = s.altitude_at_tau(0, t0, mu, tau_star, hint);
+                    assert_eq!(
+                        (hinted.0.to_bits(), hinted.1),
+                        (searched.0.to_bits(), searched.1)
+                    );
+                }
+            }
+        }
+    });
+}

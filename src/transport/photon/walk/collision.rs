@@ -34,7 +34,11 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
             } else {
                 // One search for the layer, which gives the optical depth too.
                 let l = atm.layer_of(z);
-                (s_u, l, (s.class_tau_in(0, l, z) - self.ts[0]).abs() * inv_mu)
+                (
+                    s_u,
+                    l,
+                    (s.class_tau_in(0, l, z) - self.ts[0]).abs() * inv_mu,
+                )
             }
         } else {
             let c = if ncls == 1 {
