@@ -582,7 +582,7 @@ phase = {{ kind = "isotropic" }}
     }
 
     /// Isotropic scatterers make the order-2 kernel's bound a closed form (docs/transport.md,
-    /// S7): with the farther point at depth H into a layer, each ordering gives
+    /// S5): with the farther point at depth H into a layer, each ordering gives
     /// ½ ∫₀^{π/2} tan γ σ min(ρ cot γ, H) dγ = (σ/4)[H ln(1 + ρ²/H²) + 2ρ atan(H/ρ)], ρ the
     /// footprint radius: (π/2)σρ for a thick layer, about σH ln(ρ/H) for a thin one. The bound
     /// lies between that at the layer's top (ρ there) and 1.25 times it (ρ at the gate's end;
@@ -612,7 +612,7 @@ phase = {{ kind = "isotropic" }}
     }
 
     /// The surface gate of a nadir lidar over a Lambertian surface under an isotropic layer of
-    /// thickness H (docs/transport.md, S9–S10): light scattered into the footprint by the layer
+    /// thickness H (docs/transport.md, S7–S8): light scattered into the footprint by the layer
     /// and light the surface returns that the layer scatters into the field of view each give
     /// ½σ[H + ρ − √(H² + ρ²)], together σ[H + ρ − √(H² + ρ²)], the layer's optical depth
     /// within the footprint's reach. The bound lies between 1 and 1.25 times that (plus the

@@ -1,6 +1,6 @@
 //! An upper bound on the multiple-scattering share of every return, for any scatterers
 //! (molecules, particle layers, a Lambertian surface): what [`crate::skip`] decides with.
-//! Derivation: `docs/transport.md`, "When the Monte Carlo is skipped", Eqs. S1–S12.
+//! Derivation: `docs/transport.md`, "When the Monte Carlo is skipped", Eqs. S1–S10.
 //!
 //! Order 2, per unit range of the farther of the two scatterings and relative to that point's
 //! single scattering, is integrated over the angle γ of the leg between the two scatterings to
@@ -9,7 +9,8 @@
 //! leg's reach (the layers' optical depth within it, not a maximum coefficient times a range),
 //! no attenuation credit beyond what the single-scatter path has. A gate's bound then takes
 //! the single scattering of every gate-wide window that the returns' delay (at most half the
-//! footprint) can shift into it, against its own; orders ≥ 3 follow as a geometric series.
+//! footprint) can shift into it, against its own; orders ≥ 3 follow as a geometric series over
+//! every farther point their longer paths can have.
 
 use std::f64::consts::{FRAC_PI_2, PI};
 
@@ -27,6 +28,9 @@ const GAMMA_RATIO: f64 = 1.08;
 /// Grid steps per gate for the single scattering of shifted windows: a window rounded outward
 /// to the grid is at most 2/`GRID_PER_GATE` of a gate wider.
 const GRID_PER_GATE: usize = 32;
+/// Orders summed one by one in the bound on orders ≥ 3 (each over its own window of farther
+/// points); beyond, a closed-form tail.
+const ORDERS_WINDOWED: usize = 30;
 /// A Gaussian beam is followed to this many 1/e² half-angles: the Monte Carlo draws none
 /// beyond 4.29 (the largest radius its 53-bit uniform numbers give), the physical tail beyond
 /// is e^{−40} of the energy.
@@ -37,9 +41,9 @@ const MAX_FOOTPRINT_STRETCH: f64 = 0.5;
 
 /// Upper bound on the multiple-scattering share of a scene's returns, per channel, field of
 /// view and range gate (`docs/transport.md`, "When the Monte Carlo is skipped"): order-2 energy
-/// ≤ K × the single-scatter energy, all orders ≥ 2 at most K/(1 − K̂), K̂ the largest K of the
-/// channel and field of view. ∞ where no bound is given (a gate with no single scattering that
-/// multiply scattered light can reach, a scatterer with no backscatter, a grazing surface).
+/// ≤ K × the single-scatter energy (`ratio`), all orders ≥ 2 with the higher orders of Eq. S10
+/// (`all_orders_by_channel`). ∞ where no bound is given (a gate with no single scattering that
+/// multiply scattered light can reach, a scatterer with no backscatter, a grazing surface, k̂ ≥ 1).
 #[derive(Debug, Clone, PartialEq)]
 pub struct MultipleScatteringBound {
     /// Fields of view, full angles \[mrad\], as in the scene.
@@ -73,8 +77,8 @@ impl MultipleScatteringBound {
             })
     }
 
-    /// The bound on all orders ≥ 2 together for one order-2 bound K, K/(1 − K) (each further
-    /// order gains at most another factor K), ∞ for K ≥ 1.
+    /// The geometric series K/(1 − K) over orders ≥ 2 of one factor K per order (∞ for K ≥ 1):
+    /// the earlier bound's rule for all orders, kept for callers that have one factor.
     pub fn all_orders(k: f64) -> f64 {
         if k < 1.0 {
             k / (1.0 - k)
@@ -105,7 +109,7 @@ impl MultipleScatteringBound {
 }
 
 /// The bound of [`MultipleScatteringBound`] (derivation: `docs/transport.md`, "When the Monte
-/// Carlo is skipped", Eqs. S1–S12). For each channel, field of view and gate [a, b]:
+/// Carlo is skipped", Eqs. S1–S10). For each channel, field of view and gate [a, b]:
 ///
 /// ```text
 /// E₂(gate) ≤ Σ_ψ w_ψ [ k_vol · max_{0≤d≤δ} E₁,vol([a − d, b − d]) + K_S · E₁,surface ]
@@ -115,8 +119,9 @@ impl MultipleScatteringBound {
 /// over the beam's rays (weight w_ψ at angle ψ to the axis: the field of view seen from the ray
 /// widens to α + ψ), with δ = ½ r tan α (1 + ½ tan α) the largest delay of an order-2 return
 /// behind its farther point, k_vol the volume bound per unit single scattering for farther
-/// points in [a − δ, b] (Eqs. S5–S8: forward-then-back and back-then-forward paths, binned in the
-/// leg's angle) and K_S the surface's (Eqs. S9–S10, when the gate can receive its light).
+/// points in [a − δ, b] (Eqs. S3–S6: forward-then-back and back-then-forward paths, binned in the
+/// leg's angle) and K_S the surface's (Eqs. S7–S8, when the gate can receive its light); all
+/// orders add E_{≥3} ≤ O Σ_{n≥3} k̂^{n−1} E₁([a/n, b]) (Eq. S10).
 pub fn multiple_scattering_bound(
     scene: &Scene,
     atm: &OpticalAtmosphere,
@@ -129,7 +134,7 @@ pub fn multiple_scattering_bound(
     let range_m: Vec<f64> = (0..ng).map(|i| gates.centre_m(i)).collect();
     let channels: Vec<String> = scene.channels.iter().map(|c| c.name.clone()).collect();
     let mut k2 = vec![0.0; nch * nf * ng];
-    let mut has_single = vec![false; nch * nf * ng];
+    let mut all = vec![0.0; nch * nf * ng];
     let geo = Geometry::new(scene, atm);
     let bins = Bins::new(gamma_edges(geo.gamma_min(scene, atm)));
     let rays = beam_rays(scene);
@@ -140,17 +145,20 @@ pub fn multiple_scattering_bound(
         // k_vol and K_S per field of view, ray bin and gate: shared by the class's channels.
         let mut k_vol = vec![0.0; nf * nr * ng];
         let mut k_surf = vec![0.0; nf * nr];
+        // k_vol for farther points nearer than the first gate's window: with the gates' own,
+        // the factor of each further order for paths within a gate's reach.
+        let mut k_before = vec![0.0; nf * nr];
         for (f, fov) in lidar.fov_full_angle_mrad.iter().enumerate() {
             for (b, &(psi, _)) in rays.iter().enumerate() {
                 let tan_a = (0.5e-3 * fov + psi).tan();
-                // The segments the gates' windows can meet, from the first window on.
-                let segs = geo.seg(geo.window(0, tan_a).0)..geo.n_seg();
-                let ray = RayTables::new(&groups, &bins, tan_a, segs);
+                let ray = RayTables::new(&groups, &bins, tan_a, 0..geo.n_seg());
                 for g in 0..ng {
                     let (lo, hi) = geo.window(g, tan_a);
                     k_vol[(f * nr + b) * ng + g] = geo.k_window(&groups, &bins, &ray, lo, hi);
                 }
                 k_surf[f * nr + b] = geo.k_surface(&groups, &bins, &ray, psi);
+                let (first_lo, _) = geo.window(0, tan_a);
+                k_before[f * nr + b] = geo.k_window(&groups, &bins, &ray, 0.0, first_lo);
             }
         }
         for &k in &class {
@@ -158,8 +166,12 @@ pub fn multiple_scattering_bound(
             let single = geo.cumulative_single(&ch, &grid);
             let echo = geo.surface_echo(scene, &ch, k);
             let f_surf = geo.slant_factor_surface(atm, &ch, k);
+            let beta_max = ch.beta.iter().fold(0.0f64, |m, b| m.max(*b));
+            // Further scatterings anywhere on the path: the slant credit of the whole path.
+            let path_slant = geo.slant_factor(atm, &ch, k, 0.0, geo.r_end(), 0.0);
             for (f, fov) in lidar.fov_full_angle_mrad.iter().enumerate() {
                 let o = overlap(lidar, *fov);
+                let (mut e1s, mut e2s) = (vec![0.0; ng], vec![0.0; ng]);
                 for g in 0..ng {
                     let a = gates.start_m + g as f64 * gates.width_m;
                     let b_end = a + gates.width_m;
@@ -187,37 +199,48 @@ pub fn multiple_scattering_bound(
                     {
                         e1 += energy;
                     }
-                    e1 *= o;
-                    has_single[(k * nf + f) * ng + g] = e1 > 0.0;
-                    k2[(k * nf + f) * ng + g] = if e2 == 0.0 {
-                        0.0
-                    } else if e1 > 0.0 {
-                        e2 / e1
-                    } else {
-                        f64::INFINITY
-                    };
+                    e1s[g] = e1 * o;
+                    e2s[g] = e2;
                 }
-            }
-        }
-    }
-    // Orders ≥ 3: each further scattering gains at most the largest factor of the channel and
-    // field of view (S12), over the gates that have single scattering to compare with.
-    let mut all = vec![0.0; nch * nf * ng];
-    for k in 0..nch {
-        for f in 0..nf {
-            let row = (k * nf + f) * ng;
-            let worst = (0..ng)
-                .filter(|g| has_single[row + g])
-                .fold(0.0f64, |m, g| m.max(k2[row + g]));
-            for g in 0..ng {
-                let v = k2[row + g];
-                all[row + g] = if v == 0.0 {
-                    0.0
-                } else if worst < 1.0 {
-                    v / (1.0 - worst)
-                } else {
-                    f64::INFINITY
-                };
+                // Orders ≥ 3 (S10): an order-n return arriving in a gate [a, b] has every
+                // point within b of the lidar and its farthest beyond a/n; each further order
+                // at most k̂ times the last, k̂ the largest order-2 factor of the points within
+                // b (the volume's up to the gate, the surface's once it is nearer than b).
+                let mut running: Vec<f64> = (0..nr).map(|b| k_before[f * nr + b]).collect();
+                let surface_factor: f64 = rays
+                    .iter()
+                    .enumerate()
+                    .map(|(b, &(_, w))| w * times(k_surf[f * nr + b], f_surf))
+                    .sum();
+                for g in 0..ng {
+                    let a = gates.start_m + g as f64 * gates.width_m;
+                    let b_end = a + gates.width_m;
+                    let mut volume_factor = 0.0;
+                    for (b, &(_, w)) in rays.iter().enumerate() {
+                        running[b] = running[b].max(k_vol[(f * nr + b) * ng + g]);
+                        volume_factor += w * times(running[b], path_slant);
+                    }
+                    let surface_near = echo.is_some_and(|(_, _, rs)| rs < b_end);
+                    let khat = if surface_near {
+                        volume_factor.max(surface_factor)
+                    } else {
+                        volume_factor
+                    } / o;
+                    let echo_within = |x: f64| match echo {
+                        Some((_, energy, rs)) if rs >= x && rs < b_end => energy,
+                        _ => 0.0,
+                    };
+                    let higher = higher_orders(
+                        khat,
+                        a,
+                        |x| grid.energy_from_node_before(&single, x, b_end) + echo_within(x),
+                        beta_max,
+                    );
+                    let (e1, e2) = (e1s[g], e2s[g] + o * higher);
+                    let i = (k * nf + f) * ng + g;
+                    k2[i] = ratio_of(e2s[g], e1);
+                    all[i] = ratio_of(e2, e1);
+                }
             }
         }
     }
@@ -239,6 +262,46 @@ pub fn multiple_scattering_bound(
 /// a · b with 0 · ∞ = 0 (no scatterer, or no energy, means no contribution).
 fn times(a: f64, b: f64) -> f64 {
     if a == 0.0 || b == 0.0 { 0.0 } else { a * b }
+}
+
+/// A share: 0 where nothing arrives, ∞ where something may arrive and no single scattering does.
+fn ratio_of(e2: f64, e1: f64) -> f64 {
+    if e2 == 0.0 {
+        0.0
+    } else if e1 > 0.0 {
+        e2 / e1
+    } else {
+        f64::INFINITY
+    }
+}
+
+/// The bound on orders ≥ 3 arriving in a gate starting at `a` (per unit E₀ η A O, pencil
+/// beam): Σ_{n≥3} k̂^{n−1} E₁([a/n, b]), `window(x)` the single scattering of farther points in
+/// [x, b] (rounded outward); for n > `ORDERS_WINDOWED` E₁([a/n, b]) ≤ window(a/N) + β_max n/a.
+/// ∞ for k̂ ≥ 1 where anything scatters before the gate's end.
+fn higher_orders(khat: f64, a: f64, window: impl Fn(f64) -> f64, beta_max: f64) -> f64 {
+    if khat == 0.0 {
+        return 0.0;
+    }
+    let n_max = ORDERS_WINDOWED;
+    let near = window(a / n_max as f64);
+    if !(khat < 1.0) {
+        return if near > 0.0 || beta_max > 0.0 {
+            f64::INFINITY
+        } else {
+            0.0
+        };
+    }
+    let mut sum = 0.0;
+    for n in 3..=n_max {
+        sum += khat.powi(n as i32 - 1) * window(a / n as f64);
+    }
+    // Σ_{n>N} k^{n−1} = k^N/(1 − k); Σ_{n>N} n k^{n−1} = ((N + 1) k^N (1 − k) + k^{N+1})/(1 − k)².
+    let kn = khat.powi(n_max as i32);
+    let one = 1.0 - khat;
+    sum += kn / one * near;
+    sum += beta_max / a * ((n_max as f64 + 1.0) * kn * one + kn * khat) / (one * one);
+    sum
 }
 
 /// Bin edges in γ: 0, `first`, then geometric by `GAMMA_RATIO` to π/2.
@@ -741,7 +804,7 @@ impl Geometry {
     }
 
     /// k_vol: order 2 per unit single scattering of farther points in [lo, hi], both
-    /// orderings (docs/transport.md, S5–S8), for the ray bin's field of view.
+    /// orderings (docs/transport.md, S3–S6), for the ray bin's field of view.
     fn k_window(&self, groups: &[Group], bins: &Bins, ray: &RayTables, lo: f64, hi: f64) -> f64 {
         if !(lo < hi) || groups.is_empty() {
             return 0.0;
@@ -855,7 +918,7 @@ impl Geometry {
         Some((near, far, far * tan_a))
     }
 
-    /// K_S: order 2 through the surface per unit surface echo (docs/transport.md, S9–S10).
+    /// K_S: order 2 through the surface per unit surface echo (docs/transport.md, S7–S8).
     fn k_surface(&self, groups: &[Group], bins: &Bins, ray: &RayTables, psi: f64) -> f64 {
         let (tan_a, wide, edges) = (ray.tan_a, &ray.wide, &bins.edges);
         let Some(surf) = self.surface else {
@@ -869,7 +932,7 @@ impl Geometry {
         let cos_a = 1.0 / (1.0 + tan_a * tan_a).sqrt();
         let nb = edges.len() - 1;
         let (s_near, s_rs) = (self.seg_left(near), self.seg_left(rs));
-        // Forward, then the surface (S9): the light scattered by A into the footprint's cone.
+        // Forward, then the surface (S7): the light scattered by A into the footprint's cone.
         let mut ka = 0.0;
         for g in groups {
             let t_near = self.t_in(g, near, s_near);
@@ -892,7 +955,7 @@ impl Geometry {
             ka += self.t_in(g, rs, s_rs) - t_near;
         }
         ka *= (rs / (near * cos_a)).powi(2) / th_hi.cos();
-        // The surface, then B back toward the lidar (S10).
+        // The surface, then B back toward the lidar (S8).
         let mut kb = 0.0;
         for (i, g) in groups.iter().enumerate() {
             let q_rs = self.q_in(g, rs, s_rs);
@@ -969,8 +1032,9 @@ impl Geometry {
         ch.cum[s] + ch.ext[s] * (x.min(self.r_end()) - self.r[s])
     }
 
-    /// The grid of the single scattering of shifted windows: every gate edge, `GRID_PER_GATE`
-    /// steps per gate, the breakpoints, from the nearest window start to the last gate's end.
+    /// The grid of the single scattering of windows: every gate edge, `GRID_PER_GATE` steps per
+    /// gate and before the first down to the nearest window start, the breakpoints, and 5 %
+    /// steps from there down to start/`ORDERS_WINDOWED` (the windows of orders ≥ 3).
     fn grid(&self, scene: &Scene, rays: &[(f64, f64)]) -> Grid {
         let gates = &scene.gates;
         let widest = scene
@@ -983,7 +1047,15 @@ impl Geometry {
         let (first, _) = self.window(0, tan_a);
         let x0 = first.max(0.5 * gates.start_m);
         let h = gates.width_m / GRID_PER_GATE as f64;
-        let mut x = vec![x0];
+        // Down to start/N for the windows [a/n, b] of orders ≥ 3, 5 % apart.
+        let lowest = gates.start_m / ORDERS_WINDOWED as f64;
+        let mut x = vec![lowest];
+        let mut v = lowest;
+        while v < x0 {
+            x.push(v);
+            v *= 1.05;
+        }
+        x.push(x0);
         let before = ((gates.start_m - x0) / h).ceil().max(0.0) as usize;
         x.extend((0..before).map(|i| gates.start_m - i as f64 * h));
         for g in 0..gates.count {
@@ -995,9 +1067,9 @@ impl Geometry {
             self.r
                 .iter()
                 .copied()
-                .filter(|r| *r > x0 && *r < gates.end_m()),
+                .filter(|r| *r > lowest && *r < gates.end_m()),
         );
-        x.retain(|v| *v >= x0);
+        x.retain(|v| *v >= lowest);
         x.sort_by(f64::total_cmp);
         x.dedup();
         Grid { x }
@@ -1125,6 +1197,12 @@ impl Cumulative {
 }
 
 impl Grid {
+    /// The energy from the last node ≤ x (the first node if none) to the first node ≥ b.
+    fn energy_from_node_before(&self, c: &Cumulative, x: f64, b: f64) -> f64 {
+        let i = self.x.partition_point(|v| *v <= x).saturating_sub(1);
+        c.0[self.at_or_after(b)] - c.0[i]
+    }
+
     /// The first node ≥ x (the last node if none).
     fn at_or_after(&self, x: f64) -> usize {
         self.x.partition_point(|v| *v < x).min(self.x.len() - 1)
@@ -1154,5 +1232,96 @@ impl Grid {
             best = best.max(c.0[end] - c.0[i]);
         }
         best
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::particles::phase::{HenyeyGreenstein, TabulatedPhase};
+
+    /// The largest value over an interval against a dense scan (a bound must never fall below
+    /// it): a table with a peak between nodes' ends, Rayleigh (largest at the ends), forward
+    /// and backward Henyey-Greenstein and two lobes.
+    #[test]
+    fn phase_maxima_are_never_below_a_dense_scan() {
+        let table = TabulatedPhase::from_angles(
+            &[0.0, 30.0, 60.0, 90.0, 120.0, 180.0],
+            &[5.0, 1.0, 3.0, 0.5, 0.2, 0.4],
+        )
+        .unwrap();
+        let phases = [
+            PhaseFunction::Tabulated(Box::new(table)),
+            PhaseFunction::Rayleigh(
+                crate::particles::phase::RayleighPhase::from_depolarisation(0.03).unwrap(),
+            ),
+            PhaseFunction::HenyeyGreenstein(HenyeyGreenstein::new(0.9).unwrap()),
+            PhaseFunction::HenyeyGreenstein(HenyeyGreenstein::new(-0.5).unwrap()),
+            PhaseFunction::double_hg(0.7, 0.95, -0.4).unwrap(),
+        ];
+        let intervals = [
+            (0.0, 0.2),
+            (0.3, 1.2),
+            (0.9, 1.1),
+            (1.0, 2.5),
+            (2.0, PI),
+            (0.0, PI),
+        ];
+        for p in &phases {
+            for &(lo, hi) in &intervals {
+                let scan = (0..=2000)
+                    .map(|i| p.eval((lo + (hi - lo) * i as f64 / 2000.0).cos()))
+                    .fold(0.0f64, f64::max);
+                let m = phase_max(p, lo, hi);
+                assert!(
+                    m >= scan * (1.0 - 1e-12),
+                    "{p:?} on [{lo}, {hi}]: {m} < {scan}"
+                );
+                // Exact where the function is monotone or piecewise linear: no looser than
+                // the two lobes' separate maxima.
+                assert!(m <= 1.5 * scan, "{p:?} on [{lo}, {hi}]: {m} ≫ {scan}");
+            }
+        }
+        // The table's interior node at 60° is its largest value on [45°, 75°].
+        let t = &phases[0];
+        let node = t.eval(60f64.to_radians().cos());
+        assert_eq!(phase_max(t, 45f64.to_radians(), 75f64.to_radians()), node);
+    }
+
+    /// The beam's ray bins carry the pulse: all of it for a uniform beam, all but e^{−2·4.5²}
+    /// (what the Monte Carlo's sampler cannot reach) for a Gaussian one; a pencil beam is one
+    /// ray along the axis.
+    #[test]
+    fn beam_ray_bins_carry_the_pulse() {
+        let mut s = Scene::from_toml(
+            std::path::Path::new("t.toml"),
+            r#"
+[lidar]
+altitude_m = 0.0
+zenith_angle_deg = 0.0
+pulse_energy_j = 1.0
+beam_divergence_full_angle_mrad = 0.0
+telescope_diameter_m = 1.0
+optical_efficiency = 1.0
+fov_full_angle_mrad = 1.0
+[[channel]]
+name = "a"
+wavelength_nm = 1064.0
+[gates]
+start_m = 100.0
+end_m = 200.0
+width_m = 100.0
+"#,
+        )
+        .unwrap();
+        assert_eq!(beam_rays(&s), vec![(0.0, 1.0)]);
+        s.lidar.beam_divergence_full_angle_mrad = 0.4;
+        let sum = |r: Vec<(f64, f64)>| r.iter().map(|x| x.1).sum::<f64>();
+        assert!((sum(beam_rays(&s)) - 1.0).abs() < 1e-12);
+        assert!((beam_rays(&s).last().unwrap().0 - 0.2e-3).abs() < 1e-15);
+        s.lidar.beam_profile = BeamProfile::Gaussian;
+        let g = beam_rays(&s);
+        assert!((sum(g.clone()) - (1.0 - (-2.0 * 4.5f64 * 4.5).exp())).abs() < 1e-12);
+        assert!((g.last().unwrap().0 - 4.5 * 0.2e-3).abs() < 1e-15);
     }
 }
