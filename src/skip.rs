@@ -285,6 +285,12 @@ fn gate_place(scene: &Scene, g: usize) -> String {
         if x >= 0.0 && x as usize == g {
             return format!("gate {g} at {r:.0} m, the surface echo's");
         }
+        if x < g as f64 {
+            return format!(
+                "gate {g} at {r:.0} m, beyond the surface (no single scattering; gates that end \
+                 with the surface echo's let the rest be judged)"
+            );
+        }
     }
     let z = lidar.altitude_m + mu * r;
     let here: Vec<String> = scene
