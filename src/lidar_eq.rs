@@ -22,6 +22,10 @@ use crate::particles::matrix::MatrixElements;
 use crate::returns::{Order, Returns, Source};
 use crate::scene::{BeamProfile, Lidar, Polarisation, Scene};
 
+mod bound;
+
+pub use bound::{MultipleScatteringBound, multiple_scattering_bound};
+
 /// Geometric overlap of the beam with a field of view (full angles in mrad).
 pub fn overlap(lidar: &Lidar, fov_full_angle_mrad: f64) -> f64 {
     let alpha = 0.5e-3 * fov_full_angle_mrad;
@@ -418,132 +422,6 @@ impl RayReturns {
     }
 }
 
-/// Upper bound on the multiple-scattering share of a scene's returns, per field of view and
-/// range gate: order-2 energy ≤ `ratio` × the single-scatter energy, higher orders smaller
-/// still. Meant for scenes whose scatterers have no forward peak (molecules, a Lambertian
-/// surface); with particle layers it is valid but far too loose to be useful.
-#[derive(Debug, Clone, PartialEq)]
-pub struct MultipleScatteringBound {
-    /// Fields of view, full angles \[mrad\], as in the scene.
-    pub fov_full_angle_mrad: Vec<f64>,
-    /// Gate centres \[m\].
-    pub range_m: Vec<f64>,
-    /// Bound K on E₂/E₁, index `fov * range_m.len() + gate`, the largest over the channels.
-    pub ratio: Vec<f64>,
-}
-
-impl MultipleScatteringBound {
-    /// The largest bound over every field of view and gate, and the field of view it belongs to
-    /// (the first such, on a tie); (0, the first field of view) when every bound is 0.
-    pub fn worst(&self) -> (f64, f64) {
-        let n = self.range_m.len().max(1);
-        let first = self.fov_full_angle_mrad.first().copied().unwrap_or(0.0);
-        self.ratio
-            .iter()
-            .enumerate()
-            .fold((0.0, first), |(k, f), (i, r)| {
-                if *r > k {
-                    (*r, self.fov_full_angle_mrad[i / n])
-                } else {
-                    (k, f)
-                }
-            })
-    }
-
-    /// The bound on all orders ≥ 2 together, K/(1 − K) (each further order gains at most
-    /// another factor K by the same argument), ∞ for K ≥ 1.
-    pub fn all_orders(k: f64) -> f64 {
-        if k < 1.0 {
-            k / (1.0 - k)
-        } else {
-            f64::INFINITY
-        }
-    }
-}
-
-/// The bound of [`MultipleScatteringBound`] (derivation: `docs/transport.md`, "When the Monte
-/// Carlo is skipped", Eqs. S1–S4):
-///
-/// ```text
-/// K(r) = (π/2) · P_max · max(P_max/P_π, 1/|μ|) · σ_max(r) · r · tan α / O(α)
-/// ```
-///
-/// σ_max(r) the largest scattering coefficient on the beam up to range r (the gate's end, at
-/// most the surface), P_max the largest value of any phase function present (normalised to 4π),
-/// P_max/P_π the largest ratio of a phase function's maximum to its backscatter (1 for
-/// Rayleigh, whose extremes are at 0° and 180°), |μ| the cosine of the beam's incidence on the
-/// surface (with a surface), α the field of view's half-angle and O the overlap. The order-2
-/// return at apparent range r comes from pairs of scatterings whose second point lies in the
-/// field-of-view cone; against the single-scatter return it is at most
-/// σ_max P_max/4 ∫₀^∞ ln(1 + (r tan α/u)²) du = (π/4) P_max σ_max r tan α for each ordering
-/// of the two points (forward then back, back then forward; with the surface as either), the
-/// attenuation of the longer path being no smaller. With Rayleigh scattering (P_max ≤ 1.5)
-/// K ≈ 2.4 σ_max r α: e.g. 2e-5 for the space-borne IPDA at 1.57 µm, 0.2 mrad, 450 km.
-/// Approximations: the apparent range of an order-2 path exceeds that of its farther point by
-/// at most r tan α (the footprint radius), so a gate's bound holds for returns spread over
-/// neighbouring gates when the gates are narrower than the footprint.
-pub fn multiple_scattering_bound(
-    scene: &Scene,
-    atm: &OpticalAtmosphere,
-) -> MultipleScatteringBound {
-    let lidar = &scene.lidar;
-    let gates = &scene.gates;
-    let nch = atm.n_channels;
-    let z0 = lidar.altitude_m;
-    let mu = lidar.axis().z;
-    let surface_range = match &scene.surface {
-        Some(s) if mu < -1e-12 => Some((z0 - s.altitude_m) / -mu),
-        _ => None,
-    };
-    // Phase functions: the largest value anywhere, and the largest max/backscatter ratio (a
-    // layer's mixture has at most the largest of its components' ratios).
-    let (mut p_max, mut p_ratio) = (0.0f64, 0.0f64);
-    for p in &atm.phases {
-        let peak = (0..=1800)
-            .map(|i| p.eval((std::f64::consts::PI * i as f64 / 1800.0).cos()))
-            .chain([p.eval(1.0), p.eval(-1.0)])
-            .fold(0.0, f64::max);
-        p_max = p_max.max(peak);
-        let back = p.backscatter();
-        p_ratio = p_ratio.max(if back > 0.0 {
-            peak / back
-        } else {
-            f64::INFINITY
-        });
-    }
-    if surface_range.is_some() {
-        p_ratio = p_ratio.max(1.0 / mu.abs());
-    }
-    let range_m: Vec<f64> = (0..gates.count).map(|i| gates.centre_m(i)).collect();
-    // σ_max over the beam from the lidar to range r, all channels.
-    let sigma_max_to = |r: f64| -> f64 {
-        let z1 = z0 + mu * r;
-        let (lo, hi) = (z0.min(z1), z0.max(z1));
-        (0..atm.n_layers())
-            .filter(|&l| atm.edges_m[l + 1] >= lo && atm.edges_m[l] <= hi)
-            .flat_map(|l| (0..nch).map(move |k| atm.sigma_s_per_m[l * nch + k]))
-            .fold(0.0, f64::max)
-    };
-    let mut ratio = Vec::with_capacity(lidar.fov_full_angle_mrad.len() * gates.count);
-    for fov in &lidar.fov_full_angle_mrad {
-        let tan_alpha = (0.5e-3 * fov).tan();
-        let o = overlap(lidar, *fov);
-        for g in 0..gates.count {
-            let mut r = gates.start_m + (g + 1) as f64 * gates.width_m;
-            if let Some(rs) = surface_range {
-                r = r.min(rs);
-            }
-            let k = 0.5 * std::f64::consts::PI * p_max * p_ratio * sigma_max_to(r) * r * tan_alpha;
-            ratio.push(if k == 0.0 { 0.0 } else { k / o });
-        }
-    }
-    MultipleScatteringBound {
-        fov_full_angle_mrad: lidar.fov_full_angle_mrad.clone(),
-        range_m,
-        ratio,
-    }
-}
-
 /// P(180°) of the scatterer mixture of a layer for channel k; with `cap` = α, its mean over
 /// the cap of half-angle α about 180° (what an aperture of half-angle α collects,
 /// `crate::aperture`).
@@ -638,7 +516,7 @@ phase = { kind = "isotropic" }
     }
 
     /// All orders ≥ 2 bounded by the geometric series Σₙ≥₁ Kⁿ = K/(1 − K); the largest bound
-    /// and its field of view, the first on a tie.
+    /// and its field of view, the first on a tie; the largest all-orders bound and where.
     #[test]
     fn bound_on_all_orders_and_the_worst_field_of_view() {
         assert_eq!(MultipleScatteringBound::all_orders(0.5), 1.0);
@@ -649,8 +527,15 @@ phase = { kind = "isotropic" }
             fov_full_angle_mrad: vec![1.0, 2.0, 3.0],
             range_m: vec![100.0, 200.0],
             ratio: vec![0.1, 0.2, 0.3, 0.05, 0.3, 0.0],
+            channels: vec!["a".into(), "b".into()],
+            all_orders_by_channel: vec![
+                0.1, 0.2, 0.3, 0.05, 0.3, 0.0, // channel a
+                0.0, 0.0, 0.0, 0.4, 0.0, 0.4, // channel b
+            ],
         };
         assert_eq!(b.worst(), (0.3, 2.0));
+        assert_eq!(b.worst_all_orders(), Some((0.4, 1, 1, 1)));
+        assert_eq!(b.all_orders_at(1, 2, 1), 0.4);
         let zero = MultipleScatteringBound {
             ratio: vec![0.0; 6],
             ..b
@@ -658,62 +543,132 @@ phase = { kind = "isotropic" }
         assert_eq!(zero.worst(), (0.0, 1.0));
     }
 
-    /// Eq. S4's dependence on the scatterers and the surface, as ratios of bounds in one
-    /// geometry (σ, r, α and O cancel): a phase function whose maximum lies at 90° (neither
-    /// end, so only a scan over angle finds it) multiplies K by P_max · P_max/P_π against the
-    /// isotropic one (P ≡ 1); a Lambertian surface met at incidence cosine |μ| = ½ by P_max/P_π
-    /// → max(1, 1/|μ|) = 2, for gates short of the surface too (the scattered light it returns
-    /// arrives no earlier than the farther point).
-    #[test]
-    fn bound_scales_with_the_phase_maximum_and_the_surface_incidence() {
-        use crate::particles::phase::{PhaseFunction, TabulatedPhase};
-        let mut s = scene(HOMOGENEOUS);
-        s.lidar.altitude_m = 3000.0;
-        s.lidar.zenith_angle_deg = 120.0;
+    /// A pencil-beam lidar at the ground looking up at one isotropic layer (no air), one gate
+    /// around it: the bound's ratio in that gate.
+    fn isotropic_layer_bound(base_m: f64, top_m: f64, sigma_per_m: f64, fov_mrad: f64) -> f64 {
+        let text = format!(
+            r#"
+[lidar]
+altitude_m = 0.0
+zenith_angle_deg = 0.0
+pulse_energy_j = 1.0
+beam_divergence_full_angle_mrad = 0.0
+telescope_diameter_m = 0.1
+optical_efficiency = 1.0
+fov_full_angle_mrad = {fov_mrad}
+[[channel]]
+name = "a"
+wavelength_nm = 1064.0
+[gates]
+start_m = {}
+end_m = {}
+width_m = {}
+[[layer]]
+base_m = {base_m}
+top_m = {top_m}
+extinction_per_m = {sigma_per_m}
+single_scattering_albedo = 1.0
+phase = {{ kind = "isotropic" }}
+"#,
+            base_m - 5.0,
+            top_m + 5.0,
+            top_m - base_m + 10.0
+        );
+        let s = scene(&text);
         let atm = OpticalAtmosphere::build(&s).unwrap();
-        let isotropic = multiple_scattering_bound(&s, &atm);
-        assert!(isotropic.ratio.iter().all(|&k| k > 0.0));
+        let b = multiple_scattering_bound(&s, &atm);
+        assert_eq!(b.ratio.len(), 1);
+        b.ratio[0]
+    }
 
-        // P linear in μ between the nodes 0°, 45°, 90°, 135°, 180° with values 1, 1, 4, 1, 1,
-        // scaled to ½∫P dμ = 1: ∫ = 2((1 − c) + 2.5c), c = cos 45°, so the scale is 1/(1 + 1.5c)
-        // and P_max · P_max/P_π = 4s · 4.
-        let mut lobe = atm.clone();
-        let table = TabulatedPhase::from_angles(
-            &[0.0, 45.0, 90.0, 135.0, 180.0],
-            &[1.0, 1.0, 4.0, 1.0, 1.0],
-        )
-        .unwrap();
-        let lobed = std::sync::Arc::new(PhaseFunction::Tabulated(Box::new(table)));
-        lobe.phases.iter_mut().for_each(|p| *p = lobed.clone());
-        let side = multiple_scattering_bound(&s, &lobe);
-        let expected = 16.0 / (1.0 + 1.5 * std::f64::consts::FRAC_1_SQRT_2);
-        for (a, b) in side.ratio.iter().zip(&isotropic.ratio) {
+    /// Isotropic scatterers make the order-2 kernel's bound a closed form (docs/transport.md,
+    /// S5): with the farther point at depth H into a layer, each ordering gives
+    /// ½ ∫₀^{π/2} tan γ σ min(ρ cot γ, H) dγ = (σ/4)[H ln(1 + ρ²/H²) + 2ρ atan(H/ρ)], ρ the
+    /// footprint radius: (π/2)σρ for a thick layer, about σH ln(ρ/H) for a thin one. The bound
+    /// lies between that at the layer's top (ρ there) and 1.25 times it (ρ at the gate's end;
+    /// bins of 8 % in γ).
+    #[test]
+    fn an_isotropic_layer_is_bounded_by_its_optical_depth_within_the_footprint() {
+        let closed = |sigma: f64, h: f64, rho: f64| {
+            0.5 * sigma * (h * (1.0 + (rho / h).powi(2)).ln() + 2.0 * rho * (h / rho).atan())
+        };
+        // (layer thickness, FOV): thin under a wide footprint, and thick under a narrow one.
+        for (h, fov_mrad) in [(10.0, 200.0), (1.0, 20.0), (2000.0, 1.0)] {
+            let (base, sigma) = (1000.0, 1e-4);
+            let top = base + h;
+            let k = isotropic_layer_bound(base, top, sigma, fov_mrad);
+            let tan_a = (0.5e-3 * fov_mrad).tan();
+            let low = closed(sigma, h, top * tan_a);
+            let high = closed(sigma, h, (top + 5.0) * tan_a);
             assert!(
-                (a / b / expected - 1.0).abs() < 1e-12,
-                "{a} / {b} vs {expected}"
+                k >= low && k <= 1.25 * high,
+                "H = {h} m, FOV {fov_mrad} mrad: bound {k:.4e}, closed form {low:.4e}–{high:.4e}"
+            );
+            // A layer thinner than the footprint: far below the thick-medium value πσρ/2.
+            if h < 0.1 * top * tan_a {
+                assert!(k < 0.5 * 0.5 * std::f64::consts::PI * sigma * top * tan_a);
+            }
+        }
+    }
+
+    /// The surface gate of a nadir lidar over a Lambertian surface under an isotropic layer of
+    /// thickness H (docs/transport.md, S7–S8): light scattered into the footprint by the layer
+    /// and light the surface returns that the layer scatters into the field of view each give
+    /// ½σ[H + ρ − √(H² + ρ²)], together σ[H + ρ − √(H² + ρ²)], the layer's optical depth
+    /// within the footprint's reach. The bound lies between 1 and 1.25 times that (plus the
+    /// layer's own order-2 light delayed into the gate, small against the echo here).
+    #[test]
+    fn a_surface_under_a_layer_is_bounded_by_the_optical_depth_within_reach() {
+        let text = r#"
+[lidar]
+altitude_m = 20000.0
+zenith_angle_deg = 180.0
+pulse_energy_j = 1.0
+beam_divergence_full_angle_mrad = 0.0
+telescope_diameter_m = 0.1
+optical_efficiency = 1.0
+fov_full_angle_mrad = [1.0, 10.0]
+[[channel]]
+name = "a"
+wavelength_nm = 1064.0
+[gates]
+start_m = 20000.0
+end_m = 20010.0
+width_m = 10.0
+[[layer]]
+base_m = 0.0
+top_m = 50.0
+extinction_per_m = 1e-5
+single_scattering_albedo = 1.0
+phase = { kind = "isotropic" }
+[surface]
+altitude_m = 0.0
+albedo = 1.0
+"#;
+        let s = scene(text);
+        let atm = OpticalAtmosphere::build(&s).unwrap();
+        let b = multiple_scattering_bound(&s, &atm);
+        let (sigma, h): (f64, f64) = (1e-5, 50.0);
+        for (f, fov) in [1.0f64, 10.0].iter().enumerate() {
+            let rho = 20000.0 * (0.5e-3 * fov).tan();
+            let closed = sigma * (h + rho - (h * h + rho * rho).sqrt());
+            let k = b.ratio[f];
+            assert!(
+                k >= closed && k <= 1.25 * closed,
+                "FOV {fov} mrad: bound {k:.4e}, closed form {closed:.4e}"
             );
         }
-
-        let mut surf = scene(&format!(
-            "{HOMOGENEOUS}[surface]\naltitude_m = 0.0\nalbedo = 0.5\n"
-        ));
-        surf.lidar = s.lidar.clone();
-        let lit = multiple_scattering_bound(&surf, &atm);
-        assert!(
-            surf.gates.end_m() < 6000.0,
-            "gates end before the surface, 6 km away"
-        );
-        for (a, b) in lit.ratio.iter().zip(&isotropic.ratio) {
-            assert!((a / b - 2.0).abs() < 1e-12, "{a} / {b}");
-        }
-        // Looking up, the surface is never met.
-        let mut up = surf.clone();
-        up.lidar.zenith_angle_deg = 60.0;
-        let mut up_clear = s.clone();
-        up_clear.lidar.zenith_angle_deg = 60.0;
+        // Looking up, the surface is never met: the same bound as without it.
+        let mut up = s.clone();
+        up.lidar.altitude_m = 0.0;
+        up.lidar.zenith_angle_deg = 0.0;
+        up.gates.start_m = 10.0;
+        let mut clear = up.clone();
+        clear.surface = None;
+        let atm_up = OpticalAtmosphere::build(&up).unwrap();
         assert_eq!(
-            multiple_scattering_bound(&up, &atm).ratio,
-            multiple_scattering_bound(&up_clear, &atm).ratio
+            multiple_scattering_bound(&up, &atm_up).ratio,
+            multiple_scattering_bound(&clear, &atm_up).ratio
         );
     }
 

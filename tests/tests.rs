@@ -57,6 +57,9 @@ mod shard;
 /// What a scene does not need: the Monte Carlo skipped where multiple scattering cannot
 /// matter, no line-by-line work for absent gases.
 mod skip;
+/// The bound on multiple scattering against the Monte Carlo: aerosol, cirrus and a water cloud
+/// from the ground and from space, with and without a surface.
+mod skip_bound;
 /// Line-by-line gas absorption against HAPI.
 mod spectroscopy;
 /// Extreme physical scenes: finite, conserved, bounded.

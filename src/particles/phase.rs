@@ -605,6 +605,13 @@ impl TabulatedPhase {
         self.asymmetry
     }
 
+    /// The nodes μ_i (increasing from −1 to 1) and P(μ_i). P is linear in μ between them, so its
+    /// largest value over an interval lies at an end or at a node inside
+    /// (`lidar_eq::multiple_scattering_bound`).
+    pub fn nodes(&self) -> (&[f64], &[f64]) {
+        (&self.mu, &self.p)
+    }
+
     /// The segment i with μ_i ≤ μ ≤ μ_{i+1}.
     #[inline]
     fn segment(&self, mu: f64) -> usize {

@@ -157,7 +157,16 @@ pub fn prepare(scene: &Scene) -> Result<Prepared<'_>, RunError> {
         &mut signals,
         &mut products,
     )?;
-    let decision = crate::skip::decide(scene, &atmosphere, photons);
+    let decision = crate::skip::decide_with(
+        scene,
+        &atmosphere,
+        photons,
+        Some(crate::skip::Analytic {
+            returns: &analytic,
+            lines: &analytic_lines,
+            retrieval: retrieval.as_ref(),
+        }),
+    );
     // A Monte Carlo that would run for months is refused here, in milliseconds (README,
     // "Limits").
     let mut warning = None;

@@ -354,9 +354,9 @@ pub struct Simulation {
 /// independent check of the single).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum MultipleScattering {
-    /// Skip the Monte Carlo when it cannot change the answer: no particle layer scatters and
-    /// the bound on all orders ≥ 2 ([`crate::lidar_eq::multiple_scattering_bound`])
-    /// is below the tolerance in every field of view and channel.
+    /// Skip the Monte Carlo when it cannot change the answer: the bound on all orders ≥ 2
+    /// ([`crate::lidar_eq::multiple_scattering_bound`]) is below the tolerance in every
+    /// return, and so is the retrievals' change ([`crate::skip`]).
     #[default]
     Auto,
     /// Always run the Monte Carlo (with `photons` > 0).
