@@ -358,6 +358,10 @@ impl OpticalAtmosphere {
     /// The layer holding altitude z, clamped to the first/last layer outside the atmosphere.
     #[inline]
     pub fn layer_of(&self, z: f64) -> usize {
+        // Above the top (a space lidar's photons start there) or below the bottom: no search.
+        if z >= self.top_m() {
+            return self.n_layers().saturating_sub(1);
+        }
         let i = self.edges_m.partition_point(|e| *e <= z);
         i.saturating_sub(1).min(self.n_layers().saturating_sub(1))
     }
