@@ -255,6 +255,12 @@ pub(super) fn reflect(w: &mut [f64], tau: &[f64], albedo: &[f64], branch: f64) {
 pub(super) fn collide_grey(w: &mut [f64], dta: &[f64], f: f64) {
     let n = w.len();
     let dta = &dta[..n];
+    if n == 1 && dta[0] == 0.0 {
+        // One channel through a conservative medium (a cloud): e^0 = 1 without the call, which
+        // was 1.5 % of C.1's time.
+        w[0] *= f;
+        return;
+    }
     per_channel!(n, |k, e| {
         w[k] *= f * e(-dta[k]);
     });
@@ -361,6 +367,10 @@ mod tests {
             to_receiver(&mut out[8], &a, &b, &c, 0.3);
             out[9].copy_from_slice(&w);
             reflect(&mut out[9], &a, &b, 0.6);
+            let mut grey = w.clone();
+            collide_grey(&mut grey, &a, 0.8);
+            let mut clear = w.clone();
+            collide_grey(&mut clear, &vec![0.0; n], 0.8);
             for k in 0..n {
                 let same = |i: usize, x: f64| {
                     assert_eq!(
@@ -385,6 +395,8 @@ mod tests {
                 same(7, w[k] * ex(-(a[k] + b[k])) * c[k] * 0.7);
                 same(8, (a[k] + b[k] - c[k]).abs() / 0.3);
                 same(9, w[k] * ex(-a[k]) / 0.6 * b[k]);
+                assert_eq!(grey[k].to_bits(), (w[k] * (0.8 * ex(-a[k]))).to_bits());
+                assert_eq!(clear[k].to_bits(), (w[k] * 0.8).to_bits());
             }
         }
     }

@@ -765,23 +765,35 @@ impl Setup<'_> {
             |l: usize| (l == 0 || below(cls.cum[l])) && (l == n - 1 || !below(cls.cum[l + 1]));
         // The layer holding the target is unique (the cumulative table is monotone): look a few
         // layers from the hint along the flight before searching the whole table.
-        let near = (0..HINT_LAYERS)
-            .map(|d| {
-                if mu > 0.0 {
-                    hint.checked_add(d)
-                } else {
-                    hint.checked_sub(d)
+        // The hint itself first (a collision in the layer its flight starts in: always in a
+        // single cloud), then a few more along the flight.
+        let mut l = usize::MAX;
+        if hint < n && holds(hint) {
+            l = hint;
+        } else {
+            let mut next = hint;
+            for _ in 1..HINT_LAYERS {
+                next = match (mu > 0.0, next.checked_sub(1)) {
+                    (true, _) => next + 1,
+                    (false, Some(below)) => below,
+                    (false, None) => break,
+                };
+                if next >= n {
+                    break;
                 }
-            })
-            .take_while(|l| l.is_some_and(|l| l < n))
-            .flatten()
-            .find(|&l| holds(l));
-        let l = near.unwrap_or_else(|| {
-            cls.cum
+                if holds(next) {
+                    l = next;
+                    break;
+                }
+            }
+        }
+        if l == usize::MAX {
+            l = cls
+                .cum
                 .partition_point(|c| below(*c))
                 .saturating_sub(1)
-                .min(n - 1)
-        });
+                .min(n - 1);
+        }
         let e = &self.atm.edges_m;
         let z = if cls.sigma[l] > 0.0 {
             e[l] + (target - cls.cum[l]) * cls.inv_sigma[l]
