@@ -9,7 +9,7 @@ use crate::spectroscopy::htp::{HtParameters, HtProfile, hartmann_tran};
 use crate::spectroscopy::isotopologues::Isotopologue;
 use crate::spectroscopy::lines::{Broadener, Line, LineList, ShapeParameters};
 use crate::spectroscopy::tips::partition_sum;
-use crate::spectroscopy::voigt::{SQRT_LN2, SQRT_LN2_OVER_PI, re_w, re_w_exact, w_fast};
+use crate::spectroscopy::voigt::{SQRT_LN2, SQRT_LN2_OVER_PI, add_re_w, re_w, re_w_exact, w_fast};
 
 /// One line's parameters at a given state.
 #[derive(Debug, Clone, Copy)]
@@ -169,6 +169,18 @@ impl Prepared {
             );
         }
         (self.eval(a, exact), self.eval(b, exact))
+    }
+    /// `acc[i] += self.eval(nu[i], exact)` for every i, the same values; a plain Voigt line's
+    /// fast path evaluated for all the wavenumbers together ([`add_re_w`]).
+    pub(super) fn add_evals(&self, nu: &[f64], exact: bool, acc: &mut [f64]) {
+        match self.beyond {
+            Beyond::No if !exact => add_re_w(nu, self.nu_c, self.cx, self.y, self.amp, acc),
+            _ => {
+                for (a, v) in acc.iter_mut().zip(nu) {
+                    *a += self.eval(*v, exact);
+                }
+            }
+        }
     }
     #[inline]
     pub(super) fn in_window(&self, nu: f64, w: f64) -> bool {
