@@ -24,7 +24,7 @@ use crate::atmosphere::Profile;
 use crate::instrument::laser::{Filter, Laser, Line};
 use crate::instrument::line_shape::MHZ_PER_CM1;
 use crate::spectroscopy::{
-    LblOptions, LineFilter, LineList, isotopologues, layer_optical_depths_at, layers,
+    CgLayer, LayerDepthMemo, LblOptions, LineFilter, LineList, isotopologues, layers,
 };
 
 /// Dry-air and gas columns of a profile on a layer grid.
@@ -41,7 +41,22 @@ pub struct LayerColumns {
 impl LayerColumns {
     /// Columns of `gas` in `profile` on `edges_m` (Curtis-Godson integration).
     pub fn new(profile: &Profile, edges_m: &[f64], gas: &str) -> Result<Self, RetrievalError> {
-        let cg = layers::curtis_godson_layers(profile, edges_m)?;
+        Self::of_layers(
+            profile,
+            edges_m,
+            &layers::curtis_godson_layers(profile, edges_m)?,
+            gas,
+        )
+    }
+
+    /// [`Self::new`] from the Curtis-Godson layers `cg` of `profile` on `edges_m`, computed
+    /// before.
+    pub fn of_layers(
+        profile: &Profile,
+        edges_m: &[f64],
+        cg: &[CgLayer],
+        gas: &str,
+    ) -> Result<Self, RetrievalError> {
         let index = |name: &str| profile.gases.iter().position(|g| g.name == name);
         let gi = index(gas).ok_or_else(|| {
             RetrievalError::Gas(format!("the profile `{}` has no {gas}", profile.name))
@@ -49,7 +64,7 @@ impl LayerColumns {
         let h2o = index("H2O");
         let mut dry = Vec::with_capacity(cg.len());
         let mut g = Vec::with_capacity(cg.len());
-        for l in &cg {
+        for l in cg {
             let w = h2o.map(|i| l.gas_columns_per_cm2[i]).unwrap_or(0.0);
             dry.push((l.air_column_per_cm2 - w) * 1e4);
             g.push(l.gas_columns_per_cm2[gi] * 1e4);
@@ -154,6 +169,21 @@ impl ReferenceState {
         options: &LblOptions,
         instrument: AssumedInstrument,
     ) -> Result<Self, RetrievalError> {
+        let mut memo = LayerDepthMemo::new();
+        Self::new_with(profile, edges_m, gas, lines, options, instrument, &mut memo)
+    }
+
+    /// [`Self::new`], the same numbers, with the layers and cross-sections `memo` holds reused
+    /// and what it computes added to it (an ensemble member's states, [`LayerDepthMemo`]).
+    pub fn new_with(
+        profile: &Profile,
+        edges_m: &[f64],
+        gas: &str,
+        lines: &LineList,
+        options: &LblOptions,
+        instrument: AssumedInstrument,
+        memo: &mut LayerDepthMemo,
+    ) -> Result<Self, RetrievalError> {
         let AssumedInstrument {
             laser,
             lines: laser_lines,
@@ -191,18 +221,20 @@ impl ReferenceState {
                     .map(move |q| l.wavenumber_cm1 + q.offset_mhz / MHZ_PER_CM1)
             })
             .collect();
-        let per_layer = |ls: &LineList| -> Result<Vec<Vec<Vec<f64>>>, RetrievalError> {
+        let columns =
+            LayerColumns::of_layers(profile, edges_m, &memo.layers(profile, edges_m)?, gas)?;
+        let mut per_layer = |ls: &LineList| -> Result<Vec<Vec<Vec<f64>>>, RetrievalError> {
             let t = if ls.is_empty() {
                 vec![vec![0.0; nus.len()]; edges_m.len() - 1]
             } else {
-                layer_optical_depths_at(profile, ls, edges_m, &nus, options)?
+                memo.layer_optical_depths_at(profile, ls, edges_m, &nus, options)?
             };
             Ok(t.into_iter()
                 .map(|row| row.chunks(nodes.len()).map(|c| c.to_vec()).collect())
                 .collect())
         };
         Ok(ReferenceState {
-            columns: LayerColumns::new(profile, edges_m, gas)?,
+            columns,
             weights: vec![nodes.iter().map(|q| q.weight / total).collect(); laser_lines.len()],
             target_tau: per_layer(&target_lines)?,
             other_tau: per_layer(&pick(others))?,

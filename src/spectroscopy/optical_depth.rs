@@ -1,11 +1,20 @@
 //! Vertical gas optical depths of Curtis-Godson layers computed directly, wavenumber by
 //! wavenumber (no grid): the cross-sections of [`super::xsec`] times the columns of
 //! [`super::layers`], and the count of (layer, gas) pairs computed and skipped.
+//!
+//! [`LayerDepthMemo`] computes the same optical depths remembering what it computed: the
+//! layers of each profile, and per layer state the prepared lines and the cross-section at each
+//! wavenumber. An ensemble study asks for one profile's layers many times (the truth at each
+//! laser's channels, the profile's own reference state at the nominal nodes, which are some of
+//! those channels, a re-levelled copy of it that has the same layers): each is computed once.
+
+use std::collections::HashMap;
+use std::sync::Arc;
 
 use super::SpectroscopyError;
-use super::layers::{curtis_godson_layers, line_gases};
+use super::layers::{CgLayer, curtis_godson_layers, line_gases};
 use super::lines::LineList;
-use super::xsec::{LblOptions, cross_section_at};
+use super::xsec::{GasState, LblOptions, PreparedLines, cross_section_at};
 use crate::atmosphere::Profile;
 
 /// Cross-sections of one gas in one layer: computed, and skipped for a zero column.
@@ -99,4 +108,208 @@ pub fn layer_optical_depths_at(
         out.push(tau);
     }
     Ok(out)
+}
+
+/// [`layer_optical_depths_at`] remembering what it computed (module docs), for one profile's
+/// work: the values are those of [`layer_optical_depths_at`], bit for bit, because a layer's
+/// state fixes its layers and prepared lines, and a cross-section at one wavenumber depends on
+/// that wavenumber and the prepared lines alone. Memory grows with the distinct profiles,
+/// states and wavenumbers asked for: keep one memo per unit of work (an ensemble member).
+#[derive(Debug, Default)]
+pub struct LayerDepthMemo {
+    /// Curtis-Godson layers of each (profile, edges) asked for.
+    layers: Vec<(Profile, Vec<f64>, Arc<Vec<CgLayer>>)>,
+    /// The (line list, options) pairs asked for; their index keys `states`.
+    lists: Vec<(LineList, LblOptions)>,
+    /// Per (list, molecule, state bit for bit): the prepared lines and the cross-sections
+    /// computed so far.
+    states: HashMap<(usize, u8, [u64; 3]), StateMemo>,
+}
+
+/// One layer state's prepared lines and cross-sections, by wavenumber.
+#[derive(Debug)]
+struct StateMemo {
+    lines: PreparedLines,
+    /// Wavenumbers computed \[cm⁻¹\], sorted by bits (`total_cmp`), and their cross-sections.
+    nu_cm1: Vec<f64>,
+    sigma: Vec<f64>,
+}
+
+impl LayerDepthMemo {
+    /// An empty memo.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// [`curtis_godson_layers`] of `profile` on `edges_m`, computed once per distinct pair.
+    pub fn layers(
+        &mut self,
+        profile: &Profile,
+        edges_m: &[f64],
+    ) -> Result<Arc<Vec<CgLayer>>, SpectroscopyError> {
+        if let Some((_, _, l)) = self
+            .layers
+            .iter()
+            .find(|(p, e, _)| e.as_slice() == edges_m && p == profile)
+        {
+            return Ok(l.clone());
+        }
+        let l = Arc::new(curtis_godson_layers(profile, edges_m)?);
+        self.layers
+            .push((profile.clone(), edges_m.to_vec(), l.clone()));
+        Ok(l)
+    }
+
+    /// [`layer_optical_depths_at`], bit for bit, computing only what this memo has not.
+    pub fn layer_optical_depths_at(
+        &mut self,
+        profile: &Profile,
+        lines: &LineList,
+        edges_m: &[f64],
+        wavenumbers_cm1: &[f64],
+        opts: &LblOptions,
+    ) -> Result<Vec<Vec<f64>>, SpectroscopyError> {
+        let layers = self.layers(profile, edges_m)?;
+        let gases = line_gases(profile, lines)?;
+        let list = match self.lists.iter().position(|(l, o)| o == opts && l == lines) {
+            Some(i) => i,
+            None => {
+                self.lists.push((lines.clone(), *opts));
+                self.lists.len() - 1
+            }
+        };
+        let mut out = Vec::with_capacity(layers.len());
+        for layer in layers.iter() {
+            let mut tau = vec![0.0; wavenumbers_cm1.len()];
+            for (m, gi) in &gases {
+                let col = layer.gas_columns_per_cm2[*gi];
+                if !count_layer_gas(col) {
+                    continue;
+                }
+                let state = layer.state_for(*gi);
+                let sigma = self
+                    .cross_sections(list, *m, &state, wavenumbers_cm1)
+                    .map_err(|e| in_layer(e, layer, profile))?;
+                for (t, s) in tau.iter_mut().zip(sigma) {
+                    *t += s * col;
+                }
+            }
+            out.push(tau);
+        }
+        Ok(out)
+    }
+
+    /// Cross-sections of molecule `m` of list `list` at `state` and `wavenumbers_cm1`: those
+    /// computed before looked up, the others computed (and checked) together and kept.
+    fn cross_sections(
+        &mut self,
+        list: usize,
+        m: u8,
+        state: &GasState,
+        wavenumbers_cm1: &[f64],
+    ) -> Result<Vec<f64>, SpectroscopyError> {
+        let (lines, opts) = &self.lists[list];
+        let key = (
+            list,
+            m,
+            [
+                state.pressure_pa.to_bits(),
+                state.temperature_k.to_bits(),
+                state.self_vmr.to_bits(),
+            ],
+        );
+        let entry = match self.states.entry(key) {
+            std::collections::hash_map::Entry::Occupied(e) => e.into_mut(),
+            std::collections::hash_map::Entry::Vacant(v) => v.insert(StateMemo {
+                lines: PreparedLines::new(lines, m, state, opts)?,
+                nu_cm1: Vec::new(),
+                sigma: Vec::new(),
+            }),
+        };
+        let find = |nu_cm1: &[f64], nu: f64| nu_cm1.binary_search_by(|v| v.total_cmp(&nu));
+        let mut missing: Vec<f64> = wavenumbers_cm1
+            .iter()
+            .copied()
+            .filter(|nu| find(&entry.nu_cm1, *nu).is_err())
+            .collect();
+        if !missing.is_empty() {
+            missing.sort_by(f64::total_cmp);
+            missing.dedup_by(|a, b| a.to_bits() == b.to_bits());
+            let sigma = entry.lines.cross_section_at(lines, &missing, opts)?;
+            let mut merged: Vec<(f64, f64)> = entry
+                .nu_cm1
+                .iter()
+                .copied()
+                .zip(entry.sigma.iter().copied())
+                .chain(missing.into_iter().zip(sigma))
+                .collect();
+            merged.sort_by(|a, b| a.0.total_cmp(&b.0));
+            (entry.nu_cm1, entry.sigma) = merged.into_iter().unzip();
+        }
+        Ok(wavenumbers_cm1
+            .iter()
+            .map(|nu| match find(&entry.nu_cm1, *nu) {
+                Ok(i) => entry.sigma[i],
+                // Every wavenumber was just added.
+                Err(_) => f64::NAN,
+            })
+            .collect())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::atmosphere::StandardAtmosphere;
+
+    /// The memo gives what `layer_optical_depths_at` gives, bit for bit, whatever it was asked
+    /// before: overlapping and repeated wavenumbers, another profile, another grid, another
+    /// line list and a cooler copy of the profile in between.
+    #[test]
+    fn memo_is_the_direct_computation_bit_for_bit() {
+        let warm = StandardAtmosphere::UsStandard.profile();
+        let mut cool = warm.clone();
+        cool.temperature_k.iter_mut().for_each(|t| *t -= 1.0);
+        let tropical = StandardAtmosphere::Tropical.profile();
+        let band = LineList::co2_30012_band_model().filtered(&crate::spectroscopy::LineFilter {
+            min_cm1: Some(6335.0),
+            max_cm1: Some(6391.0),
+            ..Default::default()
+        });
+        let fewer = LineList {
+            lines: band.lines[..band.len() / 2].to_vec(),
+            ..band.clone()
+        };
+        let fine: Vec<f64> = (0..=40).map(|i| 500.0 * i as f64).collect();
+        let coarse: Vec<f64> = (0..=10).map(|i| 2000.0 * i as f64).collect();
+        let a: Vec<f64> = (0..20).map(|i| 6359.9 + 0.01 * i as f64).collect();
+        let b: Vec<f64> = (0..20)
+            .map(|i| 6359.95 + 0.013 * i as f64)
+            .chain([6366.1, a[3]])
+            .collect();
+        let opts = LblOptions::default();
+        let mut memo = LayerDepthMemo::new();
+        for (profile, lines, edges, nu) in [
+            (&warm, &band, &fine, &a),
+            (&warm, &band, &fine, &b),
+            (&cool, &band, &fine, &b),
+            (&tropical, &band, &coarse, &a),
+            (&warm, &fewer, &fine, &a),
+            (&warm, &band, &coarse, &b),
+            (&warm, &band, &fine, &a),
+        ] {
+            let got = memo
+                .layer_optical_depths_at(profile, lines, edges, nu, &opts)
+                .unwrap();
+            let want = layer_optical_depths_at(profile, lines, edges, nu, &opts).unwrap();
+            assert_eq!(got.len(), want.len());
+            for (g, w) in got.iter().flatten().zip(want.iter().flatten()) {
+                assert_eq!(g.to_bits(), w.to_bits(), "{g} vs {w}");
+            }
+            assert_eq!(
+                *memo.layers(profile, edges).unwrap(),
+                curtis_godson_layers(profile, edges).unwrap()
+            );
+        }
+    }
 }
