@@ -195,21 +195,33 @@ impl Returns {
             self.orders.clone(),
         );
         for (j, c) in combos.iter().enumerate() {
+            let finite = c.terms.iter().all(|(_, ca)| ca.is_finite());
             for f in 0..self.fov_full_angle_mrad.len() {
                 for g in 0..self.range_m.len() {
                     for o in 0..self.orders.len() {
                         let mut e = 0.0;
-                        let mut var = 0.0;
                         for (a, ca) in &c.terms {
                             e += ca * self.energy_j[self.index(*a, f, g, o)];
+                        }
+                        let i = out.index(j, f, g, o);
+                        out.energy_j[i] = e;
+                        // Every term without error (analytic returns): every covariance is 0,
+                        // so the sum below is +0 and the error 0, as `zeros` left it.
+                        if finite
+                            && c.terms
+                                .iter()
+                                .all(|(a, _)| self.stderr_j[self.index(*a, f, g, o)] == 0.0)
+                        {
+                            continue;
+                        }
+                        let mut var = 0.0;
+                        for (a, ca) in &c.terms {
                             for (b, cb) in &c.terms {
                                 var += ca
                                     * cb
                                     * self.covariance_j2(*a, *b, f, g, o).unwrap_or(f64::NAN);
                             }
                         }
-                        let i = out.index(j, f, g, o);
-                        out.energy_j[i] = e;
                         out.stderr_j[i] = var.max(0.0).sqrt();
                         if var.is_nan() {
                             out.stderr_j[i] = f64::NAN;
