@@ -51,11 +51,13 @@ use crate::lidar_eq;
 use crate::optics::OpticalAtmosphere;
 use crate::pipeline;
 use crate::retrieval::{
-    AssumedInstrument, LayerColumns, Method, Product, Quantity, ReferenceState, RetrievalConfig,
+    AssumedInstrument, LayerColumns, Method, Product, Quantity, ReferenceState, Retrieval,
+    RetrievalConfig,
 };
 use crate::returns::{Order, Returns};
 use crate::rng::{self, Stream};
 use crate::scene::Scene;
+use crate::spectroscopy::LayerDepthMemo;
 
 mod netcdf;
 mod profile;
