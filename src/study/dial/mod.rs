@@ -44,7 +44,7 @@ use thiserror::Error;
 
 use crate::atmosphere::humidity::{SaturationOver, saturation_vapour_pressure_pa};
 use crate::atmosphere::{LatitudeClass, Profile, ProfileSet, SetMember, StateShift, shift_member};
-use crate::instrument::laser::{Filter, Laser, LineReturns};
+use crate::instrument::laser::{Filter, Laser, LineReturns, SampledChannel};
 use crate::instrument::line_shape::LineShape;
 use crate::instrument::signals::Signals;
 use crate::lidar_eq;
@@ -54,7 +54,7 @@ use crate::retrieval::{
     AssumedInstrument, LayerColumns, Method, Product, Quantity, ReferenceState, Retrieval,
     RetrievalConfig,
 };
-use crate::returns::{Order, Returns};
+use crate::returns::Order;
 use crate::rng::{self, Stream};
 use crate::scene::Scene;
 use crate::spectroscopy::LayerDepthMemo;

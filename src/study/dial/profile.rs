@@ -6,8 +6,6 @@ use super::*;
 /// Line returns and signals of one truth.
 struct Measured {
     scene: Scene,
-    /// The channels' returns (analytic only), for truths whose channels are a subset.
-    channels: Option<Returns>,
     lines: LineReturns,
     signals: Signals,
 }
@@ -54,65 +52,88 @@ impl Study<'_> {
         .map_err(|e| e.to_string())
     }
 
-    /// The expected returns and signals of `scene` (a truth); with photons, traced from the
-    /// profile's `seed` (every truth of one profile on the same photons).
-    fn measure(
+    /// The expected returns and signals of the truths `scenes` (the scene's laser and its
+    /// perturbations on one profile; `None` where a perturbation does not apply), in order.
+    /// With photons each is traced from the profile's `seed` (every truth of one profile on the
+    /// same photons). Analytic: one optical atmosphere and one lidar equation for the channels
+    /// of all of them, each channel once (a channel's analytic return depends on its wavenumber
+    /// and its line alone), each truth's channels picked from them.
+    fn measure_all(
         &self,
-        mut scene: Scene,
+        scenes: Vec<Option<Scene>>,
         seed: u64,
         memo: &mut LayerDepthMemo,
-    ) -> Result<Measured, String> {
-        // The study's photons, from the profile's seed (every truth of one profile on the same
-        // photons).
-        scene.simulation.photons = self.options.photons;
-        scene.simulation.seed = seed;
+    ) -> Result<Vec<Option<Measured>>, String> {
+        let scenes: Vec<Option<Scene>> = scenes
+            .into_iter()
+            .map(|s| {
+                s.map(|mut s| {
+                    s.simulation.photons = self.options.photons;
+                    s.simulation.seed = seed;
+                    s
+                })
+            })
+            .collect();
+        if self.options.photons > 0 {
+            return scenes
+                .into_iter()
+                .map(|s| s.map(|s| self.trace(s, memo)).transpose())
+                .collect();
+        }
+        let Some(first) = scenes.iter().flatten().next() else {
+            return Ok(scenes.into_iter().map(|_| None).collect());
+        };
+        let same = |a: &SampledChannel, b: &SampledChannel| {
+            a.line == b.line && a.wavenumber_cm1.to_bits() == b.wavenumber_cm1.to_bits()
+        };
+        let mut all = first.sampling.channels.clone();
+        let mut extra = Vec::new();
+        for c in scenes.iter().flatten().flat_map(|s| &s.sampling.channels) {
+            if !all.iter().any(|a| same(a, c)) {
+                all.push(c.clone());
+                extra.push(c.clone());
+            }
+        }
+        let union = first
+            .with_extra_channels(&extra)
+            .ok_or("a truth samples a line the scene does not have")?;
+        let optics = Clock::time(&self.clock.truth_optics, || {
+            OpticalAtmosphere::build_with(&union, memo).map_err(|e| e.to_string())
+        })?;
+        let analytic = Clock::time(&self.clock.returns, || {
+            lidar_eq::single_scatter(&union, &optics)
+        });
+        scenes
+            .into_iter()
+            .map(|s| {
+                s.map(|s| {
+                    Clock::time(&self.clock.returns, || {
+                        let index: Vec<usize> = s
+                            .sampling
+                            .channels
+                            .iter()
+                            .map(|c| all.iter().position(|a| same(a, c)))
+                            .collect::<Option<_>>()
+                            .ok_or("a truth's channel is not among the channels computed")?;
+                        let channels = analytic.channel_subset(&index);
+                        let lines = s.sampling.combine(&channels);
+                        with_signals(s, lines, Order::Exactly(1))
+                    })
+                })
+                .transpose()
+            })
+            .collect()
+    }
+
+    /// The Monte Carlo returns and signals of one truth `scene` (its photons and seed set).
+    fn trace(&self, scene: Scene, memo: &mut LayerDepthMemo) -> Result<Measured, String> {
         let optics = Clock::time(&self.clock.truth_optics, || {
             OpticalAtmosphere::build_with(&scene, memo).map_err(|e| e.to_string())
         })?;
         Clock::time(&self.clock.returns, || {
-            let (channels, lines, order) = if self.options.photons > 0 {
-                let (_, lines) =
-                    pipeline::trace_lines(&scene, &optics).map_err(|e| e.to_string())?;
-                (None, lines.ok_or("no combined returns")?, Order::Total)
-            } else {
-                let analytic = lidar_eq::single_scatter(&scene, &optics);
-                let lines = scene.sampling.combine(&analytic);
-                (Some(analytic), lines, Order::Exactly(1))
-            };
-            with_signals(scene, channels, lines, order)
+            let (_, lines) = pipeline::trace_lines(&scene, &optics).map_err(|e| e.to_string())?;
+            with_signals(scene, lines.ok_or("no combined returns")?, Order::Total)
         })
-    }
-
-    /// The truth `scene` (another laser on `base`'s profile): from `base`'s channel returns
-    /// when it samples only wavenumbers `base` has (a laser without jitter or impurity: the
-    /// analytic return of a channel depends on its wavenumber and its line alone), else anew.
-    fn measure_like(
-        &self,
-        base: &Measured,
-        scene: Scene,
-        seed: u64,
-        memo: &mut LayerDepthMemo,
-    ) -> Result<Measured, String> {
-        let subset = base.channels.as_ref().and_then(|r| {
-            let index: Option<Vec<usize>> = scene
-                .sampling
-                .channels
-                .iter()
-                .map(|c| {
-                    base.scene.sampling.channels.iter().position(|b| {
-                        b.line == c.line && b.wavenumber_cm1.to_bits() == c.wavenumber_cm1.to_bits()
-                    })
-                })
-                .collect();
-            index.map(|i| r.channel_subset(&i))
-        });
-        match subset {
-            Some(channels) => Clock::time(&self.clock.returns, || {
-                let lines = scene.sampling.combine(&channels);
-                with_signals(scene, Some(channels), lines, Order::Exactly(1))
-            }),
-            None => self.measure(scene, seed, memo),
-        }
     }
 
     /// The retrieval set-up of the truth `m` with `reference`: its paths through the reference
@@ -252,22 +273,25 @@ impl Study<'_> {
             spectral_purity: 1.0,
             ..laser.clone()
         });
-        let base = self.measure(scene, seed, &mut memo)?;
-        let mut variant = |l: Option<Laser>| -> Result<Option<Measured>, String> {
-            match l {
-                None => Ok(None),
-                Some(l) => {
-                    let s = base.scene.with_laser(l).map_err(|e| e.to_string())?;
-                    self.measure_like(&base, s, seed, &mut memo).map(Some)
-                }
-            }
+        let variant = |l: Option<Laser>| -> Result<Option<Scene>, String> {
+            l.map(|l| scene.with_laser(l).map_err(|e| e.to_string()))
+                .transpose()
         };
-        let lasers = [
+        let variants = [
             variant(Some(offset))?,
             variant(no_jitter)?,
             variant(wider)?,
             variant(pure)?,
         ];
+        let mut measured = self
+            .measure_all(
+                std::iter::once(Some(scene)).chain(variants).collect(),
+                seed,
+                &mut memo,
+            )?
+            .into_iter();
+        let base = measured.next().flatten().ok_or("no truth measured")?;
+        let lasers: Vec<Option<Measured>> = measured.collect();
         let one = |reference: ReferenceState| -> Result<Vec<Vec<Product>>, String> {
             self.retrieve(&mut self.retrieval(&base, reference, &truth, seed)?, &base)
         };
@@ -365,19 +389,13 @@ fn check_records(records: &mut [Record], monte_carlo: bool) -> Result<(), String
 }
 
 /// Signals of a truth's line returns through its receiver.
-fn with_signals(
-    scene: Scene,
-    channels: Option<Returns>,
-    lines: LineReturns,
-    order: Order,
-) -> Result<Measured, String> {
+fn with_signals(scene: Scene, lines: LineReturns, order: Order) -> Result<Measured, String> {
     if scene.receiver.is_none() {
         return Err("no receiver".into());
     }
     let signals = pipeline::signals_of(&scene, &lines, order).ok_or("no signals of the returns")?;
     Ok(Measured {
         scene,
-        channels,
         lines,
         signals,
     })
