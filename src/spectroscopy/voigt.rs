@@ -108,7 +108,12 @@ pub fn add_re_w(nu_cm1: &[f64], centre_cm1: f64, cx: f64, y: f64, scale: f64, ac
     while i < nu_cm1.len() {
         let terms = branch(nu_cm1[i]);
         let side_end = if i < centre { centre } else { nu_cm1.len() };
-        let j = i + nu_cm1[i..side_end].partition_point(|&nu| branch(nu) == terms);
+        // Most often (a line far from every wavenumber) the whole side is one run.
+        let j = if branch(nu_cm1[side_end - 1]) == terms {
+            side_end
+        } else {
+            i + nu_cm1[i..side_end].partition_point(|&nu| branch(nu) == terms)
+        };
         let (nus, out) = (&nu_cm1[i..j], &mut acc[i..j]);
         if terms == 0 {
             for (a, nu) in out.iter_mut().zip(nus) {
