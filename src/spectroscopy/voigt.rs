@@ -120,28 +120,50 @@ pub fn add_re_w(nu_cm1: &[f64], centre_cm1: f64, cx: f64, y: f64, scale: f64, ac
                 *a += scale * re_w_exact(x(*nu), y);
             }
         } else {
-            let whole = nus.len() / LANES * LANES;
-            for (nus, out) in nus.chunks_exact(LANES).zip(out.chunks_exact_mut(LANES)) {
-                let v = re_w_asymptotic_lanes(std::array::from_fn(|k| x(nus[k])), y, terms);
-                for k in 0..LANES {
-                    out[k] += scale * v[k];
-                }
-            }
-            for (a, nu) in out[whole..].iter_mut().zip(&nus[whole..]) {
-                *a += scale * re_w_asymptotic(x(*nu), y, terms);
-            }
+            // The number of terms as a constant: the Horner loop unrolled.
+            let run = match terms {
+                1 => add_asymptotic_run::<1>,
+                2 => add_asymptotic_run::<2>,
+                3 => add_asymptotic_run::<3>,
+                4 => add_asymptotic_run::<4>,
+                _ => add_asymptotic_run::<7>,
+            };
+            debug_assert!([1, 2, 3, 4, 7].contains(&terms));
+            run(nus, centre_cm1, cx, y, scale, out);
         }
         i = j;
+    }
+}
+
+/// `acc[i] += scale · re_w_asymptotic(xᵢ, y, N)` over a run ([`add_re_w`]).
+fn add_asymptotic_run<const N: u32>(
+    nu_cm1: &[f64],
+    centre_cm1: f64,
+    cx: f64,
+    y: f64,
+    scale: f64,
+    acc: &mut [f64],
+) {
+    let x = |nu: f64| (nu - centre_cm1) * cx;
+    let whole = nu_cm1.len() / LANES * LANES;
+    for (nus, out) in nu_cm1.chunks_exact(LANES).zip(acc.chunks_exact_mut(LANES)) {
+        let v = re_w_asymptotic_lanes::<N>(std::array::from_fn(|k| x(nus[k])), y);
+        for k in 0..LANES {
+            out[k] += scale * v[k];
+        }
+    }
+    for (a, nu) in acc[whole..].iter_mut().zip(&nu_cm1[whole..]) {
+        *a += scale * re_w_asymptotic(x(*nu), y, N);
     }
 }
 
 /// Width of the blocks of [`add_re_w`].
 const LANES: usize = 4;
 
-/// [`re_w_asymptotic`] at `LANES` arguments with one y and one number of terms: the
-/// operations of [`asymptotic_series`] lane by lane.
+/// [`re_w_asymptotic`] at `LANES` arguments with one y and `N` terms: the operations of
+/// [`asymptotic_series`] lane by lane.
 #[inline(always)]
-fn re_w_asymptotic_lanes(x: [f64; LANES], y: f64, n: u32) -> [f64; LANES] {
+fn re_w_asymptotic_lanes<const N: u32>(x: [f64; LANES], y: f64) -> [f64; LANES] {
     let mut zr = [0.0; LANES];
     let mut zi = [0.0; LANES];
     let mut ur = [0.0; LANES];
@@ -155,7 +177,7 @@ fn re_w_asymptotic_lanes(x: [f64; LANES], y: f64, n: u32) -> [f64; LANES] {
     }
     let mut sr = [1.0; LANES];
     let mut si = [0.0; LANES];
-    for t in (1..=n).rev() {
+    for t in (1..=N).rev() {
         let c = (2 * t - 1) as f64;
         for k in 0..LANES {
             let (pr, pi) = (ur[k] * sr[k] - ui[k] * si[k], ur[k] * si[k] + ui[k] * sr[k]);

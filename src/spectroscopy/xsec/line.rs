@@ -12,7 +12,7 @@ use crate::spectroscopy::tips::partition_sum;
 use crate::spectroscopy::voigt::{SQRT_LN2, SQRT_LN2_OVER_PI, add_re_w, re_w, re_w_exact, w_fast};
 
 /// One line's parameters at a given state.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub(super) struct Prepared {
     /// Unshifted HITRAN centre ν₀ [cm⁻¹] (the list is sorted by it).
     pub(super) nu0: f64,
@@ -44,17 +44,17 @@ pub(super) struct Prepared {
 }
 
 /// How a prepared line departs from the Voigt.
-// The prepared lines sit in one vector the hot loops walk; a boxed variant would add an
-// indirection per evaluation for the sake of the Voigt lines' size.
-#[allow(clippy::large_enum_variant)]
-#[derive(Debug, Clone, Copy)]
+// Boxed: a line's state is prepared once per layer and kept ([`super::PreparedLines`]), and
+// in place the beyond-Voigt variant made every line, Voigt or not, a few hundred bytes to
+// write, copy and keep; its one indirection per evaluation is small against the profile's.
+#[derive(Debug, Clone)]
 enum Beyond {
     /// The Voigt.
     No,
     /// The Voigt with first-order line mixing Y.
     Mixing(f64),
     /// The Hartmann-Tran profile (and its limits).
-    Ht(HtLine),
+    Ht(Box<HtLine>),
 }
 
 /// A beyond-Voigt line: its parameters, S(T), line mixing Y, and its far-wing form for the
@@ -253,7 +253,7 @@ pub(super) fn prepare(
                 let hart = opts.line_shape == LineShapeModel::HartmannTran;
                 let delta2 = if opts.line_shift { c.delta2 } else { 0.0 };
                 spread = SPEED_SPREAD * c.gamma2.hypot(delta2);
-                Beyond::Ht(HtLine::new(
+                Beyond::Ht(Box::new(HtLine::new(
                     HtParameters {
                         nu0: l.nu_cm1,
                         gamma_d,
@@ -268,7 +268,7 @@ pub(super) fn prepare(
                     y_mix,
                     nu_c,
                     HT_WING_WIDTHS * gamma_l.max(gamma_d) + spread,
-                ))
+                )))
             }
             // No speed dependence (and for HT no Dicke narrowing): the Voigt itself.
             _ if y_mix != 0.0 => Beyond::Mixing(y_mix),
