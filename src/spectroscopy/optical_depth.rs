@@ -178,6 +178,14 @@ impl LayerDepthMemo {
                 self.lists.len() - 1
             }
         };
+        // The wavenumbers asked for, sorted and each once, and where each request sits in them.
+        let mut wanted: Vec<f64> = wavenumbers_cm1.to_vec();
+        wanted.sort_by(f64::total_cmp);
+        wanted.dedup_by(|a, b| a.to_bits() == b.to_bits());
+        let at: Vec<usize> = wavenumbers_cm1
+            .iter()
+            .map(|nu| wanted.partition_point(|v| v.total_cmp(nu).is_lt()))
+            .collect();
         let mut out = Vec::with_capacity(layers.len());
         for layer in layers.iter() {
             let mut tau = vec![0.0; wavenumbers_cm1.len()];
@@ -188,10 +196,10 @@ impl LayerDepthMemo {
                 }
                 let state = layer.state_for(*gi);
                 let sigma = self
-                    .cross_sections(list, *m, &state, wavenumbers_cm1)
+                    .cross_sections(list, *m, &state, &wanted)
                     .map_err(|e| in_layer(e, layer, profile))?;
-                for (t, s) in tau.iter_mut().zip(sigma) {
-                    *t += s * col;
+                for (t, k) in tau.iter_mut().zip(&at) {
+                    *t += sigma[*k] * col;
                 }
             }
             out.push(tau);
@@ -199,14 +207,15 @@ impl LayerDepthMemo {
         Ok(out)
     }
 
-    /// Cross-sections of molecule `m` of list `list` at `state` and `wavenumbers_cm1`: those
-    /// computed before looked up, the others computed (and checked) together and kept.
+    /// Cross-sections of molecule `m` of list `list` at `state` and at `wanted` (sorted by
+    /// `total_cmp`, each once): those computed before looked up, the others computed (and
+    /// checked) together and kept.
     fn cross_sections(
         &mut self,
         list: usize,
         m: u8,
         state: &GasState,
-        wavenumbers_cm1: &[f64],
+        wanted: &[f64],
     ) -> Result<Vec<f64>, SpectroscopyError> {
         let (lines, opts) = &self.lists[list];
         let key = (
@@ -226,34 +235,54 @@ impl LayerDepthMemo {
                 sigma: Vec::new(),
             }),
         };
-        let find = |nu_cm1: &[f64], nu: f64| nu_cm1.binary_search_by(|v| v.total_cmp(&nu));
-        let mut missing: Vec<f64> = wavenumbers_cm1
-            .iter()
-            .copied()
-            .filter(|nu| find(&entry.nu_cm1, *nu).is_err())
-            .collect();
-        if !missing.is_empty() {
-            missing.sort_by(f64::total_cmp);
-            missing.dedup_by(|a, b| a.to_bits() == b.to_bits());
-            let sigma = entry.lines.cross_section_at(lines, &missing, opts)?;
-            let mut merged: Vec<(f64, f64)> = entry
-                .nu_cm1
-                .iter()
-                .copied()
-                .zip(entry.sigma.iter().copied())
-                .chain(missing.into_iter().zip(sigma))
-                .collect();
-            merged.sort_by(|a, b| a.0.total_cmp(&b.0));
-            (entry.nu_cm1, entry.sigma) = merged.into_iter().unzip();
+        // Both lists sorted: one merge finds what is known and what is missing.
+        let mut known: Vec<Option<f64>> = Vec::with_capacity(wanted.len());
+        let mut missing = Vec::new();
+        let mut j = 0;
+        for nu in wanted {
+            while j < entry.nu_cm1.len() && entry.nu_cm1[j].total_cmp(nu).is_lt() {
+                j += 1;
+            }
+            if j < entry.nu_cm1.len() && entry.nu_cm1[j].to_bits() == nu.to_bits() {
+                known.push(Some(entry.sigma[j]));
+            } else {
+                known.push(None);
+                missing.push(*nu);
+            }
         }
-        Ok(wavenumbers_cm1
-            .iter()
-            .map(|nu| match find(&entry.nu_cm1, *nu) {
-                Ok(i) => entry.sigma[i],
-                // Every wavenumber was just added.
-                Err(_) => f64::NAN,
+        if missing.is_empty() {
+            return Ok(known.into_iter().map(|s| s.unwrap_or(f64::NAN)).collect());
+        }
+        let computed = entry.lines.cross_section_at(lines, &missing, opts)?;
+        let mut computed_iter = computed.iter();
+        let sigma: Vec<f64> = known
+            .into_iter()
+            .map(|s| {
+                s.or_else(|| computed_iter.next().copied())
+                    .unwrap_or(f64::NAN)
             })
-            .collect())
+            .collect();
+        // Keep them: the union of the two sorted lists, merged.
+        let (mut nu_all, mut sigma_all) = (
+            Vec::with_capacity(entry.nu_cm1.len() + missing.len()),
+            Vec::with_capacity(entry.nu_cm1.len() + missing.len()),
+        );
+        let (mut a, mut b) = (0, 0);
+        while a < entry.nu_cm1.len() || b < missing.len() {
+            let take_old = b == missing.len()
+                || (a < entry.nu_cm1.len() && entry.nu_cm1[a].total_cmp(&missing[b]).is_lt());
+            if take_old {
+                nu_all.push(entry.nu_cm1[a]);
+                sigma_all.push(entry.sigma[a]);
+                a += 1;
+            } else {
+                nu_all.push(missing[b]);
+                sigma_all.push(computed[b]);
+                b += 1;
+            }
+        }
+        (entry.nu_cm1, entry.sigma) = (nu_all, sigma_all);
+        Ok(sigma)
     }
 }
 

@@ -82,8 +82,8 @@ fn asymptotic_series(x: f64, y: f64, n: u32) -> ((f64, f64), (f64, f64)) {
     ((zr, zi), (sr, si))
 }
 
-/// `acc[i] += scale · re_w(xᵢ, y)` for the detunings `nu_cm1[i]` of one line,
-/// xᵢ = (νᵢ − `centre_cm1`)·`cx`: bit for bit what [`re_w`] gives one by one (the same
+/// `acc[i] += scale · re_w(xᵢ, y)` for the wavenumbers `nu_cm1[i]` (sorted; else evaluated one
+/// by one) of one line, xᵢ = (νᵢ − `centre_cm1`)·`cx`: bit for bit what [`re_w`] gives one by one (the same
 /// operations in the same order), evaluated over runs of arguments that take the same branch
 /// and number of terms, in fixed-width blocks the compiler vectorises. A line's wing, most of
 /// a line-by-line sum's work, is such a run over every wavenumber of a channel cluster.
@@ -102,7 +102,13 @@ pub fn add_re_w(nu_cm1: &[f64], centre_cm1: f64, cx: f64, y: f64, scale: f64, ac
             asymptotic_terms(r2)
         }
     };
-    debug_assert!(nu_cm1.is_sorted());
+    if !nu_cm1.is_sorted() {
+        // Unsorted (not a line-by-line caller's): one at a time.
+        for (a, nu) in acc.iter_mut().zip(nu_cm1) {
+            *a += scale * re_w(x(*nu), y);
+        }
+        return;
+    }
     let centre = nu_cm1.partition_point(|&nu| x(nu) < 0.0);
     let mut i = 0;
     while i < nu_cm1.len() {

@@ -378,26 +378,32 @@ fn direct_sum(prepared: &[Prepared], wavenumbers_cm1: &[f64], opts: &LblOptions)
 
 /// [`direct_sum`] of one block, line by line.
 fn line_major_sum(prepared: &[Prepared], wavenumbers_cm1: &[f64], opts: &LblOptions) -> Vec<f64> {
-    let w = opts.wing_cm1;
-    let exact = opts.voigt == VoigtMethod::Exact;
-    // Sorted, so that each line's window is one slice. A wavenumber that is not finite is in
-    // no window: its sum is 0.
+    let add_lines = |sorted: &[f64]| -> Vec<f64> {
+        let w = opts.wing_cm1;
+        let exact = opts.voigt == VoigtMethod::Exact;
+        let mut acc = vec![0.0; sorted.len()];
+        for p in prepared {
+            // The window ν_w − W < ν ≤ ν_w + W (`Prepared::in_window`).
+            let lo = sorted.partition_point(|&v| v <= p.nu_w - w);
+            let hi = sorted.partition_point(|&v| v <= p.nu_w + w);
+            if lo < hi {
+                p.add_evals(&sorted[lo..hi], exact, &mut acc[lo..hi]);
+            }
+        }
+        acc
+    };
+    // Sorted, so that each line's window is one slice (most callers ask in order). A
+    // wavenumber that is not finite is in no window: its sum is 0.
+    if wavenumbers_cm1.iter().all(|v| v.is_finite()) && wavenumbers_cm1.is_sorted() {
+        return add_lines(wavenumbers_cm1);
+    }
     let mut order: Vec<usize> = (0..wavenumbers_cm1.len())
         .filter(|&i| wavenumbers_cm1[i].is_finite())
         .collect();
     order.sort_by(|&a, &b| wavenumbers_cm1[a].total_cmp(&wavenumbers_cm1[b]));
     let sorted: Vec<f64> = order.iter().map(|&i| wavenumbers_cm1[i]).collect();
-    let mut acc = vec![0.0; sorted.len()];
-    for p in prepared {
-        // The window ν_w − W < ν ≤ ν_w + W (`Prepared::in_window`).
-        let lo = sorted.partition_point(|&v| v <= p.nu_w - w);
-        let hi = sorted.partition_point(|&v| v <= p.nu_w + w);
-        if lo < hi {
-            p.add_evals(&sorted[lo..hi], exact, &mut acc[lo..hi]);
-        }
-    }
     let mut out = vec![0.0; wavenumbers_cm1.len()];
-    for (i, a) in order.into_iter().zip(acc) {
+    for (i, a) in order.into_iter().zip(add_lines(&sorted)) {
         out[i] = a;
     }
     out

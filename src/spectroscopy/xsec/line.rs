@@ -205,9 +205,10 @@ pub(super) fn prepare(
     } else {
         0.0
     };
-    // Q(T) and Q(296) per isotopologue, looked up once.
-    let mut q_cache: Vec<((u8, u8), f64, f64, f64)> = Vec::new();
-    let mut out = Vec::new();
+    // Q(T), Q(296) and the Doppler factor per isotopologue, worked out once.
+    let mut q_cache: Vec<IsoConstants> = Vec::new();
+    // No regrowth: a line's state is written once.
+    let mut out = Vec::with_capacity(lines.lines.len());
     for (index, l) in lines
         .lines
         .iter()
@@ -215,7 +216,12 @@ pub(super) fn prepare(
         .filter(|(_, l)| l.molecule_id == molecule_id)
     {
         let key = (l.molecule_id, l.iso_id);
-        let (q_t, q_ref, mass) = iso_constants(&mut q_cache, key, t, conv)?;
+        let IsoConstants {
+            q_t,
+            q_ref,
+            doppler,
+            ..
+        } = iso_constants(&mut q_cache, key, t, conv)?;
         if l.sw_cm_per_molecule == 0.0 {
             continue;
         }
@@ -224,10 +230,7 @@ pub(super) fn prepare(
             / (-c2 * l.elower_cm1 / T_REF).exp()
             * (1.0 - (-c2 * l.nu_cm1 / t).exp())
             / (1.0 - (-c2 * l.nu_cm1 / T_REF).exp());
-        let gamma_d = l.nu_cm1
-            * (2.0 * conv.boltzmann_j_per_k * t * std::f64::consts::LN_2
-                / (mass * conv.speed_of_light_m_per_s * conv.speed_of_light_m_per_s))
-                .sqrt();
+        let gamma_d = l.nu_cm1 * doppler;
         let (gamma_l, shift, ht) = line_collisional(lines, l, state, opts, p_atm, p_self, t)?;
         let nu_c = if opts.line_shift {
             l.nu_cm1 + shift
@@ -300,16 +303,26 @@ pub(super) fn prepare(
 /// The reference temperature of HITRAN's intensities and widths \[K\].
 const T_REF: f64 = 296.0;
 
-/// One isotopologue's (Q(T), Q(296), mass \[kg\]) at temperature `t`, looked up once per
-/// isotopologue in `q_cache`.
+/// One isotopologue's Q(T), Q(296) and Doppler width per unit wavenumber at temperature `t`.
+#[derive(Debug, Clone, Copy)]
+struct IsoConstants {
+    key: (u8, u8),
+    q_t: f64,
+    q_ref: f64,
+    /// sqrt(2kT ln2/(mc²)): γ_D = ν₀ times this.
+    doppler: f64,
+}
+
+/// [`IsoConstants`] of isotopologue `key` at temperature `t`, looked up once per isotopologue
+/// in `q_cache`.
 fn iso_constants(
-    q_cache: &mut Vec<((u8, u8), f64, f64, f64)>,
+    q_cache: &mut Vec<IsoConstants>,
     key: (u8, u8),
     t: f64,
     conv: &Conventions,
-) -> Result<(f64, f64, f64), SpectroscopyError> {
-    match q_cache.iter().find(|c| c.0 == key) {
-        Some(c) => Ok((c.1, c.2, c.3)),
+) -> Result<IsoConstants, SpectroscopyError> {
+    match q_cache.iter().find(|c| c.key == key) {
+        Some(c) => Ok(*c),
         None => {
             let iso =
                 Isotopologue::get(key.0, key.1).ok_or_else(|| SpectroscopyError::PartitionSum {
@@ -318,14 +331,17 @@ fn iso_constants(
                     temperature_k: t,
                     reason: "unknown isotopologue".into(),
                 })?;
-            let c = (
+            let mass = iso.mass_g_per_mol * conv.atomic_mass_kg;
+            let c = IsoConstants {
                 key,
-                partition_sum(key.0, key.1, t)?,
-                partition_sum(key.0, key.1, T_REF)?,
-                iso.mass_g_per_mol * conv.atomic_mass_kg,
-            );
+                q_t: partition_sum(key.0, key.1, t)?,
+                q_ref: partition_sum(key.0, key.1, T_REF)?,
+                doppler: (2.0 * conv.boltzmann_j_per_k * t * std::f64::consts::LN_2
+                    / (mass * conv.speed_of_light_m_per_s * conv.speed_of_light_m_per_s))
+                    .sqrt(),
+            };
             q_cache.push(c);
-            Ok((c.1, c.2, c.3))
+            Ok(c)
         }
     }
 }
