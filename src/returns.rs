@@ -194,26 +194,29 @@ impl Returns {
             self.range_m.clone(),
             self.orders.clone(),
         );
+        let bins = self.bins_per_channel();
         for (j, c) in combos.iter().enumerate() {
-            let finite = c.terms.iter().all(|(_, ca)| ca.is_finite());
+            // Term by term over the channel's bins: each bin's sum in term order, from 0.
+            let e = &mut out.energy_j[j * bins..(j + 1) * bins];
+            for (a, ca) in &c.terms {
+                for (e, v) in e.iter_mut().zip(&self.energy_j[a * bins..(a + 1) * bins]) {
+                    *e += ca * v;
+                }
+            }
+            // Every term without error in every bin (analytic returns): every covariance is 0,
+            // so the variance below is +0 and the error 0, as `zeros` left it.
+            if c.terms.iter().all(|(_, ca)| ca.is_finite())
+                && c.terms.iter().all(|(a, _)| {
+                    self.stderr_j[a * bins..(a + 1) * bins]
+                        .iter()
+                        .all(|s| *s == 0.0)
+                })
+            {
+                continue;
+            }
             for f in 0..self.fov_full_angle_mrad.len() {
                 for g in 0..self.range_m.len() {
                     for o in 0..self.orders.len() {
-                        let mut e = 0.0;
-                        for (a, ca) in &c.terms {
-                            e += ca * self.energy_j[self.index(*a, f, g, o)];
-                        }
-                        let i = out.index(j, f, g, o);
-                        out.energy_j[i] = e;
-                        // Every term without error (analytic returns): every covariance is 0,
-                        // so the sum below is +0 and the error 0, as `zeros` left it.
-                        if finite
-                            && c.terms
-                                .iter()
-                                .all(|(a, _)| self.stderr_j[self.index(*a, f, g, o)] == 0.0)
-                        {
-                            continue;
-                        }
                         let mut var = 0.0;
                         for (a, ca) in &c.terms {
                             for (b, cb) in &c.terms {
@@ -222,6 +225,7 @@ impl Returns {
                                     * self.covariance_j2(*a, *b, f, g, o).unwrap_or(f64::NAN);
                             }
                         }
+                        let i = out.index(j, f, g, o);
                         out.stderr_j[i] = var.max(0.0).sqrt();
                         if var.is_nan() {
                             out.stderr_j[i] = f64::NAN;

@@ -50,14 +50,15 @@ impl LayerColumns {
     }
 
     /// [`Self::new`] from the Curtis-Godson layers `cg` of `profile` on `edges_m`, computed
-    /// before.
+    /// before (with `gas` and water vapour at least, [`LayerDepthMemo::layers`]).
     pub fn of_layers(
         profile: &Profile,
         edges_m: &[f64],
         cg: &[CgLayer],
         gas: &str,
     ) -> Result<Self, RetrievalError> {
-        let index = |name: &str| profile.gases.iter().position(|g| g.name == name);
+        let names = cg.first().map_or(&[][..], |l| &l.gas_names[..]);
+        let index = |name: &str| names.iter().position(|g| g == name);
         let gi = index(gas).ok_or_else(|| {
             RetrievalError::Gas(format!("the profile `{}` has no {gas}", profile.name))
         })?;
@@ -221,8 +222,12 @@ impl ReferenceState {
                     .map(move |q| l.wavenumber_cm1 + q.offset_mhz / MHZ_PER_CM1)
             })
             .collect();
-        let columns =
-            LayerColumns::of_layers(profile, edges_m, &memo.layers(profile, edges_m)?, gas)?;
+        let columns = LayerColumns::of_layers(
+            profile,
+            edges_m,
+            &memo.layers(profile, edges_m, &[gas])?,
+            gas,
+        )?;
         let mut per_layer = |ls: &LineList| -> Result<Vec<Vec<Vec<f64>>>, RetrievalError> {
             let t = if ls.is_empty() {
                 vec![vec![0.0; nus.len()]; edges_m.len() - 1]

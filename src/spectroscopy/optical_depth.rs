@@ -12,7 +12,7 @@ use std::collections::HashMap;
 use std::sync::Arc;
 
 use super::SpectroscopyError;
-use super::layers::{CgLayer, curtis_godson_layers, line_gases};
+use super::layers::{CgLayer, check_profile, curtis_godson_layers, line_gases};
 use super::lines::LineList;
 use super::xsec::{GasState, LblOptions, PreparedLines, cross_section_at};
 use crate::atmosphere::Profile;
@@ -117,8 +117,8 @@ pub fn layer_optical_depths_at(
 /// states and wavenumbers asked for: keep one memo per unit of work (an ensemble member).
 #[derive(Debug, Default)]
 pub struct LayerDepthMemo {
-    /// Curtis-Godson layers of each (profile, edges) asked for.
-    layers: Vec<(Profile, Vec<f64>, Arc<Vec<CgLayer>>)>,
+    /// Curtis-Godson layers of each (profile, edges, gases kept) asked for.
+    layers: Vec<(Profile, Vec<f64>, Vec<bool>, Arc<Vec<CgLayer>>)>,
     /// The (line list, options) pairs asked for; their index keys `states`.
     lists: Vec<(LineList, LblOptions)>,
     /// Per (list, molecule, state bit for bit): the prepared lines and the cross-sections
@@ -141,22 +141,45 @@ impl LayerDepthMemo {
         Self::default()
     }
 
-    /// [`curtis_godson_layers`] of `profile` on `edges_m`, computed once per distinct pair.
+    /// [`curtis_godson_layers`] of `profile` on `edges_m` for the gases `gases` (and water
+    /// vapour, whose share of the air the integration needs), computed once per distinct
+    /// (profile, edges, gases); the profile is checked whole, as [`curtis_godson_layers`] checks
+    /// it. Every value is that of the layers of the whole profile, bit for bit (a gas's column
+    /// depends on its own and the water vapour's mixing ratios alone), but the layers hold only
+    /// those gases: look a gas up by name in [`CgLayer::gas_names`]. A profile of many gases
+    /// (the AFGL sets carry seven) costs a fraction.
     pub fn layers(
         &mut self,
         profile: &Profile,
         edges_m: &[f64],
+        gases: &[&str],
     ) -> Result<Arc<Vec<CgLayer>>, SpectroscopyError> {
-        if let Some((_, _, l)) = self
+        let keep: Vec<bool> = profile
+            .gases
+            .iter()
+            .map(|g| g.name == "H2O" || gases.contains(&g.name.as_str()))
+            .collect();
+        if let Some((_, _, _, l)) = self
             .layers
             .iter()
-            .find(|(p, e, _)| e.as_slice() == edges_m && p == profile)
+            .find(|(p, e, k, _)| *k == keep && e.as_slice() == edges_m && p == profile)
         {
             return Ok(l.clone());
         }
-        let l = Arc::new(curtis_godson_layers(profile, edges_m)?);
+        check_profile(profile)?;
+        let reduced = Profile {
+            gases: profile
+                .gases
+                .iter()
+                .zip(&keep)
+                .filter(|(_, k)| **k)
+                .map(|(g, _)| g.clone())
+                .collect(),
+            ..profile.clone()
+        };
+        let l = Arc::new(curtis_godson_layers(&reduced, edges_m)?);
         self.layers
-            .push((profile.clone(), edges_m.to_vec(), l.clone()));
+            .push((profile.clone(), edges_m.to_vec(), keep, l.clone()));
         Ok(l)
     }
 
@@ -169,8 +192,21 @@ impl LayerDepthMemo {
         wavenumbers_cm1: &[f64],
         opts: &LblOptions,
     ) -> Result<Vec<Vec<f64>>, SpectroscopyError> {
-        let layers = self.layers(profile, edges_m)?;
         let gases = line_gases(profile, lines)?;
+        let names: Vec<&str> = gases
+            .iter()
+            .map(|(_, gi)| profile.gases[*gi].name.as_str())
+            .collect();
+        let layers = self.layers(profile, edges_m, &names)?;
+        // Each line gas's index in the layers.
+        let gases: Vec<(u8, usize)> = gases
+            .iter()
+            .zip(&names)
+            .filter_map(|((m, _), name)| {
+                let at = layers.first()?.gas_names.iter().position(|n| n == name)?;
+                Some((*m, at))
+            })
+            .collect();
         let list = match self.lists.iter().position(|(l, o)| o == opts && l == lines) {
             Some(i) => i,
             None => {
@@ -335,10 +371,33 @@ mod tests {
             for (g, w) in got.iter().flatten().zip(want.iter().flatten()) {
                 assert_eq!(g.to_bits(), w.to_bits(), "{g} vs {w}");
             }
-            assert_eq!(
-                *memo.layers(profile, edges).unwrap(),
-                curtis_godson_layers(profile, edges).unwrap()
-            );
+            // The layers of a few gases hold the whole profile's values for them.
+            let few = memo.layers(profile, edges, &["CO2"]).unwrap();
+            let all = curtis_godson_layers(profile, edges).unwrap();
+            assert_eq!(few.len(), all.len());
+            for (f, a) in few.iter().zip(&all) {
+                assert_eq!(f.gas_names, ["H2O", "CO2"]);
+                assert_eq!(
+                    (
+                        f.bottom_m,
+                        f.top_m,
+                        f.pressure_pa,
+                        f.temperature_k,
+                        f.air_column_per_cm2
+                    ),
+                    (
+                        a.bottom_m,
+                        a.top_m,
+                        a.pressure_pa,
+                        a.temperature_k,
+                        a.air_column_per_cm2
+                    )
+                );
+                for (name, col) in f.gas_names.iter().zip(&f.gas_columns_per_cm2) {
+                    let i = a.gas_names.iter().position(|n| n == name).unwrap();
+                    assert_eq!(col.to_bits(), a.gas_columns_per_cm2[i].to_bits());
+                }
+            }
         }
     }
 }

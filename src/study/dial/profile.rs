@@ -213,7 +213,7 @@ impl Study<'_> {
         // The profile's line-by-line work, shared by its truths and reference states.
         let mut memo = LayerDepthMemo::new();
         let layers = memo
-            .layers(&profile, &edges)
+            .layers(&profile, &edges, &[&self.config.gas])
             .map_err(|e| crate::retrieval::RetrievalError::from(e).to_string())?;
         let truth = LayerColumns::of_layers(&profile, &edges, &layers, &self.config.gas)
             .map_err(|e| e.to_string())?;
