@@ -252,13 +252,17 @@ impl ReferenceState {
         let n_nodes = self.weights.first().map_or(0, Vec::len);
         let mut t = vec![vec![0.0; n_nodes]; n_lines];
         let mut o = vec![vec![0.0; n_nodes]; n_lines];
+        let m = mu.abs();
         for (l, f) in layer_fractions(&self.columns.edges_m, z_lidar, z) {
-            for k in 0..n_lines {
-                for i in 0..n_nodes {
-                    t[k][i] += f * self.target_tau[l][k][i] / mu.abs();
-                    o[k][i] += f * self.other_tau[l][k][i] / mu.abs();
+            let add = |sum: &mut [Vec<f64>], tau: &[Vec<f64>]| {
+                for (s, tau) in sum.iter_mut().zip(tau) {
+                    for (s, tau) in s.iter_mut().zip(tau) {
+                        *s += f * tau / m;
+                    }
                 }
-            }
+            };
+            add(&mut t, &self.target_tau[l]);
+            add(&mut o, &self.other_tau[l]);
         }
         PathDepths {
             target_fixed: vec![vec![0.0; n_nodes]; n_lines],
