@@ -118,12 +118,22 @@ pub fn layer_optical_depths_at(
 #[derive(Debug, Default)]
 pub struct LayerDepthMemo {
     /// Curtis-Godson layers of each (profile, edges, gases kept) asked for.
-    layers: Vec<(Profile, Vec<f64>, Vec<bool>, Arc<Vec<CgLayer>>)>,
+    layers: Vec<LayersOf>,
     /// The (line list, options) pairs asked for; their index keys `states`.
     lists: Vec<(LineList, LblOptions)>,
     /// Per (list, molecule, state bit for bit): the prepared lines and the cross-sections
     /// computed so far.
     states: HashMap<(usize, u8, [u64; 3]), StateMemo>,
+}
+
+/// The Curtis-Godson layers of a profile on a grid, for some of its gases.
+#[derive(Debug)]
+struct LayersOf {
+    profile: Profile,
+    edges_m: Vec<f64>,
+    /// Which of the profile's gases the layers hold.
+    keep: Vec<bool>,
+    layers: Arc<Vec<CgLayer>>,
 }
 
 /// One layer state's prepared lines and cross-sections, by wavenumber.
@@ -159,12 +169,12 @@ impl LayerDepthMemo {
             .iter()
             .map(|g| g.name == "H2O" || gases.contains(&g.name.as_str()))
             .collect();
-        if let Some((_, _, _, l)) = self
+        if let Some(l) = self
             .layers
             .iter()
-            .find(|(p, e, k, _)| *k == keep && e.as_slice() == edges_m && p == profile)
+            .find(|l| l.keep == keep && l.edges_m == edges_m && l.profile == *profile)
         {
-            return Ok(l.clone());
+            return Ok(l.layers.clone());
         }
         check_profile(profile)?;
         let reduced = Profile {
@@ -178,8 +188,12 @@ impl LayerDepthMemo {
             ..profile.clone()
         };
         let l = Arc::new(curtis_godson_layers(&reduced, edges_m)?);
-        self.layers
-            .push((profile.clone(), edges_m.to_vec(), keep, l.clone()));
+        self.layers.push(LayersOf {
+            profile: profile.clone(),
+            edges_m: edges_m.to_vec(),
+            keep,
+            layers: l.clone(),
+        });
         Ok(l)
     }
 

@@ -491,16 +491,20 @@ mod tests {
                     .collect();
                 nu.sort_by(f64::total_cmp);
                 let start: Vec<f64> = (0..nu.len()).map(|i| 1e-3 * i as f64).collect();
-                let mut acc = start.clone();
-                add_re_w(&nu, centre, cx, y, 2.5, &mut acc);
-                for (i, v) in nu.iter().enumerate() {
-                    let want = start[i] + 2.5 * re_w((v - centre) * cx, y);
-                    assert_eq!(
-                        acc[i].to_bits(),
-                        want.to_bits(),
-                        "ν {v}, y {y}: {} vs {want}",
-                        acc[i]
-                    );
+                // Sorted in runs; reversed, one by one.
+                for _ in 0..2 {
+                    let mut acc = start.clone();
+                    add_re_w(&nu, centre, cx, y, 2.5, &mut acc);
+                    for (i, v) in nu.iter().enumerate() {
+                        let want = start[i] + 2.5 * re_w((v - centre) * cx, y);
+                        assert_eq!(
+                            acc[i].to_bits(),
+                            want.to_bits(),
+                            "ν {v}, y {y}: {} vs {want}",
+                            acc[i]
+                        );
+                    }
+                    nu.reverse();
                 }
             }
         }
