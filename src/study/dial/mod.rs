@@ -362,6 +362,8 @@ pub struct Timing {
     pub truth_optics_s: f64,
     /// Returns: the lidar equation or the Monte Carlo, and signals.
     pub returns_s: f64,
+    /// Of `returns_s`, the Monte Carlo transport (0 without photons; not kept by shards).
+    pub transport_s: f64,
     /// Reference states of each profile and its perturbations (line by line at the nodes).
     pub references_s: f64,
     /// Retrievals (and one noisy measurement each).
@@ -408,6 +410,7 @@ pub enum StudyError {
 struct Clock {
     truth_optics: AtomicU64,
     returns: AtomicU64,
+    transport: AtomicU64,
     references: AtomicU64,
     retrievals: AtomicU64,
 }
@@ -603,6 +606,7 @@ pub fn run_slice(
         mean_references_s,
         truth_optics_s: secs(&study.clock.truth_optics),
         returns_s: secs(&study.clock.returns),
+        transport_s: secs(&study.clock.transport),
         references_s: secs(&study.clock.references),
         retrievals_s: secs(&study.clock.retrievals),
         wall_s: started.elapsed().as_secs_f64(),

@@ -131,7 +131,9 @@ impl Study<'_> {
             OpticalAtmosphere::build_with(&scene, memo).map_err(|e| e.to_string())
         })?;
         Clock::time(&self.clock.returns, || {
-            let (_, lines) = pipeline::trace_lines(&scene, &optics).map_err(|e| e.to_string())?;
+            let (_, lines) = Clock::time(&self.clock.transport, || {
+                pipeline::trace_lines(&scene, &optics).map_err(|e| e.to_string())
+            })?;
             with_signals(scene, lines.ok_or("no combined returns")?, Order::Total)
         })
     }
