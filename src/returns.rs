@@ -150,19 +150,24 @@ impl Returns {
     /// The returns of some channels only, in the given order (with their covariances).
     pub fn channel_subset(&self, channels: &[usize]) -> Returns {
         let bins = self.bins_per_channel();
-        let mut out = Returns::zeros(
-            self.source,
-            channels.iter().map(|k| self.channels[*k].clone()).collect(),
-            self.fov_full_angle_mrad.clone(),
-            self.range_m.clone(),
-            self.orders.clone(),
-        );
-        for (j, k) in channels.iter().enumerate() {
-            out.energy_j[j * bins..(j + 1) * bins]
-                .copy_from_slice(&self.energy_j[k * bins..(k + 1) * bins]);
-            out.stderr_j[j * bins..(j + 1) * bins]
-                .copy_from_slice(&self.stderr_j[k * bins..(k + 1) * bins]);
-        }
+        // Copied channel by channel (no zeroing first: these are large).
+        let pick = |v: &[f64]| -> Vec<f64> {
+            let mut out = Vec::with_capacity(channels.len() * bins);
+            for k in channels {
+                out.extend_from_slice(&v[k * bins..(k + 1) * bins]);
+            }
+            out
+        };
+        let mut out = Returns {
+            source: self.source,
+            channels: channels.iter().map(|k| self.channels[*k].clone()).collect(),
+            fov_full_angle_mrad: self.fov_full_angle_mrad.clone(),
+            range_m: self.range_m.clone(),
+            orders: self.orders.clone(),
+            energy_j: pick(&self.energy_j),
+            stderr_j: pick(&self.stderr_j),
+            covariance: None,
+        };
         out.covariance = self.covariance.as_ref().map(|c| {
             let mut pairs = Vec::new();
             let mut cov_j2 = Vec::new();
