@@ -88,7 +88,27 @@ fn asymptotic_series(x: f64, y: f64, n: u32) -> ((f64, f64), (f64, f64)) {
 /// and number of terms, in fixed-width blocks the compiler vectorises. A line's wing, most of
 /// a line-by-line sum's work, is such a run over every wavenumber of a channel cluster.
 pub fn add_re_w(nu_cm1: &[f64], centre_cm1: f64, cx: f64, y: f64, scale: f64, acc: &mut [f64]) {
+    if !nu_cm1.is_sorted() {
+        // Unsorted (not a line-by-line caller's): one at a time.
+        for (a, nu) in acc.iter_mut().zip(nu_cm1) {
+            *a += scale * re_w((nu - centre_cm1) * cx, y);
+        }
+        return;
+    }
+    add_re_w_sorted(nu_cm1, centre_cm1, cx, y, scale, acc);
+}
+
+/// [`add_re_w`] of wavenumbers the caller knows to be sorted.
+pub(crate) fn add_re_w_sorted(
+    nu_cm1: &[f64],
+    centre_cm1: f64,
+    cx: f64,
+    y: f64,
+    scale: f64,
+    acc: &mut [f64],
+) {
     debug_assert_eq!(nu_cm1.len(), acc.len());
+    debug_assert!(nu_cm1.is_sorted());
     let x = |nu: f64| (nu - centre_cm1) * cx;
     // 0: the exact function; else the expansion's number of terms (re_w's rule). Rounding is
     // monotone, so |x| and r² grow away from the centre: on each side the branch changes at a
@@ -102,14 +122,17 @@ pub fn add_re_w(nu_cm1: &[f64], centre_cm1: f64, cx: f64, y: f64, scale: f64, ac
             asymptotic_terms(r2)
         }
     };
-    if !nu_cm1.is_sorted() {
-        // Unsorted (not a line-by-line caller's): one at a time.
-        for (a, nu) in acc.iter_mut().zip(nu_cm1) {
-            *a += scale * re_w(x(*nu), y);
-        }
+    let Some(last) = nu_cm1.last() else {
         return;
-    }
-    let centre = nu_cm1.partition_point(|&nu| x(nu) < 0.0);
+    };
+    // The sides of the centre; most lines lie beyond every wavenumber on one side.
+    let centre = if *last < centre_cm1 {
+        nu_cm1.len()
+    } else if !(nu_cm1[0] < centre_cm1) {
+        0
+    } else {
+        nu_cm1.partition_point(|&nu| nu < centre_cm1)
+    };
     let mut i = 0;
     while i < nu_cm1.len() {
         let terms = branch(nu_cm1[i]);

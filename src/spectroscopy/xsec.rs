@@ -382,10 +382,25 @@ fn line_major_sum(prepared: &[Prepared], wavenumbers_cm1: &[f64], opts: &LblOpti
         let w = opts.wing_cm1;
         let exact = opts.voigt == VoigtMethod::Exact;
         let mut acc = vec![0.0; sorted.len()];
+        // The windows ν_w − W < ν ≤ ν_w + W (`Prepared::in_window`) as slices: swept along the
+        // lines when their window centres are in order (always about the unshifted centres, by
+        // which the lines are sorted), else found by bisection.
+        let in_order = prepared.windows(2).all(|p| p[0].nu_w <= p[1].nu_w);
+        let (mut lo, mut hi) = (0, 0);
         for p in prepared {
-            // The window ν_w − W < ν ≤ ν_w + W (`Prepared::in_window`).
-            let lo = sorted.partition_point(|&v| v <= p.nu_w - w);
-            let hi = sorted.partition_point(|&v| v <= p.nu_w + w);
+            let (a, b) = (p.nu_w - w, p.nu_w + w);
+            if in_order {
+                while lo < sorted.len() && sorted[lo] <= a {
+                    lo += 1;
+                }
+                hi = hi.max(lo);
+                while hi < sorted.len() && sorted[hi] <= b {
+                    hi += 1;
+                }
+            } else {
+                lo = sorted.partition_point(|&v| v <= a);
+                hi = sorted.partition_point(|&v| v <= b);
+            }
             if lo < hi {
                 p.add_evals(&sorted[lo..hi], exact, &mut acc[lo..hi]);
             }

@@ -9,7 +9,9 @@ use crate::spectroscopy::htp::{HtParameters, HtProfile, hartmann_tran};
 use crate::spectroscopy::isotopologues::Isotopologue;
 use crate::spectroscopy::lines::{Broadener, Line, LineList, ShapeParameters};
 use crate::spectroscopy::tips::partition_sum;
-use crate::spectroscopy::voigt::{SQRT_LN2, SQRT_LN2_OVER_PI, add_re_w, re_w, re_w_exact, w_fast};
+use crate::spectroscopy::voigt::{
+    SQRT_LN2, SQRT_LN2_OVER_PI, add_re_w_sorted, re_w, re_w_exact, w_fast,
+};
 
 /// One line's parameters at a given state.
 #[derive(Debug, Clone)]
@@ -170,11 +172,12 @@ impl Prepared {
         }
         (self.eval(a, exact), self.eval(b, exact))
     }
-    /// `acc[i] += self.eval(nu[i], exact)` for every i, the same values; a plain Voigt line's
-    /// fast path evaluated for all the wavenumbers together ([`add_re_w`]).
+    /// `acc[i] += self.eval(nu[i], exact)` for every i of the sorted wavenumbers `nu`, the
+    /// same values; a plain Voigt line's fast path evaluated for all of them together
+    /// ([`crate::spectroscopy::voigt::add_re_w`]).
     pub(super) fn add_evals(&self, nu: &[f64], exact: bool, acc: &mut [f64]) {
         match self.beyond {
-            Beyond::No if !exact => add_re_w(nu, self.nu_c, self.cx, self.y, self.amp, acc),
+            Beyond::No if !exact => add_re_w_sorted(nu, self.nu_c, self.cx, self.y, self.amp, acc),
             _ => {
                 for (a, v) in acc.iter_mut().zip(nu) {
                     *a += self.eval(*v, exact);
