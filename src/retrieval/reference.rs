@@ -111,34 +111,35 @@ pub struct ReferenceState {
     pub columns: LayerColumns,
     /// Quadrature weights of each line's nominal line shape (sum 1).
     pub weights: Vec<Vec<f64>>,
-    /// Vertical optical depth of the target gas, `[layer][line][node]`.
-    pub target_tau: Vec<Vec<Vec<f64>>>,
-    /// Vertical optical depth of every other gas with lines, `[layer][line][node]`.
-    pub other_tau: Vec<Vec<Vec<f64>>>,
+    /// Vertical optical depth of the target gas, layer by layer, line by line, node by node:
+    /// index [`Self::tau_index`] (one array: a study makes several reference states a profile).
+    pub target_tau: Vec<f64>,
+    /// Vertical optical depth of every other gas with lines, the same index.
+    pub other_tau: Vec<f64>,
 }
 
-/// Slant optical depths from the lidar to one altitude, `[line][node]`: the target gas in a
-/// part held at the reference and a part scaled by s, and the other gases.
+/// Slant optical depths from the lidar to one altitude, line by line, node by node (index
+/// `line · nodes + node`): the target gas in a part held at the reference and a part scaled by
+/// s, and the other gases.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PathDepths {
+    /// Quadrature nodes per line.
+    pub nodes: usize,
     /// Target gas, held fixed.
-    pub target_fixed: Vec<Vec<f64>>,
+    pub target_fixed: Vec<f64>,
     /// Target gas, scaled by s.
-    pub target_scaled: Vec<Vec<f64>>,
+    pub target_scaled: Vec<f64>,
     /// Other gases.
-    pub other: Vec<Vec<f64>>,
+    pub other: Vec<f64>,
 }
 
 impl PathDepths {
     /// The path to `far` with only the part beyond `near` scaled: a DIAL range cell.
     pub fn cell(near: &PathDepths, far: &PathDepths) -> PathDepths {
-        let diff = |a: &Vec<Vec<f64>>, b: &Vec<Vec<f64>>| -> Vec<Vec<f64>> {
-            a.iter()
-                .zip(b)
-                .map(|(x, y)| x.iter().zip(y).map(|(u, v)| v - u).collect())
-                .collect()
-        };
+        let diff =
+            |a: &[f64], b: &[f64]| -> Vec<f64> { a.iter().zip(b).map(|(u, v)| v - u).collect() };
         PathDepths {
+            nodes: near.nodes,
             target_fixed: near.target_scaled.clone(),
             target_scaled: diff(&near.target_scaled, &far.target_scaled),
             other: far.other.clone(),
@@ -228,15 +229,15 @@ impl ReferenceState {
             &memo.layers(profile, edges_m, &[gas])?,
             gas,
         )?;
-        let mut per_layer = |ls: &LineList| -> Result<Vec<Vec<Vec<f64>>>, RetrievalError> {
-            let t = if ls.is_empty() {
-                vec![vec![0.0; nus.len()]; edges_m.len() - 1]
+        // Each layer's row holds its lines' nodes in order: the rows one after another are
+        // the index of `tau_index`.
+        let mut per_layer = |ls: &LineList| -> Result<Vec<f64>, RetrievalError> {
+            Ok(if ls.is_empty() {
+                vec![0.0; nus.len() * (edges_m.len() - 1)]
             } else {
                 memo.layer_optical_depths_at(profile, ls, edges_m, &nus, options)?
-            };
-            Ok(t.into_iter()
-                .map(|row| row.chunks(nodes.len()).map(|c| c.to_vec()).collect())
-                .collect())
+                    .concat()
+            })
         };
         Ok(ReferenceState {
             columns,
@@ -246,26 +247,42 @@ impl ReferenceState {
         })
     }
 
+    /// Lines of the laser.
+    pub fn lines(&self) -> usize {
+        self.weights.len()
+    }
+
+    /// Quadrature nodes of each line.
+    pub fn nodes(&self) -> usize {
+        self.weights.first().map_or(0, Vec::len)
+    }
+
+    /// Index of (layer, line, node) in [`Self::target_tau`] and [`Self::other_tau`].
+    pub fn tau_index(&self, layer: usize, line: usize, node: usize) -> usize {
+        (layer * self.lines() + line) * self.nodes() + node
+    }
+
     /// Slant optical depths along a path from altitude `z_lidar` to `z` with direction cosine μ.
     pub fn path(&self, z_lidar: f64, z: f64, mu: f64) -> PathDepths {
-        let n_lines = self.weights.len();
-        let n_nodes = self.weights.first().map_or(0, Vec::len);
-        let mut t = vec![vec![0.0; n_nodes]; n_lines];
-        let mut o = vec![vec![0.0; n_nodes]; n_lines];
+        let n = self.lines() * self.nodes();
+        let mut t = vec![0.0; n];
+        let mut o = vec![0.0; n];
         let m = mu.abs();
         for (l, f) in layer_fractions(&self.columns.edges_m, z_lidar, z) {
-            let add = |sum: &mut [Vec<f64>], tau: &[Vec<f64>]| {
-                for (s, tau) in sum.iter_mut().zip(tau) {
-                    for (s, tau) in s.iter_mut().zip(tau) {
-                        *s += f * tau / m;
-                    }
+            let add = |sum: &mut [f64], tau: &[f64]| {
+                for (s, tau) in sum
+                    .iter_mut()
+                    .zip(tau.get(l * n..(l + 1) * n).unwrap_or(&[]))
+                {
+                    *s += f * tau / m;
                 }
             };
-            add(&mut t, &self.target_tau[l]);
-            add(&mut o, &self.other_tau[l]);
+            add(&mut t, &self.target_tau);
+            add(&mut o, &self.other_tau);
         }
         PathDepths {
-            target_fixed: vec![vec![0.0; n_nodes]; n_lines],
+            nodes: self.nodes(),
+            target_fixed: vec![0.0; n],
             target_scaled: t,
             other: o,
         }
@@ -275,11 +292,13 @@ impl ReferenceState {
     pub fn transmission2(&self, p: &PathDepths, line: usize, s: f64) -> (f64, f64) {
         let mut t = 0.0;
         let mut dt = 0.0;
+        let first = line * p.nodes;
         for (i, w) in self.weights[line].iter().enumerate() {
-            let tau = p.target_fixed[line][i] + s * p.target_scaled[line][i] + p.other[line][i];
+            let k = first + i;
+            let tau = p.target_fixed[k] + s * p.target_scaled[k] + p.other[k];
             let e = w * (-2.0 * tau).exp();
             t += e;
-            dt += -2.0 * p.target_scaled[line][i] * e;
+            dt += -2.0 * p.target_scaled[k] * e;
         }
         (t, dt)
     }
@@ -326,8 +345,9 @@ impl ReferenceState {
         slant_column_per_m2: f64,
     ) -> f64 {
         let mut t = 0.0;
+        let first = line * p.nodes;
         for (i, w) in self.weights[line].iter().enumerate() {
-            t += w * (-2.0 * (p.target_fixed[line][i] + p.target_scaled[line][i])).exp();
+            t += w * (-2.0 * (p.target_fixed[first + i] + p.target_scaled[first + i])).exp();
         }
         -t.ln() / (2.0 * slant_column_per_m2)
     }
@@ -347,14 +367,9 @@ mod tests {
                 gas_per_m2: vec![4e25, 4e25],
             },
             weights: vec![vec![0.3, 0.7], vec![0.6, 0.4]],
-            target_tau: vec![
-                vec![vec![0.4, 0.8], vec![0.1, 0.25]],
-                vec![vec![0.6, 1.2], vec![0.15, 0.3]],
-            ],
-            other_tau: vec![
-                vec![vec![0.05, 0.1], vec![0.2, 0.02]],
-                vec![vec![0.02, 0.04], vec![0.1, 0.01]],
-            ],
+            // [layer][line][node], flattened.
+            target_tau: vec![0.4, 0.8, 0.1, 0.25, 0.6, 1.2, 0.15, 0.3],
+            other_tau: vec![0.05, 0.1, 0.2, 0.02, 0.02, 0.04, 0.1, 0.01],
         }
     }
 
@@ -365,7 +380,9 @@ mod tests {
         let t2 = |line: usize| -> f64 {
             (0..2)
                 .map(|i| {
-                    let col = |tau: &Vec<Vec<Vec<f64>>>| tau[1][line][i] + 0.75 * tau[0][line][i];
+                    let col = |tau: &[f64]| {
+                        tau[st.tau_index(1, line, i)] + 0.75 * tau[st.tau_index(0, line, i)]
+                    };
                     st.weights[line][i]
                         * (-2.0 * (s * col(&st.target_tau) + col(&st.other_tau)) / mu.abs()).exp()
                 })
@@ -417,8 +434,8 @@ mod tests {
         // twice: no unique solution.
         let two_valued = ReferenceState {
             weights: vec![vec![0.5, 0.5], vec![0.5, 0.5]],
-            target_tau: vec![vec![vec![0.0; 2]; 2], vec![vec![0.0, 4.0], vec![0.5, 0.5]]],
-            other_tau: vec![vec![vec![0.0; 2]; 2]; 2],
+            target_tau: vec![0.0, 0.0, 0.0, 0.0, 0.0, 4.0, 0.5, 0.5],
+            other_tau: vec![0.0; 8],
             ..state()
         };
         let p = two_valued.path(1000.0, 400.0, -1.0);
