@@ -24,6 +24,7 @@ use crate::particles::matrix::ScatteringMatrix;
 use crate::particles::phase::{PhaseFunction, RayleighPhase};
 use crate::particles::rayleigh;
 use crate::scene::{Atmosphere, Scene};
+use crate::spectroscopy::LayerDepthMemo;
 
 /// A problem building the optical atmosphere.
 #[derive(Debug, Error)]
@@ -113,6 +114,18 @@ impl OpticalAtmosphere {
     /// from the scene's table (`gas_layer_tau`), added through
     /// [`OpticalAtmosphere::add_absorption_tau`].
     pub fn build(scene: &Scene) -> Result<Self, OpticsError> {
+        Self::build_inner(scene, None)
+    }
+
+    /// [`Self::build`], the same numbers, with the line-by-line layers and cross-sections that
+    /// `memo` holds reused and those it computes added to it: the truths of one profile under
+    /// several lasers share their layers, and their channels and a reference state's nodes
+    /// coincide in part ([`LayerDepthMemo`]).
+    pub fn build_with(scene: &Scene, memo: &mut LayerDepthMemo) -> Result<Self, OpticsError> {
+        Self::build_inner(scene, Some(memo))
+    }
+
+    fn build_inner(scene: &Scene, memo: Option<&mut LayerDepthMemo>) -> Result<Self, OpticsError> {
         let nch = scene.channels.len();
         let edges = layer_edges(scene);
         let n_layers = edges.len().saturating_sub(1);
@@ -247,7 +260,7 @@ impl OpticalAtmosphere {
         };
         atm.accumulate();
         if let (Some(gas), Some(a)) = (&scene.gas, &scene.atmosphere) {
-            let (tau, note, source) = gas_layer_tau(scene, a, gas, &atm.edges_m)?;
+            let (tau, note, source) = gas_layer_tau(scene, a, gas, &atm.edges_m, memo)?;
             // Name the source of a bad optical depth (the spectroscopy stage refuses negative
             // ones itself, naming the line; this is the last guard).
             atm.add_absorption_tau(&tau).map_err(|e| match e {
@@ -522,6 +535,7 @@ fn gas_layer_tau(
     a: &Atmosphere,
     gas: &crate::scene::GasAbsorption,
     edges: &[f64],
+    memo: Option<&mut LayerDepthMemo>,
 ) -> Result<(Vec<f64>, String, GasSource), OpticsError> {
     use crate::spectroscopy::{GasOpticalDepthTable, WavenumberGrid, layer_optical_depths_at};
     let nch = scene.channels.len();
@@ -530,7 +544,12 @@ fn gas_layer_tau(
     // τ per molecular layer per channel: [mol layer][channel].
     let (tau_mol, note, source): (Vec<Vec<f64>>, String, GasSource) = match &gas.table {
         None => {
-            let t = layer_optical_depths_at(&a.profile, &gas.lines, &mol, &nu, &gas.options)?;
+            let t = match memo {
+                Some(memo) => {
+                    memo.layer_optical_depths_at(&a.profile, &gas.lines, &mol, &nu, &gas.options)?
+                }
+                None => layer_optical_depths_at(&a.profile, &gas.lines, &mol, &nu, &gas.options)?,
+            };
             let note = format!(
                 "gas absorption: {} lines of {} line by line at {} channels in {} layers",
                 gas.lines.len(),

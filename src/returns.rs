@@ -150,19 +150,24 @@ impl Returns {
     /// The returns of some channels only, in the given order (with their covariances).
     pub fn channel_subset(&self, channels: &[usize]) -> Returns {
         let bins = self.bins_per_channel();
-        let mut out = Returns::zeros(
-            self.source,
-            channels.iter().map(|k| self.channels[*k].clone()).collect(),
-            self.fov_full_angle_mrad.clone(),
-            self.range_m.clone(),
-            self.orders.clone(),
-        );
-        for (j, k) in channels.iter().enumerate() {
-            out.energy_j[j * bins..(j + 1) * bins]
-                .copy_from_slice(&self.energy_j[k * bins..(k + 1) * bins]);
-            out.stderr_j[j * bins..(j + 1) * bins]
-                .copy_from_slice(&self.stderr_j[k * bins..(k + 1) * bins]);
-        }
+        // Copied channel by channel (no zeroing first: these are large).
+        let pick = |v: &[f64]| -> Vec<f64> {
+            let mut out = Vec::with_capacity(channels.len() * bins);
+            for k in channels {
+                out.extend_from_slice(&v[k * bins..(k + 1) * bins]);
+            }
+            out
+        };
+        let mut out = Returns {
+            source: self.source,
+            channels: channels.iter().map(|k| self.channels[*k].clone()).collect(),
+            fov_full_angle_mrad: self.fov_full_angle_mrad.clone(),
+            range_m: self.range_m.clone(),
+            orders: self.orders.clone(),
+            energy_j: pick(&self.energy_j),
+            stderr_j: pick(&self.stderr_j),
+            covariance: None,
+        };
         out.covariance = self.covariance.as_ref().map(|c| {
             let mut pairs = Vec::new();
             let mut cov_j2 = Vec::new();
@@ -194,14 +199,31 @@ impl Returns {
             self.range_m.clone(),
             self.orders.clone(),
         );
+        let bins = self.bins_per_channel();
         for (j, c) in combos.iter().enumerate() {
+            // Term by term over the channel's bins: each bin's sum in term order, from 0.
+            let e = &mut out.energy_j[j * bins..(j + 1) * bins];
+            for (a, ca) in &c.terms {
+                for (e, v) in e.iter_mut().zip(&self.energy_j[a * bins..(a + 1) * bins]) {
+                    *e += ca * v;
+                }
+            }
+            // Every term without error in every bin (analytic returns): every covariance is 0,
+            // so the variance below is +0 and the error 0, as `zeros` left it.
+            if c.terms.iter().all(|(_, ca)| ca.is_finite())
+                && c.terms.iter().all(|(a, _)| {
+                    self.stderr_j[a * bins..(a + 1) * bins]
+                        .iter()
+                        .all(|s| *s == 0.0)
+                })
+            {
+                continue;
+            }
             for f in 0..self.fov_full_angle_mrad.len() {
                 for g in 0..self.range_m.len() {
                     for o in 0..self.orders.len() {
-                        let mut e = 0.0;
                         let mut var = 0.0;
                         for (a, ca) in &c.terms {
-                            e += ca * self.energy_j[self.index(*a, f, g, o)];
                             for (b, cb) in &c.terms {
                                 var += ca
                                     * cb
@@ -209,7 +231,6 @@ impl Returns {
                             }
                         }
                         let i = out.index(j, f, g, o);
-                        out.energy_j[i] = e;
                         out.stderr_j[i] = var.max(0.0).sqrt();
                         if var.is_nan() {
                             out.stderr_j[i] = f64::NAN;

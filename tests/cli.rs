@@ -110,6 +110,32 @@ fn bench_reports_figure_of_merit() {
     assert!(stdout.contains("FOM"), "{stdout}");
 }
 
+/// The cloudy study benchmark runs the study with a cirrus by Monte Carlo and reports the
+/// transport's time and share; `--study-photons` goes with `--cloudy` only.
+#[test]
+fn bench_cloudy_study_reports_the_transport() {
+    let stdout = lidarsim_ok([
+        "bench",
+        "--study",
+        "1",
+        "--cloudy",
+        "--study-photons",
+        "200",
+        "--repeat",
+        "1",
+        "--threads",
+        "1",
+    ]);
+    assert!(
+        stdout.contains("cirrus") && stdout.contains("transport_share"),
+        "{stdout}"
+    );
+    let row = stdout.lines().last().unwrap_or_default();
+    assert!(row.trim_end().ends_with('%'), "{stdout}");
+    let o = lidarsim(["bench", "--study", "1", "--study-photons", "200"]);
+    assert_eq!(o.status.code(), Some(2), "{o:?}");
+}
+
 #[test]
 fn zero_photons_runs_the_analytic_equation_only() {
     let dir = tempfile::tempdir().unwrap();

@@ -1230,7 +1230,7 @@ fn monte_carlo_work_of_shipped_runs_is_a_hundredfold_below_the_limit() {
 }
 
 /// Study sizes (README, "Limits"): `bench --study` (3N profiles × thread counts × repeats)
-/// and `dial` (profiles × line evaluations, and with photons × three traced truths) beyond
+/// and `dial` (profiles × line evaluations, and with photons × five traced truths) beyond
 /// their limits are refused in well under a second, before an ensemble is drawn, naming the
 /// product and the limit; the README's own studies (`bench --study 1000` at its defaults,
 /// `dial --ensemble 1000` of the study scene, and of the airborne DIAL scene with its photons)

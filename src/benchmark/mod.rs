@@ -5,10 +5,11 @@
 //!   view. The figure of merit is FOM = 1/(rel_err² · t) of the multiple-scattering return
 //!   (orders ≥ 2) in the gate starting 100 m into the cloud (1100–1110 m), t the wall-clock
 //!   time of the transport at the given thread count.
-//! - [`study`]: the speed of the reference study's clear-sky ensemble study:
+//! - [`StudyWorkload`]: the speed of the reference study's clear-sky ensemble study:
 //!   `scenes/study_co2_ipda.toml` (compiled in) run by `lidarsim dial` over N generated profiles
 //!   per latitude class (3N in all), every one of its 10 on-lines against the off-line, IPDA and
-//!   DIAL, with the whole error budget, analytic lidar equation.
+//!   DIAL, with the whole error budget, analytic lidar equation; or the same study with a cirrus
+//!   in every profile ([`CIRRUS`]), which takes a Monte Carlo per truth of each profile.
 //! - [`scene_variants`] and [`crate::pipeline::compare_skip`]: what skipping saves on whole scene runs.
 //! - [`channels`]: the cost of a scattering event against the number of channels (the default
 //!   scene at 2, 4 and 16 channels beside C.1's one).
@@ -34,6 +35,22 @@ const C1_SCENE: &str = include_str!("../../scenes/bissonnette_c1.toml");
 const C1_TABLE_FILE: &str = r#"file = "../phase_functions/bissonnette_c1_1064nm.txt""#;
 const C1_TABLE_BUILTIN: &str = r#"builtin = "bissonnette_c1_1064nm""#;
 const STUDY_SCENE: &str = include_str!("../../scenes/study_co2_ipda.toml");
+
+/// The cirrus of the cloudy study benchmark, added to the study scene: 9–10 km, vertical
+/// optical depth 0.3, Henyey-Greenstein g = 0.75 (lidarsim has no ice-crystal phase function;
+/// 0.75 is a typical cirrus asymmetry parameter near 1.6 µm), nearly conservative.
+pub const CIRRUS: &str = r#"
+[[layer]]
+name = "cirrus"
+base_m = 9000.0
+top_m = 10000.0
+extinction_per_km = 0.3
+single_scattering_albedo = 0.99
+phase = { kind = "henyey_greenstein", g = 0.75 }
+"#;
+
+/// Photons per truth of the cloudy study benchmark unless asked otherwise.
+pub const CLOUDY_STUDY_PHOTONS: u64 = 20_000;
 
 /// Photons of a forced Monte Carlo for a scene that asks for none (the default scene's count).
 pub const FORCED_PHOTONS: u64 = 200_000;
@@ -315,12 +332,20 @@ pub struct StudyWorkload {
 
 impl StudyWorkload {
     /// N profiles per class from `seed`; refused beyond the limits for `runs` studies of them
-    /// (every thread count, every repeat).
-    pub fn new(n: usize, seed: u64, runs: u64) -> Result<Self, BenchError> {
-        let scene = Scene::from_toml(
-            Path::new("<embedded scenes/study_co2_ipda.toml>"),
-            STUDY_SCENE,
-        )?;
+    /// (every thread count, every repeat). With `cirrus_photons` > 0 every profile has the
+    /// [`CIRRUS`] and each of its truths takes a Monte Carlo of that many photons.
+    pub fn new(n: usize, seed: u64, runs: u64, cirrus_photons: u64) -> Result<Self, BenchError> {
+        let scene = if cirrus_photons > 0 {
+            Scene::from_toml(
+                Path::new("<embedded scenes/study_co2_ipda.toml with a cirrus>"),
+                &format!("{STUDY_SCENE}{CIRRUS}"),
+            )?
+        } else {
+            Scene::from_toml(
+                Path::new("<embedded scenes/study_co2_ipda.toml>"),
+                STUDY_SCENE,
+            )?
+        };
         let no_retrieval = || BenchError::Invalid("study scene has a retrieval".into());
         let retrieval = scene.retrieval.as_ref().ok_or_else(no_retrieval)?;
         let pairs: Vec<(usize, usize)> = (0..scene.lines.len())
@@ -329,7 +354,11 @@ impl StudyWorkload {
             .collect();
         // Every thread count runs the study `repeat` times: its size before the ensemble is
         // drawn (README, "Limits").
-        let work = crate::pipeline::study_work(&scene, (3 * n as u64).saturating_mul(runs), 0)?;
+        let work = crate::pipeline::study_work(
+            &scene,
+            (3 * n as u64).saturating_mul(runs),
+            cirrus_photons,
+        )?;
         work.check().map_err(|m| {
             BenchError::Invalid(format!("--study {n} (× --threads, × --repeat): {m}"))
         })?;
@@ -347,6 +376,7 @@ impl StudyWorkload {
         let options = StudyOptions {
             pairs,
             seed,
+            photons: cirrus_photons,
             ..StudyOptions::from_scene(&scene).ok_or_else(no_retrieval)?
         };
         Ok(StudyWorkload {
@@ -365,9 +395,20 @@ impl StudyWorkload {
             .as_ref()
             .and_then(|r| r.dial)
             .map_or(0, |d| d.cells);
+        let (kind, sums) = if self.options.photons > 0 {
+            (
+                format!(
+                    "cloudy ensemble study (cirrus 9–10 km, τ 0.3, HG g 0.75 in every profile; Monte Carlo of {} photons per truth, 5 truths per profile, profiles one after another, each transport on the threads)",
+                    self.options.photons
+                ),
+                "  transport_s  transport_share  (wall: one profile at a time)",
+            )
+        } else {
+            ("ensemble study".to_string(), "  (thread-summed)")
+        };
         format!(
-            "ensemble study: {} profiles (3 classes × {n}), {} on-lines × IPDA and {} DIAL cells, error budget of {} rows; ensemble generated in {:.2} s\n\
-             threads  wall_s  profiles/s  truth_optics_s  returns_s  references_s  retrievals_s  (thread-summed)",
+            "{kind}: {} profiles (3 classes × {n}), {} on-lines × IPDA and {} DIAL cells, error budget of {} rows; ensemble generated in {:.2} s\n\
+             threads  wall_s  profiles/s  ms/profile  truth_optics_s  returns_s  references_s  retrievals_s{sums}",
             self.set.len(),
             self.options.pairs.len(),
             cells,
@@ -378,19 +419,30 @@ impl StudyWorkload {
 
     /// The row of the table of the timing `t` on `threads` threads, and the same as JSON.
     pub fn row(&self, threads: usize, t: &dial::Timing) -> (String, serde_json::Value) {
-        let line = format!(
-            "{:>7} {:>7.2} {:>11.1} {:>15.2} {:>10.2} {:>13.2} {:>13.2}",
+        let profiles = self.set.len() as f64;
+        let mut line = format!(
+            "{:>7} {:>7.2} {:>11.1} {:>11.2} {:>15.2} {:>10.2} {:>13.2} {:>13.2}",
             threads,
             t.wall_s,
-            self.set.len() as f64 / t.wall_s,
+            profiles / t.wall_s,
+            1e3 * t.wall_s / profiles,
             t.truth_optics_s,
             t.returns_s,
             t.references_s + t.mean_references_s,
             t.retrievals_s
         );
+        if self.options.photons > 0 {
+            line += &format!(
+                " {:>12.2} {:>15.1} %",
+                t.transport_s,
+                100.0 * t.transport_s / t.wall_s
+            );
+        }
         let json = serde_json::json!({
             "threads": threads, "profiles": self.set.len(), "wall_s": t.wall_s,
+            "ms_per_profile": 1e3 * t.wall_s / profiles, "photons_per_truth": self.options.photons,
             "generate_s": self.generate_s, "truth_optics_s": t.truth_optics_s, "returns_s": t.returns_s,
+            "transport_s": t.transport_s,
             "references_s": t.references_s + t.mean_references_s, "retrievals_s": t.retrievals_s,
         });
         (line, json)
@@ -403,8 +455,12 @@ impl StudyWorkload {
         repeat: usize,
     ) -> Result<Option<dial::Timing>, BenchError> {
         let mut best: Option<dial::Timing> = None;
+        // A Monte Carlo study runs its profiles one after another, each transport on its own
+        // threads: as many as the pool has.
+        let mut scene = self.scene.clone();
+        scene.simulation.threads = pool.current_num_threads();
         for _ in 0..repeat {
-            let r = pool.install(|| dial::run(&self.scene, &self.set, &self.options, &|| {}))?;
+            let r = pool.install(|| dial::run(&scene, &self.set, &self.options, &|| {}))?;
             let failed = r.outcomes.iter().filter(|o| o.records.is_err()).count();
             ensure!(failed == 0, "{failed} profiles failed");
             if best.is_none_or(|b| r.timing.wall_s < b.wall_s) {

@@ -1,5 +1,6 @@
 //! `lidarsim bench`: speed and Monte Carlo efficiency of the transport on a fixed workload, or
-//! (`--study N`) the speed of the reference study's clear-sky ensemble study, or (`--scenes FILE…`)
+//! (`--study N`) the speed of the reference study's clear-sky ensemble study (`--cloudy`: with a
+//! cirrus in every profile, by Monte Carlo), or (`--scenes FILE…`)
 //! what skipping saves on whole scene runs, or (`--depth DIR`) the figure of merit of C.1's
 //! multiple scattering at every gate and field of view. The workloads and measurements are
 //! [`lidarsim::benchmark`]'s; this prints them and draws.
@@ -68,6 +69,14 @@ pub struct Args {
     /// Instead of the transport: time the clear-sky ensemble study with N profiles per class.
     #[arg(long, value_name = "N", allow_negative_numbers = true, value_parser = super::count_usize(1, lidarsim::limits::MAX_ENSEMBLE_LEVELS))]
     pub study: Option<usize>,
+    /// With `--study`: a cirrus (9–10 km, optical depth 0.3, Henyey-Greenstein g 0.75) in
+    /// every profile, each truth of a profile by a Monte Carlo of `--study-photons`; the table
+    /// adds the time in the transport.
+    #[arg(long, requires = "study")]
+    pub cloudy: bool,
+    /// Photons per truth of `--cloudy`.
+    #[arg(long, default_value_t = benchmark::CLOUDY_STUDY_PHOTONS, requires = "cloudy", allow_negative_numbers = true, value_parser = super::count(1, lidarsim::limits::MAX_PHOTONS))]
+    pub study_photons: u64,
     /// Instead: the figure of merit of C.1's multiple scattering at every gate 50–300 m into the
     /// cloud and FOV 0.5–10 mrad, against the plain local estimate; CSV and PNG into DIR
     /// (photons and the first thread count of `--threads`).
@@ -121,7 +130,8 @@ fn scenes_bench(args: &Args) -> anyhow::Result<()> {
 /// The ensemble study benchmark ([`benchmark::StudyWorkload`]).
 fn study_bench(n: usize, args: &Args) -> anyhow::Result<()> {
     let runs = (args.threads.len() as u64).saturating_mul(args.repeat as u64);
-    let w = benchmark::StudyWorkload::new(n, args.seed, runs)?;
+    let photons = if args.cloudy { args.study_photons } else { 0 };
+    let w = benchmark::StudyWorkload::new(n, args.seed, runs, photons)?;
     outln!("{}", w.header(n));
     let mut rows = Vec::new();
     for &threads in &args.threads {

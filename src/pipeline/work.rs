@@ -177,9 +177,11 @@ pub struct StudyWork {
     pub mc: Option<McWork>,
 }
 
-/// Truths and reference states computed line by line per profile, and truths traced.
+/// Truths and reference states computed line by line per profile, and truths traced: with
+/// photons every truth is traced, the scene's laser and its four perturbations (offset, no
+/// jitter, wider line, pure), as many as the laser has.
 const STUDY_LBL_STATES: u64 = 8;
-const STUDY_TRACED_TRUTHS: u64 = 3;
+const STUDY_TRACED_TRUTHS: u64 = 5;
 
 impl StudyWork {
     /// Line evaluations of the whole study.

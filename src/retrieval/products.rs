@@ -434,10 +434,22 @@ impl Retrieval {
     /// ([`Self::pair_terms`]).
     fn targets(&self) -> Vec<Target> {
         let z0 = self.lidar_altitude_m;
+        // Adjacent DIAL cells share an end: each distinct path is computed once.
+        let mut paths: Vec<(f64, PathDepths)> = Vec::new();
+        let mut path_to = |z: f64| -> PathDepths {
+            match paths.iter().find(|(e, _)| e.to_bits() == z.to_bits()) {
+                Some((_, p)) => p.clone(),
+                None => {
+                    let p = self.reference.path(z0, z, self.mu);
+                    paths.push((z, p.clone()));
+                    p
+                }
+            }
+        };
         let mut out = Vec::new();
         if let Some(t) = &self.config.target {
             let zt = t.altitude_m;
-            let path = self.reference.path(z0, zt, self.mu);
+            let path = path_to(zt);
             let (gas_ref, dry_ref) = self.reference.columns.between(z0, zt);
             let (gas, dry) = self.truth.between(z0, zt);
             // The column ends at the top of the atmosphere for a lidar above it.
@@ -478,8 +490,8 @@ impl Retrieval {
                 let (a, b) = d.bounds(c);
                 let (ra, rb) = (self.range_m[a], self.range_m[b]);
                 let (za, zb) = (self.altitude(ra), self.altitude(rb));
-                let near = self.reference.path(z0, za, self.mu);
-                let far = self.reference.path(z0, zb, self.mu);
+                let near = path_to(za);
+                let far = path_to(zb);
                 let path = PathDepths::cell(&near, &far);
                 let (gas_ref, dry_ref) = self.reference.columns.between(za, zb);
                 let (gas, dry) = self.truth.between(za, zb);

@@ -24,7 +24,7 @@ use crate::atmosphere::Profile;
 use crate::instrument::laser::{Filter, Laser, Line};
 use crate::instrument::line_shape::MHZ_PER_CM1;
 use crate::spectroscopy::{
-    LblOptions, LineFilter, LineList, isotopologues, layer_optical_depths_at, layers,
+    CgLayer, LayerDepthMemo, LblOptions, LineFilter, LineList, isotopologues, layers,
 };
 
 /// Dry-air and gas columns of a profile on a layer grid.
@@ -41,15 +41,31 @@ pub struct LayerColumns {
 impl LayerColumns {
     /// Columns of `gas` in `profile` on `edges_m` (Curtis-Godson integration).
     pub fn new(profile: &Profile, edges_m: &[f64], gas: &str) -> Result<Self, RetrievalError> {
-        let cg = layers::curtis_godson_layers(profile, edges_m)?;
-        let index = |name: &str| profile.gases.iter().position(|g| g.name == name);
+        Self::of_layers(
+            profile,
+            edges_m,
+            &layers::curtis_godson_layers(profile, edges_m)?,
+            gas,
+        )
+    }
+
+    /// [`Self::new`] from the Curtis-Godson layers `cg` of `profile` on `edges_m`, computed
+    /// before (with `gas` and water vapour at least, [`LayerDepthMemo::layers`]).
+    pub fn of_layers(
+        profile: &Profile,
+        edges_m: &[f64],
+        cg: &[CgLayer],
+        gas: &str,
+    ) -> Result<Self, RetrievalError> {
+        let names = cg.first().map_or(&[][..], |l| &l.gas_names[..]);
+        let index = |name: &str| names.iter().position(|g| g == name);
         let gi = index(gas).ok_or_else(|| {
             RetrievalError::Gas(format!("the profile `{}` has no {gas}", profile.name))
         })?;
         let h2o = index("H2O");
         let mut dry = Vec::with_capacity(cg.len());
         let mut g = Vec::with_capacity(cg.len());
-        for l in &cg {
+        for l in cg {
             let w = h2o.map(|i| l.gas_columns_per_cm2[i]).unwrap_or(0.0);
             dry.push((l.air_column_per_cm2 - w) * 1e4);
             g.push(l.gas_columns_per_cm2[gi] * 1e4);
@@ -95,34 +111,35 @@ pub struct ReferenceState {
     pub columns: LayerColumns,
     /// Quadrature weights of each line's nominal line shape (sum 1).
     pub weights: Vec<Vec<f64>>,
-    /// Vertical optical depth of the target gas, `[layer][line][node]`.
-    pub target_tau: Vec<Vec<Vec<f64>>>,
-    /// Vertical optical depth of every other gas with lines, `[layer][line][node]`.
-    pub other_tau: Vec<Vec<Vec<f64>>>,
+    /// Vertical optical depth of the target gas, layer by layer, line by line, node by node:
+    /// index [`Self::tau_index`] (one array: a study makes several reference states a profile).
+    pub target_tau: Vec<f64>,
+    /// Vertical optical depth of every other gas with lines, the same index.
+    pub other_tau: Vec<f64>,
 }
 
-/// Slant optical depths from the lidar to one altitude, `[line][node]`: the target gas in a
-/// part held at the reference and a part scaled by s, and the other gases.
+/// Slant optical depths from the lidar to one altitude, line by line, node by node (index
+/// `line · nodes + node`): the target gas in a part held at the reference and a part scaled by
+/// s, and the other gases.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PathDepths {
+    /// Quadrature nodes per line.
+    pub nodes: usize,
     /// Target gas, held fixed.
-    pub target_fixed: Vec<Vec<f64>>,
+    pub target_fixed: Vec<f64>,
     /// Target gas, scaled by s.
-    pub target_scaled: Vec<Vec<f64>>,
+    pub target_scaled: Vec<f64>,
     /// Other gases.
-    pub other: Vec<Vec<f64>>,
+    pub other: Vec<f64>,
 }
 
 impl PathDepths {
     /// The path to `far` with only the part beyond `near` scaled: a DIAL range cell.
     pub fn cell(near: &PathDepths, far: &PathDepths) -> PathDepths {
-        let diff = |a: &Vec<Vec<f64>>, b: &Vec<Vec<f64>>| -> Vec<Vec<f64>> {
-            a.iter()
-                .zip(b)
-                .map(|(x, y)| x.iter().zip(y).map(|(u, v)| v - u).collect())
-                .collect()
-        };
+        let diff =
+            |a: &[f64], b: &[f64]| -> Vec<f64> { a.iter().zip(b).map(|(u, v)| v - u).collect() };
         PathDepths {
+            nodes: near.nodes,
             target_fixed: near.target_scaled.clone(),
             target_scaled: diff(&near.target_scaled, &far.target_scaled),
             other: far.other.clone(),
@@ -153,6 +170,21 @@ impl ReferenceState {
         lines: &LineList,
         options: &LblOptions,
         instrument: AssumedInstrument,
+    ) -> Result<Self, RetrievalError> {
+        let mut memo = LayerDepthMemo::new();
+        Self::new_with(profile, edges_m, gas, lines, options, instrument, &mut memo)
+    }
+
+    /// [`Self::new`], the same numbers, with the layers and cross-sections `memo` holds reused
+    /// and what it computes added to it (an ensemble member's states, [`LayerDepthMemo`]).
+    pub fn new_with(
+        profile: &Profile,
+        edges_m: &[f64],
+        gas: &str,
+        lines: &LineList,
+        options: &LblOptions,
+        instrument: AssumedInstrument,
+        memo: &mut LayerDepthMemo,
     ) -> Result<Self, RetrievalError> {
         let AssumedInstrument {
             laser,
@@ -191,40 +223,66 @@ impl ReferenceState {
                     .map(move |q| l.wavenumber_cm1 + q.offset_mhz / MHZ_PER_CM1)
             })
             .collect();
-        let per_layer = |ls: &LineList| -> Result<Vec<Vec<Vec<f64>>>, RetrievalError> {
-            let t = if ls.is_empty() {
-                vec![vec![0.0; nus.len()]; edges_m.len() - 1]
+        let columns = LayerColumns::of_layers(
+            profile,
+            edges_m,
+            &memo.layers(profile, edges_m, &[gas])?,
+            gas,
+        )?;
+        // Each layer's row holds its lines' nodes in order: the rows one after another are
+        // the index of `tau_index`.
+        let mut per_layer = |ls: &LineList| -> Result<Vec<f64>, RetrievalError> {
+            Ok(if ls.is_empty() {
+                vec![0.0; nus.len() * (edges_m.len() - 1)]
             } else {
-                layer_optical_depths_at(profile, ls, edges_m, &nus, options)?
-            };
-            Ok(t.into_iter()
-                .map(|row| row.chunks(nodes.len()).map(|c| c.to_vec()).collect())
-                .collect())
+                memo.layer_optical_depths_at(profile, ls, edges_m, &nus, options)?
+                    .concat()
+            })
         };
         Ok(ReferenceState {
-            columns: LayerColumns::new(profile, edges_m, gas)?,
+            columns,
             weights: vec![nodes.iter().map(|q| q.weight / total).collect(); laser_lines.len()],
             target_tau: per_layer(&target_lines)?,
             other_tau: per_layer(&pick(others))?,
         })
     }
 
+    /// Lines of the laser.
+    pub fn lines(&self) -> usize {
+        self.weights.len()
+    }
+
+    /// Quadrature nodes of each line.
+    pub fn nodes(&self) -> usize {
+        self.weights.first().map_or(0, Vec::len)
+    }
+
+    /// Index of (layer, line, node) in [`Self::target_tau`] and [`Self::other_tau`].
+    pub fn tau_index(&self, layer: usize, line: usize, node: usize) -> usize {
+        (layer * self.lines() + line) * self.nodes() + node
+    }
+
     /// Slant optical depths along a path from altitude `z_lidar` to `z` with direction cosine μ.
     pub fn path(&self, z_lidar: f64, z: f64, mu: f64) -> PathDepths {
-        let n_lines = self.weights.len();
-        let n_nodes = self.weights.first().map_or(0, Vec::len);
-        let mut t = vec![vec![0.0; n_nodes]; n_lines];
-        let mut o = vec![vec![0.0; n_nodes]; n_lines];
+        let n = self.lines() * self.nodes();
+        let mut t = vec![0.0; n];
+        let mut o = vec![0.0; n];
+        let m = mu.abs();
         for (l, f) in layer_fractions(&self.columns.edges_m, z_lidar, z) {
-            for k in 0..n_lines {
-                for i in 0..n_nodes {
-                    t[k][i] += f * self.target_tau[l][k][i] / mu.abs();
-                    o[k][i] += f * self.other_tau[l][k][i] / mu.abs();
+            let add = |sum: &mut [f64], tau: &[f64]| {
+                for (s, tau) in sum
+                    .iter_mut()
+                    .zip(tau.get(l * n..(l + 1) * n).unwrap_or(&[]))
+                {
+                    *s += f * tau / m;
                 }
-            }
+            };
+            add(&mut t, &self.target_tau);
+            add(&mut o, &self.other_tau);
         }
         PathDepths {
-            target_fixed: vec![vec![0.0; n_nodes]; n_lines],
+            nodes: self.nodes(),
+            target_fixed: vec![0.0; n],
             target_scaled: t,
             other: o,
         }
@@ -234,11 +292,13 @@ impl ReferenceState {
     pub fn transmission2(&self, p: &PathDepths, line: usize, s: f64) -> (f64, f64) {
         let mut t = 0.0;
         let mut dt = 0.0;
+        let first = line * p.nodes;
         for (i, w) in self.weights[line].iter().enumerate() {
-            let tau = p.target_fixed[line][i] + s * p.target_scaled[line][i] + p.other[line][i];
+            let k = first + i;
+            let tau = p.target_fixed[k] + s * p.target_scaled[k] + p.other[k];
             let e = w * (-2.0 * tau).exp();
             t += e;
-            dt += -2.0 * p.target_scaled[line][i] * e;
+            dt += -2.0 * p.target_scaled[k] * e;
         }
         (t, dt)
     }
@@ -285,8 +345,9 @@ impl ReferenceState {
         slant_column_per_m2: f64,
     ) -> f64 {
         let mut t = 0.0;
+        let first = line * p.nodes;
         for (i, w) in self.weights[line].iter().enumerate() {
-            t += w * (-2.0 * (p.target_fixed[line][i] + p.target_scaled[line][i])).exp();
+            t += w * (-2.0 * (p.target_fixed[first + i] + p.target_scaled[first + i])).exp();
         }
         -t.ln() / (2.0 * slant_column_per_m2)
     }
@@ -306,14 +367,9 @@ mod tests {
                 gas_per_m2: vec![4e25, 4e25],
             },
             weights: vec![vec![0.3, 0.7], vec![0.6, 0.4]],
-            target_tau: vec![
-                vec![vec![0.4, 0.8], vec![0.1, 0.25]],
-                vec![vec![0.6, 1.2], vec![0.15, 0.3]],
-            ],
-            other_tau: vec![
-                vec![vec![0.05, 0.1], vec![0.2, 0.02]],
-                vec![vec![0.02, 0.04], vec![0.1, 0.01]],
-            ],
+            // [layer][line][node], flattened.
+            target_tau: vec![0.4, 0.8, 0.1, 0.25, 0.6, 1.2, 0.15, 0.3],
+            other_tau: vec![0.05, 0.1, 0.2, 0.02, 0.02, 0.04, 0.1, 0.01],
         }
     }
 
@@ -324,7 +380,9 @@ mod tests {
         let t2 = |line: usize| -> f64 {
             (0..2)
                 .map(|i| {
-                    let col = |tau: &Vec<Vec<Vec<f64>>>| tau[1][line][i] + 0.75 * tau[0][line][i];
+                    let col = |tau: &[f64]| {
+                        tau[st.tau_index(1, line, i)] + 0.75 * tau[st.tau_index(0, line, i)]
+                    };
                     st.weights[line][i]
                         * (-2.0 * (s * col(&st.target_tau) + col(&st.other_tau)) / mu.abs()).exp()
                 })
@@ -376,8 +434,8 @@ mod tests {
         // twice: no unique solution.
         let two_valued = ReferenceState {
             weights: vec![vec![0.5, 0.5], vec![0.5, 0.5]],
-            target_tau: vec![vec![vec![0.0; 2]; 2], vec![vec![0.0, 4.0], vec![0.5, 0.5]]],
-            other_tau: vec![vec![vec![0.0; 2]; 2]; 2],
+            target_tau: vec![0.0, 0.0, 0.0, 0.0, 0.0, 4.0, 0.5, 0.5],
+            other_tau: vec![0.0; 8],
             ..state()
         };
         let p = two_valued.path(1000.0, 400.0, -1.0);

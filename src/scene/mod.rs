@@ -45,7 +45,7 @@ use std::sync::Arc;
 
 use crate::atmosphere::Profile;
 use crate::input::{InputError, check_count};
-use crate::instrument::laser::{Filter, Laser, Line, SpectralSampling};
+use crate::instrument::laser::{Filter, Laser, Line, SampledChannel, SpectralSampling};
 use crate::instrument::signals::Receiver;
 use crate::particles::matrix::ScatteringMatrix;
 use crate::particles::phase::PhaseFunction;
@@ -510,6 +510,32 @@ impl Scene {
         if let Some(s) = &mut self.surface {
             remap(&mut s.albedo, index);
         }
+    }
+
+    /// This scene with the channels `extra` appended, each sampling one of its lines (and
+    /// carrying that line's per-channel values: optics, albedo, depolarisation). For the
+    /// analytic returns of the channels of several lasers on the same lines at once: the
+    /// optical atmosphere and the lidar equation of a channel depend on its wavenumber and its
+    /// line alone. The laser and the line combinations stay this scene's (they use none of
+    /// `extra`); `None` if a channel of `extra` names a line the scene does not have.
+    pub fn with_extra_channels(&self, extra: &[SampledChannel]) -> Option<Scene> {
+        let mut index: Vec<usize> = (0..self.channels.len()).collect();
+        for c in extra {
+            index.push(
+                self.sampling
+                    .channels
+                    .iter()
+                    .position(|b| b.line == c.line)?,
+            );
+        }
+        let mut out = self.clone();
+        out.remap_per_channel_values(&index);
+        out.channels.extend(extra.iter().map(|c| Channel {
+            name: c.name.clone(),
+            wavenumber_cm1: c.wavenumber_cm1,
+        }));
+        out.sampling.channels.extend(extra.iter().cloned());
+        Some(out)
     }
 
     /// The inverse of [`Self::expand_per_channel_values`]: one value per line again, each

@@ -63,7 +63,7 @@ impl CgLayer {
     }
 }
 
-fn check_profile(profile: &Profile) -> Result<(), SpectroscopyError> {
+pub(crate) fn check_profile(profile: &Profile) -> Result<(), SpectroscopyError> {
     let n = profile.len();
     let bad = |what: String| {
         Err(SpectroscopyError::Gas(format!(

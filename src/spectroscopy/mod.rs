@@ -37,7 +37,9 @@ pub mod xsec;
 
 pub use layers::{CgLayer, LineOfSight};
 pub use lines::{Broadener, Line, LineFilter, LineList, ShapeColumns, ShapeParameters};
-pub use optical_depth::{LayerGasCounts, layer_gas_counts, layer_optical_depths_at};
+pub use optical_depth::{
+    LayerDepthMemo, LayerGasCounts, layer_gas_counts, layer_optical_depths_at,
+};
 pub use table::GasOpticalDepthTable;
 pub use xsec::{
     Conventions, GasState, LblOptions, LineShapeModel, VoigtMethod, WavenumberGrid, WingCentre,

@@ -310,40 +310,118 @@ pub fn cross_section_at(
     wavenumbers_cm1: &[f64],
     opts: &LblOptions,
 ) -> Result<Vec<f64>, SpectroscopyError> {
-    let prepared = prepare(lines, molecule_id, state, opts)?;
-    let sigma = direct_sum(&prepared, wavenumbers_cm1, opts);
-    refuse_negative(lines, &prepared, state, opts, &sigma, |k| {
-        wavenumbers_cm1[k]
-    })?;
-    Ok(sigma)
+    PreparedLines::new(lines, molecule_id, state, opts)?.cross_section_at(
+        lines,
+        wavenumbers_cm1,
+        opts,
+    )
+}
+
+/// One molecule's lines prepared at one state (strengths, widths, shifts): [`cross_section_at`]
+/// in two steps, so that cross-sections at more wavenumbers of the same state can be added
+/// later without preparing the lines again ([`super::optical_depth::LayerDepthMemo`]).
+#[derive(Debug, Clone)]
+pub(crate) struct PreparedLines {
+    prepared: Vec<Prepared>,
+    state: GasState,
+}
+
+impl PreparedLines {
+    /// The lines of `molecule_id` in `lines` at `state`.
+    pub(crate) fn new(
+        lines: &LineList,
+        molecule_id: u8,
+        state: &GasState,
+        opts: &LblOptions,
+    ) -> Result<Self, SpectroscopyError> {
+        Ok(PreparedLines {
+            prepared: prepare(lines, molecule_id, state, opts)?,
+            state: *state,
+        })
+    }
+
+    /// [`cross_section_at`] at `wavenumbers_cm1`, `lines` and `opts` those the lines were
+    /// prepared from.
+    pub(crate) fn cross_section_at(
+        &self,
+        lines: &LineList,
+        wavenumbers_cm1: &[f64],
+        opts: &LblOptions,
+    ) -> Result<Vec<f64>, SpectroscopyError> {
+        let sigma = direct_sum(&self.prepared, wavenumbers_cm1, opts);
+        refuse_negative(lines, &self.prepared, &self.state, opts, &sigma, |k| {
+            wavenumbers_cm1[k]
+        })?;
+        Ok(sigma)
+    }
 }
 
 /// Direct sum at arbitrary wavenumbers, every line whose window contains ν, in line order.
+///
+/// Each wavenumber's sum depends on that wavenumber alone (its lines in line order, from 0), so
+/// it is the same whatever other wavenumbers are asked for with it and in whichever order the
+/// work is done: here line by line over all the wavenumbers of a block (a line's wing over a
+/// channel cluster is one vectorised run, [`Prepared::add_evals`]), blocks in parallel.
 fn direct_sum(prepared: &[Prepared], wavenumbers_cm1: &[f64], opts: &LblOptions) -> Vec<f64> {
-    let w = opts.wing_cm1;
-    let exact = opts.voigt == VoigtMethod::Exact;
-    // Lines are sorted by ν₀, and every ν_w lies within `slack` of its ν₀ (the shift), so a
-    // binary search on ν₀ bounds the lines whose window can contain ν.
-    let keys: Vec<f64> = prepared.iter().map(|p| p.nu0).collect();
-    let slack = prepared
-        .iter()
-        .map(|p| (p.nu_w - p.nu0).abs())
-        .fold(0.0, f64::max)
-        + 1e-9;
+    // Large enough that a study's few hundred channels stay on their thread (it runs profiles
+    // in parallel), small enough that a long list still spreads over the threads.
+    const BLOCK: usize = 1024;
+    if wavenumbers_cm1.len() <= BLOCK {
+        return line_major_sum(prepared, wavenumbers_cm1, opts);
+    }
     wavenumbers_cm1
-        .par_iter()
-        .map(|&nu| {
-            let lo = keys.partition_point(|&k| k < nu - w - slack);
-            let hi = keys.partition_point(|&k| k <= nu + w + slack);
-            let mut s = 0.0;
-            for p in &prepared[lo..hi] {
-                if p.in_window(nu, w) {
-                    s += p.eval(nu, exact);
+        .par_chunks(BLOCK)
+        .map(|block| line_major_sum(prepared, block, opts))
+        .collect::<Vec<_>>()
+        .concat()
+}
+
+/// [`direct_sum`] of one block, line by line.
+fn line_major_sum(prepared: &[Prepared], wavenumbers_cm1: &[f64], opts: &LblOptions) -> Vec<f64> {
+    let add_lines = |sorted: &[f64]| -> Vec<f64> {
+        let w = opts.wing_cm1;
+        let exact = opts.voigt == VoigtMethod::Exact;
+        let mut acc = vec![0.0; sorted.len()];
+        // The windows ν_w − W < ν ≤ ν_w + W (`Prepared::in_window`) as slices: swept along the
+        // lines when their window centres are in order (always about the unshifted centres, by
+        // which the lines are sorted), else found by bisection.
+        let in_order = prepared.windows(2).all(|p| p[0].nu_w <= p[1].nu_w);
+        let (mut lo, mut hi) = (0, 0);
+        for p in prepared {
+            let (a, b) = (p.nu_w - w, p.nu_w + w);
+            if in_order {
+                while lo < sorted.len() && sorted[lo] <= a {
+                    lo += 1;
                 }
+                hi = hi.max(lo);
+                while hi < sorted.len() && sorted[hi] <= b {
+                    hi += 1;
+                }
+            } else {
+                lo = sorted.partition_point(|&v| v <= a);
+                hi = sorted.partition_point(|&v| v <= b);
             }
-            s
-        })
-        .collect()
+            if lo < hi {
+                p.add_evals(&sorted[lo..hi], exact, &mut acc[lo..hi]);
+            }
+        }
+        acc
+    };
+    // Sorted, so that each line's window is one slice (most callers ask in order). A
+    // wavenumber that is not finite is in no window: its sum is 0.
+    if wavenumbers_cm1.iter().all(|v| v.is_finite()) && wavenumbers_cm1.is_sorted() {
+        return add_lines(wavenumbers_cm1);
+    }
+    let mut order: Vec<usize> = (0..wavenumbers_cm1.len())
+        .filter(|&i| wavenumbers_cm1[i].is_finite())
+        .collect();
+    order.sort_by(|&a, &b| wavenumbers_cm1[a].total_cmp(&wavenumbers_cm1[b]));
+    let sorted: Vec<f64> = order.iter().map(|&i| wavenumbers_cm1[i]).collect();
+    let mut out = vec![0.0; wavenumbers_cm1.len()];
+    for (i, a) in order.into_iter().zip(add_lines(&sorted)) {
+        out[i] = a;
+    }
+    out
 }
 
 /// Absorption cross-section σ(ν) [cm²/molecule] of molecule `molecule_id` on a uniform grid

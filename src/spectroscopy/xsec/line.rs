@@ -9,10 +9,12 @@ use crate::spectroscopy::htp::{HtParameters, HtProfile, hartmann_tran};
 use crate::spectroscopy::isotopologues::Isotopologue;
 use crate::spectroscopy::lines::{Broadener, Line, LineList, ShapeParameters};
 use crate::spectroscopy::tips::partition_sum;
-use crate::spectroscopy::voigt::{SQRT_LN2, SQRT_LN2_OVER_PI, re_w, re_w_exact, w_fast};
+use crate::spectroscopy::voigt::{
+    SQRT_LN2, SQRT_LN2_OVER_PI, add_re_w_sorted, re_w, re_w_exact, w_fast,
+};
 
 /// One line's parameters at a given state.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub(super) struct Prepared {
     /// Unshifted HITRAN centre ν₀ [cm⁻¹] (the list is sorted by it).
     pub(super) nu0: f64,
@@ -44,17 +46,17 @@ pub(super) struct Prepared {
 }
 
 /// How a prepared line departs from the Voigt.
-// The prepared lines sit in one vector the hot loops walk; a boxed variant would add an
-// indirection per evaluation for the sake of the Voigt lines' size.
-#[allow(clippy::large_enum_variant)]
-#[derive(Debug, Clone, Copy)]
+// Boxed: a line's state is prepared once per layer and kept ([`super::PreparedLines`]), and
+// in place the beyond-Voigt variant made every line, Voigt or not, a few hundred bytes to
+// write, copy and keep; its one indirection per evaluation is small against the profile's.
+#[derive(Debug, Clone)]
 enum Beyond {
     /// The Voigt.
     No,
     /// The Voigt with first-order line mixing Y.
     Mixing(f64),
     /// The Hartmann-Tran profile (and its limits).
-    Ht(HtLine),
+    Ht(Box<HtLine>),
 }
 
 /// A beyond-Voigt line: its parameters, S(T), line mixing Y, and its far-wing form for the
@@ -170,6 +172,19 @@ impl Prepared {
         }
         (self.eval(a, exact), self.eval(b, exact))
     }
+    /// `acc[i] += self.eval(nu[i], exact)` for every i of the sorted wavenumbers `nu`, the
+    /// same values; a plain Voigt line's fast path evaluated for all of them together
+    /// ([`crate::spectroscopy::voigt::add_re_w`]).
+    pub(super) fn add_evals(&self, nu: &[f64], exact: bool, acc: &mut [f64]) {
+        match self.beyond {
+            Beyond::No if !exact => add_re_w_sorted(nu, self.nu_c, self.cx, self.y, self.amp, acc),
+            _ => {
+                for (a, v) in acc.iter_mut().zip(nu) {
+                    *a += self.eval(*v, exact);
+                }
+            }
+        }
+    }
     #[inline]
     pub(super) fn in_window(&self, nu: f64, w: f64) -> bool {
         nu > self.nu_w - w && nu <= self.nu_w + w
@@ -193,9 +208,10 @@ pub(super) fn prepare(
     } else {
         0.0
     };
-    // Q(T) and Q(296) per isotopologue, looked up once.
-    let mut q_cache: Vec<((u8, u8), f64, f64, f64)> = Vec::new();
-    let mut out = Vec::new();
+    // Q(T), Q(296) and the Doppler factor per isotopologue, worked out once.
+    let mut q_cache: Vec<IsoConstants> = Vec::new();
+    // No regrowth: a line's state is written once.
+    let mut out = Vec::with_capacity(lines.lines.len());
     for (index, l) in lines
         .lines
         .iter()
@@ -203,7 +219,12 @@ pub(super) fn prepare(
         .filter(|(_, l)| l.molecule_id == molecule_id)
     {
         let key = (l.molecule_id, l.iso_id);
-        let (q_t, q_ref, mass) = iso_constants(&mut q_cache, key, t, conv)?;
+        let IsoConstants {
+            q_t,
+            q_ref,
+            doppler,
+            ..
+        } = iso_constants(&mut q_cache, key, t, conv)?;
         if l.sw_cm_per_molecule == 0.0 {
             continue;
         }
@@ -212,10 +233,7 @@ pub(super) fn prepare(
             / (-c2 * l.elower_cm1 / T_REF).exp()
             * (1.0 - (-c2 * l.nu_cm1 / t).exp())
             / (1.0 - (-c2 * l.nu_cm1 / T_REF).exp());
-        let gamma_d = l.nu_cm1
-            * (2.0 * conv.boltzmann_j_per_k * t * std::f64::consts::LN_2
-                / (mass * conv.speed_of_light_m_per_s * conv.speed_of_light_m_per_s))
-                .sqrt();
+        let gamma_d = l.nu_cm1 * doppler;
         let (gamma_l, shift, ht) = line_collisional(lines, l, state, opts, p_atm, p_self, t)?;
         let nu_c = if opts.line_shift {
             l.nu_cm1 + shift
@@ -241,7 +259,7 @@ pub(super) fn prepare(
                 let hart = opts.line_shape == LineShapeModel::HartmannTran;
                 let delta2 = if opts.line_shift { c.delta2 } else { 0.0 };
                 spread = SPEED_SPREAD * c.gamma2.hypot(delta2);
-                Beyond::Ht(HtLine::new(
+                Beyond::Ht(Box::new(HtLine::new(
                     HtParameters {
                         nu0: l.nu_cm1,
                         gamma_d,
@@ -256,7 +274,7 @@ pub(super) fn prepare(
                     y_mix,
                     nu_c,
                     HT_WING_WIDTHS * gamma_l.max(gamma_d) + spread,
-                ))
+                )))
             }
             // No speed dependence (and for HT no Dicke narrowing): the Voigt itself.
             _ if y_mix != 0.0 => Beyond::Mixing(y_mix),
@@ -288,16 +306,26 @@ pub(super) fn prepare(
 /// The reference temperature of HITRAN's intensities and widths \[K\].
 const T_REF: f64 = 296.0;
 
-/// One isotopologue's (Q(T), Q(296), mass \[kg\]) at temperature `t`, looked up once per
-/// isotopologue in `q_cache`.
+/// One isotopologue's Q(T), Q(296) and Doppler width per unit wavenumber at temperature `t`.
+#[derive(Debug, Clone, Copy)]
+struct IsoConstants {
+    key: (u8, u8),
+    q_t: f64,
+    q_ref: f64,
+    /// sqrt(2kT ln2/(mc²)): γ_D = ν₀ times this.
+    doppler: f64,
+}
+
+/// [`IsoConstants`] of isotopologue `key` at temperature `t`, looked up once per isotopologue
+/// in `q_cache`.
 fn iso_constants(
-    q_cache: &mut Vec<((u8, u8), f64, f64, f64)>,
+    q_cache: &mut Vec<IsoConstants>,
     key: (u8, u8),
     t: f64,
     conv: &Conventions,
-) -> Result<(f64, f64, f64), SpectroscopyError> {
-    match q_cache.iter().find(|c| c.0 == key) {
-        Some(c) => Ok((c.1, c.2, c.3)),
+) -> Result<IsoConstants, SpectroscopyError> {
+    match q_cache.iter().find(|c| c.key == key) {
+        Some(c) => Ok(*c),
         None => {
             let iso =
                 Isotopologue::get(key.0, key.1).ok_or_else(|| SpectroscopyError::PartitionSum {
@@ -306,14 +334,17 @@ fn iso_constants(
                     temperature_k: t,
                     reason: "unknown isotopologue".into(),
                 })?;
-            let c = (
+            let mass = iso.mass_g_per_mol * conv.atomic_mass_kg;
+            let c = IsoConstants {
                 key,
-                partition_sum(key.0, key.1, t)?,
-                partition_sum(key.0, key.1, T_REF)?,
-                iso.mass_g_per_mol * conv.atomic_mass_kg,
-            );
+                q_t: partition_sum(key.0, key.1, t)?,
+                q_ref: partition_sum(key.0, key.1, T_REF)?,
+                doppler: (2.0 * conv.boltzmann_j_per_k * t * std::f64::consts::LN_2
+                    / (mass * conv.speed_of_light_m_per_s * conv.speed_of_light_m_per_s))
+                    .sqrt(),
+            };
             q_cache.push(c);
-            Ok((c.1, c.2, c.3))
+            Ok(c)
         }
     }
 }

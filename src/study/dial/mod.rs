@@ -44,18 +44,20 @@ use thiserror::Error;
 
 use crate::atmosphere::humidity::{SaturationOver, saturation_vapour_pressure_pa};
 use crate::atmosphere::{LatitudeClass, Profile, ProfileSet, SetMember, StateShift, shift_member};
-use crate::instrument::laser::{Filter, Laser, LineReturns};
+use crate::instrument::laser::{Filter, Laser, LineReturns, SampledChannel};
 use crate::instrument::line_shape::LineShape;
 use crate::instrument::signals::Signals;
 use crate::lidar_eq;
 use crate::optics::OpticalAtmosphere;
 use crate::pipeline;
 use crate::retrieval::{
-    AssumedInstrument, LayerColumns, Method, Product, Quantity, ReferenceState, RetrievalConfig,
+    AssumedInstrument, LayerColumns, Method, Product, Quantity, ReferenceState, Retrieval,
+    RetrievalConfig,
 };
-use crate::returns::{Order, Returns};
+use crate::returns::Order;
 use crate::rng::{self, Stream};
 use crate::scene::Scene;
+use crate::spectroscopy::LayerDepthMemo;
 
 mod netcdf;
 mod profile;
@@ -360,6 +362,8 @@ pub struct Timing {
     pub truth_optics_s: f64,
     /// Returns: the lidar equation or the Monte Carlo, and signals.
     pub returns_s: f64,
+    /// Of `returns_s`, the Monte Carlo transport (0 without photons; not kept by shards).
+    pub transport_s: f64,
     /// Reference states of each profile and its perturbations (line by line at the nodes).
     pub references_s: f64,
     /// Retrievals (and one noisy measurement each).
@@ -406,6 +410,7 @@ pub enum StudyError {
 struct Clock {
     truth_optics: AtomicU64,
     returns: AtomicU64,
+    transport: AtomicU64,
     references: AtomicU64,
     retrievals: AtomicU64,
 }
@@ -601,6 +606,7 @@ pub fn run_slice(
         mean_references_s,
         truth_optics_s: secs(&study.clock.truth_optics),
         returns_s: secs(&study.clock.returns),
+        transport_s: secs(&study.clock.transport),
         references_s: secs(&study.clock.references),
         retrievals_s: secs(&study.clock.retrievals),
         wall_s: started.elapsed().as_secs_f64(),

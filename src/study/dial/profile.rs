@@ -6,8 +6,6 @@ use super::*;
 /// Line returns and signals of one truth.
 struct Measured {
     scene: Scene,
-    /// The channels' returns (analytic only), for truths whose channels are a subset.
-    channels: Option<Returns>,
     lines: LineReturns,
     signals: Signals,
 }
@@ -20,15 +18,17 @@ impl Study<'_> {
         profile: &Profile,
         edges: &[f64],
     ) -> Result<ReferenceState, String> {
-        self.reference_as(profile, edges, true)
+        self.reference_as(profile, edges, true, &mut LayerDepthMemo::new())
     }
 
-    /// The reference state with the retrieval's own spectroscopy (`assumed`) or the truth's.
+    /// The reference state with the retrieval's own spectroscopy (`assumed`) or the truth's,
+    /// with the line-by-line work of the profile's `memo`.
     fn reference_as(
         &self,
         profile: &Profile,
         edges: &[f64],
         assumed: bool,
+        memo: &mut LayerDepthMemo,
     ) -> Result<ReferenceState, String> {
         let gas = self.scene.gas.as_ref().ok_or("no gas absorption")?;
         let (lines, options) = if assumed {
@@ -36,7 +36,7 @@ impl Study<'_> {
         } else {
             (&*gas.lines, gas.options)
         };
-        ReferenceState::new(
+        ReferenceState::new_with(
             profile,
             &fit_edges(edges, profile),
             &self.config.gas,
@@ -47,76 +47,123 @@ impl Study<'_> {
                 lines: &self.scene.sampling.lines,
                 filter: &self.filter,
             },
+            memo,
         )
         .map_err(|e| e.to_string())
     }
 
-    /// The expected returns and signals of `scene` (a truth); with photons, traced from the
-    /// profile's `seed` (every truth of one profile on the same photons).
-    fn measure(&self, mut scene: Scene, seed: u64) -> Result<Measured, String> {
-        // The study's photons, from the profile's seed (every truth of one profile on the same
-        // photons).
-        scene.simulation.photons = self.options.photons;
-        scene.simulation.seed = seed;
+    /// The expected returns and signals of the truths `scenes` (the scene's laser and its
+    /// perturbations on one profile; `None` where a perturbation does not apply), in order.
+    /// With photons each is traced from the profile's `seed` (every truth of one profile on the
+    /// same photons). Analytic: one optical atmosphere and one lidar equation for the channels
+    /// of all of them, each channel once (a channel's analytic return depends on its wavenumber
+    /// and its line alone), each truth's channels picked from them.
+    fn measure_all(
+        &self,
+        scenes: Vec<Option<Scene>>,
+        seed: u64,
+        memo: &mut LayerDepthMemo,
+    ) -> Result<Vec<Option<Measured>>, String> {
+        let scenes: Vec<Option<Scene>> = scenes
+            .into_iter()
+            .map(|s| {
+                s.map(|mut s| {
+                    s.simulation.photons = self.options.photons;
+                    s.simulation.seed = seed;
+                    s
+                })
+            })
+            .collect();
+        if self.options.photons > 0 {
+            return scenes
+                .into_iter()
+                .map(|s| s.map(|s| self.trace(s, memo)).transpose())
+                .collect();
+        }
+        let Some(first) = scenes.iter().flatten().next() else {
+            return Ok(scenes.into_iter().map(|_| None).collect());
+        };
+        let same = |a: &SampledChannel, b: &SampledChannel| {
+            a.line == b.line && a.wavenumber_cm1.to_bits() == b.wavenumber_cm1.to_bits()
+        };
+        let mut all = first.sampling.channels.clone();
+        let mut extra = Vec::new();
+        for c in scenes.iter().flatten().flat_map(|s| &s.sampling.channels) {
+            if !all.iter().any(|a| same(a, c)) {
+                all.push(c.clone());
+                extra.push(c.clone());
+            }
+        }
+        let union = first
+            .with_extra_channels(&extra)
+            .ok_or("a truth samples a line the scene does not have")?;
         let optics = Clock::time(&self.clock.truth_optics, || {
-            OpticalAtmosphere::build(&scene).map_err(|e| e.to_string())
+            OpticalAtmosphere::build_with(&union, memo).map_err(|e| e.to_string())
+        })?;
+        let analytic = Clock::time(&self.clock.returns, || {
+            lidar_eq::single_scatter(&union, &optics)
+        });
+        scenes
+            .into_iter()
+            .map(|s| {
+                s.map(|s| {
+                    Clock::time(&self.clock.returns, || {
+                        let index: Vec<usize> = s
+                            .sampling
+                            .channels
+                            .iter()
+                            .map(|c| all.iter().position(|a| same(a, c)))
+                            .collect::<Option<_>>()
+                            .ok_or("a truth's channel is not among the channels computed")?;
+                        let channels = analytic.channel_subset(&index);
+                        let lines = s.sampling.combine(&channels);
+                        with_signals(s, lines, Order::Exactly(1))
+                    })
+                })
+                .transpose()
+            })
+            .collect()
+    }
+
+    /// The Monte Carlo returns and signals of one truth `scene` (its photons and seed set).
+    fn trace(&self, scene: Scene, memo: &mut LayerDepthMemo) -> Result<Measured, String> {
+        let optics = Clock::time(&self.clock.truth_optics, || {
+            OpticalAtmosphere::build_with(&scene, memo).map_err(|e| e.to_string())
         })?;
         Clock::time(&self.clock.returns, || {
-            let (channels, lines, order) = if self.options.photons > 0 {
-                let (_, lines) =
-                    pipeline::trace_lines(&scene, &optics).map_err(|e| e.to_string())?;
-                (None, lines.ok_or("no combined returns")?, Order::Total)
-            } else {
-                let analytic = lidar_eq::single_scatter(&scene, &optics);
-                let lines = scene.sampling.combine(&analytic);
-                (Some(analytic), lines, Order::Exactly(1))
-            };
-            with_signals(scene, channels, lines, order)
+            let (_, lines) = Clock::time(&self.clock.transport, || {
+                pipeline::trace_lines(&scene, &optics).map_err(|e| e.to_string())
+            })?;
+            with_signals(scene, lines.ok_or("no combined returns")?, Order::Total)
         })
     }
 
-    /// The truth `scene` (another laser on `base`'s profile): from `base`'s channel returns
-    /// when it samples only wavenumbers `base` has (a laser without jitter or impurity: the
-    /// analytic return of a channel depends on its wavenumber and its line alone), else anew.
-    fn measure_like(&self, base: &Measured, scene: Scene, seed: u64) -> Result<Measured, String> {
-        let subset = base.channels.as_ref().and_then(|r| {
-            let index: Option<Vec<usize>> = scene
-                .sampling
-                .channels
-                .iter()
-                .map(|c| {
-                    base.scene.sampling.channels.iter().position(|b| {
-                        b.line == c.line && b.wavenumber_cm1.to_bits() == c.wavenumber_cm1.to_bits()
-                    })
-                })
-                .collect();
-            index.map(|i| r.channel_subset(&i))
-        });
-        match subset {
-            Some(channels) => Clock::time(&self.clock.returns, || {
-                let lines = scene.sampling.combine(&channels);
-                with_signals(scene, Some(channels), lines, Order::Exactly(1))
-            }),
-            None => self.measure(scene, seed),
-        }
-    }
-
-    /// The products of every pair retrieved from `m` with `reference` (one retrieval set-up,
-    /// its paths shared by the pairs: [`Retrieval::set_pair`](crate::retrieval::Retrieval::set_pair)).
-    fn retrieve(
+    /// The retrieval set-up of the truth `m` with `reference`: its paths through the reference
+    /// state, computed once for every pair ([`Retrieval::set_pair`]) and every truth of the
+    /// profile ([`Self::retrieve`]).
+    fn retrieval(
         &self,
         m: &Measured,
-        reference: &ReferenceState,
+        reference: ReferenceState,
         truth: &LayerColumns,
         seed: u64,
-    ) -> Result<Vec<Vec<Product>>, String> {
+    ) -> Result<Retrieval, String> {
         Clock::time(&self.clock.retrievals, || {
             let mut config = self.config.clone();
             config.realisations = 1;
             (config.on, config.off) = self.options.pairs[0];
-            let mut r =
-                pipeline::retrieval_of(&m.scene, config, reference.clone(), truth.clone(), seed)
-                    .map_err(|e| e.to_string())?;
+            pipeline::retrieval_of(&m.scene, config, reference, truth.clone(), seed)
+                .map_err(|e| e.to_string())
+        })
+    }
+
+    /// The products of every pair retrieved from `m` with the set-up `r` of a truth of the same
+    /// profile. The truths differ only in their laser, which is all of the scene a set-up reads
+    /// after it is made (its pulse energies and the measurement's imperfections): `m`'s
+    /// replaces it.
+    fn retrieve(&self, r: &mut Retrieval, m: &Measured) -> Result<Vec<Vec<Product>>, String> {
+        Clock::time(&self.clock.retrievals, || {
+            r.laser.clone_from(&m.scene.laser);
             let name = |(on, off): (usize, usize)| pipeline::pair_name(&m.scene, on, off);
             let mut out = Vec::with_capacity(self.options.pairs.len());
             for &(on, off) in &self.options.pairs {
@@ -165,8 +212,13 @@ impl Study<'_> {
             .map(|(_, r)| r)
             .ok_or("no mean profile of its class")?;
         let edges = scene.molecular_edges().ok_or("no molecular grid")?;
-        let truth =
-            LayerColumns::new(&profile, &edges, &self.config.gas).map_err(|e| e.to_string())?;
+        // The profile's line-by-line work, shared by its truths and reference states.
+        let mut memo = LayerDepthMemo::new();
+        let layers = memo
+            .layers(&profile, &edges, &[&self.config.gas])
+            .map_err(|e| crate::retrieval::RetrievalError::from(e).to_string())?;
+        let truth = LayerColumns::of_layers(&profile, &edges, &layers, &self.config.gas)
+            .map_err(|e| e.to_string())?;
         let truth_member = SetMember {
             meta: member.meta.clone(),
             profile,
@@ -174,16 +226,18 @@ impl Study<'_> {
         let steps = &self.options.steps;
         // References: the truth's own, re-levelled, and one per knowledge error.
         let (own, exact, knowledge) = Clock::time(&self.clock.references, || {
-            let own = self.reference(&truth_member.profile, &edges)?;
+            let own = self.reference_as(&truth_member.profile, &edges, true, &mut memo)?;
             // The truth's spectroscopy, where the retrieval assumes another.
             let exact = match &self.config.spectroscopy {
-                Some(_) => Some(self.reference_as(&truth_member.profile, &edges, false)?),
+                Some(_) => {
+                    Some(self.reference_as(&truth_member.profile, &edges, false, &mut memo)?)
+                }
                 None => None,
             };
-            let shifted = |s: StateShift| -> Result<ReferenceState, String> {
+            let mut shifted = |s: StateShift| -> Result<ReferenceState, String> {
                 let p = shift_member(&truth_member, &s).map_err(|e| e.to_string())?;
                 check_dry_air(&p.profile, s.h2o_factor)?;
-                self.reference(&p.profile, &edges)
+                self.reference_as(&p.profile, &edges, true, &mut memo)
             };
             let none = StateShift::NONE;
             let knowledge = [
@@ -221,40 +275,42 @@ impl Study<'_> {
             spectral_purity: 1.0,
             ..laser.clone()
         });
-        let base = self.measure(scene, seed)?;
-        let variant = |l: Option<Laser>| -> Result<Option<Measured>, String> {
-            match l {
-                None => Ok(None),
-                Some(l) => {
-                    let s = base.scene.with_laser(l).map_err(|e| e.to_string())?;
-                    self.measure_like(&base, s, seed).map(Some)
-                }
-            }
+        let variant = |l: Option<Laser>| -> Result<Option<Scene>, String> {
+            l.map(|l| scene.with_laser(l).map_err(|e| e.to_string()))
+                .transpose()
         };
-        let lasers = [
+        let variants = [
             variant(Some(offset))?,
             variant(no_jitter)?,
             variant(wider)?,
             variant(pure)?,
         ];
-        let paper = self.retrieve(&base, mean, &truth, seed)?;
-        let own_p = self.retrieve(&base, &own, &truth, seed)?;
-        let exact_p = exact
-            .as_ref()
-            .map(|r| self.retrieve(&base, r, &truth, seed))
-            .transpose()?;
-        let know: Vec<Vec<Vec<Product>>> = knowledge
-            .iter()
-            .map(|r| self.retrieve(&base, r, &truth, seed))
-            .collect::<Result<_, _>>()?;
-        let las: Vec<Option<Vec<Vec<Product>>>> = lasers
-            .iter()
-            .map(|m| {
+        let mut measured = self
+            .measure_all(
+                std::iter::once(Some(scene)).chain(variants).collect(),
+                seed,
+                &mut memo,
+            )?
+            .into_iter();
+        let base = measured.next().flatten().ok_or("no truth measured")?;
+        let lasers: Vec<Option<Measured>> = measured.collect();
+        let one = |reference: ReferenceState| -> Result<Vec<Vec<Product>>, String> {
+            self.retrieve(&mut self.retrieval(&base, reference, &truth, seed)?, &base)
+        };
+        let paper = one(mean.clone())?;
+        let mut own_r = self.retrieval(&base, own, &truth, seed)?;
+        let own_p = self.retrieve(&mut own_r, &base)?;
+        let exact_p = exact.map(one).transpose()?;
+        let know: Vec<Vec<Vec<Product>>> =
+            knowledge.into_iter().map(one).collect::<Result<_, _>>()?;
+        let mut las: Vec<Option<Vec<Vec<Product>>>> = Vec::with_capacity(lasers.len());
+        for m in &lasers {
+            las.push(
                 m.as_ref()
-                    .map(|m| self.retrieve(m, &own, &truth, seed))
-                    .transpose()
-            })
-            .collect::<Result<_, _>>()?;
+                    .map(|m| self.retrieve(&mut own_r, m))
+                    .transpose()?,
+            );
+        }
         let mut records: Vec<Record> = Vec::new();
         for p in 0..self.options.pairs.len() {
             let know_p: Vec<Vec<Product>> = know.iter().map(|k| k[p].clone()).collect();
@@ -335,19 +391,13 @@ fn check_records(records: &mut [Record], monte_carlo: bool) -> Result<(), String
 }
 
 /// Signals of a truth's line returns through its receiver.
-fn with_signals(
-    scene: Scene,
-    channels: Option<Returns>,
-    lines: LineReturns,
-    order: Order,
-) -> Result<Measured, String> {
+fn with_signals(scene: Scene, lines: LineReturns, order: Order) -> Result<Measured, String> {
     if scene.receiver.is_none() {
         return Err("no receiver".into());
     }
     let signals = pipeline::signals_of(&scene, &lines, order).ok_or("no signals of the returns")?;
     Ok(Measured {
         scene,
-        channels,
         lines,
         signals,
     })

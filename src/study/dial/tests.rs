@@ -69,3 +69,48 @@ fn budget_steps_are_held_to_the_options_ranges() {
         );
     }
 }
+
+/// A scene with the channels of another laser appended gives, channel by channel, the optical
+/// depths and analytic returns of each laser's own scene bit for bit (what the study's truths
+/// share): the study scene with its on-lines offset by 1 MHz and its line 10 % wider.
+#[test]
+fn extra_channels_return_what_their_own_scene_returns() {
+    let text = include_str!("../../../scenes/study_co2_ipda.toml");
+    let base = Scene::from_toml(std::path::Path::new("study.toml"), text).unwrap();
+    let mut offset = base.laser.clone();
+    offset.frequency_offset_mhz[0] += 1.0;
+    let wider = Laser {
+        line_shape: LineShape::Gaussian { fwhm_mhz: 33.0 },
+        ..base.laser.clone()
+    };
+    let others: Vec<Scene> = [offset, wider]
+        .into_iter()
+        .map(|l| base.with_laser(l).unwrap())
+        .collect();
+    let extra: Vec<SampledChannel> = others
+        .iter()
+        .flat_map(|s| s.sampling.channels.iter().cloned())
+        .collect();
+    let union = base.with_extra_channels(&extra).unwrap();
+    let mut memo = LayerDepthMemo::new();
+    let u_atm = OpticalAtmosphere::build_with(&union, &mut memo).unwrap();
+    let u = lidar_eq::single_scatter(&union, &u_atm);
+    let bins = u.bins_per_channel();
+    let mut first = 0;
+    for s in std::iter::once(&base).chain(&others) {
+        let atm = OpticalAtmosphere::build(s).unwrap();
+        let own = lidar_eq::single_scatter(s, &atm);
+        let n = s.channels.len();
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(
+            bits(&own.energy_j),
+            bits(&u.energy_j[first * bins..(first + n) * bins])
+        );
+        let nch = u_atm.n_channels;
+        for l in 0..atm.n_layers() {
+            let got = &u_atm.sigma_a_per_m[l * nch + first..l * nch + first + n];
+            assert_eq!(bits(&atm.sigma_a_per_m[l * n..(l + 1) * n]), bits(got));
+        }
+        first += n;
+    }
+}

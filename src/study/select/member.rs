@@ -139,7 +139,8 @@ pub fn weighting_function(
     for l in 0..n {
         let dp = (p[l] - p[l + 1]) / 100.0;
         let x = state.columns.gas_per_m2[l] / state.columns.dry_air_per_m2[l];
-        let dt = state.target_tau[l][on][0] - state.target_tau[l][off][0];
+        let dt = state.target_tau[state.tau_index(l, on, 0)]
+            - state.target_tau[state.tau_index(l, off, 0)];
         wf.ln_p_centre.push(0.5 * (p[l].ln() + p[l + 1].ln()));
         wf.dp_hpa.push(dp);
         wf.per_hpa.push(dt / (x * dp));
@@ -227,7 +228,8 @@ pub fn study_member(member: &SetMember, cfg: &StudyConfig) -> Result<MemberResul
     let (p0, p_t, p_q, p_p) = (path(&s0), path(&s_t), path(s_q), path(&s_p));
     let (x0, x_t, x_q, x_p) = (xco2(&s0), xco2(&s_t), xco2(s_q), xco2(&s_p));
     let tau = |p: &crate::retrieval::PathDepths, line: usize| {
-        p.target_scaled[line][0] + p.target_fixed[line][0] + p.other[line][0]
+        let k = line * p.nodes;
+        p.target_scaled[k] + p.target_fixed[k] + p.other[k]
     };
     // The error of a retrieval whose reference is (state, path, X) given the true DAOD.
     let error_ppm =
