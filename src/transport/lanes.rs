@@ -353,7 +353,7 @@ mod tests {
                     .collect()
             };
             let (w, a, b, c, d, g, f) = (v(1.1), v(2.3), v(3.7), v(4.1), v(5.9), v(6.3), v(7.7));
-            let mut out = vec![vec![0.0; n]; 10];
+            let mut out = vec![vec![0.0; n]; 15];
             estimate_phase(&mut out[0], &w, &a, &b, 0.7);
             crossing(&mut out[1], &w, &a, &b, &c, &d, &g, &f, &a, 1.3, 0.2, 0.9);
             cone(&mut out[2], &w, &a, &b, &c, 0.4, &d, &g);
@@ -367,8 +367,12 @@ mod tests {
             to_receiver(&mut out[8], &a, &b, &c, 0.3);
             out[9].copy_from_slice(&w);
             reflect(&mut out[9], &a, &b, 0.6);
-            let mut grey = w.clone();
-            collide_grey(&mut grey, &a, 0.8);
+            estimate(&mut out[10], &w, &a, 0.7);
+            cone_grey(&mut out[11], &w, &a, 0.3, 0.5, 0.4, &b, &c);
+            out[12].copy_from_slice(&w);
+            collide_grey(&mut out[12], &a, 0.8);
+            step(&mut out[13], &a, &b, 1.3);
+            scale(&mut out[14], &a, 0.9);
             let mut clear = w.clone();
             collide_grey(&mut clear, &vec![0.0; n], 0.8);
             for k in 0..n {
@@ -395,7 +399,11 @@ mod tests {
                 same(7, w[k] * ex(-(a[k] + b[k])) * c[k] * 0.7);
                 same(8, (a[k] + b[k] - c[k]).abs() / 0.3);
                 same(9, w[k] * ex(-a[k]) / 0.6 * b[k]);
-                assert_eq!(grey[k].to_bits(), (w[k] * (0.8 * ex(-a[k]))).to_bits());
+                same(10, w[k] * 0.7 * ex(-a[k]));
+                same(11, w[k] * a[k] * 0.3 * 0.5 * 0.4 * ex(-(b[k] + c[k])));
+                same(12, w[k] * (0.8 * ex(-a[k])));
+                same(13, (a[k] - b[k]).abs() * 1.3);
+                same(14, a[k] * 0.9);
                 assert_eq!(clear[k].to_bits(), (w[k] * 0.8).to_bits());
             }
         }
