@@ -525,9 +525,14 @@ pub fn run_slice(
         means: Vec::new(),
         clock: Clock::default(),
     };
-    // Profiles that cannot be run are found first: they take no part in the class means.
-    let checked: Vec<Result<Scene, String>> =
-        set.members.par_iter().map(|m| study.usable(m)).collect();
+    // Profiles that cannot be run are found first: they take no part in the class means. Only
+    // the verdict is kept (each profile's scene is made again when it runs): a scene per
+    // profile held for the whole study was most of its memory (about 45 kB each).
+    let checked: Vec<Result<(), String>> = set
+        .members
+        .par_iter()
+        .map(|m| study.usable(m).map(|_| ()))
+        .collect();
     // The class-mean profiles and their reference states.
     let t_means = Instant::now();
     let mut mean_profiles = Vec::new();
@@ -569,10 +574,12 @@ pub fn run_slice(
         .into_iter()
         .map(|mut r| r.random::<u64>())
         .collect();
-    let one = |((member, seed), ok): ((&SetMember, &u64), &Result<Scene, String>)| {
+    let one = |((member, seed), ok): ((&SetMember, &u64), &Result<(), String>)| {
         let records = match ok {
             _ if stopped() => Err("stopped".into()),
-            Ok(scene) => study.profile(member, scene, *seed),
+            Ok(()) => study
+                .usable(member)
+                .and_then(|scene| study.profile(member, scene, *seed)),
             Err(e) => Err(e.clone()),
         };
         progress();

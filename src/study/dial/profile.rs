@@ -196,10 +196,9 @@ impl Study<'_> {
     pub(super) fn profile(
         &self,
         member: &SetMember,
-        scene: &Scene,
+        scene: Scene,
         seed: u64,
     ) -> Result<Vec<Record>, String> {
-        let scene = scene.clone();
         let profile = scene
             .atmosphere
             .as_ref()
