@@ -89,7 +89,8 @@ pub mod returns;
 pub mod rng;
 pub mod scene;
 pub mod shard;
-pub mod skip;
+/// What a scene does not need: whether the Monte Carlo runs ([`pipeline::skip`]).
+pub use pipeline::skip;
 pub mod spectroscopy;
 pub mod stats;
 pub mod study;

@@ -6,7 +6,7 @@ use std::time::Instant;
 use super::{RunError, RunOutput, run};
 use crate::optics::OpticalAtmosphere;
 use crate::scene::{MultipleScattering, Scene};
-use crate::skip::Decision;
+use super::skip::Decision;
 
 /// Wall-clock times of one scene's whole run ([`run`]) as the scene asks for it and with
 /// the Monte Carlo forced on: what skipping saves.

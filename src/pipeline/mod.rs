@@ -25,6 +25,7 @@ use crate::returns::{Order, Returns, Source};
 use crate::scene::Scene;
 use crate::transport::{self, McResult, Progress, TallyLayout, TransportError};
 
+pub mod skip;
 mod compare;
 mod work;
 
@@ -43,7 +44,7 @@ pub struct RunOutput {
     /// The Monte Carlo run, if it ran (channels, and lines in `combined`).
     pub mc: Option<McResult>,
     /// Whether the Monte Carlo ran, and why ([`crate::skip`]).
-    pub monte_carlo: crate::skip::Decision,
+    pub monte_carlo: skip::Decision,
     /// Monte Carlo line returns.
     pub mc_lines: Option<LineReturns>,
     /// Signals of each set of returns (analytic order 1; Monte Carlo order 1 and all orders),
@@ -127,7 +128,7 @@ pub struct Prepared<'s> {
     analytic: Returns,
     analytic_lines: LineReturns,
     retrieval: Option<Retrieval>,
-    decision: crate::skip::Decision,
+    decision: skip::Decision,
     warning: Option<String>,
     /// Signals and products of the analytic returns.
     signals: Vec<Signals>,
@@ -157,11 +158,11 @@ pub fn prepare(scene: &Scene) -> Result<Prepared<'_>, RunError> {
         &mut signals,
         &mut products,
     )?;
-    let decision = crate::skip::decide_with(
+    let decision = skip::decide_with(
         scene,
         &atmosphere,
         photons,
-        Some(crate::skip::Analytic {
+        Some(skip::Analytic {
             returns: &analytic,
             lines: &analytic_lines,
             retrieval: retrieval.as_ref(),
@@ -204,7 +205,7 @@ impl<'s> Prepared<'s> {
     }
 
     /// Whether the Monte Carlo runs, and why.
-    pub fn decision(&self) -> &crate::skip::Decision {
+    pub fn decision(&self) -> &skip::Decision {
         &self.decision
     }
 

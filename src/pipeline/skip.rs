@@ -185,7 +185,7 @@ pub fn decide_with(
     if scene.retrieval.is_some() && scene.receiver.is_some() {
         let own = match given.and_then(|a| a.retrieval) {
             Some(_) => None,
-            None => Some(crate::pipeline::retrieval_setup(scene)),
+            None => Some(super::retrieval_setup(scene)),
         };
         let retrieval = match (given.and_then(|a| a.retrieval), &own) {
             (Some(r), _) => Ok(r),
@@ -486,7 +486,7 @@ fn retrieval_change(
         }
     }
     let retrieve = |set: &LineReturns| -> Option<Vec<Product>> {
-        let signals = crate::pipeline::signals_of(scene, set, Order::Exactly(1))?;
+        let signals = super::signals_of(scene, set, Order::Exactly(1))?;
         let mut out = Vec::new();
         for fov in 0..lb.n_fov {
             out.extend(r.retrieve(set, &signals, fov).ok()?);
