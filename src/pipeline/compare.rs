@@ -3,10 +3,10 @@
 
 use std::time::Instant;
 
+use super::skip::Decision;
 use super::{RunError, RunOutput, run};
 use crate::optics::OpticalAtmosphere;
 use crate::scene::{MultipleScattering, Scene};
-use super::skip::Decision;
 
 /// Wall-clock times of one scene's whole run ([`run`]) as the scene asks for it and with
 /// the Monte Carlo forced on: what skipping saves.

@@ -25,8 +25,8 @@ use crate::returns::{Order, Returns, Source};
 use crate::scene::Scene;
 use crate::transport::{self, McResult, Progress, TallyLayout, TransportError};
 
-pub mod skip;
 mod compare;
+pub mod skip;
 mod work;
 
 pub use compare::{Comparison, compare_skip};
