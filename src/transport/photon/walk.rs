@@ -297,14 +297,15 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
             if rng.random::<f64>() >= q {
                 // Reach the surface and reflect (its signal was scored above).
                 if s.flux_tally {
+                    // The surface absorbs what arrives and does not reflect.
                     for k in 0..nch {
                         let arriving = self.w[k] * (-self.tmp[k]).exp();
                         self.flux.down[k] += arriving * (1.0 - albedo[k]);
-                        self.w[k] = arriving / (1.0 - q) * albedo[k];
                     }
-                } else {
-                    lanes::reflect(&mut self.w[..nch], &self.tmp, albedo, 1.0 - q);
                 }
+                // The weights by one kernel whether or not the flux is tallied, so that the
+                // flux tally never changes the returns.
+                lanes::reflect(&mut self.w[..nch], &self.tmp, albedo, 1.0 - q);
                 walk.pos = hit;
                 walk.pos.z = s.bottom_m;
                 walk.at_layer = 0;
