@@ -42,7 +42,7 @@ const OVERFLOW: f64 = 709.0;
 /// 16-channel scene's time. The one-channel tracer keeps the library's (`Tracer::exp`). e^r by its Taylor series to r¹³: the remainder, below
 /// (ln 2/2)¹⁴/14! = 4.4e-18, is under the last bit.
 #[inline(always)]
-pub(super) fn exp(x: f64) -> f64 {
+pub(crate) fn exp(x: f64) -> f64 {
     let xc = x.clamp(UNDERFLOW, OVERFLOW);
     let t = xc * std::f64::consts::LOG2_E + ROUND;
     let n = t - ROUND;

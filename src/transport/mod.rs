@@ -13,7 +13,7 @@ mod cone;
 mod crossing;
 mod fold;
 mod jacobian;
-mod lanes;
+pub(crate) mod lanes;
 mod photon;
 mod plan;
 mod setup;
