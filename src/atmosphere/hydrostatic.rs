@@ -63,6 +63,46 @@ pub struct HydrostaticProfile<'a> {
     h2o: Option<&'a [f64]>,
     /// J_i(z_{i+1}) = ∫ dz/T_v over each level interval \[m/K\].
     j_full: Vec<f64>,
+    /// Per level interval: the pressure's log-linear interpolant, the water vapour's, and
+    /// each gas's (the rule of [`Self::gas_vmr`]), with their logarithms worked out once: the
+    /// columns evaluate them at every node of two nested quadratures, and a power per node
+    /// was most of a Curtis-Godson layer's cost.
+    pressure: Vec<LogLinear>,
+    h2o_interp: Vec<LogLinear>,
+    gases: Vec<Vec<(LogLinear, bool)>>,
+    /// The height factor of normal gravity at 45° ([`Self::j`]).
+    height: (f64, f64),
+}
+
+/// a (b/a)^t on one interval as a e^{t ln(b/a)}, with ln(b/a) computed once (within a few
+/// ulps of the power), or linearly where either end is not positive.
+#[derive(Debug, Clone, Copy)]
+struct LogLinear {
+    a: f64,
+    b: f64,
+    ln_ratio: f64,
+    log: bool,
+}
+
+impl LogLinear {
+    fn new(a: f64, b: f64) -> Self {
+        let log = a > 0.0 && b > 0.0;
+        LogLinear {
+            a,
+            b,
+            ln_ratio: if log { (b / a).ln() } else { 0.0 },
+            log,
+        }
+    }
+
+    #[inline]
+    fn at(&self, t: f64) -> f64 {
+        if self.log {
+            self.a * (t * self.ln_ratio).exp()
+        } else {
+            self.a + (self.b - self.a) * t
+        }
+    }
 }
 
 /// The state at one altitude.
@@ -89,16 +129,6 @@ pub struct ColumnIntegrals {
     pub temperature_weighted: f64,
 }
 
-/// a (b/a)^t, or linearly where either is not positive.
-#[inline]
-fn log_linear(a: f64, b: f64, t: f64) -> f64 {
-    if a > 0.0 && b > 0.0 {
-        a * (b / a).powf(t)
-    } else {
-        a + (b - a) * t
-    }
-}
-
 impl<'a> HydrostaticProfile<'a> {
     /// The integration of `profile` (its level intervals' ∫ dz/T_v worked out once).
     pub fn new(profile: &'a Profile) -> Self {
@@ -106,12 +136,42 @@ impl<'a> HydrostaticProfile<'a> {
             profile,
             h2o: profile.gas("H2O"),
             j_full: Vec::new(),
+            pressure: Vec::new(),
+            h2o_interp: Vec::new(),
+            gases: Vec::new(),
+            height: height_coefficients(45.0),
         };
         let n = profile
             .altitude_m
             .len()
             .min(profile.pressure_pa.len())
             .min(profile.temperature_k.len());
+        let intervals = n.saturating_sub(1);
+        let p = &profile.pressure_pa;
+        h.pressure = (0..intervals)
+            .map(|i| LogLinear::new(p[i], p[i + 1]))
+            .collect();
+        if let Some(w) = h.h2o {
+            h.h2o_interp = (0..intervals.min(w.len().saturating_sub(1)))
+                .map(|i| LogLinear::new(w[i], w[i + 1]))
+                .collect();
+        }
+        h.gases = profile
+            .gases
+            .iter()
+            .map(|g| {
+                let vmr = &g.vmr[..];
+                (0..intervals.min(vmr.len().saturating_sub(1)))
+                    .map(|i| match h.h2o {
+                        Some(w) if !std::ptr::eq(w, vmr) && w[i] < 1.0 && w[i + 1] < 1.0 => (
+                            LogLinear::new(vmr[i] / (1.0 - w[i]), vmr[i + 1] / (1.0 - w[i + 1])),
+                            true,
+                        ),
+                        _ => (LogLinear::new(vmr[i], vmr[i + 1]), false),
+                    })
+                    .collect()
+            })
+            .collect();
         h.j_full = (0..n.saturating_sub(1))
             .map(|i| h.j(i, profile.altitude_m[i + 1]))
             .collect();
@@ -141,30 +201,36 @@ impl<'a> HydrostaticProfile<'a> {
         tk[i] + (tk[i + 1] - tk[i]) * t
     }
 
-    /// Mixing ratio (of moist air) of a gas with levels `vmr` at fraction `t` of interval `i`,
-    /// `x_w` the water vapour's there (module docs): log-linear in dry air.
+    /// Mixing ratio (of moist air) of gas `g` at fraction `t` of interval `i`, `x_w` the water
+    /// vapour's there (module docs): log-linear in dry air.
     #[inline]
-    fn gas_vmr(&self, vmr: &[f64], i: usize, t: f64, x_w: f64) -> f64 {
-        match self.h2o {
-            Some(h) if !std::ptr::eq(h, vmr) && h[i] < 1.0 && h[i + 1] < 1.0 => {
-                log_linear(vmr[i] / (1.0 - h[i]), vmr[i + 1] / (1.0 - h[i + 1]), t) * (1.0 - x_w)
-            }
-            _ => log_linear(vmr[i], vmr[i + 1], t),
+    fn gas_vmr(&self, g: usize, i: usize, t: f64, x_w: f64) -> f64 {
+        let (interp, dry) = self.gases[g][i];
+        if dry {
+            interp.at(t) * (1.0 - x_w)
+        } else {
+            interp.at(t)
         }
+    }
+
+    /// The water vapour's mixing ratio at fraction `t` of interval `i` (0 without it).
+    #[inline]
+    fn h2o_vmr(&self, i: usize, t: f64) -> f64 {
+        self.h2o_interp.get(i).map_or(0.0, |w| w.at(t))
     }
 
     /// J_i(z) = ∫_{z_i}^{z} γ(z')/T_v(z') dz' (8-point Gauss-Legendre), γ the height factor
     /// of normal gravity, 1 − c₁z + c₂z² ([`normal_gravity_m_per_s2`]; at 45°: its latitude
     /// dependence changes c₁ by 3e-3 of itself, 1e-9 of γ over a kilometre).
     fn j(&self, i: usize, z: f64) -> f64 {
-        let (c1, c2) = height_coefficients(45.0);
+        let (c1, c2) = self.height;
         let z0 = self.profile.altitude_m[i];
         let (mid, half) = (0.5 * (z0 + z), 0.5 * (z - z0));
         GL8.iter()
             .map(|(x, w)| {
                 let zz = mid + half * x;
                 let t = self.fraction(i, zz);
-                let x_w = self.h2o.map_or(0.0, |h| log_linear(h[i], h[i + 1], t));
+                let x_w = self.h2o_vmr(i, t);
                 let gamma = 1.0 - c1 * zz + c2 * zz * zz;
                 w * half * gamma / virtual_temperature_k(self.temperature(i, t), x_w)
             })
@@ -173,14 +239,13 @@ impl<'a> HydrostaticProfile<'a> {
 
     /// Pressure, temperature and air number density at `z` in level interval `i`.
     pub fn state_in(&self, i: usize, z: f64) -> HydrostaticState {
-        let p = &self.profile.pressure_pa;
         let t = self.fraction(i, z);
         let share = if self.j_full[i] != 0.0 {
             self.j(i, z) / self.j_full[i]
         } else {
             t
         };
-        let pressure_pa = log_linear(p[i], p[i + 1], share);
+        let pressure_pa = self.pressure[i].at(share);
         let temperature_k = self.temperature(i, t);
         HydrostaticState {
             pressure_pa,
@@ -229,13 +294,13 @@ impl<'a> HydrostaticProfile<'a> {
                 let zz = mid + half * x;
                 let s = self.state_in(i, zz);
                 let t = self.fraction(i, zz);
-                let x_w = self.h2o.map_or(0.0, |h| log_linear(h[i], h[i + 1], t));
+                let x_w = self.h2o_vmr(i, t);
                 let wn = wq * half * s.air_number_density_per_m3;
                 out.air_per_m2 += wn;
                 out.pressure_weighted += wn * s.pressure_pa;
                 out.temperature_weighted += wn * s.temperature_k;
-                for (u, g) in out.gas_per_m2.iter_mut().zip(gases) {
-                    *u += wn * self.gas_vmr(&g.vmr, i, t, x_w);
+                for (g, u) in out.gas_per_m2.iter_mut().enumerate() {
+                    *u += wn * self.gas_vmr(g, i, t, x_w);
                 }
             }
             a = b;
