@@ -668,6 +668,61 @@ phase = { kind = "isotropic" }
         }
     }
 
+    /// Every channel of a many-channel scene (the pieces away from the receiver done for all
+    /// channels at once, `Lanes`) gets what the same channel gets alone (one channel: the
+    /// library's exponential, one channel at a time), including a channel so thick that its
+    /// pieces need more sub-intervals than the others' (left to the one-channel loop, so
+    /// bit for bit).
+    #[test]
+    fn many_channels_at_once_are_each_channel_alone() {
+        let extinction = [1e-3, 2e-3, 0.2, 1e-4, 5e-3];
+        let many = HOMOGENEOUS
+            .replace(
+                "[[channel]]\nname = \"a\"\nwavelength_nm = 1064.0\n",
+                &(0..extinction.len())
+                    .map(|k| format!("[[channel]]\nname = \"c{k}\"\nwavelength_nm = 1064.0\n"))
+                    .collect::<String>(),
+            )
+            .replace(
+                "extinction_per_m = 1e-3",
+                &format!("extinction_per_m = {extinction:?}"),
+            );
+        for zenith in [0.0, 30.0, 150.0] {
+            let mut s = scene(&many);
+            s.lidar.altitude_m = 1000.0;
+            s.lidar.zenith_angle_deg = zenith;
+            let all = single_scatter(&s, &OpticalAtmosphere::build(&s).unwrap());
+            for (k, e) in extinction.iter().enumerate() {
+                let mut one = scene(&HOMOGENEOUS.replace(
+                    "extinction_per_m = 1e-3",
+                    &format!("extinction_per_m = {e:?}"),
+                ));
+                one.lidar.altitude_m = 1000.0;
+                one.lidar.zenith_angle_deg = zenith;
+                let alone = single_scatter(&one, &OpticalAtmosphere::build(&one).unwrap());
+                for g in 0..4 {
+                    let (a, b) = (
+                        all.energy(k, 0, g, Order::Exactly(1)).unwrap(),
+                        alone.energy(0, 0, g, Order::Exactly(1)).unwrap(),
+                    );
+                    // Looking down from 1 km, the last gates lie below the medium.
+                    assert!(
+                        a > 0.0 || (zenith > 90.0 && g >= 2),
+                        "zenith {zenith}°, channel {k}, gate {g}: {a}"
+                    );
+                    if k == 2 || a == 0.0 {
+                        assert_eq!(a.to_bits(), b.to_bits(), "thick channel, gate {g}");
+                    } else {
+                        assert!(
+                            (a / b - 1.0).abs() < 1e-14,
+                            "zenith {zenith}°, channel {k}, gate {g}: {a} vs {b}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+
     /// All orders ≥ 2 bounded by the geometric series Σₙ≥₁ Kⁿ = K/(1 − K); the largest bound
     /// and its field of view, the first on a tie; the largest all-orders bound and where.
     #[test]
