@@ -8,9 +8,9 @@ use std::path::{Path, PathBuf};
 use super::ProductError;
 use crate::atmosphere::{LatitudeClass, StandardAtmosphere};
 use crate::output::{OutputError, OutputSet, csv_field};
-use crate::study;
 use crate::study::select::{self, MemberFailure, Row};
 use crate::study::select_study::{GroupSummary, MemberOutcome, SelectSource, SelectStudy};
+use crate::study::{FailurePolicy, FailureReport};
 
 /// The line of the report that says what the study computes.
 pub fn setup_line(study: &SelectStudy) -> String {
@@ -46,10 +46,23 @@ impl<'a> SelectProducts<'a> {
         study: &'a SelectStudy,
         outcomes: &'a [MemberOutcome],
     ) -> Result<Self, ProductError> {
+        Self::with_policy(study, outcomes, FailurePolicy::Tolerate)
+    }
+
+    /// [`Self::new`] under `policy`: with [`FailurePolicy::Strict`] an error when any member
+    /// failed ([`FailureReport::verdict`]).
+    pub fn with_policy(
+        study: &'a SelectStudy,
+        outcomes: &'a [MemberOutcome],
+        policy: FailurePolicy,
+    ) -> Result<Self, ProductError> {
         let failed: Vec<&MemberFailure> =
             outcomes.iter().filter_map(|o| o.as_ref().err()).collect();
-        if !outcomes.is_empty() && failed.len() == outcomes.len() {
-            // Nothing to report: no file is written as if the study had succeeded.
+        let report = FailureReport::new(
+            outcomes.len(),
+            failed.iter().map(|f| (f.id.as_str(), f.reason.as_str())),
+        );
+        if report.failed() > 0 {
             let o = &study.options;
             let of = match &o.source {
                 SelectSource::Set(p) => p.display().to_string(),
@@ -61,10 +74,9 @@ impl<'a> SelectProducts<'a> {
                     format!("--atmosphere {}", names.join(","))
                 }
             };
-            return Err(ProductError::AllFailed(study::all_failed_message(
-                &of,
-                &study::group_failures(failed.iter().map(|f| (f.id.as_str(), f.reason.as_str()))),
-            )));
+            report
+                .verdict(&of, policy)
+                .map_err(ProductError::ProfilesFailed)?;
         }
         let summaries = study.summarise(outcomes);
         let mut rows: Vec<Row> = Vec::new();
@@ -122,9 +134,17 @@ pub fn report_failures(out: &mut impl Write, g: &GroupSummary) -> std::io::Resul
     Ok(())
 }
 
-/// The group's size and mean XCO2, and its five best-ranked positions.
+/// The group's size and mean XCO2, and its five best-ranked positions; for a group none of
+/// whose members could be studied, that it has no rows.
 pub fn report_group(out: &mut impl Write, g: &GroupSummary) -> std::io::Result<()> {
     let name = &g.name;
+    if g.profiles == 0 {
+        return writeln!(
+            out,
+            "{name}: every profile failed ({} excluded): no rows, no figures",
+            g.failed.len()
+        );
+    }
     writeln!(
         out,
         "{name}: {} profiles ({} excluded), XCO2 {:.2} ppm, {} positions kept, {} dropped (DAOD ≤ 0)",
@@ -175,20 +195,24 @@ pub fn file_names() -> Vec<String> {
     v
 }
 
-/// `failed.csv`: `profile_id,group,reason`, one row per member that could not be studied, in
-/// member order (the header alone when none failed).
+/// Header of `failed.csv`, one row per member that could not be studied.
+pub const FAILED_HEADER: &str = "index,profile_id,group,reason";
+
+/// `failed.csv`: one row per member that could not be studied, in member order: its 0-based
+/// index in the study (groups in report order, each group's members in set order), id, group
+/// (the AFGL atmosphere or latitude class) and reason (the header alone when none failed).
 pub fn failed_csv(study: &SelectStudy, outcomes: &[MemberOutcome]) -> String {
     use std::fmt::Write as _;
-    let mut s = String::from("profile_id,group,reason\n");
+    let mut s = format!("{FAILED_HEADER}\n");
     let groups = study
         .groups
         .iter()
         .flat_map(|(name, members)| std::iter::repeat_n(name, members.len()));
-    for (o, group) in outcomes.iter().zip(groups) {
+    for (i, (o, group)) in outcomes.iter().zip(groups).enumerate() {
         if let Err(f) = o {
             let _ = writeln!(
                 s,
-                "{},{},{}",
+                "{i},{},{},{}",
                 csv_field(&f.id),
                 csv_field(group),
                 csv_field(&f.reason)
