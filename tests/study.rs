@@ -910,6 +910,79 @@ fn a_study_whose_profiles_fail_says_so() {
     assert_eq!(names(&out), listed);
 }
 
+/// Issue 42, item 3, for sharded studies: shards of a set where three of four profiles fail
+/// each write their file (a shard does not decide, and `--strict` with `--shard` is refused);
+/// `merge` exits 0 with the failed.csv of the single study, `merge --strict` exits 2 with one
+/// line and writes nothing.
+#[test]
+fn a_merge_of_shards_with_failed_profiles_is_strict_on_request() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene_path = dir.path().join("study.toml");
+    std::fs::write(&scene_path, SCENE).unwrap();
+    let set = set_with_failures(dir.path(), true);
+    let shards = dir.path().join("shards");
+    let dial = |out: &Path, extra: &[&str]| {
+        let mut args: Vec<std::ffi::OsString> = vec![
+            "dial".into(),
+            scene_path.clone().into(),
+            "--profiles".into(),
+            set.clone().into(),
+            "--no-plots".into(),
+            "--out".into(),
+            out.into(),
+        ];
+        args.extend(extra.iter().map(Into::into));
+        lidarsim(args)
+    };
+    let single = dir.path().join("single");
+    assert_eq!(dial(&single, &[]).status.code(), Some(0));
+    let o = dial(&shards, &["--shard", "0/2", "--strict"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        String::from_utf8_lossy(&o.stderr).contains("--strict"),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    for i in ["0/2", "1/2"] {
+        assert_eq!(dial(&shards, &["--shard", i]).status.code(), Some(0), "{i}");
+    }
+    let merge = |out: &Path, extra: &[&str]| {
+        let mut args: Vec<std::ffi::OsString> = vec![
+            "merge".into(),
+            shards.clone().into(),
+            "--no-plots".into(),
+            "--out".into(),
+            out.into(),
+        ];
+        args.extend(extra.iter().map(Into::into));
+        lidarsim(args)
+    };
+    let strict = dir.path().join("strict");
+    let o = merge(&strict, &["--strict"]);
+    assert_eq!(o.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(stderr.lines().count(), 1, "{stderr}");
+    assert!(
+        stderr.starts_with("lidarsim: error: 3 of 4 profiles of ")
+            && stderr.contains("(strict: any failed profile is an error)")
+            && stderr.trim_end().ends_with("; nothing was written"),
+        "{stderr}"
+    );
+    assert!(!strict.exists());
+    let merged = dir.path().join("merged");
+    let o = merge(&merged, &[]);
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert_eq!(
+        std::fs::read(merged.join("failed.csv")).unwrap(),
+        std::fs::read(single.join("failed.csv")).unwrap()
+    );
+}
+
 /// Issue 42, item 3, as a user met it: a profile set without CO2 (its column taken out of a
 /// generated set) through a scene whose lines absorb CO2, figures on. Every profile fails:
 /// exit 2, one line on stderr with the one reason, its count and first profile, and no output
