@@ -788,7 +788,10 @@ fn cli_profiles_that_fail_are_counted_once_per_reason() {
         "{stdout}"
     );
     assert!(
-        stdout.contains("tropical: 2 profiles (2 excluded)"),
+        stdout.contains("tropical: 2 profiles (2 excluded)")
+            && stdout.contains(
+                "2 of 4 profiles failed and were left out of the statistics (failed.csv)"
+            ),
         "{stdout}"
     );
     let failed = std::fs::read_to_string(out.join("failed.csv")).unwrap();

@@ -72,6 +72,7 @@ pub fn select(
 ) -> anyhow::Result<()> {
     let p = SelectProducts::with_policy(study, outcomes, policy)?;
     let out = &mut std::io::stdout().lock();
+    p.report_failed(out)?;
     for g in &p.summaries {
         products::select::report_failures(out, g)?;
         g.check(study)?;

@@ -37,6 +37,8 @@ pub struct SelectProducts<'a> {
     pub summaries: Vec<GroupSummary>,
     /// The rows of `sensitivities.csv`: every group's, then the per-profile ones.
     pub rows: Vec<Row>,
+    /// Its failed members, grouped by reason over the whole study.
+    pub failures: FailureReport,
 }
 
 impl<'a> SelectProducts<'a> {
@@ -91,6 +93,7 @@ impl<'a> SelectProducts<'a> {
             outcomes,
             summaries,
             rows,
+            failures: report,
         })
     }
 
@@ -121,6 +124,22 @@ impl<'a> SelectProducts<'a> {
         }
         figures(&mut files)?;
         Ok(files.commit()?)
+    }
+}
+
+impl SelectProducts<'_> {
+    /// The line that says how many members of the whole study failed, pointing at `failed.csv`
+    /// (each reason is said once per group by [`report_failures`]); nothing when none failed.
+    pub fn report_failed(&self, out: &mut impl Write) -> std::io::Result<()> {
+        let failed = self.failures.failed();
+        if failed > 0 {
+            writeln!(
+                out,
+                "{failed} of {} profiles failed and were left out of the statistics ({FAILED_CSV})",
+                self.failures.total
+            )?;
+        }
+        Ok(())
     }
 }
 
