@@ -875,20 +875,22 @@ fn a_study_whose_profiles_fail_says_so() {
     let listed = names(&out);
 
     // --strict: the same set is an error, one line with the counts by reason, and the
-    // directory as the study before left it.
+    // directory as the study before left it. These three cannot be run at all, so the study is
+    // refused before its work (nothing on stdout: no report of a study that did not run).
     let o = run_with(&some, &["--strict"]);
     assert_eq!(o.status.code(), Some(2));
     let stderr = String::from_utf8_lossy(&o.stderr);
     assert_eq!(stderr.lines().count(), 1, "{stderr}");
     assert!(
         stderr.starts_with(&format!(
-            "lidarsim: error: 3 of 4 profiles of {} through the scene {} failed (strict: any failed profile is an error): 2 profiles: supersaturated: relative humidity ",
+            "lidarsim: error: 3 of 4 profiles of {} through the scene {} cannot be run (strict: any failed profile is an error): 2 profiles: supersaturated: relative humidity ",
             some.display(),
             scene_path.display()
         )) && stderr.contains(" (profile mid-0001 and 1 more); 1 profile: ")
-            && stderr.trim_end().ends_with(" (profile mid-0002); nothing was written"),
+            && stderr.trim_end().ends_with(" (profile mid-0002); nothing was run"),
         "{stderr}"
     );
+    assert!(o.stdout.is_empty(), "{}", String::from_utf8_lossy(&o.stdout));
     assert_eq!(std::fs::read(out.join("summary.csv")).unwrap(), before);
     assert_eq!(names(&out), listed);
 

@@ -95,6 +95,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // Before the work: a study must not fail at its end on a name it could have refused now.
     output::check_paths(&out_files)?;
     let inputs = request(&args).resolve()?;
+    let policy = lidarsim::study::FailurePolicy::strict_if(args.strict);
+    lidarsim::products::dial::check_before_run(&inputs, policy)?;
     let pool = lidarsim::study::thread_pool(args.threads).map_err(anyhow::Error::msg)?;
     if let Some(spec) = args.shard {
         let n = spec.batches(inputs.set.len()).len();
@@ -112,7 +114,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         !args.no_netcdf,
         &inputs,
         &result,
-        lidarsim::study::FailurePolicy::strict_if(args.strict),
+        policy,
     )
 }
 

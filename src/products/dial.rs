@@ -163,6 +163,29 @@ impl DialRequest {
     }
 }
 
+/// The profiles of a study and the scene they run through, as its failures name them: either
+/// may be the cause.
+fn profiles_of(inputs: &StudyInputs) -> String {
+    let of = match &inputs.source {
+        ProfileSource::Set(p) => p.display().to_string(),
+        ProfileSource::Ensemble(_) => format!("the ensemble ({})", inputs.set.name),
+        ProfileSource::Given(given) => format!("the profiles given ({})", given.name),
+    };
+    format!("{of} through the scene {}", inputs.scene.path.display())
+}
+
+/// Before a study runs: under [`FailurePolicy::Strict`] refuse it when any profile cannot be
+/// run at all ([`dial::unusable`], [`FailureReport::verdict_before_run`]), instead of after
+/// the work of the others; nothing to check otherwise.
+pub fn check_before_run(inputs: &StudyInputs, policy: FailurePolicy) -> Result<(), ProductError> {
+    if policy == FailurePolicy::Tolerate {
+        return Ok(());
+    }
+    dial::unusable(&inputs.scene, &inputs.set)
+        .verdict_before_run(&profiles_of(inputs), policy)
+        .map_err(ProductError::ProfilesFailed)
+}
+
 /// A study's results ready to be written and reported: its inputs, its results, the
 /// statistics of its classes and its failures grouped by reason.
 pub struct DialProducts<'a> {
@@ -190,7 +213,6 @@ impl<'a> DialProducts<'a> {
         result: &'a StudyResult,
         policy: FailurePolicy,
     ) -> Result<Self, ProductError> {
-        let (scene, set) = (&inputs.scene, &inputs.set);
         let report = FailureReport::new(
             result.outcomes.len(),
             result.outcomes.iter().filter_map(|o| match &o.records {
@@ -198,18 +220,9 @@ impl<'a> DialProducts<'a> {
                 Ok(_) => None,
             }),
         );
-        // The profiles and the scene they ran through: either may be the cause.
-        let of = || {
-            let of = match &inputs.source {
-                ProfileSource::Set(p) => p.display().to_string(),
-                ProfileSource::Ensemble(_) => format!("the ensemble ({})", set.name),
-                ProfileSource::Given(given) => format!("the profiles given ({})", given.name),
-            };
-            format!("{of} through the scene {}", scene.path.display())
-        };
         if report.failed() > 0 {
             report
-                .verdict(&of(), policy)
+                .verdict(&profiles_of(inputs), policy)
                 .map_err(ProductError::ProfilesFailed)?;
         }
         Ok(DialProducts {

@@ -184,6 +184,29 @@ impl FailureReport {
     }
 }
 
+impl FailureReport {
+    /// [`Self::verdict`] before a study runs, on the profiles found unable to run
+    /// ([`dial::unusable`]): with [`FailurePolicy::Strict`] any of them refuses the study
+    /// (`N of M profiles of <of> cannot be run (strict: …): <each reason once>; nothing was
+    /// run`; when none can, the line a study where every profile failed gives); otherwise the
+    /// study runs and leaves them out.
+    pub fn verdict_before_run(&self, of: &str, policy: FailurePolicy) -> Result<(), String> {
+        let failed = self.failed();
+        if policy == FailurePolicy::Strict && self.all_failed() {
+            return Err(all_failed_message(of, &self.groups));
+        }
+        if policy == FailurePolicy::Strict && failed > 0 {
+            let each: Vec<String> = self.groups.iter().map(|g| g.to_string()).collect();
+            return Err(format!(
+                "{failed} of {} profiles of {of} cannot be run (strict: any failed profile is an error): {}; nothing was run",
+                self.total,
+                each.join("; ")
+            ));
+        }
+        Ok(())
+    }
+}
+
 /// The worker threads a study runs on for `--threads requested` (0: all cores) with `cores`
 /// available: at most the cores. A study's work is computation, so a thread beyond the cores
 /// only waits for one, and hundreds of them waiting on the nested parallel line-by-line loops
@@ -293,6 +316,18 @@ mod tests {
         let none = FailureReport::new(2, []);
         assert_eq!(none.failed(), 0);
         assert_eq!(none.verdict("set.csv", Strict), Ok(()));
+        // Before the run: only strict refuses, on any profile that cannot be run.
+        assert_eq!(some.verdict_before_run("set.csv", Tolerate), Ok(()));
+        assert_eq!(all.verdict_before_run("set.csv", Tolerate), Ok(()));
+        assert_eq!(
+            all.verdict_before_run("set.csv", Strict),
+            all.verdict("set.csv", Strict)
+        );
+        assert_eq!(none.verdict_before_run("set.csv", Strict), Ok(()));
+        assert_eq!(
+            some.verdict_before_run("set.csv", Strict),
+            Err("2 of 3 profiles of set.csv cannot be run (strict: any failed profile is an error): 2 profiles: no CO2 in `a` (profile a and 1 more); nothing was run".into())
+        );
         // An empty study is not "every profile failed".
         assert!(!FailureReport::new(0, []).all_failed());
     }
