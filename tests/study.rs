@@ -890,7 +890,11 @@ fn a_study_whose_profiles_fail_says_so() {
             && stderr.trim_end().ends_with(" (profile mid-0002); nothing was run"),
         "{stderr}"
     );
-    assert!(o.stdout.is_empty(), "{}", String::from_utf8_lossy(&o.stdout));
+    assert!(
+        o.stdout.is_empty(),
+        "{}",
+        String::from_utf8_lossy(&o.stdout)
+    );
     assert_eq!(std::fs::read(out.join("summary.csv")).unwrap(), before);
     assert_eq!(names(&out), listed);
 
