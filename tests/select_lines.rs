@@ -726,35 +726,44 @@ fn check_weighting_function(atm: StandardAtmosphere, label: &str, offset_ghz: f6
     );
 }
 
-/// Issue 37, item 5, for line selection: of four tropical profiles two end at 700 hPa, about
-/// 3 km, below one 4 km layer: exit 0, the reason said once with its count and first profile,
-/// failed.csv lists both; when every profile ends there, exit 2 with one line and no file.
+/// Issue 37, item 5, and issue 42, item 3, for line selection: of four tropical profiles two
+/// end at 700 hPa, about 3 km, below one 4 km layer: exit 0, the reason said once with its
+/// count and first profile, failed.csv lists both with their indices; with `--strict` exit 2,
+/// one line, nothing written; a class none of whose profiles can be studied beside one that
+/// can: exit 0, the class has no rows; when every profile ends there, exit 2 with one line and
+/// no file.
 #[test]
 fn cli_profiles_that_fail_are_counted_once_per_reason() {
     let dir = tempfile::tempdir().unwrap();
     let set = dir.path().join("set.csv");
     let out = dir.path().join("out");
-    let run = |text: String| {
+    let run_with = |text: String, extra: &[&str]| {
         std::fs::write(&set, text).unwrap();
-        lidarsim([
-            "select-lines".as_ref(),
-            "--profiles".as_ref(),
-            set.as_os_str(),
-            "--on-cm1".as_ref(),
-            "6360.04".as_ref(),
-            "--off-cm1".as_ref(),
-            "6360.61".as_ref(),
-            "--co2-ppm".as_ref(),
-            "410".as_ref(),
-            "--layer-m".as_ref(),
-            "4000".as_ref(),
-            "--top-km".as_ref(),
-            "40".as_ref(),
-            "--no-plots".as_ref(),
-            "--out".as_ref(),
-            out.as_os_str(),
-        ])
+        let mut args: Vec<std::ffi::OsString> = [
+            "select-lines",
+            "--profiles",
+            set.to_str().unwrap(),
+            "--on-cm1",
+            "6360.04",
+            "--off-cm1",
+            "6360.61",
+            "--co2-ppm",
+            "410",
+            "--layer-m",
+            "4000",
+            "--top-km",
+            "40",
+            "--no-plots",
+            "--out",
+            out.to_str().unwrap(),
+        ]
+        .iter()
+        .map(Into::into)
+        .collect();
+        args.extend(extra.iter().map(Into::into));
+        lidarsim(args)
     };
+    let run = |text: String| run_with(text, &[]);
     let o = run(tropical_set(&[
         ("a", 10.0, 0.0, 10),
         ("short1", 5.0, 0.0, 3),
@@ -779,15 +788,90 @@ fn cli_profiles_that_fail_are_counted_once_per_reason() {
         "{stdout}"
     );
     assert!(
-        stdout.contains("tropical: 2 profiles (2 excluded)"),
+        stdout.contains("tropical: 2 profiles (2 excluded)")
+            && stdout.contains(
+                "2 of 4 profiles failed and were left out of the statistics (failed.csv)"
+            ),
         "{stdout}"
     );
     let failed = std::fs::read_to_string(out.join("failed.csv")).unwrap();
     let rows: Vec<&str> = failed.lines().collect();
-    assert_eq!(rows[0], "profile_id,group,reason");
+    assert_eq!(rows[0], "index,profile_id,group,reason");
     assert_eq!(rows.len(), 3, "{failed}");
-    assert!(rows[1].starts_with("short1,tropical,") && rows[2].starts_with("short2,tropical,"));
+    // The second and fourth profiles of the study (0-based), those made short.
+    assert!(
+        rows[1].starts_with("1,short1,tropical,") && rows[2].starts_with("3,short2,tropical,"),
+        "{failed}"
+    );
     crate::util::assert_no_non_finite(&out);
+
+    // --strict: the same study is an error, one line with the counts by reason, and the
+    // directory as the study before left it.
+    let sensitivities = std::fs::read(out.join("sensitivities.csv")).unwrap();
+    let o = run_with(
+        tropical_set(&[
+            ("a", 10.0, 0.0, 10),
+            ("short1", 5.0, 0.0, 3),
+            ("b", -12.0, 2.0, 10),
+            ("short2", 6.0, 1.0, 3),
+        ]),
+        &["--strict"],
+    );
+    assert_eq!(o.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(stderr.lines().count(), 1, "{stderr}");
+    assert!(
+        stderr.starts_with(&format!(
+            "lidarsim: error: 2 of 4 profiles of {} failed (strict: any failed profile is an error): 2 profiles: ",
+            set.display()
+        )) && stderr
+            .trim_end()
+            .ends_with(" (profile short1 and 1 more); nothing was written"),
+        "{stderr}"
+    );
+    assert_eq!(
+        std::fs::read(out.join("sensitivities.csv")).unwrap(),
+        sensitivities
+    );
+    assert_eq!(
+        std::fs::read_to_string(out.join("failed.csv")).unwrap(),
+        failed
+    );
+
+    // A class (mid, latitude 45°) none of whose profiles can be studied, beside a tropical one
+    // that can: exit 0, the class said once and without rows, failed.csv lists its two.
+    let o = run(tropical_set(&[
+        ("m1", 45.0, 0.0, 3),
+        ("a", 10.0, 0.0, 10),
+        ("m2", 50.0, 0.0, 3),
+    ]));
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        stdout.contains("mid: excluded 2 profiles: ")
+            && stdout.contains("mid: every profile failed (2 excluded): no rows, no figures")
+            && stdout.contains("tropical: 1 profiles (0 excluded)"),
+        "{stdout}"
+    );
+    let (h, rows) = crate::util::read_csv(&out.join("sensitivities.csv"));
+    let atm = h.iter().position(|c| c == "atmosphere").unwrap();
+    assert!(
+        !rows.is_empty() && rows.iter().all(|r| r[atm] == "tropical"),
+        "{rows:?}"
+    );
+    let failed = std::fs::read_to_string(out.join("failed.csv")).unwrap();
+    let rows: Vec<&str> = failed.lines().collect();
+    // Member order: the tropical group (a), then mid (m1, m2).
+    assert_eq!(rows.len(), 3, "{failed}");
+    assert!(
+        rows[1].starts_with("1,m1,mid,") && rows[2].starts_with("2,m2,mid,"),
+        "{failed}"
+    );
 
     let out_before = std::fs::read(out.join("sensitivities.csv")).unwrap();
     let o = run(tropical_set(&[

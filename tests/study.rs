@@ -793,17 +793,20 @@ fn a_study_whose_profiles_fail_says_so() {
     let scene_path = dir.path().join("study.toml");
     std::fs::write(&scene_path, SCENE).unwrap();
     let out = dir.path().join("out");
-    let run = |set: &Path| {
-        lidarsim([
-            "dial".as_ref(),
-            scene_path.as_os_str(),
-            "--profiles".as_ref(),
-            set.as_os_str(),
-            "--no-plots".as_ref(),
-            "--out".as_ref(),
-            out.as_os_str(),
-        ])
+    let run_with = |set: &Path, extra: &[&str]| {
+        let mut args: Vec<std::ffi::OsString> = vec![
+            "dial".into(),
+            scene_path.clone().into(),
+            "--profiles".into(),
+            set.into(),
+            "--no-plots".into(),
+            "--out".into(),
+            out.clone().into(),
+        ];
+        args.extend(extra.iter().map(Into::into));
+        lidarsim(args)
     };
+    let run = |set: &Path| run_with(set, &[]);
     let some = set_with_failures(dir.path(), true);
     let o = run(&some);
     assert_eq!(
@@ -837,9 +840,21 @@ fn a_study_whose_profiles_fail_says_so() {
         failed[1]
     );
     let (h, rows) = read_csv(&out.join("failed.csv"));
-    assert_eq!(h, ["profile_id", "class", "reason"]);
-    let ids: Vec<&str> = rows.iter().map(|r| r[0].as_str()).collect();
-    assert_eq!(ids, ["mid-0001", "mid-0002", "mid-0003"]);
+    assert_eq!(h, ["index", "profile_id", "class", "reason"]);
+    // The profiles made to fail: the first three of the set, 0-based.
+    let ids: Vec<(&str, &str, &str)> = rows
+        .iter()
+        .map(|r| (r[0].as_str(), r[1].as_str(), r[2].as_str()))
+        .collect();
+    assert_eq!(
+        ids,
+        [
+            ("0", "mid-0001", "mid"),
+            ("1", "mid-0002", "mid"),
+            ("2", "mid-0003", "mid")
+        ]
+    );
+    assert!(rows[0][3].starts_with("supersaturated: ") && rows[1][3].contains("top_m"));
     let (h, rows) = read_csv(&out.join("summary.csv"));
     let c = h.iter().position(|x| x == "profiles").unwrap();
     assert!(
@@ -858,6 +873,31 @@ fn a_study_whose_profiles_fail_says_so() {
         v
     };
     let listed = names(&out);
+
+    // --strict: the same set is an error, one line with the counts by reason, and the
+    // directory as the study before left it. These three cannot be run at all, so the study is
+    // refused before its work (nothing on stdout: no report of a study that did not run).
+    let o = run_with(&some, &["--strict"]);
+    assert_eq!(o.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(stderr.lines().count(), 1, "{stderr}");
+    assert!(
+        stderr.starts_with(&format!(
+            "lidarsim: error: 3 of 4 profiles of {} through the scene {} cannot be run (strict: any failed profile is an error): 2 profiles: supersaturated: relative humidity ",
+            some.display(),
+            scene_path.display()
+        )) && stderr.contains(" (profile mid-0001 and 1 more); 1 profile: ")
+            && stderr.trim_end().ends_with(" (profile mid-0002); nothing was run"),
+        "{stderr}"
+    );
+    assert!(
+        o.stdout.is_empty(),
+        "{}",
+        String::from_utf8_lossy(&o.stdout)
+    );
+    assert_eq!(std::fs::read(out.join("summary.csv")).unwrap(), before);
+    assert_eq!(names(&out), listed);
+
     let none = set_with_failures(dir.path(), false);
     let o = run(&none);
     assert_eq!(o.status.code(), Some(2));
@@ -874,6 +914,156 @@ fn a_study_whose_profiles_fail_says_so() {
     );
     assert_eq!(std::fs::read(out.join("summary.csv")).unwrap(), before);
     assert_eq!(names(&out), listed);
+}
+
+/// Issue 42, item 3, for sharded studies: shards of a set where three of four profiles fail
+/// each write their file (a shard does not decide, and `--strict` with `--shard` is refused);
+/// `merge` exits 0 with the failed.csv of the single study, `merge --strict` exits 2 with one
+/// line and writes nothing.
+#[test]
+fn a_merge_of_shards_with_failed_profiles_is_strict_on_request() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene_path = dir.path().join("study.toml");
+    std::fs::write(&scene_path, SCENE).unwrap();
+    let set = set_with_failures(dir.path(), true);
+    let shards = dir.path().join("shards");
+    let dial = |out: &Path, extra: &[&str]| {
+        let mut args: Vec<std::ffi::OsString> = vec![
+            "dial".into(),
+            scene_path.clone().into(),
+            "--profiles".into(),
+            set.clone().into(),
+            "--no-plots".into(),
+            "--out".into(),
+            out.into(),
+        ];
+        args.extend(extra.iter().map(Into::into));
+        lidarsim(args)
+    };
+    let single = dir.path().join("single");
+    assert_eq!(dial(&single, &[]).status.code(), Some(0));
+    let o = dial(&shards, &["--shard", "0/2", "--strict"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        String::from_utf8_lossy(&o.stderr).contains("--strict"),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    for i in ["0/2", "1/2"] {
+        assert_eq!(dial(&shards, &["--shard", i]).status.code(), Some(0), "{i}");
+    }
+    let merge = |out: &Path, extra: &[&str]| {
+        let mut args: Vec<std::ffi::OsString> = vec![
+            "merge".into(),
+            shards.clone().into(),
+            "--no-plots".into(),
+            "--out".into(),
+            out.into(),
+        ];
+        args.extend(extra.iter().map(Into::into));
+        lidarsim(args)
+    };
+    let strict = dir.path().join("strict");
+    let o = merge(&strict, &["--strict"]);
+    assert_eq!(o.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(stderr.lines().count(), 1, "{stderr}");
+    assert!(
+        stderr.starts_with("lidarsim: error: 3 of 4 profiles of ")
+            && stderr.contains("(strict: any failed profile is an error)")
+            && stderr.trim_end().ends_with("; nothing was written"),
+        "{stderr}"
+    );
+    assert!(!strict.exists());
+    let merged = dir.path().join("merged");
+    let o = merge(&merged, &[]);
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert_eq!(
+        std::fs::read(merged.join("failed.csv")).unwrap(),
+        std::fs::read(single.join("failed.csv")).unwrap()
+    );
+}
+
+/// Issue 42, item 3, as a user met it: a profile set without CO2 (its column taken out of a
+/// generated set) through a scene whose lines absorb CO2, figures on. Every profile fails:
+/// exit 2, one line on stderr with the one reason, its count and first profile, and no output
+/// directory at all (no empty CSV, no `ensemble.png` of profiles that were never run); the
+/// same with `--strict`.
+#[test]
+fn a_study_of_profiles_without_co2_fails_with_one_line_and_no_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene_path = dir.path().join("study.toml");
+    std::fs::write(&scene_path, SCENE).unwrap();
+    let generated = dir.path().join("generated.csv");
+    lidarsim_ok([
+        "profiles".as_ref(),
+        "generate".as_ref(),
+        "--class".as_ref(),
+        "mid".as_ref(),
+        "--n".as_ref(),
+        "5".as_ref(),
+        "--seed".as_ref(),
+        "3".as_ref(),
+        "--out".as_ref(),
+        generated.as_os_str(),
+    ]);
+    // The set without its CO2 column.
+    let text = std::fs::read_to_string(&generated).unwrap();
+    let header: Vec<&str> = text
+        .lines()
+        .find(|l| l.starts_with("profile,"))
+        .unwrap()
+        .split(',')
+        .collect();
+    let co2 = header.iter().position(|h| *h == "CO2_ppmv").unwrap();
+    let no_co2 = dir.path().join("no_co2.csv");
+    let without: Vec<String> = text
+        .lines()
+        .map(|l| {
+            if l.starts_with('#') {
+                return l.to_string();
+            }
+            let mut f: Vec<&str> = l.split(',').collect();
+            f.remove(co2);
+            f.join(",")
+        })
+        .collect();
+    std::fs::write(&no_co2, without.join("\n") + "\n").unwrap();
+    let out = dir.path().join("out");
+    for extra in [&[][..], &["--strict"]] {
+        let mut args: Vec<std::ffi::OsString> = vec![
+            "dial".into(),
+            scene_path.clone().into(),
+            "--profiles".into(),
+            no_co2.clone().into(),
+            "--out".into(),
+            out.clone().into(),
+        ];
+        args.extend(extra.iter().map(Into::into));
+        let o = lidarsim(args);
+        assert_eq!(o.status.code(), Some(2), "{extra:?}");
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(stderr.lines().count(), 1, "{extra:?}: {stderr}");
+        assert!(
+            stderr.starts_with(&format!(
+                "lidarsim: error: every profile of {} through the scene {} failed (5 of 5): 5 profiles: ",
+                no_co2.display(),
+                scene_path.display()
+            )) && stderr.contains("has no CO2")
+                && stderr
+                    .trim_end()
+                    .ends_with(" (profile mid-0001 and 4 more); nothing was written"),
+            "{extra:?}: {stderr}"
+        );
+        // The one reason is said once, not once per profile.
+        assert_eq!(stderr.matches("has no CO2").count(), 1, "{stderr}");
+        assert!(!out.exists(), "{extra:?}: {:?}", crate::util::tree(&out));
+    }
 }
 
 /// Issue 37: a Monte Carlo study with few photons (`airborne_co2_dial.toml`, a cloud, 200

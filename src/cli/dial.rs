@@ -73,6 +73,13 @@ pub struct Args {
     /// outputs.
     #[arg(long, value_name = "I/N", value_parser = clap::value_parser!(ShardSpec))]
     pub shard: Option<ShardSpec>,
+    /// Make any failed profile an error: exit 2 with one line of the counts by reason (and the
+    /// first profile of each), and nothing written. Without it a study where some profiles fail
+    /// (cannot be run, are supersaturated, a retrieval fails) succeeds, leaves them out of the
+    /// statistics and lists them in DIR/failed.csv (index,profile_id,class,reason); one where
+    /// every profile fails is an error either way. A shard does not decide: give it to `merge`.
+    #[arg(long, conflicts_with = "shard")]
+    pub strict: bool,
     /// Do not write profiles.nc and summary.nc (the CF NetCDF files of profiles.csv and
     /// summary.csv).
     #[arg(long)]
@@ -88,6 +95,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // Before the work: a study must not fail at its end on a name it could have refused now.
     output::check_paths(&out_files)?;
     let inputs = request(&args).resolve()?;
+    let policy = lidarsim::study::FailurePolicy::strict_if(args.strict);
+    lidarsim::products::dial::check_before_run(&inputs, policy)?;
     let pool = lidarsim::study::thread_pool(args.threads).map_err(anyhow::Error::msg)?;
     if let Some(spec) = args.shard {
         let n = spec.batches(inputs.set.len()).len();
@@ -99,7 +108,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let result =
         pool.install(|| dial::run(&inputs.scene, &inputs.set, &inputs.options, &|| bar.tick()))?;
     bar.finish();
-    super::write::dial(&args.out, args.no_plots, !args.no_netcdf, &inputs, &result)
+    super::write::dial(
+        &args.out,
+        args.no_plots,
+        !args.no_netcdf,
+        &inputs,
+        &result,
+        policy,
+    )
 }
 
 /// The request of the command line ([`DialRequest::resolve`] makes the study's inputs).

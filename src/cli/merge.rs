@@ -20,6 +20,10 @@ pub struct Args {
     /// Do not draw the figures (returns.png, dial.png; a study's figures).
     #[arg(long)]
     pub no_plots: bool,
+    /// For the shards of a study (`dial`, `select-lines`): make any failed profile an error
+    /// (as their `--strict`): exit 2 with the counts by reason, nothing written.
+    #[arg(long)]
+    pub strict: bool,
 }
 
 /// Run the subcommand.
@@ -39,7 +43,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 outln!("the shards ran with --no-plots: no figures");
             }
             outln!("{}", lidarsim::products::select::setup_line(study));
-            super::write::select(&args.out, args.no_plots, study, &merged.outcomes)
+            super::write::select(
+                &args.out,
+                args.no_plots,
+                study,
+                &merged.outcomes,
+                lidarsim::study::FailurePolicy::strict_if(args.strict),
+            )
         }
         Merged::Dial(merged) => {
             outln!(
@@ -49,7 +59,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 merged.inputs.scene.path.display()
             );
             let (inputs, result) = (&merged.inputs, &merged.result);
-            super::write::dial(&args.out, args.no_plots, true, inputs, result)
+            super::write::dial(
+                &args.out,
+                args.no_plots,
+                true,
+                inputs,
+                result,
+                lidarsim::study::FailurePolicy::strict_if(args.strict),
+            )
         }
         Merged::Run(merged) => {
             outln!(

@@ -110,6 +110,13 @@ pub struct Args {
     /// Worker threads, 0 for all cores; at most the cores available.
     #[arg(long, default_value_t = 0, allow_negative_numbers = true, value_parser = super::threads())]
     threads: usize,
+    /// Make any failed profile an error: exit 2 with one line of the counts by reason (and the
+    /// first profile of each), and nothing written. Without it a study where some profiles fail
+    /// (cannot be run, are supersaturated, a retrieval fails) succeeds, leaves them out of the
+    /// statistics and lists them in DIR/failed.csv (index,profile_id,group,reason); one where
+    /// every profile fails is an error either way. A shard does not decide: give it to `merge`.
+    #[arg(long, conflicts_with = "shard")]
+    strict: bool,
     /// Study only shard I of N (0 ≤ I < N) of the profiles and write their results raw to
     /// DIR/shard-I-of-N.lshard; `lidarsim merge` puts the N files together into this study's
     /// outputs.
@@ -142,7 +149,13 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let bar = super::progress::Progress::new(study.len(), "select-lines", "profiles");
     let outcomes = pool.install(|| study.study(0..study.len(), &|| bar.tick()));
     bar.finish();
-    super::write::select(&a.out, a.no_plots, &study, &outcomes)
+    super::write::select(
+        &a.out,
+        a.no_plots,
+        &study,
+        &outcomes,
+        lidarsim::study::FailurePolicy::strict_if(a.strict),
+    )
 }
 
 /// The study's options from the command line. A shard names its files by their absolute

@@ -8,6 +8,7 @@ use std::path::Path;
 use lidarsim::pipeline::RunOutput;
 use lidarsim::products::{self, dial::DialProducts, select::SelectProducts};
 use lidarsim::scene::Scene;
+use lidarsim::study::FailurePolicy;
 use lidarsim::study::dial::StudyResult;
 use lidarsim::study::select_study::{MemberOutcome, SelectStudy};
 use lidarsim::study::shard::StudyInputs;
@@ -47,8 +48,9 @@ pub fn dial(
     netcdf: bool,
     inputs: &StudyInputs,
     result: &StudyResult,
+    policy: FailurePolicy,
 ) -> anyhow::Result<()> {
-    let p = DialProducts::new(inputs, result)?;
+    let p = DialProducts::with_policy(inputs, result, policy)?;
     let history = netcdf.then(super::netcdf_history);
     let written = p.write(dir, history.as_deref(), |files| match no_plots {
         true => Ok(()),
@@ -66,9 +68,11 @@ pub fn select(
     no_plots: bool,
     study: &SelectStudy,
     outcomes: &[MemberOutcome],
+    policy: FailurePolicy,
 ) -> anyhow::Result<()> {
-    let p = SelectProducts::new(study, outcomes)?;
+    let p = SelectProducts::with_policy(study, outcomes, policy)?;
     let out = &mut std::io::stdout().lock();
+    p.report_failed(out)?;
     for g in &p.summaries {
         products::select::report_failures(out, g)?;
         g.check(study)?;
@@ -77,7 +81,8 @@ pub fn select(
     let written = p.write(dir, &super::netcdf_history(), |files| {
         if study.options.plots && !no_plots {
             init_font();
-            for g in &p.summaries {
+            // A group none of whose members could be studied has nothing to draw.
+            for g in p.summaries.iter().filter(|g| g.profiles > 0) {
                 crate::figures::select::draw_figures(
                     files,
                     dir,

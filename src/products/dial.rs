@@ -10,12 +10,12 @@ use super::ProductError;
 use crate::atmosphere::ProfileSet;
 use crate::output::{OutputError, OutputSet, csv_field, csv_number as num};
 use crate::scene::Scene;
-use crate::study;
 use crate::study::dial::{
     self, BudgetSteps, N_SOURCES, ProfileOutcome, ProfileSource, Source, StudyOptions, StudyResult,
     Summary,
 };
 use crate::study::shard::StudyInputs;
+use crate::study::{self, FailurePolicy, FailureReport};
 
 /// Every file `dial` may write into its directory.
 pub const FILES: [&str; 10] = [
@@ -163,6 +163,29 @@ impl DialRequest {
     }
 }
 
+/// The profiles of a study and the scene they run through, as its failures name them: either
+/// may be the cause.
+fn profiles_of(inputs: &StudyInputs) -> String {
+    let of = match &inputs.source {
+        ProfileSource::Set(p) => p.display().to_string(),
+        ProfileSource::Ensemble(_) => format!("the ensemble ({})", inputs.set.name),
+        ProfileSource::Given(given) => format!("the profiles given ({})", given.name),
+    };
+    format!("{of} through the scene {}", inputs.scene.path.display())
+}
+
+/// Before a study runs: under [`FailurePolicy::Strict`] refuse it when any profile cannot be
+/// run at all ([`dial::unusable`], [`FailureReport::verdict_before_run`]), instead of after
+/// the work of the others; nothing to check otherwise.
+pub fn check_before_run(inputs: &StudyInputs, policy: FailurePolicy) -> Result<(), ProductError> {
+    if policy == FailurePolicy::Tolerate {
+        return Ok(());
+    }
+    dial::unusable(&inputs.scene, &inputs.set)
+        .verdict_before_run(&profiles_of(inputs), policy)
+        .map_err(ProductError::ProfilesFailed)
+}
+
 /// A study's results ready to be written and reported: its inputs, its results, the
 /// statistics of its classes and its failures grouped by reason.
 pub struct DialProducts<'a> {
@@ -180,26 +203,33 @@ impl<'a> DialProducts<'a> {
     /// The products of a study; an error when every profile failed (nothing is written as if
     /// the study had succeeded).
     pub fn new(inputs: &'a StudyInputs, result: &'a StudyResult) -> Result<Self, ProductError> {
-        let (scene, set) = (&inputs.scene, &inputs.set);
-        let failures = failure_groups(&result.outcomes);
-        if !result.outcomes.is_empty() && result.outcomes.iter().all(|o| o.records.is_err()) {
-            // Nothing to report: no file is written as if the study had succeeded.
-            // The profiles and the scene they ran through: either may be the cause.
-            let of = match &inputs.source {
-                ProfileSource::Set(p) => p.display().to_string(),
-                ProfileSource::Ensemble(_) => format!("the ensemble ({})", set.name),
-                ProfileSource::Given(given) => format!("the profiles given ({})", given.name),
-            };
-            let of = format!("{of} through the scene {}", scene.path.display());
-            return Err(ProductError::AllFailed(study::all_failed_message(
-                &of, &failures,
-            )));
+        Self::with_policy(inputs, result, FailurePolicy::Tolerate)
+    }
+
+    /// [`Self::new`] under `policy`: with [`FailurePolicy::Strict`] an error when any profile
+    /// failed ([`study::FailureReport::verdict`]).
+    pub fn with_policy(
+        inputs: &'a StudyInputs,
+        result: &'a StudyResult,
+        policy: FailurePolicy,
+    ) -> Result<Self, ProductError> {
+        let report = FailureReport::new(
+            result.outcomes.len(),
+            result.outcomes.iter().filter_map(|o| match &o.records {
+                Err(e) => Some((o.id.as_str(), e.as_str())),
+                Ok(_) => None,
+            }),
+        );
+        if report.failed() > 0 {
+            report
+                .verdict(&profiles_of(inputs), policy)
+                .map_err(ProductError::ProfilesFailed)?;
         }
         Ok(DialProducts {
             inputs,
             result,
             summaries: dial::summarise(&result.outcomes),
-            failures,
+            failures: report.groups,
         })
     }
 
@@ -365,12 +395,23 @@ pub fn budget_csv(summaries: &[Summary], steps: &BudgetSteps, scene: &Scene) -> 
     s
 }
 
-/// `failed.csv`: `profile_id,class,reason`, one row per profile that failed.
+/// Header of `failed.csv`, one row per profile that failed.
+pub const FAILED_HEADER: &str = "index,profile_id,class,reason";
+
+/// `failed.csv`: one row per profile that failed, in the study's order: its 0-based index in
+/// the study (the order of `profiles.csv`, which is its noise seed's), id, latitude class and
+/// reason (the header alone when none failed).
 pub fn failed_csv(outcomes: &[ProfileOutcome]) -> String {
-    let mut s = String::from("profile_id,class,reason\n");
-    for o in outcomes {
+    let mut s = format!("{FAILED_HEADER}\n");
+    for (i, o) in outcomes.iter().enumerate() {
         if let Err(e) = &o.records {
-            let _ = writeln!(s, "{},{},{}", csv_field(&o.id), o.class, csv_field(e));
+            let _ = writeln!(
+                s,
+                "{i},{},{},{}",
+                csv_field(&o.id),
+                csv_field(o.class.name()),
+                csv_field(e)
+            );
         }
     }
     s
@@ -425,14 +466,6 @@ fn fixed(x: f64) -> String {
     } else {
         "-".into()
     }
-}
-
-/// The failed profiles of `outcomes` grouped by reason ([`study::group_failures`]).
-fn failure_groups(outcomes: &[ProfileOutcome]) -> Vec<study::FailureGroup> {
-    study::group_failures(outcomes.iter().filter_map(|o| match &o.records {
-        Err(e) => Some((o.id.as_str(), e.as_str())),
-        Ok(_) => None,
-    }))
 }
 
 fn print_report(

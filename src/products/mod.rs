@@ -73,9 +73,12 @@ pub enum ProductError {
         #[source]
         source: Box<dyn std::error::Error + Send + Sync>,
     },
-    /// Every profile of a study failed: nothing is written as if it had succeeded.
+    /// Profiles of a study failed: every one of them, or any with
+    /// [`FailurePolicy::Strict`](crate::study::FailurePolicy::Strict). Nothing is written as if
+    /// the study had succeeded; the one line says the counts by reason
+    /// ([`crate::study::FailureReport::verdict`]).
     #[error("{0}")]
-    AllFailed(String),
+    ProfilesFailed(String),
 }
 
 impl ProductError {

@@ -8,9 +8,9 @@ use std::path::{Path, PathBuf};
 use super::ProductError;
 use crate::atmosphere::{LatitudeClass, StandardAtmosphere};
 use crate::output::{OutputError, OutputSet, csv_field};
-use crate::study;
 use crate::study::select::{self, MemberFailure, Row};
 use crate::study::select_study::{GroupSummary, MemberOutcome, SelectSource, SelectStudy};
+use crate::study::{FailurePolicy, FailureReport};
 
 /// The line of the report that says what the study computes.
 pub fn setup_line(study: &SelectStudy) -> String {
@@ -37,6 +37,8 @@ pub struct SelectProducts<'a> {
     pub summaries: Vec<GroupSummary>,
     /// The rows of `sensitivities.csv`: every group's, then the per-profile ones.
     pub rows: Vec<Row>,
+    /// Its failed members, grouped by reason over the whole study.
+    pub failures: FailureReport,
 }
 
 impl<'a> SelectProducts<'a> {
@@ -46,10 +48,23 @@ impl<'a> SelectProducts<'a> {
         study: &'a SelectStudy,
         outcomes: &'a [MemberOutcome],
     ) -> Result<Self, ProductError> {
+        Self::with_policy(study, outcomes, FailurePolicy::Tolerate)
+    }
+
+    /// [`Self::new`] under `policy`: with [`FailurePolicy::Strict`] an error when any member
+    /// failed ([`FailureReport::verdict`]).
+    pub fn with_policy(
+        study: &'a SelectStudy,
+        outcomes: &'a [MemberOutcome],
+        policy: FailurePolicy,
+    ) -> Result<Self, ProductError> {
         let failed: Vec<&MemberFailure> =
             outcomes.iter().filter_map(|o| o.as_ref().err()).collect();
-        if !outcomes.is_empty() && failed.len() == outcomes.len() {
-            // Nothing to report: no file is written as if the study had succeeded.
+        let report = FailureReport::new(
+            outcomes.len(),
+            failed.iter().map(|f| (f.id.as_str(), f.reason.as_str())),
+        );
+        if report.failed() > 0 {
             let o = &study.options;
             let of = match &o.source {
                 SelectSource::Set(p) => p.display().to_string(),
@@ -61,10 +76,9 @@ impl<'a> SelectProducts<'a> {
                     format!("--atmosphere {}", names.join(","))
                 }
             };
-            return Err(ProductError::AllFailed(study::all_failed_message(
-                &of,
-                &study::group_failures(failed.iter().map(|f| (f.id.as_str(), f.reason.as_str()))),
-            )));
+            report
+                .verdict(&of, policy)
+                .map_err(ProductError::ProfilesFailed)?;
         }
         let summaries = study.summarise(outcomes);
         let mut rows: Vec<Row> = Vec::new();
@@ -79,6 +93,7 @@ impl<'a> SelectProducts<'a> {
             outcomes,
             summaries,
             rows,
+            failures: report,
         })
     }
 
@@ -112,6 +127,22 @@ impl<'a> SelectProducts<'a> {
     }
 }
 
+impl SelectProducts<'_> {
+    /// The line that says how many members of the whole study failed, pointing at `failed.csv`
+    /// (each reason is said once per group by [`report_failures`]); nothing when none failed.
+    pub fn report_failed(&self, out: &mut impl Write) -> std::io::Result<()> {
+        let failed = self.failures.failed();
+        if failed > 0 {
+            writeln!(
+                out,
+                "{failed} of {} profiles failed and were left out of the statistics ({FAILED_CSV})",
+                self.failures.total
+            )?;
+        }
+        Ok(())
+    }
+}
+
 /// The group's failed members, each reason once with its count and first profile: not a line
 /// per profile.
 pub fn report_failures(out: &mut impl Write, g: &GroupSummary) -> std::io::Result<()> {
@@ -122,9 +153,17 @@ pub fn report_failures(out: &mut impl Write, g: &GroupSummary) -> std::io::Resul
     Ok(())
 }
 
-/// The group's size and mean XCO2, and its five best-ranked positions.
+/// The group's size and mean XCO2, and its five best-ranked positions; for a group none of
+/// whose members could be studied, that it has no rows.
 pub fn report_group(out: &mut impl Write, g: &GroupSummary) -> std::io::Result<()> {
     let name = &g.name;
+    if g.profiles == 0 {
+        return writeln!(
+            out,
+            "{name}: every profile failed ({} excluded): no rows, no figures",
+            g.failed.len()
+        );
+    }
     writeln!(
         out,
         "{name}: {} profiles ({} excluded), XCO2 {:.2} ppm, {} positions kept, {} dropped (DAOD ≤ 0)",
@@ -175,20 +214,24 @@ pub fn file_names() -> Vec<String> {
     v
 }
 
-/// `failed.csv`: `profile_id,group,reason`, one row per member that could not be studied, in
-/// member order (the header alone when none failed).
+/// Header of `failed.csv`, one row per member that could not be studied.
+pub const FAILED_HEADER: &str = "index,profile_id,group,reason";
+
+/// `failed.csv`: one row per member that could not be studied, in member order: its 0-based
+/// index in the study (groups in report order, each group's members in set order), id, group
+/// (the AFGL atmosphere or latitude class) and reason (the header alone when none failed).
 pub fn failed_csv(study: &SelectStudy, outcomes: &[MemberOutcome]) -> String {
     use std::fmt::Write as _;
-    let mut s = String::from("profile_id,group,reason\n");
+    let mut s = format!("{FAILED_HEADER}\n");
     let groups = study
         .groups
         .iter()
         .flat_map(|(name, members)| std::iter::repeat_n(name, members.len()));
-    for (o, group) in outcomes.iter().zip(groups) {
+    for (i, (o, group)) in outcomes.iter().zip(groups).enumerate() {
         if let Err(f) = o {
             let _ = writeln!(
                 s,
-                "{},{},{}",
+                "{i},{},{},{}",
                 csv_field(&f.id),
                 csv_field(group),
                 csv_field(&f.reason)

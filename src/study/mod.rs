@@ -104,6 +104,109 @@ pub fn all_failed_message(of: &str, groups: &[FailureGroup]) -> String {
     )
 }
 
+/// What a study does with profiles that fail (cannot be run, are supersaturated, a retrieval
+/// fails): the decision [`FailureReport::verdict`] makes for `dial`, `select-lines` and the
+/// merge of their shards, so that the exit code of a study tells the truth.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum FailurePolicy {
+    /// A study where some profiles fail succeeds: they are left out of the statistics, listed
+    /// in `failed.csv` and counted by reason in the report. Only a study where every profile
+    /// failed is an error (it has nothing to report).
+    #[default]
+    Tolerate,
+    /// Any failed profile makes the study an error, with the same summary, and nothing is
+    /// written (`--strict`).
+    Strict,
+}
+
+impl FailurePolicy {
+    /// [`FailurePolicy::Strict`] when `strict` (a command line's `--strict`), else
+    /// [`FailurePolicy::Tolerate`].
+    pub fn strict_if(strict: bool) -> FailurePolicy {
+        if strict {
+            FailurePolicy::Strict
+        } else {
+            FailurePolicy::Tolerate
+        }
+    }
+}
+
+/// The failures of a study of `total` profiles, grouped by reason ([`group_failures`]).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct FailureReport {
+    /// Profiles of the study.
+    pub total: usize,
+    /// Each reason once, in order of first appearance.
+    pub groups: Vec<FailureGroup>,
+}
+
+impl FailureReport {
+    /// The report of a study of `total` profiles whose failed ones are `failures`
+    /// `(profile id, reason)`, in the study's order.
+    pub fn new<'a>(
+        total: usize,
+        failures: impl IntoIterator<Item = (&'a str, &'a str)>,
+    ) -> FailureReport {
+        FailureReport {
+            total,
+            groups: group_failures(failures),
+        }
+    }
+
+    /// Profiles that failed.
+    pub fn failed(&self) -> usize {
+        self.groups.iter().map(|g| g.count).sum()
+    }
+
+    /// Whether every profile of a study that had some failed: it has nothing to report.
+    pub fn all_failed(&self) -> bool {
+        self.total > 0 && self.failed() == self.total
+    }
+
+    /// Whether the study of the profiles `of` (a set file, an ensemble) may write its products
+    /// under `policy`: `Err` with the one line that says why not ([`all_failed_message`], or
+    /// with [`FailurePolicy::Strict`] `N of M profiles of <of> failed (strict: …): <each
+    /// reason once, with its count and first profile>; nothing was written`).
+    pub fn verdict(&self, of: &str, policy: FailurePolicy) -> Result<(), String> {
+        let failed = self.failed();
+        if self.all_failed() {
+            return Err(all_failed_message(of, &self.groups));
+        }
+        if policy == FailurePolicy::Strict && failed > 0 {
+            let each: Vec<String> = self.groups.iter().map(|g| g.to_string()).collect();
+            return Err(format!(
+                "{failed} of {} profiles of {of} failed (strict: any failed profile is an error): {}; nothing was written",
+                self.total,
+                each.join("; ")
+            ));
+        }
+        Ok(())
+    }
+}
+
+impl FailureReport {
+    /// [`Self::verdict`] before a study runs, on the profiles found unable to run
+    /// ([`dial::unusable`]): with [`FailurePolicy::Strict`] any of them refuses the study
+    /// (`N of M profiles of <of> cannot be run (strict: …): <each reason once>; nothing was
+    /// run`; when none can, the line a study where every profile failed gives); otherwise the
+    /// study runs and leaves them out.
+    pub fn verdict_before_run(&self, of: &str, policy: FailurePolicy) -> Result<(), String> {
+        let failed = self.failed();
+        if policy == FailurePolicy::Strict && self.all_failed() {
+            return Err(all_failed_message(of, &self.groups));
+        }
+        if policy == FailurePolicy::Strict && failed > 0 {
+            let each: Vec<String> = self.groups.iter().map(|g| g.to_string()).collect();
+            return Err(format!(
+                "{failed} of {} profiles of {of} cannot be run (strict: any failed profile is an error): {}; nothing was run",
+                self.total,
+                each.join("; ")
+            ));
+        }
+        Ok(())
+    }
+}
+
 /// The worker threads a study runs on for `--threads requested` (0: all cores) with `cores`
 /// available: at most the cores. A study's work is computation, so a thread beyond the cores
 /// only waits for one, and hundreds of them waiting on the nested parallel line-by-line loops
@@ -187,5 +290,45 @@ mod tests {
             all_failed_message("set.csv", &g)
                 .starts_with("every profile of set.csv failed (5 of 5): 2 profiles: ")
         );
+    }
+
+    /// Tolerated: a study with some failed profiles passes, one with all fails; strict: any
+    /// failure fails, with the counts by reason; none failed passes either way.
+    #[test]
+    fn the_verdict_follows_the_policy() {
+        use FailurePolicy::{Strict, Tolerate};
+        let fails = [("a", "no CO2 in `a`"), ("b", "no CO2 in `b`")];
+        let some = FailureReport::new(3, fails);
+        assert_eq!((some.failed(), some.all_failed()), (2, false));
+        assert_eq!(some.verdict("set.csv", Tolerate), Ok(()));
+        assert_eq!(
+            some.verdict("set.csv", Strict),
+            Err("2 of 3 profiles of set.csv failed (strict: any failed profile is an error): 2 profiles: no CO2 in `a` (profile a and 1 more); nothing was written".into())
+        );
+        let all = FailureReport::new(2, fails);
+        assert!(all.all_failed());
+        for p in [Tolerate, Strict] {
+            assert_eq!(
+                all.verdict("set.csv", p),
+                Err("every profile of set.csv failed (2 of 2): 2 profiles: no CO2 in `a` (profile a and 1 more); nothing was written".into())
+            );
+        }
+        let none = FailureReport::new(2, []);
+        assert_eq!(none.failed(), 0);
+        assert_eq!(none.verdict("set.csv", Strict), Ok(()));
+        // Before the run: only strict refuses, on any profile that cannot be run.
+        assert_eq!(some.verdict_before_run("set.csv", Tolerate), Ok(()));
+        assert_eq!(all.verdict_before_run("set.csv", Tolerate), Ok(()));
+        assert_eq!(
+            all.verdict_before_run("set.csv", Strict),
+            all.verdict("set.csv", Strict)
+        );
+        assert_eq!(none.verdict_before_run("set.csv", Strict), Ok(()));
+        assert_eq!(
+            some.verdict_before_run("set.csv", Strict),
+            Err("2 of 3 profiles of set.csv cannot be run (strict: any failed profile is an error): 2 profiles: no CO2 in `a` (profile a and 1 more); nothing was run".into())
+        );
+        // An empty study is not "every profile failed".
+        assert!(!FailureReport::new(0, []).all_failed());
     }
 }

@@ -483,21 +483,12 @@ impl GroupSummary {
         )
     }
 
-    /// Refuse a group of which no member could be studied (each reason once), or, with
-    /// positions given by `--on-cm1`, where one was dropped.
+    /// Refuse a group where a position given by `--on-cm1` was dropped. A group none of whose
+    /// members could be studied has no rows and is not refused here: its failures are the
+    /// study's ([`crate::study::FailureReport::verdict`] decides on them, for the whole study).
     pub fn check(&self, study: &SelectStudy) -> Result<(), SelectError> {
         if self.profiles == 0 {
-            let each: Vec<String> = self
-                .failure_groups()
-                .iter()
-                .map(|g| g.to_string())
-                .collect();
-            return Err(usage(format!(
-                "{}: every profile of the group failed ({}): {}; nothing was written",
-                self.name,
-                self.failed.len(),
-                each.join("; ")
-            )));
+            return Ok(());
         }
         if !study.options.on_cm1.is_empty() && !self.dropped.is_empty() {
             let v: Vec<String> = self

@@ -625,6 +625,27 @@ pub fn run_slice(
     })
 }
 
+/// The profiles of `set` that cannot be run through `scene` at all (they do not fit it, lack a
+/// gas its lines absorb, or are supersaturated), grouped by reason: what [`run`] finds before
+/// its first profile and leaves out. Found in a fraction of the study's time, so that a study
+/// that must not lose any profile ([`crate::study::FailurePolicy::Strict`]) is refused before
+/// its work; profiles whose retrieval fails are found only by running them.
+pub fn unusable(scene: &Scene, set: &ProfileSet) -> crate::study::FailureReport {
+    let failed: Vec<(String, String)> = set
+        .members
+        .par_iter()
+        .filter_map(|m| {
+            profile::usable_in(scene, m)
+                .err()
+                .map(|e| (m.meta.id.clone(), e))
+        })
+        .collect();
+    crate::study::FailureReport::new(
+        set.len(),
+        failed.iter().map(|(id, e)| (id.as_str(), e.as_str())),
+    )
+}
+
 /// Where a study's profiles come from.
 #[derive(Debug, Clone, PartialEq)]
 pub enum ProfileSource {

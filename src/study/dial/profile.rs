@@ -181,15 +181,7 @@ impl Study<'_> {
     /// The scene with `member` as its truth, or why it cannot be run: it does not fit the scene
     /// ([`Scene::with_profile`]) or is supersaturated.
     pub(super) fn usable(&self, member: &SetMember) -> Result<Scene, String> {
-        let scene = self
-            .scene
-            .with_profile(member.profile.clone())
-            .map_err(|e| e.to_string())?;
-        match &scene.atmosphere {
-            Some(a) => check_saturation(&a.profile)?,
-            None => return Err("no atmosphere".into()),
-        }
-        Ok(scene)
+        usable_in(self.scene, member)
     }
 
     /// Every record of one profile, `scene` its truth ([`Self::usable`]).
@@ -484,6 +476,19 @@ fn widened(shape: &LineShape, factor: f64) -> Option<LineShape> {
 }
 
 /// A profile supersaturated over liquid water (beyond [`MAX_RELATIVE_HUMIDITY`]) is refused.
+/// `scene` with `member` as its truth, or why it cannot be run: it does not fit the scene
+/// ([`Scene::with_profile`]) or is supersaturated.
+pub(super) fn usable_in(scene: &Scene, member: &SetMember) -> Result<Scene, String> {
+    let scene = scene
+        .with_profile(member.profile.clone())
+        .map_err(|e| e.to_string())?;
+    match &scene.atmosphere {
+        Some(a) => check_saturation(&a.profile)?,
+        None => return Err("no atmosphere".into()),
+    }
+    Ok(scene)
+}
+
 fn check_saturation(p: &Profile) -> Result<(), String> {
     let Some(h2o) = p.gas("H2O") else {
         return Ok(());
