@@ -23,6 +23,10 @@ pub fn run(
     scene: &Scene,
     run: &RunOutput,
 ) -> anyhow::Result<()> {
+    // Once, before the files: the scene's and the run's warnings (also in the summary).
+    for w in &run.warnings {
+        lidarsim::limits::warn(w);
+    }
     let history = netcdf.then(super::netcdf_history);
     let written =
         products::run::write(
