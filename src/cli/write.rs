@@ -52,6 +52,10 @@ pub fn dial(
     inputs: &StudyInputs,
     result: &StudyResult,
 ) -> anyhow::Result<()> {
+    // Once for the study, not per profile: the scene's own warnings.
+    for w in &inputs.scene.warnings {
+        lidarsim::limits::warn(w);
+    }
     let p = DialProducts::new(inputs, result)?;
     let history = netcdf.then(super::netcdf_history);
     let written = p.write(dir, history.as_deref(), |files| match no_plots {
