@@ -36,6 +36,9 @@ mod netcdf;
 mod output;
 /// Particles: Mie, size distributions, phase-function tables and sampling.
 mod particles;
+/// Physical inputs as users give them: CO2 well mixed in dry air, clouds by water content and
+/// effective radius, warnings of implausible values.
+mod physical_inputs;
 /// Polarised transport: co- and cross-polarised returns and depolarisation ratios against
 /// exact values.
 mod polarisation;

@@ -314,7 +314,8 @@ def select_lines(scene=None, *, off_cm1, co2_ppm, on_cm1=(), atmospheres=(), pro
     against the off-line ``off_cm1`` [cm⁻¹], the weighting function, the random error of the
     scene's instrument and the systematic errors of temperature [K], frequency [MHz], surface
     pressure [hPa] and water vapour [%] knowledge, over profiles (AFGL ``atmospheres``, a
-    profile-set file, or an ``ensemble`` per class) with CO2 at ``co2_ppm`` [ppm]. Lines:
+    profile-set file, or an ``ensemble`` per class) with CO2 well mixed at ``co2_ppm`` [ppm] of
+    dry air at every level. Lines:
     HITRAN ``.par`` paths (default the built-in band model); the grid ``layer_m`` [m] to
     ``top_km`` [km].
 

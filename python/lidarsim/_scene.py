@@ -141,7 +141,8 @@ class Scene:
         :func:`lidarsim.profiles.ensemble` or :func:`lidarsim.profiles.read` (``ds.isel(profile=3)``),
         or a dict with ``altitude_m`` [m], ``pressure_pa`` [Pa], ``temperature_k`` [K] per level
         bottom up and ``gases``, a dict formula → volume mixing ratio [mol/mol] per level. The
-        scene's ``co2_ppm`` still rescales CO2; layer optics and line lists are kept."""
+        scene's ``co2_ppm`` still sets CO2 as its ``co2_scaling`` says (by default well mixed
+        in dry air, replacing the profile's own CO2); layer optics and line lists are kept."""
         if isinstance(profile, dict):
             name = str(profile.get("name", "profile"))
             gases = list(profile.get("gases", {}).items())

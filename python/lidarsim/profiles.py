@@ -93,7 +93,8 @@ def read(path):
 
 
 def ensemble(n, seed, latitude_class=None, atmosphere=None, co2_ppm=None, error_model=None,
-             co2_std_ppm=None, ps_std_hpa=None, max_rh_percent=100.0, rh_over="water"):
+             co2_std_ppm=None, ps_std_hpa=None, max_rh_percent=100.0, rh_over="water",
+             co2_scaling="well_mixed"):
     """``n`` profiles drawn around a mean profile with the representative NWP forecast-error
     covariance (as ``lidarsim profiles generate``).
 
@@ -109,7 +110,7 @@ def ensemble(n, seed, latitude_class=None, atmosphere=None, co2_ppm=None, error_
     atmosphere : str, optional
         The mean is this AFGL atmosphere (``us_standard``, ``tropical``, …).
     co2_ppm : float, optional
-        Rescale the mean's CO2 to this dry-air column average [ppm] (set it if absent).
+        CO2 of the mean [ppm], applied as ``co2_scaling`` says.
     error_model : path, optional
         A per-level error table (p_hPa, T_std_K, lnq_std[, CO2_std_ppmv]) instead of the
         embedded representative NWP forecast error.
@@ -121,6 +122,10 @@ def ensemble(n, seed, latitude_class=None, atmosphere=None, co2_ppm=None, error_
         Cap water vapour at this relative humidity [%].
     rh_over : {"water", "ice"}
         Relative humidity over water, or over ice below 273.16 K.
+    co2_scaling : {"well_mixed", "profile_shape"}
+        ``well_mixed``: ``co2_ppm`` is the dry-air mole fraction at every level (the mean's CO2
+        replaced or added); ``profile_shape``: the mean's own CO2 rescaled by one factor to
+        that dry-air column average.
 
     Returns
     -------
@@ -130,5 +135,5 @@ def ensemble(n, seed, latitude_class=None, atmosphere=None, co2_ppm=None, error_
     return _to_dataset(_lidarsim.ensemble(
         int(n), int(seed), latitude_class, atmosphere, co2_ppm,
         None if error_model is None else str(error_model), co2_std_ppm, ps_std_hpa,
-        float(max_rh_percent), rh_over,
+        float(max_rh_percent), rh_over, co2_scaling,
     ))

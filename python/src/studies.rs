@@ -223,7 +223,7 @@ pub fn read_profiles<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py,
 /// with the representative NWP forecast-error covariance (or the error model given): the dict
 /// of [`set_to_py`]; its notes say how it was made.
 #[pyfunction]
-#[pyo3(signature = (n, seed, latitude_class=None, atmosphere=None, co2_ppm=None, error_model=None, co2_std_ppm=None, ps_std_hpa=None, max_rh_percent=100.0, rh_over="water"))]
+#[pyo3(signature = (n, seed, latitude_class=None, atmosphere=None, co2_ppm=None, error_model=None, co2_std_ppm=None, ps_std_hpa=None, max_rh_percent=100.0, rh_over="water", co2_scaling="well_mixed"))]
 #[allow(clippy::too_many_arguments)]
 pub fn ensemble<'py>(
     py: Python<'py>,
@@ -237,7 +237,11 @@ pub fn ensemble<'py>(
     ps_std_hpa: Option<f64>,
     max_rh_percent: f64,
     rh_over: &str,
+    co2_scaling: &str,
 ) -> PyResult<Bound<'py, PyDict>> {
+    let co2_scaling = co2_scaling
+        .parse::<lidarsim::atmosphere::Co2Scaling>()
+        .map_err(|m| value_error(format!("co2_scaling: {m}")))?;
     let class = latitude_class
         .map(|c| {
             c.parse::<LatitudeClass>()
@@ -259,6 +263,7 @@ pub fn ensemble<'py>(
         mean_profile: None,
         profile_id: None,
         co2_ppm,
+        co2_scaling,
         covariance: None,
         error_model,
         pairs: None,

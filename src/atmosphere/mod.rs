@@ -47,7 +47,7 @@ pub mod interp;
 pub mod native;
 pub mod set;
 
-pub use column::RescaleBasis;
+pub use column::{Co2Scaling, RescaleBasis};
 pub use covariance::{Covariance, ErrorModel, Factor, RepairReport, StateVariable};
 pub use ensemble::{
     EnsembleConfig, EnsembleReport, StateShift, class_ensemble, generate_ensemble, shift_member,

@@ -5,7 +5,9 @@ use std::path::{Path, PathBuf};
 
 use anyhow::bail;
 use lidarsim::atmosphere::native::{read_ecmwf52, read_ecmwf83, read_rfmip};
-use lidarsim::atmosphere::{LatitudeClass, ProfileSet, StandardAtmosphere, read_profile_set};
+use lidarsim::atmosphere::{
+    Co2Scaling, LatitudeClass, ProfileSet, StandardAtmosphere, read_profile_set,
+};
 
 use lidarsim::input::Bounds;
 use lidarsim::limits::MAX_ENSEMBLE_LEVELS;
@@ -61,9 +63,15 @@ struct GenerateArgs {
     /// Which profile of --mean-profile.
     #[arg(long, requires = "mean_profile")]
     profile_id: Option<String>,
-    /// Rescale the mean's CO2 to this dry-air column average [ppm] (or set it, if it has none).
+    /// CO2 of the mean [ppm]: by default well mixed, this dry-air mole fraction at every level
+    /// (see --co2-scaling).
     #[arg(long, allow_negative_numbers = true, value_parser = real(Bounds::positive(1e6)))]
     co2_ppm: Option<f64>,
+    /// How --co2-ppm is applied: `well_mixed` (the dry-air mole fraction at every level, the
+    /// profile's CO2 replaced or added) or `profile_shape` (the profile's own CO2 rescaled by
+    /// one factor to that dry-air column average).
+    #[arg(long, default_value = "well_mixed", requires = "co2_ppm")]
+    co2_scaling: Co2Scaling,
     /// Covariance (a): a covariance file (docs/atmosphere.md), projected to the mean's levels.
     #[arg(long, conflicts_with_all = ["error_model", "pairs"])]
     covariance: Option<PathBuf>,
@@ -137,6 +145,15 @@ struct ConvertArgs {
     /// Output profile set.
     #[arg(long)]
     out: PathBuf,
+    /// Give every profile this CO2 [ppm] (ECMWF 52 has none): by default well mixed, this
+    /// dry-air mole fraction at every level (see --co2-scaling).
+    #[arg(long, allow_negative_numbers = true, value_parser = real(Bounds::positive(1e6)))]
+    co2_ppm: Option<f64>,
+    /// How --co2-ppm is applied: `well_mixed` (the dry-air mole fraction at every level, the
+    /// profile's CO2 replaced or added) or `profile_shape` (the profile's own CO2 rescaled by
+    /// one factor to that dry-air column average).
+    #[arg(long, default_value = "well_mixed", requires = "co2_ppm")]
+    co2_scaling: Co2Scaling,
 }
 
 /// `lidarsim profiles info`.
@@ -179,6 +196,7 @@ fn generate(a: GenerateArgs) -> anyhow::Result<()> {
         mean_profile: a.mean_profile.clone(),
         profile_id: a.profile_id.clone(),
         co2_ppm: a.co2_ppm,
+        co2_scaling: a.co2_scaling,
         covariance: a.covariance.clone(),
         error_model: a.error_model.clone(),
         pairs: a.pairs.clone(),
@@ -208,11 +226,14 @@ fn generate(a: GenerateArgs) -> anyhow::Result<()> {
 }
 
 fn convert(a: ConvertArgs) -> anyhow::Result<()> {
-    let set = match a.format.as_str() {
+    let mut set = match a.format.as_str() {
         "ecmwf83" => read_ecmwf83(&a.levels, &a.meta)?,
         "ecmwf52" => read_ecmwf52(&a.levels, &a.meta)?,
         _ => read_rfmip(&a.levels, &a.meta)?,
     };
+    if let Some(ppm) = a.co2_ppm {
+        products::profiles::set_co2(&mut set, ppm, a.co2_scaling)?;
+    }
     set.write(&a.out)?;
     let [t, m, h] = set.class_counts();
     outln!(

@@ -59,7 +59,8 @@ pub struct Args {
     /// The off-line [cm⁻¹].
     #[arg(long, allow_negative_numbers = true, value_parser = super::real(ranges::WAVENUMBER_CM1))]
     off_cm1: f64,
-    /// CO2 dry-air column average of every profile [ppm] (rescaled, or set if absent).
+    /// CO2 of every profile [ppm]: well mixed, this dry-air mole fraction at every level (the
+    /// profile's own CO2 replaced or added).
     #[arg(long, allow_negative_numbers = true, value_parser = super::real(ranges::CO2_PPM))]
     co2_ppm: f64,
     /// Output directory.

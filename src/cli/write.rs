@@ -24,6 +24,10 @@ pub fn run(
     scene: &Scene,
     run: &RunOutput,
 ) -> anyhow::Result<()> {
+    // Once, before the files: the scene's and the run's warnings (also in the summary).
+    for w in &run.warnings {
+        lidarsim::limits::warn(w);
+    }
     let history = netcdf.then(super::netcdf_history);
     let written =
         products::run::write(
@@ -50,6 +54,10 @@ pub fn dial(
     result: &StudyResult,
     policy: FailurePolicy,
 ) -> anyhow::Result<()> {
+    // Once for the study, not per profile: the scene's own warnings.
+    for w in &inputs.scene.warnings {
+        lidarsim::limits::warn(w);
+    }
     let p = DialProducts::with_policy(inputs, result, policy)?;
     let history = netcdf.then(super::netcdf_history);
     let written = p.write(dir, history.as_deref(), |files| match no_plots {

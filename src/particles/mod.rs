@@ -13,6 +13,7 @@ pub mod opac;
 pub mod phase;
 pub mod rayleigh;
 pub mod table;
+pub mod water_content;
 
 use std::path::Path;
 

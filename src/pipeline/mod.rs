@@ -59,6 +59,10 @@ pub struct RunOutput {
     pub weighting: Vec<crate::retrieval::Weighting>,
     /// Co- and cross-polarised line returns, when the lidar's light is polarised.
     pub polarised: Option<PolarisedLines>,
+    /// The scene's warnings and the run's own (an on-line whose signal-to-noise ratio per shot
+    /// is below 1), each `FILE:LINE: key: …` ([`crate::scene::warnings`]); the command line
+    /// prints them once and the run's summary records them.
+    pub warnings: Vec<String>,
 }
 
 /// The co- and cross-polarised parts of the line returns of a run with polarised light.
@@ -310,7 +314,14 @@ impl<'s> Prepared<'s> {
                 }
             }
         }
+        let mut warnings = scene.warnings.clone();
+        if let Some(r) = &retrieval {
+            warnings.extend(crate::scene::warnings::on_line_snr_warnings(
+                scene, r, &signals,
+            ));
+        }
         Ok(RunOutput {
+            warnings,
             weighting,
             atmosphere,
             analytic,

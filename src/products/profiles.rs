@@ -7,8 +7,8 @@ use std::path::PathBuf;
 use super::ProductError;
 use crate::atmosphere::covariance::{Covariance, ErrorModel};
 use crate::atmosphere::{
-    EnsembleConfig, LatitudeClass, ProfileSet, SaturationOver, SetMember, StandardAtmosphere,
-    generate_ensemble, read_profile_set,
+    Co2Scaling, EnsembleConfig, LatitudeClass, ProfileSet, SaturationOver, SetMember,
+    StandardAtmosphere, generate_ensemble, read_profile_set,
 };
 use crate::output::csv_field;
 
@@ -64,8 +64,10 @@ pub struct GenerateRequest {
     pub mean_profile: Option<PathBuf>,
     /// Which profile of `mean_profile`.
     pub profile_id: Option<String>,
-    /// The mean's CO2 dry-air column average \[ppm\].
+    /// The mean's CO2 \[ppm\], applied as `co2_scaling` says.
     pub co2_ppm: Option<f64>,
+    /// How `co2_ppm` is applied (well mixed in dry air by default).
+    pub co2_scaling: Co2Scaling,
     /// A covariance file.
     pub covariance: Option<PathBuf>,
     /// A per-level error table; the representative NWP forecast error without one.
@@ -159,21 +161,8 @@ pub fn generate(
     )];
     notes.push(format!("mean profile: {source}"));
     if let Some(ppm) = a.co2_ppm {
-        if mean.profile.gas("CO2").is_some() {
-            mean.profile.rescale_gas("CO2", ppm * 1e-6)?;
-            notes.push(format!(
-                "mean CO2 rescaled to a dry-air column average of {ppm} ppm"
-            ));
-        } else {
-            let h2o = mean.profile.gas("H2O").map(|v| v.to_vec());
-            let v = (0..mean.profile.len())
-                .map(|k| ppm * 1e-6 * (1.0 - h2o.as_ref().map_or(0.0, |h| h[k])))
-                .collect();
-            mean.profile.set_gas("CO2", v)?;
-            notes.push(format!(
-                "mean CO2 set to {ppm} ppm of dry air at all levels"
-            ));
-        }
+        mean.profile.set_co2_ppm(ppm, a.co2_scaling)?;
+        notes.push(format!("mean {}", a.co2_scaling.describe(ppm)));
     }
     let class = LatitudeClass::of_latitude_deg(mean.meta.latitude_deg);
     let cov = if let Some(path) = &a.covariance {
@@ -261,6 +250,19 @@ pub fn generate(
 }
 
 /// The mean profile and a description of where it comes from.
+/// Give every member of `set` (a converted set: `profiles convert --co2-ppm`) `ppm` of CO2 as
+/// `scaling` says, and note it in the set's header. An error names the first member that cannot
+/// take it (with `profile_shape`, one without CO2).
+pub fn set_co2(set: &mut ProfileSet, ppm: f64, scaling: Co2Scaling) -> Result<(), ProductError> {
+    for m in &mut set.members {
+        m.profile.set_co2_ppm(ppm, scaling).map_err(|e| {
+            ProductError::Request(format!("--co2-ppm: profile `{}`: {e}", m.meta.id))
+        })?;
+    }
+    set.notes.push(scaling.describe(ppm));
+    Ok(())
+}
+
 fn mean_member(a: &GenerateRequest) -> Result<(SetMember, String), ProductError> {
     if let Some(atm) = a.atmosphere {
         if a.class.is_some() {
@@ -343,6 +345,7 @@ mod tests {
             mean_profile: None,
             profile_id: None,
             co2_ppm: Some(420.0),
+            co2_scaling: Co2Scaling::WellMixed,
             covariance: None,
             error_model: None,
             pairs: None,

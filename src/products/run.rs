@@ -231,6 +231,14 @@ fn print_summary(out: &mut impl Write, scene: &Scene, run: &RunOutput) -> std::i
         scene.description.clone()
     };
     writeln!(out, "scene: {name}")?;
+    if let Some(a) = &scene.atmosphere
+        && let Some(ppm) = a.co2_ppm
+    {
+        writeln!(out, "atmosphere: {}", a.co2_scaling.describe(ppm))?;
+    }
+    for w in &run.warnings {
+        writeln!(out, "warning: {w}")?;
+    }
     writeln!(out, "{}", run.monte_carlo.reason)?;
     if scene.lidar.polarisation != crate::scene::Polarisation::None {
         // Once: which layers' scalar phase functions stand in for scattering matrices.
@@ -549,6 +557,17 @@ pub fn summary_json(scene: &Scene, run: &RunOutput) -> String {
         },
     });
     // Only where computed: summary.json holds no nulls.
+    if let Some(a) = &scene.atmosphere
+        && let Some(ppm) = a.co2_ppm
+    {
+        json["atmosphere"] = serde_json::json!({
+            "co2_ppm": ppm,
+            "co2_scaling": a.co2_scaling.name(),
+        });
+    }
+    if !run.warnings.is_empty() {
+        json["warnings"] = run.warnings.clone().into();
+    }
     if let Some((bound, fov)) = run.monte_carlo.bound {
         json["monte_carlo"]["multiple_scattering_bound"] = bound.into();
         json["monte_carlo"]["multiple_scattering_bound_fov_full_angle_mrad"] = fov.into();

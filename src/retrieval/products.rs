@@ -336,6 +336,20 @@ pub struct Geometry {
 }
 
 impl Retrieval {
+    /// The expected signal-to-noise ratio per shot of the on-line in the window of each
+    /// hard-target (IPDA) measurement, for every field of view of `signals`: (FOV full angle
+    /// \[mrad\], SNR). The run warns where it is below 1 ([`crate::scene::warnings`]).
+    pub fn ipda_on_line_snr(&self, signals: &Signals) -> Vec<(f64, f64)> {
+        let mut out = Vec::new();
+        for t in self.targets.iter().filter(|t| t.windows.len() == 1) {
+            for (f, fov) in signals.fov_full_angle_mrad.iter().enumerate() {
+                let w = signals.window(self.config.on, f, t.windows[0].clone());
+                out.push((*fov, w.noise.snr()));
+            }
+        }
+        out
+    }
+
     /// The retrieval of `config` (its line pair named `pair`) seen from `geometry`, against
     /// `reference` and `truth`; `seed` seeds its noise. Checks that the on-line absorbs more
     /// than the off-line over every path it will retrieve.

@@ -246,8 +246,13 @@ pub struct AtmosphereDescription {
     pub profile_file: Option<String>,
     /// The member of `profile_file`.
     pub profile_id: Option<String>,
-    /// Dry-air column average of CO2 to rescale the profile to \[ppm\].
+    /// CO2 \[ppm\]: by default a well-mixed dry-air mole fraction at every level; see
+    /// `co2_scaling`.
     pub co2_ppm: Option<f64>,
+    /// How `co2_ppm` is applied: `well_mixed` (default; the dry-air mole fraction at every
+    /// level) or `profile_shape` (the profile's CO2 rescaled by one factor to that dry-air
+    /// column average).
+    pub co2_scaling: Option<String>,
     /// A profile given by values, with its gases.
     pub profile: Option<ProfileDescription>,
     /// Altitudes of an air-density profile \[m\].
@@ -319,6 +324,14 @@ pub struct LayerDescription {
     pub extinction_per_m: Option<PerChannel>,
     /// Particle extinction \[1/km\] (or `extinction_per_m`).
     pub extinction_per_km: Option<PerChannel>,
+    /// Liquid water content \[g/m³\], in place of an extinction: with `r_eff_um` in the
+    /// geometric-optics limit, or the amount of a layer of Mie `particles`.
+    pub lwc_g_per_m3: Option<f64>,
+    /// Ice water content \[g/m³\], as `lwc_g_per_m3` for ice (ρ = 917 kg/m³).
+    pub iwc_g_per_m3: Option<f64>,
+    /// Effective radius ⟨r³⟩/⟨r²⟩ \[µm\] of `lwc_g_per_m3` / `iwc_g_per_m3` (of a lognormal
+    /// `particles`, in place of `median_radius_um`).
+    pub r_eff_um: Option<f64>,
     /// Particle single-scattering albedo.
     pub single_scattering_albedo: Option<PerChannel>,
     /// Particle phase function: one, or one per channel.

@@ -39,11 +39,12 @@ mod validate_instrument;
 mod validate_retrieval;
 mod validator;
 mod variance;
+pub mod warnings;
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use crate::atmosphere::Profile;
+use crate::atmosphere::{Co2Scaling, Profile};
 use crate::input::{InputError, check_count};
 use crate::instrument::laser::{Filter, Laser, Line, SampledChannel, SpectralSampling};
 use crate::instrument::signals::Receiver;
@@ -105,6 +106,10 @@ pub struct Scene {
     pub surface: Option<Surface>,
     /// Line-by-line gas absorption, if any.
     pub gas: Option<GasAbsorption>,
+    /// Warnings about the scene's values, each `FILE:LINE: key: …` ([`warnings`]): accepted but
+    /// seldom meant (a layer of optical depth above 100), or making the numbers mean less than
+    /// they seem (gates the detector does not resolve). Printed once by the command line.
+    pub warnings: Vec<String>,
     /// The run settings: everything that says how a scene is run rather than what it is (photons,
     /// seed, batches, threads, orders, when the Monte Carlo runs, its variance reductions). The one
     /// settings type: the transport, the pipeline, shards and MPI read them from here.
@@ -268,9 +273,12 @@ pub struct Atmosphere {
     pub rayleigh: bool,
     /// Depolarisation factor per channel (Bucholtz 1995 Table 1 unless given).
     pub depolarisation_factor: Vec<f64>,
-    /// The dry-air column average of CO2 the scene asks for \[ppm\] (`co2_ppm`), applied to
-    /// its profile and to any profile swapped in ([`Scene::with_profile`]).
+    /// The CO2 the scene asks for \[ppm\] (`co2_ppm`), applied to its profile and to any
+    /// profile swapped in ([`Scene::with_profile`]) as `co2_scaling` says.
     pub co2_ppm: Option<f64>,
+    /// How `co2_ppm` is applied (`co2_scaling`; well mixed in dry air unless the scene says
+    /// `profile_shape`).
+    pub co2_scaling: Co2Scaling,
 }
 
 /// A horizontal layer of particles and/or extra absorption.

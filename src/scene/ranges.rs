@@ -58,6 +58,8 @@ pub(super) const COEFFICIENT_PER_KM: Bounds = Bounds::closed(0.0, 1e6);
 pub(super) const PARTICLE_DENSITY_PER_CM3: Bounds = Bounds::positive(1e10);
 /// Particle radii of a size distribution \[µm\] (up to 1 cm rain drops).
 pub(super) const RADIUS_UM: Bounds = Bounds::positive(1e4);
+/// Condensed water content of a cloud \[g/m³\] (convective cores reach ~5).
+pub(super) const WATER_CONTENT_G_PER_M3: Bounds = Bounds::positive(100.0);
 /// Geometric standard deviation of a log-normal distribution.
 pub(super) const SIGMA_G: Bounds = Bounds::above(1.0, 10.0);
 /// Shape parameters `alpha`, `b`, `gamma` of a modified gamma distribution.

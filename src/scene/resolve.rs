@@ -18,13 +18,17 @@ use super::validator::Validator;
 use super::{
     Atmosphere, Channel, Layer, Polarisation, Scene, Surface, molecular_layer_count, sample_lines,
 };
-use crate::atmosphere::{GasProfile, Profile, StandardAtmosphere};
+use crate::atmosphere::{Co2Scaling, GasProfile, Profile, StandardAtmosphere};
 use crate::input::InputError;
 use crate::particles::distribution::{BulkOptions, Component, SizeDistribution};
 use crate::particles::matrix::ScatteringMatrix;
 use crate::particles::matrix_table::MatrixTable;
 use crate::particles::phase::{HenyeyGreenstein, PhaseFunction, RayleighPhase, TabulatedPhase};
 use crate::particles::table::PhaseTable;
+use crate::particles::water_content::{
+    Condensate, geometric_optics_extinction_per_m, lognormal_median_for_effective_radius_um,
+    number_density_for_content_per_m3,
+};
 use crate::particles::{builtin_table, rayleigh};
 
 impl Resolver<'_> {
@@ -106,7 +110,16 @@ impl Resolver<'_> {
             gas.as_ref(),
             reuse.spectroscopy.take(),
         )?;
+        let warnings = super::warnings::scene_warnings(
+            self.src,
+            &d,
+            &lines,
+            &layers,
+            &gates,
+            receiver.as_ref(),
+        );
         let mut scene = Scene {
+            warnings,
             path: self.path.clone(),
             description: d.description.clone().unwrap_or_default(),
             lidar,
@@ -186,9 +199,16 @@ impl Resolver<'_> {
             );
             density_profile(z.unwrap_or_default(), n.unwrap_or_default())
         };
+        // Checked by validate; the default is a well-mixed dry-air mole fraction.
+        let co2_scaling = match &a.co2_scaling {
+            Some(s) => s
+                .parse::<Co2Scaling>()
+                .map_err(|m| self.err(&sec.key("co2_scaling"), m))?,
+            None => Co2Scaling::default(),
+        };
         if let Some(ppm) = a.co2_ppm {
             profile
-                .rescale_gas("CO2", ppm * 1e-6)
+                .set_co2_ppm(ppm, co2_scaling)
                 .map_err(|e| self.err(&sec.key("co2_ppm"), e.to_string()))?;
         }
         let z_top = *profile.altitude_m.last().unwrap_or(&0.0);
@@ -229,6 +249,7 @@ impl Resolver<'_> {
             rayleigh: rayleigh_on,
             depolarisation_factor,
             co2_ppm: a.co2_ppm,
+            co2_scaling,
         })
     }
 
@@ -319,10 +340,20 @@ impl Resolver<'_> {
         if let Some(p) = &l.particles {
             return self.mie_layer(&sec, name, l, p, channels, cache_dir);
         }
-        let ext = match (&l.extinction_per_m, &l.extinction_per_km) {
-            (Some(v), _) => Some((sec.key("extinction_per_m"), v, 1.0)),
-            (None, Some(v)) => Some((sec.key("extinction_per_km"), v, 1e-3)),
-            (None, None) => None,
+        // A water content with its effective radius: one extinction for every channel, the
+        // geometric-optics limit (`particles::water_content`).
+        let from_content = condensate(l).map(|(w, c)| {
+            PerChannel::One(geometric_optics_extinction_per_m(
+                w,
+                l.r_eff_um.unwrap_or(f64::NAN),
+                c,
+            ))
+        });
+        let ext = match (&l.extinction_per_m, &l.extinction_per_km, &from_content) {
+            (Some(v), _, _) => Some((sec.key("extinction_per_m"), v, 1.0)),
+            (None, Some(v), _) => Some((sec.key("extinction_per_km"), v, 1e-3)),
+            (None, None, Some(v)) => Some((sec.key("lwc_g_per_m3"), v, 1.0)),
+            (None, None, None) => None,
         };
         let (extinction_per_m, single_scattering_albedo, phase, matrix) =
             match (ext, &l.single_scattering_albedo, &l.phase) {
@@ -425,12 +456,20 @@ impl Resolver<'_> {
         let components = if p.distribution == "opac" {
             self.opac_components(&at, p, channels)?
         } else {
-            self.mie_components(&at, name.clone(), p, channels)?
+            self.mie_components(&at, name.clone(), p, l.r_eff_um, channels)?
         };
         let optics = self.mie_optics(&at, channels, &components, cache_dir)?;
-        // The amount: a number density, or an extinction at the first channel.
+        // The amount: a number density, an extinction at the first channel, or a water
+        // content (the number of particles of the distribution that hold it).
+        let content = condensate(l);
         let number_density_per_m3 = match (l.number_density_per_cm3, &l.extinction_per_m) {
             (Some(n), _) => n * 1e6,
+            (None, None) if content.is_some() => {
+                let (w, c) = content.unwrap_or((f64::NAN, Condensate::Liquid));
+                // Every channel's components are the same distribution (an OPAC type, which
+                // holds several, is refused a water content by validation).
+                number_density_for_content_per_m3(w, &components[0][0].distribution, c)
+            }
             (None, Some(PerChannel::One(e))) => e / optics[0].extinction_cross_section_m2,
             _ => match &l.extinction_per_km {
                 Some(PerChannel::One(e)) => e * 1e-3 / optics[0].extinction_cross_section_m2,
@@ -504,6 +543,7 @@ impl Resolver<'_> {
         at: &KeyPath,
         name: String,
         p: &ParticlesDescription,
+        r_eff_um: Option<f64>,
         channels: &[Channel],
     ) -> Result<Vec<Vec<Component>>, InputError> {
         let mie_err = |e: String| self.err(at, e);
@@ -511,7 +551,14 @@ impl Resolver<'_> {
         let given = |v: Option<f64>| v.unwrap_or(f64::NAN);
         let mut dist = match p.distribution.as_str() {
             "lognormal" => {
-                SizeDistribution::lognormal(1.0, given(p.median_radius_um), given(p.sigma_g))
+                // The median radius, or the one that gives the layer's effective radius.
+                let median = match (p.median_radius_um, r_eff_um) {
+                    (None, Some(r)) => {
+                        lognormal_median_for_effective_radius_um(r, given(p.sigma_g))
+                    }
+                    (m, _) => given(m),
+                };
+                SizeDistribution::lognormal(1.0, median, given(p.sigma_g))
             }
             _ => SizeDistribution::modified_gamma(1.0, given(p.alpha), given(p.b), given(p.gamma)),
         }
@@ -655,5 +702,15 @@ fn density_profile(z: &[f64], n: &[f64]) -> Profile {
             .collect(),
         temperature_k: vec![t; z.len()],
         gases: Vec::new(),
+    }
+}
+
+/// A layer's condensed-water content \[g/m³\] and what it is of (`lwc_g_per_m3` or
+/// `iwc_g_per_m3`; validation allows one).
+fn condensate(l: &LayerDescription) -> Option<(f64, Condensate)> {
+    match (l.lwc_g_per_m3, l.iwc_g_per_m3) {
+        (Some(w), _) => Some((w, Condensate::Liquid)),
+        (None, Some(w)) => Some((w, Condensate::Ice)),
+        (None, None) => None,
     }
 }

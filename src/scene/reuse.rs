@@ -128,8 +128,9 @@ impl Scene {
 
     /// The scene with another atmospheric profile (an ensemble member, say): its description
     /// with the profile given by values ([`ProfileDescription`]), validated and resolved again,
-    /// keeping the layers' optics and the line lists. The scene's `co2_ppm` rescales its CO2
-    /// column; it must cover the scene's surface and top of the atmosphere (which it keeps).
+    /// keeping the layers' optics and the line lists. The scene's `co2_ppm` is applied to it as
+    /// its `co2_scaling` says (well mixed by default: the profile's own CO2 is replaced); it
+    /// must cover the scene's surface and top of the atmosphere (which it keeps).
     /// Errors name the scene key that the profile does not fit.
     pub fn with_profile(&self, profile: Profile) -> Result<Scene, InputError> {
         let Some(a) = &self.atmosphere else {

@@ -410,6 +410,34 @@ impl Validator<'_> {
         if l.number_density_per_cm3.is_some() {
             return Err(self.err(&sec.key("number_density_per_cm3"), "goes with `particles`"));
         }
+        let content = self.water_content(&sec, l)?;
+        match (&content, l.r_eff_um) {
+            (Some(_), None) => {
+                return Err(self.err(
+                    &sec,
+                    "a layer given by its water content needs `r_eff_um` (the effective radius, µm)",
+                ));
+            }
+            (None, Some(_)) => {
+                return Err(self.err(
+                    &sec.key("r_eff_um"),
+                    "goes with `lwc_g_per_m3` or `iwc_g_per_m3` (or with a lognormal of `particles`)",
+                ));
+            }
+            (Some(_), Some(r)) => {
+                self.range(&sec.key("r_eff_um"), r, RADIUS_UM)?;
+            }
+            (None, None) => {}
+        }
+        if let (Some((at, _)), true) = (
+            &content,
+            l.extinction_per_m.is_some() || l.extinction_per_km.is_some(),
+        ) {
+            return Err(self.err(
+                at,
+                "give the particles' amount as `extinction_per_m`, `extinction_per_km` or a water content with `r_eff_um`, one of them",
+            ));
+        }
         let ext = match (&l.extinction_per_m, &l.extinction_per_km) {
             (Some(v), None) => Some((sec.key("extinction_per_m"), v, COEFFICIENT_PER_M)),
             (None, Some(v)) => Some((sec.key("extinction_per_km"), v, COEFFICIENT_PER_KM)),
@@ -421,11 +449,13 @@ impl Validator<'_> {
             }
             (None, None) => None,
         };
-        let has_particles = ext.is_some();
-        match ext {
-            Some((at, v, bounds)) => {
-                let e = self.per_channel(&at, v, nch)?;
-                self.range_all(&at, &e, bounds)?;
+        let has_particles = ext.is_some() || content.is_some();
+        if let Some((at, v, bounds)) = ext {
+            let e = self.per_channel(&at, v, nch)?;
+            self.range_all(&at, &e, bounds)?;
+        }
+        match has_particles {
+            true => {
                 let ssa_at = sec.key("single_scattering_albedo");
                 let ssa_raw = l.single_scattering_albedo.as_ref().ok_or_else(|| {
                     self.err(
@@ -443,11 +473,11 @@ impl Validator<'_> {
                     self.phase(&sec.key("phase"), s)?;
                 }
             }
-            None => {
+            false => {
                 if l.single_scattering_albedo.is_some() || l.phase.is_some() {
                     return Err(self.err(
                         &sec,
-                        "`single_scattering_albedo` and `phase` need `extinction_per_m` or `extinction_per_km`",
+                        "`single_scattering_albedo` and `phase` need `extinction_per_m`, `extinction_per_km` or a water content (`lwc_g_per_m3`/`iwc_g_per_m3` with `r_eff_um`)",
                     ));
                 }
             }
@@ -456,10 +486,36 @@ impl Validator<'_> {
         if !has_particles && l.absorption_per_m.is_none() {
             return Err(self.err(
                 &sec,
-                "a layer needs particles (`extinction_per_m`/`_per_km`) or `absorption_per_m`",
+                "a layer needs particles (`extinction_per_m`/`_per_km`, or `lwc_g_per_m3`/`iwc_g_per_m3` with `r_eff_um`) or `absorption_per_m`",
             ));
         }
         Ok(())
+    }
+
+    /// A layer's condensed-water content, `lwc_g_per_m3` or `iwc_g_per_m3` (not both), in its
+    /// range: the key it was given at, and the value.
+    fn water_content(
+        &self,
+        sec: &KeyPath,
+        l: &LayerDescription,
+    ) -> Result<Option<(KeyPath, f64)>, InputError> {
+        match (l.lwc_g_per_m3, l.iwc_g_per_m3) {
+            (Some(_), Some(_)) => Err(self.err(
+                &sec.key("iwc_g_per_m3"),
+                "give `lwc_g_per_m3` (liquid) or `iwc_g_per_m3` (ice), not both: a mixed-phase cloud is two layers",
+            )),
+            (Some(w), None) => {
+                let at = sec.key("lwc_g_per_m3");
+                self.range(&at, w, WATER_CONTENT_G_PER_M3)?;
+                Ok(Some((at, w)))
+            }
+            (None, Some(w)) => {
+                let at = sec.key("iwc_g_per_m3");
+                self.range(&at, w, WATER_CONTENT_G_PER_M3)?;
+                Ok(Some((at, w)))
+            }
+            (None, None) => Ok(None),
+        }
     }
 
     /// A layer's phase-function specs, one per channel.
@@ -555,6 +611,18 @@ impl Validator<'_> {
             }
         }
         if p.distribution == "opac" {
+            if l.r_eff_um.is_some() {
+                return Err(self.err(
+                    &sec.key("r_eff_um"),
+                    "an OPAC type has its own sizes: remove `r_eff_um`",
+                ));
+            }
+            if l.lwc_g_per_m3.is_some() || l.iwc_g_per_m3.is_some() {
+                return Err(self.err(
+                    &at,
+                    "an OPAC aerosol type's amount is `number_density_per_cm3` or an extinction, not a water content",
+                ));
+            }
             if p.refractive_index.is_some() {
                 return Err(self.err(&at, "OPAC aerosol types carry their own refractive indices: remove `refractive_index`"));
             }
@@ -576,10 +644,30 @@ impl Validator<'_> {
             }
             match p.distribution.as_str() {
                 "lognormal" => {
-                    need(p.median_radius_um, "median_radius_um", RADIUS_UM)?;
+                    // Its size by the median radius, or by the layer's effective radius.
+                    match (p.median_radius_um, l.r_eff_um) {
+                        (Some(_), Some(_)) => {
+                            return Err(self.err(
+                                &sec.key("r_eff_um"),
+                                "the lognormal's size is given twice: give `median_radius_um` or `r_eff_um`, not both",
+                            ));
+                        }
+                        (None, Some(r)) => {
+                            self.range(&sec.key("r_eff_um"), r, RADIUS_UM)?;
+                        }
+                        _ => {
+                            need(p.median_radius_um, "median_radius_um", RADIUS_UM)?;
+                        }
+                    }
                     need(p.sigma_g, "sigma_g", SIGMA_G)?;
                 }
                 "modified_gamma" => {
+                    if l.r_eff_um.is_some() {
+                        return Err(self.err(
+                            &sec.key("r_eff_um"),
+                            "a modified gamma's size is its `alpha`, `b` and `gamma`: `r_eff_um` goes with a lognormal (for its `median_radius_um`) or a layer without `particles`",
+                        ));
+                    }
                     need(p.alpha, "alpha", GAMMA_SHAPE)?;
                     need(p.b, "b", GAMMA_SHAPE)?;
                     need(p.gamma, "gamma", GAMMA_SHAPE)?;
@@ -626,10 +714,12 @@ impl Validator<'_> {
                 ));
             }
         };
-        if l.number_density_per_cm3.is_some() == ext0 {
+        let content = self.water_content(sec, l)?;
+        let amounts = [l.number_density_per_cm3.is_some(), ext0, content.is_some()];
+        if amounts.iter().filter(|a| **a).count() != 1 {
             return Err(self.err(
                 &at,
-                "give the amount as `number_density_per_cm3` or as an extinction at the first channel (one of them)",
+                "give the amount as `number_density_per_cm3`, as an extinction at the first channel, or as a water content (`lwc_g_per_m3` or `iwc_g_per_m3`): one of them",
             ));
         }
         Ok(())

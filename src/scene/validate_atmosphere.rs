@@ -6,6 +6,7 @@ use super::description::{AtmosphereDescription, ProfileDescription};
 use super::ranges::*;
 use super::source::KeyPath;
 use super::validator::Validator;
+use crate::atmosphere::Co2Scaling;
 use crate::input::{InputError, check_finite_range, names};
 
 impl Validator<'_> {
@@ -54,6 +55,13 @@ impl Validator<'_> {
         }
         if let Some(ppm) = a.co2_ppm {
             self.range(&sec.key("co2_ppm"), ppm, CO2_PPM)?;
+        }
+        if let Some(s) = &a.co2_scaling {
+            let at = sec.key("co2_scaling");
+            s.parse::<Co2Scaling>().map_err(|m| self.err(&at, m))?;
+            if a.co2_ppm.is_none() {
+                return Err(self.err(&at, "goes with `co2_ppm`"));
+            }
         }
         if let Some(t) = a.top_m {
             self.range(&sec.key("top_m"), t, ALTITUDE_M)?;

@@ -5,7 +5,7 @@
 //! # What is computed
 //!
 //! For every profile (a built-in AFGL atmosphere or a member of a profile set), with its CO2
-//! set to a dry-air column average ([`set_co2_column_average`]), and every on-line position ν_on
+//! well mixed in dry air at `--co2-ppm` ([`set_co2_column_average`]), and every on-line position ν_on
 //! (monochromatic laser, nadir from the top of the grid to the surface, μ = −1):
 //!
 //! * `daod_one_way`: D = τ(ν_on) − τ(ν_off), the one-way vertical optical depths of all gases
@@ -44,7 +44,7 @@
 //! the on-line does not absorb more than the off-line in every member dropped, and a rank by the
 //! total expected error ([`Uncertainties::total_ppm`]).
 
-use crate::atmosphere::{AtmosphereError, Profile};
+use crate::atmosphere::{AtmosphereError, Co2Scaling, Profile};
 use crate::instrument::detector::{self, Detector};
 use crate::instrument::line_shape::MHZ_PER_CM1;
 use crate::retrieval::RetrievalError;
@@ -214,26 +214,12 @@ pub fn label_positions(band: &[BandLine], nus_cm1: &[f64]) -> Vec<OnPosition> {
         .collect()
 }
 
-/// Give `profile` a CO2 dry-air column average of `ppm`: rescale its CO2 by one factor
-/// ([`Profile::rescale_gas`]) if it has CO2, else set CO2 to `ppm` of dry air at every level
-/// (moist-air mole fraction ppm·10⁻⁶·(1 − x_H2O)), as `lidarsim profiles generate --co2-ppm`
-/// does.
+/// Give `profile` a CO2 dry-air column average of `ppm` as a well-mixed gas: `ppm` of dry air
+/// at every level (moist-air mole fraction ppm·10⁻⁶·(1 − x_H2O)), its own CO2 replaced or
+/// added ([`Profile::set_co2_ppm`] with [`Co2Scaling::WellMixed`]), as `lidarsim profiles
+/// generate --co2-ppm` and a scene's `co2_ppm` do by default.
 pub fn set_co2_column_average(profile: &mut Profile, ppm: f64) -> Result<(), AtmosphereError> {
-    if !(ppm.is_finite() && ppm > 0.0 && ppm < 1e6) {
-        return Err(AtmosphereError::InvalidArgument(format!(
-            "CO2 column average {ppm} ppm must be positive and below 1e6"
-        )));
-    }
-    if profile.gas("CO2").is_some() {
-        profile.rescale_gas("CO2", ppm * 1e-6)?;
-    } else {
-        let h2o = profile.gas("H2O").map(|v| v.to_vec());
-        let v = (0..profile.len())
-            .map(|k| ppm * 1e-6 * (1.0 - h2o.as_ref().map_or(0.0, |h| h[k])))
-            .collect();
-        profile.set_gas("CO2", v)?;
-    }
-    Ok(())
+    profile.set_co2_ppm(ppm, Co2Scaling::WellMixed)
 }
 
 /// The perturbations the sensitivities are defined by (the contract of `sensitivities.csv`).
