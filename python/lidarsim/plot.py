@@ -184,7 +184,9 @@ def _limits(points, keep, half_widths=(), floor_frac=0.02, bar_cap=0.0):
     pts = np.asarray(points, dtype=float)
     keep = np.asarray(keep, dtype=float)
     keep = keep[np.isfinite(keep)]
-    w_lo, w_hi = _robust_window(np.concatenate([pts, keep]), floor_frac=floor_frac)
+    # The window from the retrieved points alone: truths that coincide (a well-mixed CO2
+    # gives every cell the same truth) would otherwise narrow it to nothing.
+    w_lo, w_hi = _robust_window(pts if np.isfinite(pts).any() else keep, floor_frac=floor_frac)
     if keep.size:
         w_lo, w_hi = min(w_lo, keep.min()), max(w_hi, keep.max())
     inside = np.isfinite(pts) & (pts >= w_lo) & (pts <= w_hi)
