@@ -326,6 +326,7 @@ pub fn dial<'py>(
     });
     let request = DialRequest {
         scene: None,
+        overrides: Vec::new(),
         profiles: None,
         ensemble: None,
         seed,
