@@ -55,7 +55,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     output::check_paths(&FILES.map(|f| args.out.join(f)))?;
     #[cfg(not(feature = "mpi"))]
     let run = {
-        let bar = super::progress::Progress::new(0, "transport", "batches");
+        let bar = super::progress::Progress::new(0, "run", "batches");
         let run = lidarsim::pipeline::run_reporting(&scene, &|done, total| bar.reach(done, total));
         bar.finish();
         run?
