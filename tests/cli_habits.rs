@@ -741,4 +741,32 @@ fn progress_is_logged_to_stderr_off_a_terminal() {
     let log = stderr(&o);
     assert!(log.contains("select-lines: 33 % (1/3 profiles)"), "{log}");
     assert!(log.contains("select-lines: done, 3 profiles in "), "{log}");
+    // And lbl's layer mode, layer by layer.
+    let o = Command::new(lidarsim_bin())
+        .args([
+            "lbl",
+            "--atmosphere",
+            "us_standard",
+            "--sensor-altitude-m",
+            "45000",
+            "--zenith-deg",
+            "180",
+            "--layer-m",
+            "1000",
+            "--start-cm1",
+            "6359",
+            "--end-cm1",
+            "6361",
+            "--step-cm1",
+            "0.01",
+            "--out",
+        ])
+        .arg(dir.path().join("tau.csv"))
+        .env("LIDARSIM_PROGRESS_AFTER_S", "0")
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let log = stderr(&o);
+    assert!(log.contains("lbl: 2 % (1/45 layers)"), "{log}");
+    assert!(log.contains("lbl: done, 45 layers in "), "{log}");
 }

@@ -288,7 +288,13 @@ fn run_layers(
     let edges = los
         .layer_edges(&prof, args.layer.layer_m)
         .with_context(|| format!("--layer-m {}", args.layer.layer_m))?;
-    let table = GasOpticalDepthTable::compute(&prof, lines, &edges, grid, opts)?;
+    let bar = super::progress::Progress::new(0, "lbl", "layers");
+    let table =
+        GasOpticalDepthTable::compute_reporting(&prof, lines, &edges, grid, opts, &|d, n| {
+            bar.reach(d, n)
+        });
+    bar.finish();
+    let table = table?;
     let mut files = OutputSet::new();
     if let Some(path) = &args.layer.save_table {
         let bytes = table
