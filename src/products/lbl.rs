@@ -312,3 +312,65 @@ pub fn no_lines_error(
     }
     ProductError::Request(message)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use SpectralUnit::{Cm1, Nm, Um};
+
+    #[test]
+    fn a_range_is_given_in_exactly_one_unit_with_both_ends() {
+        let r = SpectralRange::from_options(&[
+            (Cm1, None, None),
+            (Nm, Some(1570.0), Some(1580.0)),
+            (Um, None, None),
+        ])
+        .unwrap();
+        assert_eq!((r.unit, r.start, r.end), (Nm, 1570.0, 1580.0));
+        // 1e7/1580 … 1e7/1570 cm⁻¹, low to high.
+        assert_eq!(r.cm1(), (1e7 / 1580.0, 1e7 / 1570.0));
+        let um = SpectralRange {
+            unit: Um,
+            start: 1.58,
+            end: 1.57,
+        };
+        assert_eq!(um.cm1(), (1e4 / 1.58, 1e4 / 1.57));
+        let err = |given: &[(SpectralUnit, Option<f64>, Option<f64>)]| {
+            SpectralRange::from_options(given).unwrap_err().to_string()
+        };
+        assert!(err(&[(Cm1, None, None)]).starts_with("give the spectral range"));
+        assert_eq!(err(&[(Nm, None, Some(1.0))]), "--end-nm needs --start-nm");
+        assert!(
+            err(&[(Cm1, Some(1.0), Some(2.0)), (Um, Some(1.0), None)])
+                .ends_with("not in cm⁻¹ and µm")
+        );
+    }
+
+    #[test]
+    fn the_other_readings_of_a_range_are_the_plausible_ones() {
+        let r = SpectralRange {
+            unit: Cm1,
+            start: 1570.0,
+            end: 1580.0,
+        };
+        // 1570 is a plausible wavenumber (CO2 has no band there, but H2O does) and wavelength,
+        // not a plausible µm.
+        let others: Vec<SpectralUnit> = r.other_readings().iter().map(|o| o.unit).collect();
+        assert_eq!(others, [Nm]);
+        assert_eq!(
+            r.other_readings()[0].describe(),
+            "--start-nm 1570 --end-nm 1580 (6329.1–6369.4 cm⁻¹)"
+        );
+        let r = SpectralRange {
+            unit: Nm,
+            start: 6360.0,
+            end: 6361.0,
+        };
+        let others: Vec<SpectralUnit> = r.other_readings().iter().map(|o| o.unit).collect();
+        assert_eq!(others, [Cm1]);
+        assert_eq!(
+            r.other_readings()[0].describe(),
+            "--start-cm1 6360 --end-cm1 6361"
+        );
+    }
+}

@@ -20,7 +20,10 @@
 //!    lists read, Mie theory run (and cached), the laser lines sampled; the checks that need
 //!    what those give.
 //!
-//! [`Scene::read`] and [`Scene::from_toml`] do all three. [`SceneDescription::resolve_reusing`]
+//! [`Scene::read`] and [`Scene::from_toml`] do all three; [`Scene::read_with`] reads `-` as
+//! standard input and first applies the command line's `--set KEY=VALUE` overrides to the TOML
+//! text (`overrides.rs`), so that an override goes through the same three steps, its errors
+//! named `--set KEY`. [`SceneDescription::resolve_reusing`]
 //! (`reuse.rs`) resolves an edited description keeping what a previous scene resolved from the
 //! parts the edit left unchanged; [`Scene::with_profile`] and [`Scene::with_laser`] are such
 //! edits.
