@@ -475,7 +475,7 @@ impl Scene {
             let d = SceneDescription::parse(path, text)?;
             return Scene::resolve_from(d, Source::toml(path, text), base_dir);
         }
-        let edited = overrides::apply(path, text, overrides)?;
+        let edited = overrides::apply(text, overrides)?;
         let d = SceneDescription::parse(path, &edited.text)
             .map_err(|e| overrides::remap(e, path, &edited.origins))?;
         Scene::resolve_from(d, Source::edited(path, edited), base_dir)

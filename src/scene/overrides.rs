@@ -119,21 +119,16 @@ pub(super) fn remap(e: InputError, path: &Path, origins: &[LineOrigin]) -> Input
     }
 }
 
-/// Apply `overrides` in order to the scene text `text` of `path`. A key that cannot be set
-/// (an index past the end of an array, a key inside a number) is refused naming `--set KEY`;
-/// a text that is not TOML is left for the parser to report at its line.
-pub(super) fn apply(
-    path: &Path,
-    text: &str,
-    overrides: &[SceneOverride],
-) -> Result<Edited, InputError> {
+/// Apply `overrides` in order to the scene text `text`. A key that cannot be set (an index
+/// past the end of an array, a key inside a number) is refused naming `--set KEY`; a text that
+/// is not TOML is left for the parser to report at its line.
+pub(super) fn apply(text: &str, overrides: &[SceneOverride]) -> Result<Edited, InputError> {
     let mut edited = Edited::unchanged(text);
     if overrides.is_empty() {
         return Ok(edited);
     }
     let Ok(mut doc) = text.parse::<toml_edit::DocumentMut>() else {
         // The parser names the line of the problem in the file.
-        let _ = path;
         return Ok(edited);
     };
     for o in overrides {
@@ -332,7 +327,7 @@ mod tests {
 
     fn set(text: &str, sets: &[&str]) -> Result<Edited, InputError> {
         let o: Vec<SceneOverride> = sets.iter().map(|s| s.parse().unwrap()).collect();
-        apply(Path::new("s.toml"), text, &o)
+        apply(text, &o)
     }
 
     const TEXT: &str = "\
