@@ -770,3 +770,49 @@ fn progress_is_logged_to_stderr_off_a_terminal() {
     assert!(log.contains("lbl: 2 % (1/45 layers)"), "{log}");
     assert!(log.contains("lbl: done, 45 layers in "), "{log}");
 }
+
+/// Shards of a run with `--set` merge into the run itself: the shards store the edited text,
+/// and the scene read again from it is the one they ran.
+#[test]
+fn shards_of_a_run_with_overrides_merge() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let sets = [
+        "--set",
+        "simulation.photons=2e3",
+        "--set",
+        "lidar.fov_full_angle_mrad=[1,2]",
+    ];
+    for i in 0..2 {
+        let shard = format!("{i}/2");
+        lidarsim_ok(
+            [
+                &["run"][..],
+                &sets,
+                &["--threads", "1", "--shard", &shard, "--out"],
+                &[d.join("s").to_str().unwrap()],
+            ]
+            .concat(),
+        );
+    }
+    lidarsim_ok([
+        "merge",
+        d.join("s").to_str().unwrap(),
+        "--no-plots",
+        "--out",
+        d.join("m").to_str().unwrap(),
+    ]);
+    lidarsim_ok(
+        [
+            &["run"][..],
+            &sets,
+            &["--threads", "1", "--no-plots", "--out"],
+            &[d.join("r").to_str().unwrap()],
+        ]
+        .concat(),
+    );
+    assert_eq!(
+        std::fs::read_to_string(d.join("m/returns.csv")).unwrap(),
+        std::fs::read_to_string(d.join("r/returns.csv")).unwrap()
+    );
+}

@@ -11,7 +11,7 @@ use super::overrides::{Edited, LineOrigin, remap};
 
 /// The origin of a description: a TOML text (errors name its lines) or code (errors name
 /// field paths). `path` names the file, or a pseudo-path, in every error.
-#[derive(Debug, Clone)]
+#[derive(Clone)]
 pub(super) struct Source {
     pub path: PathBuf,
     /// The scene text: the file's as read, or the description written as TOML.
@@ -21,6 +21,19 @@ pub(super) struct Source {
     /// With `--set` overrides: where each line of `text` came from (a line of the file, or an
     /// override, which an error then names instead of a line).
     pub origins: Option<Arc<[LineOrigin]>>,
+}
+
+/// Without `origins`: the scene's digest (shards, `crate::shard::scene_digest`, a digest of
+/// its `Debug` form) is that of its text, so that a scene read with `--set` overrides and the
+/// same edited text read again (as `merge` reads it from the shards) agree.
+impl std::fmt::Debug for Source {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Source")
+            .field("path", &self.path)
+            .field("text", &self.text)
+            .field("has_lines", &self.has_lines)
+            .finish()
+    }
 }
 
 impl Source {
