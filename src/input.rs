@@ -207,6 +207,132 @@ pub fn check_count(value: u64, lo: u64, hi: u64) -> Result<u64, String> {
     }
 }
 
+/// How a count may be written, for messages.
+const COUNT_FORMS: &str = "a count is a whole number ≥ 0: 1000000, 1_000_000, 1e6 or 2.5e5";
+
+/// A count as people write one: `1000000`, `1_000_000`, `1e6`, `2.5e5`, `1E+6` (the one parser
+/// of every count read from the command line). Exact: the digits and the exponent are read as
+/// decimals, so a count beyond 2⁵³ is not rounded through a float. A value that is not a whole
+/// number (`1.5`, `1e-3`), negative or beyond `u64` gets a message saying so (the caller names
+/// the option or key and checks the range).
+pub fn parse_count(text: &str) -> Result<u64, String> {
+    let t = text.trim();
+    let not_whole = || format!("`{text}` is not a whole number ({COUNT_FORMS})");
+    let not_count = || format!("`{text}` is not a count ({COUNT_FORMS})");
+    if t.starts_with('-') && t.len() > 1 {
+        return Err(format!("`{text}` is negative ({COUNT_FORMS})"));
+    }
+    // Underscores only between digits, as in Rust, Python and TOML literals.
+    let b = t.as_bytes();
+    for (i, c) in b.iter().enumerate() {
+        if *c == b'_'
+            && !(i > 0 && i + 1 < b.len() && b[i - 1].is_ascii_digit() && b[i + 1].is_ascii_digit())
+        {
+            return Err(not_count());
+        }
+    }
+    let t = t.strip_prefix('+').unwrap_or(t).replace('_', "");
+    let (mantissa, exponent) = match t.find(['e', 'E']) {
+        Some(i) => {
+            let e: i64 = t[i + 1..].parse().map_err(|_| not_count())?;
+            (&t[..i], e)
+        }
+        None => (t.as_str(), 0),
+    };
+    let (int, frac) = mantissa.split_once('.').unwrap_or((mantissa, ""));
+    if (int.is_empty() && frac.is_empty())
+        || !int.bytes().chain(frac.bytes()).all(|c| c.is_ascii_digit())
+    {
+        return Err(not_count());
+    }
+    // value = digits · 10^(exponent − fraction digits)
+    let mut digits = format!("{int}{frac}");
+    let mut exp10 = exponent - frac.len() as i64;
+    while exp10 < 0 && digits.ends_with('0') {
+        digits.pop();
+        exp10 += 1;
+    }
+    let digits = digits.trim_start_matches('0');
+    if exp10 < 0 && !digits.is_empty() {
+        return Err(not_whole());
+    }
+    if digits.is_empty() {
+        return Ok(0);
+    }
+    let too_large = || format!("`{text}` is too large for a count");
+    let mut v: u64 = digits.parse().map_err(|_| too_large())?;
+    for _ in 0..exp10 {
+        v = v.checked_mul(10).ok_or_else(too_large)?;
+    }
+    Ok(v)
+}
+
+/// A count given as a float (a TOML `photons = 1e6` is a float): the same rule as
+/// [`parse_count`], whole and ≥ 0, and not beyond 2⁵³, above which a float no longer says
+/// which whole number was meant.
+pub fn count_from_f64(v: f64) -> Result<u64, String> {
+    const EXACT: f64 = 9_007_199_254_740_992.0; // 2⁵³
+    if !v.is_finite() || v.fract() != 0.0 {
+        Err(format!("{v} is not a whole number ({COUNT_FORMS})"))
+    } else if v < 0.0 {
+        Err(format!("{v} is negative ({COUNT_FORMS})"))
+    } else if v > EXACT {
+        Err(format!(
+            "{} is beyond 2^53 as a float: write the count as an integer",
+            fmt_bound(v)
+        ))
+    } else {
+        Ok(v as u64)
+    }
+}
+
+/// Serde helpers for counts in input files: an integer, or a float that is a whole number
+/// (`photons = 1e6`, which TOML reads as a float), by the rule of [`count_from_f64`].
+pub mod serde_count {
+    use serde::de::{self, Deserializer, Visitor};
+
+    /// For an `Option<T>` field (with `#[serde(default, deserialize_with = …)]`).
+    pub fn option<'de, D, T>(d: D) -> Result<Option<T>, D::Error>
+    where
+        D: Deserializer<'de>,
+        T: TryFrom<u64>,
+    {
+        struct V<T>(std::marker::PhantomData<T>);
+        impl<T: TryFrom<u64>> V<T> {
+            fn fit<E: de::Error>(v: u64) -> Result<Option<T>, E> {
+                T::try_from(v)
+                    .map(Some)
+                    .map_err(|_| E::custom(format!("{v} is too large for this count")))
+            }
+        }
+        impl<'de, T: TryFrom<u64>> Visitor<'de> for V<T> {
+            type Value = Option<T>;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("a whole number ≥ 0 (an integer, or a float such as 1e6)")
+            }
+            fn visit_u64<E: de::Error>(self, v: u64) -> Result<Self::Value, E> {
+                Self::fit(v)
+            }
+            fn visit_i64<E: de::Error>(self, v: i64) -> Result<Self::Value, E> {
+                let v = u64::try_from(v).map_err(|_| {
+                    E::custom(format!("{v} is negative (a count is a whole number ≥ 0)"))
+                })?;
+                Self::fit(v)
+            }
+            fn visit_f64<E: de::Error>(self, v: f64) -> Result<Self::Value, E> {
+                Self::fit(super::count_from_f64(v).map_err(E::custom)?)
+            }
+            fn visit_some<D2: Deserializer<'de>>(self, d: D2) -> Result<Self::Value, D2::Error> {
+                d.deserialize_any(self)
+            }
+            fn visit_none<E: de::Error>(self) -> Result<Self::Value, E> {
+                Ok(None)
+            }
+        }
+        d.deserialize_option(V(std::marker::PhantomData))
+    }
+}
+
 /// The UTF-8 byte-order mark some editors put at the start of a text file; it is not part of
 /// the first line's content.
 pub fn strip_bom(text: &str) -> &str {
@@ -505,6 +631,69 @@ mod tests {
         assert_eq!(Bounds::closed(-1e4, 1e8).to_string(), "[-10000, 1e8]");
         assert!(check_count(0, 1, 5).is_err());
         assert!(check_count(5, 1, 5).is_ok());
+    }
+
+    #[test]
+    fn counts_read_in_every_notation_people_use() {
+        for (t, v) in [
+            ("1000000", 1_000_000),
+            ("1_000_000", 1_000_000),
+            ("1e6", 1_000_000),
+            ("1E6", 1_000_000),
+            ("1e+6", 1_000_000),
+            ("2.5e5", 250_000),
+            ("+7", 7),
+            (" 12 ", 12),
+            ("0", 0),
+            ("0e0", 0),
+            ("0.0", 0),
+            ("1.0", 1),
+            ("1.50e1", 15),
+            ("10e-1", 1),
+            ("18446744073709551615", u64::MAX),
+            ("1234567890123456789", 1_234_567_890_123_456_789),
+            ("1.234567890123456789e18", 1_234_567_890_123_456_789),
+        ] {
+            assert_eq!(parse_count(t), Ok(v), "{t}");
+        }
+        for t in ["1.5", "1e-3", "2.55e1"] {
+            let e = parse_count(t).unwrap_err();
+            assert!(e.contains("is not a whole number"), "{t}: {e}");
+        }
+        for t in [
+            "", "e6", "1e", "abc", "_1", "1_", "1__0", "1._5", "0x10", "inf", "nan", "1.2.3",
+        ] {
+            assert!(
+                parse_count(t).unwrap_err().contains("is not a count"),
+                "{t}"
+            );
+        }
+        assert!(parse_count("-5").unwrap_err().contains("negative"));
+        assert!(parse_count("1e20").unwrap_err().contains("too large"));
+        assert!(
+            parse_count("18446744073709551616")
+                .unwrap_err()
+                .contains("too large")
+        );
+    }
+
+    #[test]
+    fn a_count_given_as_a_float_must_be_whole() {
+        assert_eq!(count_from_f64(1e6), Ok(1_000_000));
+        assert_eq!(count_from_f64(0.0), Ok(0));
+        assert!(
+            count_from_f64(1.5)
+                .unwrap_err()
+                .contains("not a whole number")
+        );
+        assert!(
+            count_from_f64(1e-3)
+                .unwrap_err()
+                .contains("not a whole number")
+        );
+        assert!(count_from_f64(-1.0).unwrap_err().contains("negative"));
+        assert!(count_from_f64(1e17).unwrap_err().contains("2^53"));
+        assert!(count_from_f64(f64::NAN).is_err());
     }
 
     #[test]

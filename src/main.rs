@@ -15,6 +15,10 @@ mod figures;
 #[derive(Parser)]
 #[command(name = "lidarsim", version, about, long_about = None)]
 struct Cli {
+    /// No progress reports on stderr (neither the bar on a terminal nor the log lines
+    /// otherwise); errors and warnings are still printed.
+    #[arg(long, global = true)]
+    quiet: bool,
     #[command(subcommand)]
     command: Command,
 }
@@ -52,6 +56,7 @@ fn main() -> ExitCode {
             None => e.exit(),
         },
     };
+    cli::progress::set_quiet(cli.quiet);
     let result = match cli.command {
         Command::Run(a) => cli::run::run(a),
         Command::Lbl(a) => cli::lbl::run(a),

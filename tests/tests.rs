@@ -12,6 +12,9 @@ mod backscatter;
 mod beyond_voigt;
 /// The command line.
 mod cli;
+/// The command line's habits: counts as people write them, the scene first, from stdin, with
+/// `--set` overrides; errors that name what to use instead.
+mod cli_habits;
 /// Multiple scattering in clouds against closed forms: absorption in a
 /// far-viewed cloud, the single-scatter Platt integral.
 mod clouds;

@@ -331,6 +331,7 @@ pub fn dial<'py>(
     });
     let request = DialRequest {
         scene: None,
+        overrides: Vec::new(),
         profiles: None,
         ensemble: None,
         seed,

@@ -84,7 +84,7 @@ pub struct Args {
     pub depth: Option<PathBuf>,
     /// With `--depth`: instead of the FOM, K independent runs of `--photons` and the scatter of
     /// their means against their standard errors (spikes), into DIR/scatter.csv.
-    #[arg(long, value_name = "K", requires = "depth")]
+    #[arg(long, value_name = "K", requires = "depth", allow_negative_numbers = true, value_parser = super::count(0, u64::MAX))]
     pub seeds: Option<u64>,
     /// With `--depth` and `--plain`: instead of the FOM, the relative error against time of
     /// both estimators at `--photons`/27, /9, /3 and `--photons` (DIR/error_time.{csv,png}).

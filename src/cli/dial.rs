@@ -13,9 +13,12 @@ use lidarsim::study::shard as study_shard;
 /// Arguments of `lidarsim dial`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// Scene file (TOML) with `[laser]`/`[receiver]`/`[retrieval]`; without it the embedded
-    /// default scene.
+    /// Scene file (TOML) with `[laser]`/`[receiver]`/`[retrieval]`; `-` reads it from
+    /// standard input (relative paths inside it then resolve against the current directory);
+    /// without it the embedded default scene.
     pub scene: Option<PathBuf>,
+    #[command(flatten)]
+    pub overrides: super::SceneOverrides,
     /// Profile set (lidarsim format: `profiles generate` or `profiles convert`).
     #[arg(
         long,
@@ -131,6 +134,7 @@ fn request(args: &Args) -> DialRequest {
     };
     DialRequest {
         scene: args.scene.clone(),
+        overrides: args.overrides.set.clone(),
         profiles: args.profiles.clone(),
         ensemble: args.ensemble,
         seed: args.seed,

@@ -15,6 +15,7 @@ use lidarsim::input::Bounds;
 use lidarsim::limits::{MAX_LBL_ROWS, MAX_PATH_LAYERS, check_product};
 use lidarsim::output::{self, OutputSet};
 use lidarsim::products;
+use lidarsim::products::lbl::{SpectralRange, SpectralUnit};
 use lidarsim::spectroscopy::isotopologues::molecule_name;
 use lidarsim::spectroscopy::xsec::GasState;
 use lidarsim::spectroscopy::{
@@ -28,10 +29,11 @@ use super::real;
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// Line file: HITRAN 160-character records (.par, or a HAPI .data table), or a CSV with
-    /// HITRAN parameter names (`*.csv`, beyond-Voigt parameters included). Without it: the
-    /// built-in CO2 30012←00001 band model (approximate).
+    /// HITRAN parameter names (`*.csv`, beyond-Voigt parameters included). Repeatable (e.g.
+    /// CO2 and H2O): the lines are merged. Without it: the built-in CO2 30012←00001 band model
+    /// (approximate).
     #[arg(long, value_name = "FILE")]
-    lines: Option<PathBuf>,
+    lines: Vec<PathBuf>,
     /// Line profile: voigt, sdvoigt (speed-dependent Voigt) or ht (Hartmann-Tran); the last two
     /// need a CSV line list with their parameters.
     #[arg(long, default_value = "voigt")]
@@ -49,13 +51,27 @@ pub struct Args {
     /// Temperature \[K\] (cross-section mode).
     #[arg(long, allow_negative_numbers = true, value_parser = real(lidarsim::atmosphere::TEMPERATURE_K))]
     temperature_k: Option<f64>,
-    /// First wavenumber [cm⁻¹].
+    /// First wavenumber [cm⁻¹]. The range is given in one unit: --start-cm1/--end-cm1,
+    /// --start-nm/--end-nm or --start-um/--end-um (vacuum wavelengths); the grid is uniform
+    /// in wavenumber either way.
     #[arg(long, allow_negative_numbers = true, value_parser = real(Bounds::positive(1e6)))]
-    start_cm1: f64,
+    start_cm1: Option<f64>,
     /// Last wavenumber [cm⁻¹] (inclusive).
     #[arg(long, allow_negative_numbers = true, value_parser = real(Bounds::positive(1e6)))]
-    end_cm1: f64,
-    /// Grid step [cm⁻¹].
+    end_cm1: Option<f64>,
+    /// First vacuum wavelength [nm] (instead of --start-cm1).
+    #[arg(long, allow_negative_numbers = true, value_parser = real(Bounds::closed(10.0, 1e9)))]
+    start_nm: Option<f64>,
+    /// Last vacuum wavelength [nm] (inclusive).
+    #[arg(long, allow_negative_numbers = true, value_parser = real(Bounds::closed(10.0, 1e9)))]
+    end_nm: Option<f64>,
+    /// First vacuum wavelength [µm] (instead of --start-cm1).
+    #[arg(long, allow_negative_numbers = true, value_parser = real(Bounds::closed(0.01, 1e6)))]
+    start_um: Option<f64>,
+    /// Last vacuum wavelength [µm] (inclusive).
+    #[arg(long, allow_negative_numbers = true, value_parser = real(Bounds::closed(0.01, 1e6)))]
+    end_um: Option<f64>,
+    /// Grid step [cm⁻¹] (also with a range in nm or µm: the grid is uniform in wavenumber).
     #[arg(long, allow_negative_numbers = true, value_parser = real(Bounds::positive(100.0)))]
     step_cm1: f64,
     /// Output CSV.
@@ -117,13 +133,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .flatten()
         .collect();
     output::check_paths(&outputs)?;
-    let grid =
-        WavenumberGrid::new(args.start_cm1, args.end_cm1, args.step_cm1).with_context(|| {
-            format!(
-                "--start-cm1 {}, --end-cm1 {}, --step-cm1 {}",
-                args.start_cm1, args.end_cm1, args.step_cm1
-            )
-        })?;
+    let range = SpectralRange::from_options(&[
+        (SpectralUnit::Cm1, args.start_cm1, args.end_cm1),
+        (SpectralUnit::Nm, args.start_nm, args.end_nm),
+        (SpectralUnit::Um, args.start_um, args.end_um),
+    ])?;
+    let (start_cm1, end_cm1) = range.cm1();
+    let grid = WavenumberGrid::new(start_cm1, end_cm1, args.step_cm1)
+        .with_context(|| format!("{}, --step-cm1 {}", range.describe(), args.step_cm1))?;
     check_product(
         "the output",
         &[("wavenumbers", grid.len as u64)],
@@ -143,17 +160,23 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         opts.voigt = VoigtMethod::Exact;
         opts.multigrid = false;
     }
-    let lines = match &args.lines {
-        Some(p) => {
-            let filter = LineFilter::window(
-                grid.start_cm1 - opts.wing_cm1 - 1.0,
-                grid.end_cm1() + opts.wing_cm1 + 1.0,
-            );
-            LineList::read(p, &filter)?
-        }
-        None => LineList::co2_30012_band_model(),
-    };
+    let window = LineFilter::window(
+        grid.start_cm1 - opts.wing_cm1 - 1.0,
+        grid.end_cm1() + opts.wing_cm1 + 1.0,
+    );
+    let lines = products::lbl::read_lines(&args.lines, &window)?;
     let layer_mode = args.layer.atmosphere.is_some() || args.layer.profile.is_some();
+    // Cross-sections of no line are refused (a wrong unit, most often); a path's optical
+    // depth through a window without lines is zero, which the layer table says.
+    if !layer_mode && lines.filtered(&window).is_empty() {
+        return Err(products::lbl::no_lines_error(
+            &args.lines,
+            &range,
+            opts.wing_cm1,
+            &lines.source,
+        )
+        .into());
+    }
     if layer_mode {
         run_layers(&args, &lines, &grid, &opts)
     } else {
@@ -265,7 +288,13 @@ fn run_layers(
     let edges = los
         .layer_edges(&prof, args.layer.layer_m)
         .with_context(|| format!("--layer-m {}", args.layer.layer_m))?;
-    let table = GasOpticalDepthTable::compute(&prof, lines, &edges, grid, opts)?;
+    let bar = super::progress::Progress::new(0, "lbl", "layers");
+    let table =
+        GasOpticalDepthTable::compute_reporting(&prof, lines, &edges, grid, opts, &|d, n| {
+            bar.reach(d, n)
+        });
+    bar.finish();
+    let table = table?;
     let mut files = OutputSet::new();
     if let Some(path) = &args.layer.save_table {
         let bytes = table

@@ -20,9 +20,21 @@ pub mod run;
 pub mod select_lines;
 pub mod write;
 
-use lidarsim::input::{Bounds, check_count, check_finite_range};
+use lidarsim::input::{Bounds, check_count, check_finite_range, parse_count};
 use lidarsim::shard::{ShardError, ShardSpec};
 use lidarsim::study::shard::StudyShardReport;
+
+/// `--set KEY=VALUE` of every command that reads a scene (flattened into its arguments).
+#[derive(clap::Args, Debug, Clone)]
+pub struct SceneOverrides {
+    /// Override a value of the scene (repeatable): a dotted key and a TOML value, e.g.
+    /// `--set simulation.photons=1e6`, `--set lidar.fov_full_angle_mrad=[1,2]`,
+    /// `--set atmosphere.co2_ppm=410`, `--set channel.0.wavenumber_cm1=6360` (the first
+    /// `[[channel]]`); a bare word is a string. Applied to the scene's text before it is read,
+    /// so the value is checked as the file's is; an error in it names `--set KEY`.
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub set: Vec<lidarsim::scene::SceneOverride>,
+}
 
 /// A clap value parser for a real option: a finite number inside `bounds` (unit as the
 /// option's name says), so that a bad value is refused by the parser with the option named.
@@ -40,15 +52,10 @@ pub fn real(
     }
 }
 
-/// A clap value parser for a count in `lo..=hi`.
+/// A clap value parser for a count in `lo..=hi`, written as people do (`1000000`,
+/// `1_000_000`, `1e6`, `2.5e5`: [`lidarsim::input::parse_count`]).
 pub fn count(lo: u64, hi: u64) -> impl Fn(&str) -> Result<u64, String> + Clone + Send + Sync {
-    move |text| {
-        let v: u64 = text
-            .trim()
-            .parse()
-            .map_err(|_| format!("`{text}` is not a whole number ≥ 0"))?;
-        check_count(v, lo, hi)
-    }
+    move |text| check_count(parse_count(text)?, lo, hi)
 }
 
 /// [`count`] for options held as `usize`.

@@ -1,4 +1,4 @@
-//! `lidarsim run [SCENE] [--out DIR] [--photons N] [--seed S] [--threads T] [--no-plots]`
+//! `lidarsim run [SCENE|-] [--set KEY=VALUE]… [--out DIR] [--photons N] [--seed S] [--threads T] [--no-plots]`
 
 use std::path::PathBuf;
 
@@ -10,8 +10,11 @@ use lidarsim::shard::{self, ShardSpec};
 /// Arguments of `lidarsim run`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// Scene file (TOML). Without it the embedded default scene runs.
+    /// Scene file (TOML); `-` reads it from standard input (relative paths inside it then
+    /// resolve against the current directory). Without it the embedded default scene runs.
     pub scene: Option<PathBuf>,
+    #[command(flatten)]
+    pub overrides: super::SceneOverrides,
     /// Output directory (created if needed); receives returns.csv, summary.json and, with a
     /// receiver and a retrieval, signals.csv, retrieval.csv and figures.
     #[arg(long, default_value = "out")]
@@ -52,7 +55,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     output::check_paths(&FILES.map(|f| args.out.join(f)))?;
     #[cfg(not(feature = "mpi"))]
     let run = {
-        let bar = super::progress::Progress::new(0, "transport", "batches");
+        let bar = super::progress::Progress::new(0, "run", "batches");
         let run = lidarsim::pipeline::run_reporting(&scene, &|done, total| bar.reach(done, total));
         bar.finish();
         run?
@@ -72,7 +75,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
 /// The scene with the command line's settings (`absolute`: read by its absolute path, as shards).
 fn scene(args: &Args, absolute: bool) -> anyhow::Result<lidarsim::scene::Scene> {
-    let mut scene = products::read_scene(args.scene.as_deref(), absolute)?;
+    let mut scene = products::read_scene(args.scene.as_deref(), &args.overrides.set, absolute)?;
     scene.simulation.variance_reduction.ddis_epsilon = args.ddis_epsilon;
     scene
         .override_simulation(args.photons, args.seed, args.threads)

@@ -21,6 +21,22 @@ use lidarsim::study::select_study::{SelectOptions, SelectSource, SelectStudy, ra
 /// Arguments of `lidarsim select-lines`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
+    /// Scene whose instrument sets the random error (TOML); `-` reads it from standard input
+    /// (relative paths inside it then resolve against the current directory); without it the
+    /// embedded default scene.
+    #[arg(value_name = "SCENE")]
+    scene: Option<PathBuf>,
+    #[command(flatten)]
+    overrides: super::SceneOverrides,
+    /// The scene by its former option; hidden, kept so that scripts written before the scene
+    /// became the first argument still run.
+    #[arg(
+        long = "scene",
+        value_name = "FILE",
+        hide = true,
+        conflicts_with = "scene"
+    )]
+    scene_option: Option<PathBuf>,
     /// Built-in AFGL atmospheres, comma-separated (tropical, midlatitude_summer,
     /// midlatitude_winter, subarctic_summer, subarctic_winter, us_standard).
     #[arg(
@@ -87,9 +103,6 @@ pub struct Args {
     /// Line wing cutoff [cm⁻¹].
     #[arg(long, default_value_t = 25.0, allow_negative_numbers = true, value_parser = super::real(ranges::WING_CM1))]
     wing_cm1: f64,
-    /// Scene whose instrument sets the random error (default: the embedded default scene).
-    #[arg(long, value_name = "FILE")]
-    scene: Option<PathBuf>,
     /// Uncertainty of the assumed temperature [K] (total error).
     #[arg(long, default_value_t = 1.0, allow_negative_numbers = true, value_parser = super::real(ranges::TEMPERATURE_K))]
     temperature_uncertainty_k: f64,
@@ -127,7 +140,12 @@ pub struct Args {
 
 /// `lidarsim select-lines`.
 pub fn run(a: Args) -> anyhow::Result<()> {
-    let scene = products::read_scene(a.scene.as_deref(), a.shard.is_some())?;
+    let scene_path = a.scene.as_ref().or(a.scene_option.as_ref());
+    let scene = products::read_scene(
+        scene_path.map(PathBuf::as_path),
+        &a.overrides.set,
+        a.shard.is_some(),
+    )?;
     let study = SelectStudy::build(options(&a)?, scene)?;
     // Before the work; the figures' names depend on the groups and are checked when written.
     let out_files = match a.shard {

@@ -69,6 +69,33 @@ pub fn builtin_table_names() -> Vec<&'static str> {
     BUILTIN_TABLES.iter().map(|(n, _)| *n).collect()
 }
 
+/// What to write instead of a phase-table `file` that is not found at `resolved` (the scene's
+/// directory joined with it): where relative paths are anchored and, when the file is one of
+/// the shipped tables (a scene copied out of `scenes/` keeps `file = "../phase_functions/…"`),
+/// the built-in table of the same name. `None` when the file exists.
+pub fn missing_table_hint(file: &str, resolved: &Path) -> Option<String> {
+    if resolved.exists() {
+        return None;
+    }
+    let stem = Path::new(file).file_stem()?.to_str()?;
+    let anchor = if Path::new(file).is_relative() {
+        format!(
+            "`{file}` is relative to the scene's directory (or, for a scene read from standard input, the current directory)"
+        )
+    } else {
+        format!("`{file}` does not exist")
+    };
+    Some(match BUILTIN_TABLES.iter().find(|(n, _)| *n == stem) {
+        Some((name, _)) => format!(
+            "{anchor}; the same table is built in: write `phase = {{ kind = \"table\", builtin = \"{name}\" }}`"
+        ),
+        None => format!(
+            "{anchor}; built-in tables (`builtin = \"NAME\"`): {}",
+            builtin_table_names().join(", ")
+        ),
+    })
+}
+
 /// A built-in table by name (the file name in `phase_functions/` without `.txt`).
 pub fn builtin_table(name: &str) -> Result<PhaseTable, String> {
     let (_, text) = BUILTIN_TABLES

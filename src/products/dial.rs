@@ -36,8 +36,10 @@ pub const FILES: [&str; 10] = [
 /// budget's steps. [`Self::resolve`] makes the study's inputs.
 #[derive(Debug, Clone)]
 pub struct DialRequest {
-    /// Scene file; the embedded default scene without one.
+    /// Scene file (`-`: standard input); the embedded default scene without one.
     pub scene: Option<PathBuf>,
+    /// `--set KEY=VALUE` overrides of the scene's values.
+    pub overrides: Vec<crate::scene::SceneOverride>,
     /// A profile set.
     pub profiles: Option<PathBuf>,
     /// Instead of a set: N generated members per class.
@@ -64,7 +66,7 @@ impl DialRequest {
     /// any work: a study beyond the limits (README, "Limits"), an unknown on-line.
     pub fn resolve(&self) -> Result<StudyInputs, ProductError> {
         let args = self;
-        let scene = super::read_scene(args.scene.as_deref(), args.shard)?;
+        let scene = super::read_scene(args.scene.as_deref(), &args.overrides, args.shard)?;
         let source = match (&args.profiles, args.ensemble) {
             (Some(p), _) if args.shard => {
                 ProfileSource::Set(std::fs::canonicalize(p).map_err(|e| {

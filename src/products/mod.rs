@@ -25,7 +25,7 @@ pub mod select;
 
 use std::path::Path;
 
-use crate::scene::Scene;
+use crate::scene::{Scene, SceneOverride};
 
 /// Why a command's products could not be made or written.
 #[derive(Debug, thiserror::Error)]
@@ -94,13 +94,24 @@ impl ProductError {
     }
 }
 
-/// The scene of a command: the file at `path`, or the embedded default scene without one. A
-/// shard (`absolute`) reads it by its absolute path, so that shards started from different
+/// The scene of a command: the file at `path` (`-`: standard input), or the embedded default
+/// scene without one, with the command line's `--set` overrides ([`Scene::read_with`]). A
+/// shard (`absolute`) reads a file by its absolute path, so that shards started from different
 /// directories agree ([`crate::shard::read_scene`]).
-pub fn read_scene(path: Option<&Path>, absolute: bool) -> Result<Scene, ProductError> {
-    match (path, absolute) {
-        (Some(_), true) => Ok(crate::shard::read_scene(path)?),
-        (Some(p), false) => Ok(Scene::read(p)?),
-        (None, _) => Ok(Scene::default_scene()?),
+pub fn read_scene(
+    path: Option<&Path>,
+    overrides: &[SceneOverride],
+    absolute: bool,
+) -> Result<Scene, ProductError> {
+    match path {
+        Some(p) if absolute && p != Path::new("-") => {
+            let abs = std::fs::canonicalize(p).map_err(|error| crate::shard::ShardError::Io {
+                path: p.to_path_buf(),
+                error,
+            })?;
+            Ok(Scene::read_with(&abs, overrides)?)
+        }
+        Some(p) => Ok(Scene::read_with(p, overrides)?),
+        None => Ok(Scene::default_with(overrides)?),
     }
 }

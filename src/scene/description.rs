@@ -64,6 +64,7 @@ pub struct LaserDescription {
     /// The line-shape table of `line_shape = "table"` given by values, or `line_shape_file`.
     pub line_shape_table: Option<LineShapeTableDescription>,
     /// Quadrature nodes over the line shape.
+    #[serde(default, deserialize_with = "crate::input::serde_count::option")]
     pub line_shape_nodes: Option<usize>,
     /// Offset of each line from its channel's wavenumber \[MHz\].
     pub frequency_offset_mhz: Option<PerChannel>,
@@ -144,12 +145,14 @@ pub struct RetrievalDescription {
     /// End of the DIAL cells \[m\] (range).
     pub dial_end_m: Option<f64>,
     /// Shot pairs averaged (or `averaging_length_km` with `platform_speed_m_per_s`).
+    #[serde(default, deserialize_with = "crate::input::serde_count::option")]
     pub averaging_shots: Option<u64>,
     /// Along-track averaging length \[km\].
     pub averaging_length_km: Option<f64>,
     /// Platform speed \[m/s\].
     pub platform_speed_m_per_s: Option<f64>,
     /// Noisy realisations per product.
+    #[serde(default, deserialize_with = "crate::input::serde_count::option")]
     pub realisations: Option<usize>,
     /// The retrieval's own line file (relative to the scene), if it differs from the truth's.
     pub lines: Option<String>,
@@ -424,14 +427,19 @@ pub struct SurfaceDescription {
 #[serde(deny_unknown_fields)]
 pub struct SimulationDescription {
     /// Photon packets (0: the analytic lidar equation only).
+    #[serde(default, deserialize_with = "crate::input::serde_count::option")]
     pub photons: Option<u64>,
     /// Random seed.
+    #[serde(default, deserialize_with = "crate::input::serde_count::option")]
     pub seed: Option<u64>,
     /// Highest scattering order tallied separately.
+    #[serde(default, deserialize_with = "crate::input::serde_count::option")]
     pub max_order: Option<u32>,
     /// Worker threads (0: all cores).
+    #[serde(default, deserialize_with = "crate::input::serde_count::option")]
     pub threads: Option<usize>,
     /// Independent batches for the standard errors.
+    #[serde(default, deserialize_with = "crate::input::serde_count::option")]
     pub batches: Option<usize>,
     /// Directory for cached Mie optics (relative to the scene).
     pub cache_dir: Option<String>,

@@ -20,12 +20,16 @@
 //!    lists read, Mie theory run (and cached), the laser lines sampled; the checks that need
 //!    what those give.
 //!
-//! [`Scene::read`] and [`Scene::from_toml`] do all three. [`SceneDescription::resolve_reusing`]
+//! [`Scene::read`] and [`Scene::from_toml`] do all three; [`Scene::read_with`] reads `-` as
+//! standard input and first applies the command line's `--set KEY=VALUE` overrides to the TOML
+//! text (`overrides.rs`), so that an override goes through the same three steps, its errors
+//! named `--set KEY`. [`SceneDescription::resolve_reusing`]
 //! (`reuse.rs`) resolves an edited description keeping what a previous scene resolved from the
 //! parts the edit left unchanged; [`Scene::with_profile`] and [`Scene::with_laser`] are such
 //! edits.
 
 mod description;
+mod overrides;
 mod ranges;
 mod resolve;
 mod resolve_gas;
@@ -60,6 +64,7 @@ pub use description::{
     ProfileDescription, ReceiverDescription, RetrievalDescription, SceneDescription,
     SimulationDescription, SurfaceDescription,
 };
+pub use overrides::SceneOverride;
 use source::{KeyPath, Source};
 pub use variance::{
     ALIGNMENT_SPLITTING, DDIS_EPSILON, RANGE_STRATIFICATION, ROULETTE_ALIGNMENT, VarianceReduction,
@@ -69,6 +74,8 @@ pub use variance::{
 pub const DEFAULT_SCENE_TOML: &str = include_str!("../../scenes/spaceborne_co2_ipda.toml");
 /// Pseudo-path of the embedded default scene in messages.
 pub const DEFAULT_SCENE_NAME: &str = "<embedded default scene>";
+/// Pseudo-path of a scene read from standard input (`-` as its path) in messages.
+pub const STDIN_NAME: &str = "<stdin>";
 
 /// A resolved scene: what the stages use. Made by [`SceneDescription::resolve`] (or
 /// [`Scene::from_toml`] / [`Scene::read`]); editing its public fields skips the checks, editing
@@ -435,6 +442,51 @@ impl Scene {
     pub fn read(path: &Path) -> Result<Scene, InputError> {
         let text = crate::input::read_to_string(path)?;
         Scene::from_toml(path, &text)
+    }
+
+    /// Read a scene file, or standard input when `path` is `-` (named [`STDIN_NAME`] in errors;
+    /// relative paths inside it resolve against the current directory), with `overrides`
+    /// (`--set KEY=VALUE`) applied to its text before it is parsed: an override is checked as
+    /// the file is, and an error in it names `--set KEY` instead of a line.
+    pub fn read_with(path: &Path, overrides: &[SceneOverride]) -> Result<Scene, InputError> {
+        if path == Path::new("-") {
+            let mut text = String::new();
+            std::io::Read::read_to_string(&mut std::io::stdin().lock(), &mut text)
+                .map_err(|e| InputError::file(STDIN_NAME, format!("cannot read the scene: {e}")))?;
+            let text = crate::input::strip_bom(&text);
+            return Scene::from_toml_with(Path::new(STDIN_NAME), text, Path::new("."), overrides);
+        }
+        let text = crate::input::read_to_string(path)?;
+        Scene::from_toml_with(
+            path,
+            &text,
+            path.parent().unwrap_or(Path::new(".")),
+            overrides,
+        )
+    }
+
+    /// The embedded default scene with `overrides` ([`Self::read_with`]).
+    pub fn default_with(overrides: &[SceneOverride]) -> Result<Scene, InputError> {
+        let path = Path::new(DEFAULT_SCENE_NAME);
+        Scene::from_toml_with(path, DEFAULT_SCENE_TOML, Path::new(""), overrides)
+    }
+
+    /// [`Self::from_toml`] with `overrides` applied to the text first and relative paths
+    /// anchored at `base_dir`.
+    pub fn from_toml_with(
+        path: &Path,
+        text: &str,
+        base_dir: &Path,
+        overrides: &[SceneOverride],
+    ) -> Result<Scene, InputError> {
+        if overrides.is_empty() {
+            let d = SceneDescription::parse(path, text)?;
+            return Scene::resolve_from(d, Source::toml(path, text), base_dir);
+        }
+        let edited = overrides::apply(text, overrides)?;
+        let d = SceneDescription::parse(path, &edited.text)
+            .map_err(|e| overrides::remap(e, path, &edited.origins))?;
+        Scene::resolve_from(d, Source::edited(path, edited), base_dir)
     }
 
     /// The embedded default scene.

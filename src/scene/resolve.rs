@@ -662,8 +662,12 @@ impl Resolver<'_> {
                 let table = match (file, builtin) {
                     (Some(f), None) => {
                         let p = self.base_dir.join(f);
-                        PhaseTable::read(&p)
-                            .map_err(|e| bad(format!("phase-function table: {e}")))?
+                        PhaseTable::read(&p).map_err(|e| {
+                            let hint = crate::particles::missing_table_hint(f, &p)
+                                .map(|h| format!(" ({h})"))
+                                .unwrap_or_default();
+                            bad(format!("phase-function table: {e}{hint}"))
+                        })?
                     }
                     (None, Some(name)) => builtin_table(name).map_err(bad)?,
                     _ => {

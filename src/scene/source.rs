@@ -7,16 +7,33 @@ use std::sync::Arc;
 use crate::input::{Bounds, InputError, check_finite_range};
 
 use super::description::PerChannel;
+use super::overrides::{Edited, LineOrigin, remap};
 
 /// The origin of a description: a TOML text (errors name its lines) or code (errors name
 /// field paths). `path` names the file, or a pseudo-path, in every error.
-#[derive(Debug, Clone)]
+#[derive(Clone)]
 pub(super) struct Source {
     pub path: PathBuf,
     /// The scene text: the file's as read, or the description written as TOML.
     pub text: Arc<str>,
     /// Whether `text` is what the user wrote (so its lines can be named).
     pub has_lines: bool,
+    /// With `--set` overrides: where each line of `text` came from (a line of the file, or an
+    /// override, which an error then names instead of a line).
+    pub origins: Option<Arc<[LineOrigin]>>,
+}
+
+/// Without `origins`: the scene's digest (shards, `crate::shard::scene_digest`, a digest of
+/// its `Debug` form) is that of its text, so that a scene read with `--set` overrides and the
+/// same edited text read again (as `merge` reads it from the shards) agree.
+impl std::fmt::Debug for Source {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Source")
+            .field("path", &self.path)
+            .field("text", &self.text)
+            .field("has_lines", &self.has_lines)
+            .finish()
+    }
 }
 
 impl Source {
@@ -26,6 +43,17 @@ impl Source {
             path: path.to_path_buf(),
             text: Arc::from(text),
             has_lines: true,
+            origins: None,
+        }
+    }
+
+    /// A scene file's text after `--set` overrides ([`super::overrides`]).
+    pub fn edited(path: &Path, edited: Edited) -> Self {
+        Source {
+            path: path.to_path_buf(),
+            text: Arc::from(edited.text),
+            has_lines: true,
+            origins: Some(Arc::from(edited.origins)),
         }
     }
 
@@ -35,6 +63,7 @@ impl Source {
             path: path.to_path_buf(),
             text: Arc::from(text),
             has_lines: false,
+            origins: None,
         }
     }
 
@@ -45,11 +74,15 @@ impl Source {
         } else {
             (None, at.field_path())
         };
-        InputError {
+        let e = InputError {
             path: self.path.clone(),
             line,
             field: Some(field),
             message: message.into(),
+        };
+        match &self.origins {
+            Some(o) => remap(e, &self.path, o),
+            None => e,
         }
     }
 

@@ -112,6 +112,19 @@ impl GasOpticalDepthTable {
         grid: &WavenumberGrid,
         opts: &LblOptions,
     ) -> Result<Self, SpectroscopyError> {
+        Self::compute_reporting(profile, lines, edges_m, grid, opts, &|_, _| {})
+    }
+
+    /// [`Self::compute`], calling `progress(done, total)` after each layer (a command's
+    /// progress report; the numbers do not depend on it).
+    pub fn compute_reporting(
+        profile: &Profile,
+        lines: &LineList,
+        edges_m: &[f64],
+        grid: &WavenumberGrid,
+        opts: &LblOptions,
+        progress: &dyn Fn(usize, usize),
+    ) -> Result<Self, SpectroscopyError> {
         let layers = curtis_godson_layers(profile, edges_m)?;
         let gases = line_gases(profile, lines)?;
         let n = grid.len;
@@ -130,6 +143,7 @@ impl GasOpticalDepthTable {
                     *t += s * col;
                 }
             }
+            progress(l + 1, layers.len());
         }
         Ok(GasOpticalDepthTable {
             edges_m: edges_m.to_vec(),
