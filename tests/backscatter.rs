@@ -180,7 +180,7 @@ fn check_rows_against_returns(dir: &Path, width_m: f64, constants: &HashMap<&str
         let (e, se) = (num(&r[e_col]), num(&r[s_col]));
         let rc = num(&kb.3);
         let (r1, r2) = (rc - 0.5 * width_m, rc + 0.5 * width_m);
-        let c = constants[kb.1.as_str()];
+        let c = constants[lidarsim::output::csv_text_value(kb.1.as_str())];
         let factor = r1 * r2 / (c * width_m);
         assert!(same_printed(num(&b[9]), c), "{kb:?}: C {}", b[9]);
         for (got, want) in [
