@@ -136,7 +136,8 @@ fn rows_by_key(path: &Path) -> (Vec<String>, Vec<(Key, Vec<String>)>) {
         .map(|r| {
             let k = (
                 r[idx[0]].clone(),
-                r[idx[1]].clone(),
+                // The CSV marks a channel name that reads as a number (`'1064`).
+                lidarsim::output::csv_text_value(&r[idx[1]]).to_string(),
                 r[idx[2]].clone(),
                 r[idx[3]].clone(),
                 r[idx[4]].clone(),
@@ -180,7 +181,7 @@ fn check_rows_against_returns(dir: &Path, width_m: f64, constants: &HashMap<&str
         let (e, se) = (num(&r[e_col]), num(&r[s_col]));
         let rc = num(&kb.3);
         let (r1, r2) = (rc - 0.5 * width_m, rc + 0.5 * width_m);
-        let c = constants[lidarsim::output::csv_text_value(kb.1.as_str())];
+        let c = constants[kb.1.as_str()];
         let factor = r1 * r2 / (c * width_m);
         assert!(same_printed(num(&b[9]), c), "{kb:?}: C {}", b[9]);
         for (got, want) in [
