@@ -20,7 +20,7 @@ struct Layout {
 impl Layout {
     fn of<'r>(
         groups: impl Iterator<Item = Vec<(&'r str, Method)>>,
-    ) -> Result<(Layout, Vec<Vec<(usize, usize)>>), crate::netcdf::NetcdfError> {
+    ) -> Result<(Layout, Places), crate::netcdf::NetcdfError> {
         let mut layout = Layout {
             pairs: Vec::new(),
             methods: Vec::new(),
@@ -75,6 +75,9 @@ impl Layout {
         )]);
     }
 }
+
+/// Each group's records' (pair, retrieval) indices, in the records' order.
+type Places = Vec<Vec<(usize, usize)>>;
 
 /// The dimensions of a study's arrays: the group (`profile` or `class`), `pair`, `retrieval`.
 fn dims(group: &str) -> [&str; 3] {
