@@ -100,6 +100,11 @@ pub struct RunFile<'a> {
     pub lidar_constant_j_m2: Option<&'a [f64]>,
     /// The range gates of the returns (for the gate edges).
     pub gates: &'a Gates,
+    /// The lidar's altitude \[m\] and the cosine of its zenith angle (1 looks up, −1 down):
+    /// with them each gate's altitude, `altitude_m` = lidar altitude + μ r.
+    pub lidar_altitude_m: f64,
+    /// Cosine of the pointing zenith angle.
+    pub mu: f64,
     /// The laser lines (each channel's wavenumber, where a channel is one of them).
     pub lines: &'a [Line],
     /// With polarised light, the co- and cross-polarised parts of the sets of returns
@@ -169,6 +174,7 @@ pub fn run_dataset(run: &RunFile) -> Result<Dataset, NetcdfError> {
             product_variables(&mut nc, q, &rows, run.gas);
         }
     }
+    add_range_coordinates(&mut nc);
     nc.check()?;
     Ok(nc)
 }
@@ -229,6 +235,7 @@ pub fn table_dataset(
         Attr::text(format!("lidarsim {}", env!("CARGO_PKG_VERSION"))),
     );
     nc.global("history", Attr::text(history));
+    nc.global("lidarsim_version", Attr::text(env!("CARGO_PKG_VERSION")));
     nc.dim(row_dim, rows);
     let texts: Vec<&str> = columns
         .iter()
@@ -268,6 +275,48 @@ pub fn table_dataset(
     }
     nc.check()?;
     Ok(nc)
+}
+
+/// How a study's NetCDF file was made ([`study_globals`]).
+#[derive(Debug, Clone, Copy)]
+pub struct StudyAttributes<'a> {
+    /// `title`: what was run.
+    pub title: &'a str,
+    /// `history`: when and by which command line (CF §2.6.2).
+    pub history: &'a str,
+    /// The scene file's path (or the embedded default scene's name); `None` without a scene.
+    pub scene_file: Option<&'a str>,
+    /// The scene's whole text (TOML).
+    pub scene_text: Option<&'a str>,
+    /// Random seed of the study (its ensembles and noise).
+    pub seed: Option<u64>,
+    /// The profile set the study ran over (its name).
+    pub profile_set: Option<&'a str>,
+}
+
+/// The global attributes of a study's NetCDF file: `Conventions`, `title`, `source`,
+/// `history`, `lidarsim_version`, and where known `scene_file`, `scene` (its TOML text, as
+/// `run.nc` has it), `seed` (text: NetCDF-3 has no 64-bit integer) and `profile_set`.
+pub fn study_globals(nc: &mut Dataset, a: &StudyAttributes) {
+    let version = env!("CARGO_PKG_VERSION");
+    nc.globals.clear();
+    nc.global("Conventions", Attr::text(CONVENTIONS));
+    nc.global("title", Attr::text(a.title));
+    nc.global("source", Attr::text(format!("lidarsim {version}")));
+    nc.global("history", Attr::text(a.history));
+    nc.global("lidarsim_version", Attr::text(version));
+    if let Some(f) = a.scene_file {
+        nc.global("scene_file", Attr::text(f));
+    }
+    if let Some(t) = a.scene_text {
+        nc.global("scene", Attr::text(t));
+    }
+    if let Some(seed) = a.seed {
+        nc.global("seed", Attr::text(seed.to_string()));
+    }
+    if let Some(set) = a.profile_set {
+        nc.global("profile_set", Attr::text(set));
+    }
 }
 
 /// The CF `history` attribute of a NetCDF file written now by `command` (the command line,
@@ -471,22 +520,78 @@ fn coordinates(nc: &mut Dataset, grid: &Grid, run: &RunFile) -> Result<(), Netcd
             grid.range_m.len()
         )));
     }
-    let edges = (0..g.count)
-        .flat_map(|i| {
-            [
-                g.start_m + i as f64 * g.width_m,
-                g.start_m + (i + 1) as f64 * g.width_m,
-            ]
-        })
-        .collect();
+    let edges = edges_of(g);
+    let altitude = |r: f64| run.lidar_altitude_m + run.mu * r;
+    let altitude_edges = edges_of(g).into_iter().map(altitude).collect();
     // CF §7.1: a boundary variable takes its units from its coordinate; it needs none of its own.
     nc.f64("range_m_bounds", &["range_m", "nv"], edges);
+    // The altitude of each gate's centre along the line of sight (plane-parallel, as the
+    // transport): an auxiliary coordinate on `range_m` (CF-1.8 §5), named in the
+    // `coordinates` of every variable over `range_m`.
+    if !(run.lidar_altitude_m.is_finite() && run.mu.is_finite() && run.mu.abs() <= 1.0) {
+        return Err(NetcdfError::Layout(format!(
+            "lidar altitude {} m, cosine of the zenith angle {}",
+            run.lidar_altitude_m, run.mu
+        )));
+    }
+    nc.f64(
+        "altitude_m",
+        &["range_m"],
+        grid.range_m.iter().map(|&r| altitude(r)).collect(),
+    )
+    .attrs([
+        ("standard_name", "altitude"),
+        (
+            "long_name",
+            "altitude of the centre of the range gate along the line of sight",
+        ),
+        ("units", "m"),
+        ("positive", "up"),
+        ("axis", "Z"),
+        ("bounds", "altitude_m_bounds"),
+    ]);
+    nc.f64("altitude_m_bounds", &["range_m", "nv"], altitude_edges);
     nc.text("order", "order", &grid.orders).attrs([(
         "long_name",
         "scattering-order bin: total = all orders, n = exactly n scattering events (surface \
          reflections count), n+ = n or more",
     )]);
     Ok(())
+}
+
+/// The gates' near and far edges \[m\], gate by gate.
+fn edges_of(g: &Gates) -> Vec<f64> {
+    (0..g.count)
+        .flat_map(|i| {
+            [
+                g.start_m + i as f64 * g.width_m,
+                g.start_m + (i + 1) as f64 * g.width_m,
+            ]
+        })
+        .collect()
+}
+
+/// The gates' altitude (`altitude_m`) named in the `coordinates` attribute of every data
+/// variable over `range_m` (CF-1.8 §5: an auxiliary coordinate is found through it), added to
+/// the coordinates it names already.
+fn add_range_coordinates(nc: &mut Dataset) {
+    const SKIP: [&str; 4] = [
+        "range_m",
+        "range_m_bounds",
+        "altitude_m",
+        "altitude_m_bounds",
+    ];
+    for v in &mut nc.vars {
+        if SKIP.contains(&v.name.as_str()) || !v.dims.iter().any(|d| d == "range_m") {
+            continue;
+        }
+        match v.attrs.iter_mut().find(|(k, _)| k == "coordinates") {
+            Some((_, Attr::Text(c))) => *c = format!("altitude_m {c}"),
+            _ => v
+                .attrs
+                .push(("coordinates".into(), Attr::text("altitude_m"))),
+        }
+    }
 }
 
 fn returns_variables(nc: &mut Dataset, grid: &Grid, sets: &[&Returns]) {

@@ -136,7 +136,8 @@ fn rows_by_key(path: &Path) -> (Vec<String>, Vec<(Key, Vec<String>)>) {
         .map(|r| {
             let k = (
                 r[idx[0]].clone(),
-                r[idx[1]].clone(),
+                // The CSV marks a channel name that reads as a number (`'1064`).
+                lidarsim::output::csv_text_value(&r[idx[1]]).to_string(),
                 r[idx[2]].clone(),
                 r[idx[3]].clone(),
                 r[idx[4]].clone(),

@@ -194,12 +194,22 @@ fn default_scene_retrieves_xco2_and_writes_signals_retrieval_and_figures() {
     let col = |name: &str| columns.iter().position(|c| *c == name).unwrap();
     for r in &rows {
         assert_eq!(r.len(), columns.len());
-        let truth: f64 = r[col("truth")].parse().unwrap();
-        let retrieved: f64 = r[col("retrieved")].parse().unwrap();
-        let bias: f64 = r[col("bias")].parse().unwrap();
+        // Each row's values in the columns of its quantity's unit, the others empty.
+        let unit = match r[col("quantity")] {
+            "mixing_ratio" => "ppm",
+            "slant_column" => "molecules_per_m2",
+            q => panic!("quantity {q}"),
+        };
+        for other in ["ppm", "molecules_per_m2", "molecules_per_m3"] {
+            if other != unit {
+                assert_eq!(r[col(&format!("truth_{other}"))], "", "{r:?}");
+            }
+        }
+        let truth: f64 = r[col(&format!("truth_{unit}"))].parse().unwrap();
+        let retrieved: f64 = r[col(&format!("retrieved_{unit}"))].parse().unwrap();
+        let bias: f64 = r[col(&format!("bias_{unit}"))].parse().unwrap();
         assert!((retrieved - truth - bias).abs() <= 1e-9 * truth.abs());
-        if r[col("quantity")] == "mixing_ratio" {
-            assert_eq!(r[col("unit")], "ppm");
+        if unit == "ppm" {
             assert!((truth - 420.0).abs() < 0.1, "{truth}");
         }
     }

@@ -340,7 +340,11 @@ fn run_nc_jacobians_are_the_rows_of_jacobians_csv() {
         }
         let l = findf(&layer, &row[col("layer")]);
         let idx = [
-            find(&channels, &row[col("channel")]),
+            // The CSV marks a name that reads as a number (`'1064`; README, "Text in CSV files").
+            find(
+                &channels,
+                lidarsim::output::csv_text_value(&row[col("channel")]),
+            ),
             findf(&fov, &row[col("fov_full_angle_mrad")]),
             findf(&range, &row[col("range_m")]),
             find(&orders, &row[col("order")]),
@@ -386,4 +390,201 @@ fn run_nc_jacobians_are_the_rows_of_jacobians_csv() {
         (0.0, 1450.0),
         "{bottom:?} {top:?}"
     );
+}
+
+/// The CF checkers in a virtual environment (`$LIDARSIM_CF_VENV`, else `target/cf-venv`,
+/// made and filled from PyPI when absent): `cfchecks` (cfchecker) and the IOOS
+/// `compliance-checker`, and the CF standard-name table compliance-checker ships (cfchecks
+/// would download one). `None` after one line when they cannot be installed; in CI (`CI`
+/// set) that is a failure, as for xarray above (`.ci/run` installs cfchecker's UDUNITS-2
+/// library).
+fn cf_checkers() -> Option<(std::path::PathBuf, std::path::PathBuf)> {
+    let venv = std::env::var_os("LIDARSIM_CF_VENV")
+        .map_or_else(|| project_root().join("target/cf-venv"), Into::into);
+    let (cfchecks, cc) = (
+        venv.join("bin/cfchecks"),
+        venv.join("bin/compliance-checker"),
+    );
+    let mut why = String::new();
+    if !(cfchecks.is_file() && cc.is_file()) {
+        let python = std::env::var("LIDARSIM_PYTHON").unwrap_or_else(|_| "python3".into());
+        let made = Command::new(&python)
+            .args(["-m", "venv"])
+            .arg(&venv)
+            .output()
+            .is_ok_and(|o| o.status.success())
+            && Command::new(venv.join("bin/python"))
+                .args([
+                    "-m",
+                    "pip",
+                    "install",
+                    "--quiet",
+                    "--disable-pip-version-check",
+                ])
+                .args(["cfchecker", "compliance-checker"])
+                .output()
+                .is_ok_and(|o| o.status.success());
+        if !made {
+            why = format!(
+                "cfchecker and compliance-checker could not be installed into {} (pip install cfchecker compliance-checker)",
+                venv.display()
+            );
+        }
+    }
+    let table = Command::new(venv.join("bin/python"))
+        .args([
+            "-c",
+            "import compliance_checker, os; print(os.path.join(os.path.dirname(compliance_checker.__file__), 'data', 'cf-standard-name-table.xml'))",
+        ])
+        .output()
+        .ok()
+        .filter(|o| o.status.success())
+        .map(|o| std::path::PathBuf::from(String::from_utf8_lossy(&o.stdout).trim()))
+        .filter(|p| p.is_file());
+    // cfchecker loads the UDUNITS-2 C library when it starts.
+    let runs = Command::new(&cfchecks)
+        .arg("--help")
+        .output()
+        .is_ok_and(|o| String::from_utf8_lossy(&o.stdout).contains("cfchecks"));
+    if why.is_empty() && table.is_none() {
+        why = "compliance-checker's CF standard-name table is missing".into();
+    }
+    if why.is_empty() && !runs {
+        why = format!(
+            "{} does not start (it needs the UDUNITS-2 library: apt-get install libudunits2-0)",
+            cfchecks.display()
+        );
+    }
+    if why.is_empty() {
+        return Some((venv, table.unwrap()));
+    }
+    assert!(
+        std::env::var_os("CI").is_none_or(|v| v.is_empty()),
+        "CI: {why}"
+    );
+    println!("skipped: {why}");
+    None
+}
+
+/// Every kind of NetCDF file lidarsim writes passes both CF checkers with no error:
+/// `run.nc` of the default scene, the airborne DIAL (fill values), C.1 (many orders), a
+/// polarised run, a run with Jacobians and an analytic-only run; `profiles.nc` and
+/// `summary.nc` of `dial`; `sensitivities.nc` of `select-lines`. cfchecks (`-v 1.8`, the
+/// standard-name table of compliance-checker; empty area-type and region tables, which only
+/// `area_type` and `region` variables need, and lidarsim writes none) must report
+/// `ERRORS detected: 0`; compliance-checker `--test=cf:1.8` must exit 0 with "All tests
+/// passed!".
+#[test]
+fn every_netcdf_file_passes_the_cf_checkers() {
+    let Some((venv, table)) = cf_checkers() else {
+        return;
+    };
+    let root = project_root();
+    let tmp = tempfile::tempdir().unwrap();
+    let t = tmp.path();
+    let empty = t.join("empty-table.xml");
+    std::fs::write(
+        &empty,
+        "<?xml version=\"1.0\"?><table><version_number>0</version_number><date>none</date></table>\n",
+    )
+    .unwrap();
+    let polarised = t.join("polarised.toml");
+    std::fs::write(&polarised, crate::output::POLARISED_CLOUD).unwrap();
+    let jacobians = t.join("jacobians.toml");
+    std::fs::write(&jacobians, JACOBIAN_SCENE).unwrap();
+    let c1 = t.join("c1.toml");
+    std::fs::write(
+        &c1,
+        std::fs::read_to_string(root.join("scenes/bissonnette_c1.toml"))
+            .unwrap()
+            .replace(
+                "\"../phase_functions/",
+                &format!("\"{}/phase_functions/", root.display()),
+            ),
+    )
+    .unwrap();
+    let airborne = root.join("scenes/airborne_co2_dial.toml");
+    let mut files = Vec::new();
+    let cases: [(Option<&Path>, &str, &str); 6] = [
+        (None, "2000", "default"),
+        (Some(&airborne), "2000", "airborne"),
+        (Some(&airborne), "0", "analytic"),
+        (Some(&c1), "2000", "c1"),
+        (Some(&polarised), "2000", "polarised"),
+        (Some(&jacobians), "2000", "jacobians"),
+    ];
+    for (scene, photons, name) in cases {
+        let out = t.join(name);
+        run(scene, photons, &out);
+        files.push(out.join("run.nc"));
+    }
+    let study = t.join("study.toml");
+    std::fs::write(&study, crate::study::SCENE).unwrap();
+    let dial = t.join("dial");
+    lidarsim_ok([
+        "dial".as_ref(),
+        study.as_os_str(),
+        "--ensemble".as_ref(),
+        "2".as_ref(),
+        "--on".as_ref(),
+        "on,side".as_ref(),
+        "--no-plots".as_ref(),
+        "--out".as_ref(),
+        dial.as_os_str(),
+    ]);
+    files.push(dial.join("profiles.nc"));
+    files.push(dial.join("summary.nc"));
+    let select = t.join("select");
+    lidarsim_ok([
+        "select-lines".as_ref(),
+        "--atmosphere".as_ref(),
+        "us_standard,tropical".as_ref(),
+        "--off-cm1".as_ref(),
+        "6360.61".as_ref(),
+        "--co2-ppm".as_ref(),
+        "420".as_ref(),
+        "--on-cm1".as_ref(),
+        "6358.655,6359.967".as_ref(),
+        "--no-plots".as_ref(),
+        "--out".as_ref(),
+        select.as_os_str(),
+    ]);
+    files.push(select.join("sensitivities.nc"));
+    for f in &files {
+        let out = Command::new(venv.join("bin/cfchecks"))
+            .args(["-v", "1.8", "-s"])
+            .arg(&table)
+            .arg("-a")
+            .arg(&empty)
+            .arg("-r")
+            .arg(&empty)
+            .arg(f)
+            .output()
+            .expect("cfchecks runs");
+        let text = String::from_utf8_lossy(&out.stdout);
+        assert!(
+            text.contains("ERRORS detected: 0"),
+            "cfchecks {}:\n{text}{}",
+            f.display(),
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let warnings = text.lines().filter(|l| l.starts_with("WARN")).count();
+        let out = Command::new(venv.join("bin/compliance-checker"))
+            .arg("--test=cf:1.8")
+            .arg(f)
+            .output()
+            .expect("compliance-checker runs");
+        let cc = String::from_utf8_lossy(&out.stdout);
+        assert!(
+            out.status.success() && cc.contains("All tests passed!"),
+            "compliance-checker {}:\n{cc}{}",
+            f.display(),
+            String::from_utf8_lossy(&out.stderr)
+        );
+        println!(
+            "cf checks: {}: cfchecks 0 errors ({warnings} warnings), compliance-checker: all tests passed",
+            f.strip_prefix(t).unwrap().display()
+        );
+    }
+    assert_eq!(files.len(), 9);
 }

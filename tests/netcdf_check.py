@@ -18,7 +18,15 @@ attributes and the raw fill values). The CSV files are read with Python's csv mo
   retrieval.csv prints the shortest text that reads back as the same double: exact equality.
   Empty fields (and `NaN`) are missing values in the file;
 * the CF attributes: Conventions, title, source, history, scene, seed, photons; units and
-  long_name on every variable, bounds of range_m, ancillary_variables, _FillValue.
+  long_name on every variable, bounds of range_m, ancillary_variables, _FillValue;
+* `altitude_m`, each gate's altitude from the scene's own [lidar] altitude and pointing, an
+  auxiliary coordinate of every variable over range_m;
+* every CSV file of the directory read by pandas: its text columns load as text (README,
+  "Text in CSV files"); read here with the apostrophe that marks a numeric-looking name
+  removed.
+
+`--dial`: profiles.nc and summary.nc on (profile or class, pair, retrieval) against the CSVs,
+cell by cell, and their global attributes (scene, seed, lidarsim_version).
 
 Prints one line per directory and exits 1 on the first difference.
 """
@@ -53,9 +61,45 @@ def same_exact(text, value):
     return not math.isnan(value) and float(text) == value
 
 
+def text(field):
+    """A text field of lidarsim's CSV files as the name it holds: lidarsim writes a name that
+    would read as a number, a boolean or a missing value with one apostrophe in front
+    (`'1064`; README, "Text in CSV files"), and one that starts with an apostrophe so too."""
+    return field[1:] if field.startswith("'") else field
+
+
+# Columns of lidarsim's CSV files that hold text: pandas must load each as strings (object).
+CSV_TEXT_COLUMNS = {
+    "source", "channel", "method", "channel_pair", "quantity", "unit", "polarisation",
+    "profile_id", "id", "class", "pair", "atmosphere", "line", "reason",
+}
+
+
+def check_csv_text_columns(out):
+    """Every CSV file of OUT: pandas (default options) reads its text columns as strings, and
+    every non-empty field there, decoded, is a name (never a number's type)."""
+    import glob
+    import os
+
+    import pandas as pd
+
+    n = 0
+    for path in sorted(glob.glob(os.path.join(out, "*.csv"))):
+        df = pd.read_csv(path, comment="#")
+        for c in df.columns:
+            if c in CSV_TEXT_COLUMNS and df[c].notna().any():
+                values = df[c].dropna()
+                text = df[c].dtype == object or pd.api.types.is_string_dtype(df[c].dtype)
+                if not text or not all(isinstance(v, str) for v in values):
+                    fail(f"{path}: pandas reads the text column {c} as {df[c].dtype}")
+                n += 1
+    return n
+
+
 def read_csv(path):
+    """Header and rows, every field decoded by `text` (no number starts with an apostrophe)."""
     with open(path, newline="", encoding="utf-8") as f:
-        rows = list(csv.reader(f))
+        rows = [[text(x) for x in r] for r in csv.reader(f)]
     return rows[0], rows[1:]
 
 
@@ -184,11 +228,15 @@ def check_jacobians(ds, out):
     return len(rows) - only_csv, only_csv
 
 
-UNITS = {"ppm": "1e-6", "molecules/m2": "m-2", "molecules/m3": "m-3"}
+UNITS = {"ppm": "1e-6", "molecules_per_m2": "m-2", "molecules_per_m3": "m-3"}
+SUFFIX = {"mixing_ratio": "ppm", "slant_column": "molecules_per_m2", "number_density": "molecules_per_m3"}
 TEXT_COLUMNS = ["method", "source", "order", "channel_pair"]
 
 
 def check_retrievals(ds, csv_path):
+    """retrieval.csv against the `<quantity>_*` tables: a row's values are in the columns of its
+    quantity's unit (`truth_ppm`, …), equal to `<quantity>_truth`, …; the other units' columns
+    are empty."""
     header, rows = read_csv(csv_path)
     col = {name: header.index(name) for name in header}
     by_quantity = {}
@@ -196,16 +244,24 @@ def check_retrievals(ds, csv_path):
         by_quantity.setdefault(row[col["quantity"]], []).append((n, row))
     for q, qrows in by_quantity.items():
         dim = f"{q}_product"
+        unit = SUFFIX[q]
         if ds.sizes.get(dim) != len(qrows):
             fail(f"{dim}: {ds.sizes.get(dim)} in run.nc, {len(qrows)} {q} rows in retrieval.csv")
         for c in header:
-            if c in ("quantity", "unit"):
+            if c == "quantity":
                 continue
-            var = ds[f"{q}_{c}"]
+            other = [u for u in UNITS if u != unit and c.endswith("_" + u)]
+            if other:
+                for n, row in qrows:
+                    if row[col[c]] != "":
+                        fail(f"{csv_path} line {n}: {c} of a {q} row is {row[col[c]]!r}, not empty")
+                continue
+            bare = c[: -len(unit) - 1] if c.endswith("_" + unit) else c
+            var = ds[f"{q}_{bare}"]
             if c in TEXT_COLUMNS or c == "shots_averaged" or c.endswith("_m") or c.endswith("_mrad"):
                 pass
-            elif var.attrs.get("units") != UNITS[qrows[0][1][col["unit"]]]:
-                fail(f"{q}_{c}: units {var.attrs.get('units')!r} for {qrows[0][1][col['unit']]}")
+            elif var.attrs.get("units") != UNITS[unit]:
+                fail(f"{q}_{bare}: units {var.attrs.get('units')!r} for {c}")
             for i, (n, row) in enumerate(qrows):
                 v = var.values[i]
                 if c in TEXT_COLUMNS:
@@ -256,6 +312,24 @@ def check_attributes(path, out, scene):
         centre = r[:]
         if b.shape != (len(centre), 2) or not np.allclose((b[:, 0] + b[:, 1]) / 2, centre, rtol=1e-15, atol=0):
             fail("range_m_bounds are not the edges of the gates")
+        # The altitude of each gate's centre, from the scene's own [lidar] altitude and pointing.
+        import tomllib
+
+        lidar = tomllib.loads(g["scene"])["lidar"]
+        mu = math.cos(math.radians(lidar.get("zenith_angle_deg", 0.0)))
+        z = nc.variables["altitude_m"]
+        if z.dimensions != ("range_m",) or z.standard_name != "altitude" or z.units != "m" or z.positive != "up":
+            fail(f"altitude_m: dimensions {z.dimensions} or attributes {z.ncattrs()}")
+        z0 = lidar["altitude_m"] if "altitude_m" in lidar else 1e3 * lidar.get("altitude_km", 0.0)
+        if not np.allclose(z[:], z0 + mu * centre, rtol=1e-12, atol=1e-6):
+            fail("altitude_m is not the lidar altitude + cos(zenith) x range")
+        zb = nc.variables[z.bounds][:]
+        if not np.allclose(zb, z0 + mu * b, rtol=1e-12, atol=1e-6):
+            fail("altitude_m_bounds")
+        for name, v in nc.variables.items():
+            if "range_m" in v.dimensions and not name.startswith(("range_m", "altitude_m")):
+                if "altitude_m" not in getattr(v, "coordinates", "").split():
+                    fail(f"{name}: coordinates {getattr(v, 'coordinates', None)!r} lack altitude_m")
 
 
 # sensitivities.csv: the Rust format of each numeric column, as Python's % operator writes it
@@ -275,6 +349,9 @@ def check_sensitivities(out):
     with netCDF4.Dataset(f"{out}/sensitivities.nc") as nc:
         if nc.Conventions != "CF-1.8" or not nc.source.startswith("lidarsim ") or not nc.history:
             fail("sensitivities.nc: global attributes")
+        for k in ["lidarsim_version", "scene_file", "scene", "seed"]:
+            if k not in nc.ncattrs():
+                fail(f"sensitivities.nc: global attribute {k} is missing")
     with xr.open_dataset(f"{out}/sensitivities.nc") as ds:
         if ds.sizes["row"] != len(rows):
             fail(f"sensitivities.nc has {ds.sizes['row']} rows, the CSV {len(rows)}")
@@ -295,12 +372,18 @@ def check_sensitivities(out):
     print(f"netcdf check: {out}: {len(rows)} sensitivity rows equal in sensitivities.nc")
 
 
-def check_dial_table(out, name):
-    """`lidarsim dial`: NAME.nc against NAME.csv, column by column, read by netCDF4 and by
-    xarray. The CSV prints each double as the shortest text that reads back as it (Rust's `{}`):
-    exact equality of the parsed double; an empty field is a missing value in the file."""
+def check_dial_table(out, name, group, group_column):
+    """`lidarsim dial`: NAME.nc against NAME.csv, read by netCDF4 and by xarray. The file holds
+    arrays on (GROUP, pair, retrieval): GROUP the profiles (coordinate `profile`, the ids, and
+    `class`) or the classes (`class`), `pair` the line pairs by name, `retrieval` each pair's
+    rows in the CSV's order (`method`). Every CSV row has its cell, found from its GROUP_COLUMN,
+    pair and rank among the rows of that group and pair, and every number there equals the
+    CSV's (Rust's `{}`, the shortest text that reads back as the double: exact equality; an
+    empty field is a missing value); every other cell is missing."""
     header, rows = read_csv(f"{out}/{name}.csv")
+    col = {c: j for j, c in enumerate(header)}
     path = f"{out}/{name}.nc"
+    dims = (group, "pair", "retrieval")
     with netCDF4.Dataset(path) as nc:
         if nc.data_model != "NETCDF3_64BIT_OFFSET":
             fail(f"{name}.nc: data model {nc.data_model}")
@@ -308,48 +391,71 @@ def check_dial_table(out, name):
             fail(f"{name}.nc: global attributes")
         if "lidarsim" not in nc.history or not nc.history[:4].isdigit():
             fail(f"{name}.nc: history {nc.history!r}")
-        if "row" not in nc.dimensions or len(nc.dimensions["row"]) != len(rows):
-            fail(f"{name}.nc has dimensions {list(nc.dimensions)}, the CSV {len(rows)} rows")
-        if sorted(nc.variables) != sorted(header):
-            fail(f"{name}.nc has variables {sorted(nc.variables)}, the CSV {sorted(header)}")
+        summary = json.load(open(f"{out}/summary.json", encoding="utf-8"))
+        g = {k: nc.getncattr(k) for k in nc.ncattrs()}
+        for k in ["lidarsim_version", "scene_file", "scene", "seed", "profile_set"]:
+            if k not in g:
+                fail(f"{name}.nc: global attribute {k} is missing")
+        if g["seed"] != str(summary["seed"]):
+            fail(f"{name}.nc: seed {g['seed']!r}, summary.json {summary['seed']}")
+        if not g["source"].endswith(g["lidarsim_version"]):
+            fail(f"{name}.nc: lidarsim_version {g['lidarsim_version']!r}, source {g['source']!r}")
+        import tomllib
+
+        tomllib.loads(g["scene"])  # the scene's TOML text
         raw = {}
-        for c in header:
+        numbers = [c for c in header if c not in (group_column, "class", "pair", "method")]
+        for c in numbers:
             v = nc.variables[c]
-            if "long_name" not in v.ncattrs() or v.dimensions[0] != "row":
-                fail(f"{name}.nc: {c} has no long_name or is not over row")
-            if v.dtype == "S1":
-                # The raw char array, decoded here (netCDF4 would decode it by `_Encoding`).
-                v.set_auto_chartostring(False)
-                chars = v[:]
-                if chars.shape[0] != len(rows):
-                    fail(f"{name}.nc: {c} has shape {chars.shape}")
-                raw[c] = [str(t) for t in netCDF4.chartostring(chars, encoding="utf-8")]
-            else:
-                units = "1e-6" if c.endswith("_ppm") else "m" if c.endswith("_m") else "1"
-                if v.getncattr("units") != units or "_FillValue" not in v.ncattrs():
-                    fail(f"{name}.nc: {c} units {v.getncattr('units')!r} (not {units!r}) or no _FillValue")
-                raw[c] = np.ma.filled(v[:].astype(np.float64), np.nan)
+            if v.dimensions != dims:
+                fail(f"{name}.nc: {c} has dimensions {v.dimensions}, not {dims}")
+            units = "1e-6" if c.endswith("_ppm") else "m" if c.endswith("_m") else "1"
+            if v.getncattr("units") != units or "_FillValue" not in v.ncattrs() or "long_name" not in v.ncattrs():
+                fail(f"{name}.nc: {c} units {v.getncattr('units')!r} (not {units!r}), no _FillValue or long_name")
+            raw[c] = np.ma.filled(v[:].astype(np.float64), np.nan)
     with xr.open_dataset(path) as ds:
-        decoded = {c: ds[c].values for c in header}
-    for reader, values in [("netCDF4", raw), ("xarray", decoded)]:
-        for j, c in enumerate(header):
-            for i, row in enumerate(rows):
-                v = values[c][i]
-                if isinstance(v, str):
-                    ok = v == row[j]
-                elif row[j] == "":
-                    ok = math.isnan(float(v))
-                else:
-                    ok = not math.isnan(float(v)) and float(row[j]) == float(v)
+        if tuple(ds.sizes) != dims:
+            fail(f"{name}.nc: dimensions {dict(ds.sizes)}, not {dims}")
+        for c in ("class", "method", "altitude_bottom_m", "altitude_top_m"):
+            if c not in ds.coords:
+                fail(f"{name}.nc: {c} is not a coordinate")
+        groups = [str(x) for x in ds[group].values]
+        pairs = [str(x) for x in ds["pair"].values]
+        methods = [str(x) for x in ds["method"].values]
+        classes = [str(x) for x in ds["class"].values]
+        decoded = {c: ds[c].values for c in numbers}
+    seen = np.zeros(raw[numbers[0]].shape, dtype=bool)
+    rank = {}
+    for i, row in enumerate(rows):
+        key = (row[col[group_column]], row[col["pair"]])
+        k = rank.get(key, 0)
+        rank[key] = k + 1
+        try:
+            at = (groups.index(key[0]), pairs.index(key[1]), k)
+        except ValueError:
+            fail(f"{name}.csv line {i + 2}: {key} is not in {name}.nc")
+        if methods[k] != row[col["method"]]:
+            fail(f"{name}.csv line {i + 2}: method {row[col['method']]!r}, {name}.nc {methods[k]!r}")
+        if group == "profile" and classes[at[0]] != row[col["class"]]:
+            fail(f"{name}.csv line {i + 2}: class {row[col['class']]!r}, {name}.nc {classes[at[0]]!r}")
+        seen[at] = True
+        for reader, values in [("netCDF4", raw), ("xarray", decoded)]:
+            for c in numbers:
+                v = float(values[c][at])
+                t = row[col[c]]
+                ok = math.isnan(v) if t == "" else (not math.isnan(v) and float(t) == v)
                 if not ok:
-                    fail(f"{name}.csv line {i + 2}, {c}: CSV {row[j]!r}, {name}.nc by {reader} {v!r}")
+                    fail(f"{name}.csv line {i + 2}, {c}: CSV {t!r}, {name}.nc by {reader} {v!r}")
+    for c in numbers:
+        if (~seen & ~np.isnan(raw[c])).any():
+            fail(f"{name}.nc: {c} has values no row of {name}.csv has")
     return len(rows)
 
 
 def check_dial(out):
     """`lidarsim dial`: profiles.nc and summary.nc against profiles.csv and summary.csv."""
-    n_profiles = check_dial_table(out, "profiles")
-    n_summary = check_dial_table(out, "summary")
+    n_profiles = check_dial_table(out, "profiles", "profile", "profile_id")
+    n_summary = check_dial_table(out, "summary", "class", "class")
     print(
         f"netcdf check: {out}: {n_profiles} profile rows equal in profiles.nc, "
         f"{n_summary} summary rows equal in summary.nc"
@@ -360,10 +466,12 @@ def main(args):
     if args and args[0] == "--sensitivities":
         for out in args[1:]:
             check_sensitivities(out)
+            check_csv_text_columns(out)
         return
     if args and args[0] == "--dial":
         for out in args[1:]:
             check_dial(out)
+            check_csv_text_columns(out)
         return
     if len(args) % 2:
         fail("arguments: OUT_DIR SCENE pairs")
@@ -371,7 +479,10 @@ def main(args):
         t0 = time.time()
         path = f"{out}/run.nc"
         check_attributes(path, out, None if scene == "-" else scene)
+        n_text = check_csv_text_columns(out)
         with xr.open_dataset(path) as ds:
+            if "altitude_m" not in ds["energy_j"].coords:
+                fail("xarray does not see altitude_m as a coordinate of energy_j")
             n_ret = check_grid_file(ds, f"{out}/returns.csv", ["energy_j", "stderr_j"], "returns.csv")
             check_grid_file(
                 ds,
@@ -422,7 +533,7 @@ def main(args):
         print(
             f"netcdf check: {out}: {n_ret} returns, {n_sig} signal and {n_prod} retrieval rows "
             f"equal in run.nc (xarray {xr.__version__}, netCDF4 {netCDF4.__version__}, "
-            f"{time.time() - t0:.2f} s)"
+            f"{time.time() - t0:.2f} s); {n_text} text columns read as text by pandas"
         )
 
 

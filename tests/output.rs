@@ -268,36 +268,41 @@ fn retrieval_csv_holds_no_nan_and_leaves_what_cannot_be_computed_empty() {
     let mut r = csv::Reader::from_path(dir.path().join("retrieval.csv")).unwrap();
     let header: Vec<String> = r.headers().unwrap().iter().map(str::to_string).collect();
     let col = |name: &str| header.iter().position(|h| h == name).unwrap();
-    let simulated = [
-        "simulated_error_per_shot_pair",
-        "simulated_error_averaged",
-        "simulated_bias_averaged",
-    ];
     let (mut empty_mc, mut rows) = (0, 0);
     for rec in r.records() {
         let rec = rec.unwrap();
         rows += 1;
         let analytic = &rec[col("source")] == "analytic";
-        if rec[col("retrieved")].is_empty() {
+        // A row's values are in the columns of its quantity's unit; the others are empty.
+        let unit = match &rec[col("quantity")] {
+            "mixing_ratio" => "ppm",
+            "slant_column" => "molecules_per_m2",
+            "number_density" => "molecules_per_m3",
+            q => panic!("quantity {q}"),
+        };
+        let simulated = [
+            format!("simulated_error_per_shot_pair_{unit}"),
+            format!("simulated_error_averaged_{unit}"),
+            format!("simulated_bias_averaged_{unit}"),
+        ];
+        if rec[col(&format!("retrieved_{unit}"))].is_empty() {
             empty_mc += 1;
         }
         for (name, field) in header.iter().zip(rec.iter()) {
-            if [
-                "method",
-                "source",
-                "order",
-                "channel_pair",
-                "quantity",
-                "unit",
-            ]
-            .contains(&name.as_str())
-            {
+            if ["method", "source", "order", "channel_pair", "quantity"].contains(&name.as_str()) {
+                continue;
+            }
+            let other_unit = ["ppm", "molecules_per_m2", "molecules_per_m3"]
+                .iter()
+                .any(|u| *u != unit && name.ends_with(&format!("_{u}")));
+            if other_unit {
+                assert!(field.is_empty(), "`{name}` of a {unit} row: {rec:?}");
                 continue;
             }
             if field.is_empty() {
                 // Only Monte Carlo estimates and the simulated figures may be missing.
                 assert!(
-                    !analytic || simulated.contains(&name.as_str()),
+                    !analytic || simulated.contains(name),
                     "an analytic row lacks `{name}`: {rec:?}"
                 );
                 continue;
@@ -306,8 +311,8 @@ fn retrieval_csv_holds_no_nan_and_leaves_what_cannot_be_computed_empty() {
             assert!(v.is_finite(), "`{name}` = `{field}`: {rec:?}");
         }
         if analytic {
-            let truth: f64 = rec[col("truth")].parse().unwrap();
-            let retrieved: f64 = rec[col("retrieved")].parse().unwrap();
+            let truth: f64 = rec[col(&format!("truth_{unit}"))].parse().unwrap();
+            let retrieved: f64 = rec[col(&format!("retrieved_{unit}"))].parse().unwrap();
             assert!((retrieved / truth - 1.0).abs() < 0.01, "{rec:?}");
         }
     }

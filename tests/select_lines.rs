@@ -533,7 +533,7 @@ fn random_error_matches_the_retrieval_stage() {
         .map(|l| l.split(',').collect::<Vec<_>>())
         .find(|r| r[col("method")] == "ipda" && r[col("source")] == "analytic")
         .unwrap();
-    let expected: f64 = row[col("random_error_averaged")].parse().unwrap();
+    let expected: f64 = row[col("random_error_averaged_ppm")].parse().unwrap();
     let out = dir.path().join("select");
     lidarsim_ok([
         "select-lines".as_ref(),

@@ -259,7 +259,13 @@ pub fn check_csv_text(name: &str, text: &str) -> Result<usize, String> {
             if non_finite_text(field) {
                 return Err(format!("{name} record {}: `{col}` = {field}", n + 1));
             }
+            // retrieval.csv's value columns carry their unit (`mc_stderr_ppm`, …).
+            let bare = ["_ppm", "_molecules_per_m2", "_molecules_per_m3"]
+                .iter()
+                .find_map(|u| col.strip_suffix(u))
+                .unwrap_or(col);
             let non_negative = NON_NEGATIVE_COLUMNS.contains(&col.as_str())
+                || NON_NEGATIVE_COLUMNS.contains(&bare)
                 || (col.starts_with("sigma_") && col.ends_with("_cm2"));
             if non_negative
                 && let Ok(v) = field.trim().parse::<f64>()

@@ -227,10 +227,10 @@ def mie(m, x):
 class StudyResult:
     """A study's products: its tables as Datasets (None without rows) and its failures."""
 
-    #: One row per profile (or group), line pair and retrieved quantity (``profiles.nc``,
-    #: ``sensitivities.nc``).
+    #: ``profiles.nc``: arrays on (profile, pair, retrieval), with ``class`` on profile and
+    #: ``method`` on retrieval; or ``sensitivities.nc``, one row per group and on-line.
     records: Optional[xr.Dataset]
-    #: Statistics per class, line pair and quantity (``summary.nc``; None for select_lines).
+    #: ``summary.nc``: statistics on (class, pair, retrieval); None for select_lines.
     summary: Optional[xr.Dataset]
     #: The profiles that could not be studied: (id, reason).
     failed: List[Tuple[str, str]] = field(default_factory=list)

@@ -777,13 +777,44 @@ _NOT_BUDGET = {
 }
 
 
+def _flat(ds, da):
+    """A variable of a study's file as a flat array in the order of ``_table``: a table on
+    ``row`` as it is; on (profile or class, pair, retrieval), ``profiles.nc`` and
+    ``summary.nc``, broadcast to those dimensions and raveled."""
+    if "row" in ds.dims:
+        return da.values
+    order = [d for d in ("profile", "class", "pair", "retrieval") if d in ds.dims]
+    full = da.variable.set_dims({d: ds.sizes[d] for d in order})
+    return full.transpose(*order).values.ravel()
+
+
 def _table(ds, names, what):
-    _require(ds, names, what)
+    """Columns of a study's file as flat arrays: the variables ``names`` (``profile_id`` is the
+    coordinate ``profile`` of ``profiles.nc``); on (profile or class, pair, retrieval), the
+    cells no record fills (every value missing) left out."""
+    names = list(names)
+    alias = {"profile_id": "profile"} if "row" not in ds.dims and "profile_id" not in ds.variables else {}
+    # A missing column is named as the caller asked for it.
+    alias = {k: v for k, v in alias.items() if v in ds.variables}
+    _require(ds, [alias.get(n, n) for n in names], what)
     out = {}
     for n in names:
-        v = ds[n].values
+        v = _flat(ds, ds[alias.get(n, n)])
         out[n] = _text(v) if v.dtype.kind in "OSU" else np.asarray(v, dtype=float)
+    if "row" not in ds.dims:
+        keep = _filled(ds)
+        out = {k: v[keep] for k, v in out.items()}
     return out
+
+
+def _filled(ds):
+    """The cells of a study's arrays that hold a record (any number there)."""
+    numbers = [v for v in ds.data_vars if ds[v].dtype.kind == "f"]
+    keep = None
+    for v in numbers:
+        k = np.isfinite(np.asarray(_flat(ds, ds[v]), dtype=float))
+        keep = k if keep is None else keep | k
+    return keep
 
 
 def _pick_method(methods, method, what):
@@ -817,8 +848,8 @@ def study_errors(summary, *, method=None, group=None, ax=None):
     Parameters
     ----------
     summary : xarray.Dataset
-        ``summary.nc`` of ``lidarsim dial``: a table on dimension ``row`` with ``class``,
-        ``pair``, ``method``, ``bias_ppm``, ``sd_ppm``, ``noisy_bias_ppm``, ``noisy_sd_ppm``
+        ``summary.nc`` of ``lidarsim dial``: arrays on (class, pair, retrieval) with the
+        coordinates ``class``, ``pair``, ``method``, ``bias_ppm``, ``sd_ppm``, ``noisy_bias_ppm``, ``noisy_sd_ppm``
         [ppm] and ``altitude_bottom_m``, ``altitude_top_m`` [m].
     method : {"ipda", "dial"}, optional
         Default ``ipda`` if the study has it, else ``dial``.
@@ -972,7 +1003,8 @@ def budget_table(profiles, *, method="ipda"):
             "study_budget: the table has no budget columns (<source>_ppm besides "
             f"{sorted(_NOT_BUDGET)}): is it profiles.nc of lidarsim dial?"
         )
-    vals = {s: np.asarray(profiles[s + "_ppm"].values, dtype=float) for s in sources}
+    keep = _filled(profiles) if "row" not in profiles.dims else slice(None)
+    vals = {s: np.asarray(_flat(profiles, profiles[s + "_ppm"]), dtype=float)[keep] for s in sources}
     m = t["method"] == method
     if not m.any():
         raise ValueError(
@@ -1016,8 +1048,8 @@ def study_budget(profiles, *, method="ipda", group=None, ax=None):
     Parameters
     ----------
     profiles : xarray.Dataset
-        ``profiles.nc`` of ``lidarsim dial`` (one row per profile, pair and cell; one
-        ``<source>_ppm`` column [ppm] per budget row).
+        ``profiles.nc`` of ``lidarsim dial`` (arrays on (profile, pair, retrieval); one
+        ``<source>_ppm`` variable [ppm] per budget row).
     method : {"ipda", "dial"}
         ``ipda`` (default): the columns, one slot per pair. ``dial``: the cells of the first
         pair (or of ``group``'s), one slot per cell, labelled by altitude [km].

@@ -367,8 +367,16 @@ pub fn dial<'py>(
         .iter()
         .any(|o| o.records.as_ref().is_ok_and(|r| !r.is_empty()))
     {
-        let ds = dial_study::profiles_dataset(&result.outcomes, &title, &history)
+        let mut ds = dial_study::profiles_dataset(&result.outcomes, &title, &history)
             .map_err(runtime_error)?;
+        lidarsim::products::dial::study_globals(
+            &mut ds,
+            &title,
+            &history,
+            &inputs.scene,
+            &inputs.set,
+            inputs.options.seed,
+        );
         dataset_to_py(py, ds)?.into_any()
     } else {
         py.None().into_bound(py)
@@ -376,8 +384,16 @@ pub fn dial<'py>(
     let summary = if products.summaries.is_empty() {
         py.None().into_bound(py)
     } else {
-        let ds = dial_study::summary_dataset(&products.summaries, &title, &history)
+        let mut ds = dial_study::summary_dataset(&products.summaries, &title, &history)
             .map_err(runtime_error)?;
+        lidarsim::products::dial::study_globals(
+            &mut ds,
+            &title,
+            &history,
+            &inputs.scene,
+            &inputs.set,
+            inputs.options.seed,
+        );
         dataset_to_py(py, ds)?.into_any()
     };
     let failed = PyList::empty(py);
@@ -479,12 +495,7 @@ pub fn select_lines<'py>(
     let table = if products.rows.is_empty() {
         py.None().into_bound(py)
     } else {
-        let ds = lidarsim::study::select::to_dataset(
-            &products.rows,
-            "lidarsim select-lines: CO2 IPDA line selection",
-            &history,
-        )
-        .map_err(runtime_error)?;
+        let ds = products.dataset(&history).map_err(runtime_error)?;
         dataset_to_py(py, ds)?.into_any()
     };
     let failed = PyList::empty(py);

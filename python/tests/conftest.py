@@ -22,6 +22,12 @@ def shared_file(relative):
     return p
 
 
+def text(field):
+    """A text field of lidarsim's CSV files as the name it holds: a name that would read as a
+    number (`1064`) is written with one apostrophe in front (README, "Text in CSV files")."""
+    return field[1:] if field.startswith("'") else field
+
+
 def as_written(v, digits):
     """A number as lidarsim's CSV files write it with Rust's `{:.Ne}` (`1.500000000e-3`,
     `0.000000000e0`; an empty field for no value)."""

@@ -9,7 +9,7 @@ import pytest
 import xarray as xr
 
 import lidarsim
-from conftest import ROOT, as_written, same_but_history, shared_file
+from conftest import ROOT, as_written, same_but_history, shared_file, text
 
 
 @pytest.mark.parametrize(
@@ -30,7 +30,7 @@ def test_run_is_the_command_line_bit_for_bit(cli, tmp_path, scene, photons):
         for r in csv.DictReader(f):
             if r["polarisation"] != "total":
                 continue
-            at = dict(source=r["source"], channel=r["channel"], order=r["order"],
+            at = dict(source=r["source"], channel=text(r["channel"]), order=r["order"],
                       fov_full_angle_mrad=float(r["fov_full_angle_mrad"]), range_m=float(r["range_m"]))
             # returns.csv writes 10 significant digits ({:.9e}); run.nc (above) every bit.
             assert as_written(ds["energy_j"].sel(at).item(), 9) == r["energy_j"]
@@ -185,14 +185,14 @@ def test_polarised_returns_are_the_csv_rows(cli, tmp_path):
         for r in csv.DictReader(f):
             if r["polarisation"] == "total":
                 continue
-            at = dict(source=r["source"], channel=r["channel"], order=r["order"], polarisation=r["polarisation"],
+            at = dict(source=r["source"], channel=text(r["channel"]), order=r["order"], polarisation=r["polarisation"],
                       fov_full_angle_mrad=float(r["fov_full_angle_mrad"]), range_m=float(r["range_m"]))
             assert as_written(ds["polarised_energy_j"].sel(at).item(), 9) == r["energy_j"]
             assert as_written(ds["polarised_stderr_j"].sel(at).item(), 9) == r["stderr_j"]
             checked += 1
     with open(tmp_path / "out" / "depolarisation.csv") as f:
         for r in csv.DictReader(f):
-            at = dict(source=r["source"], channel=r["channel"], order=r["order"],
+            at = dict(source=r["source"], channel=text(r["channel"]), order=r["order"],
                       fov_full_angle_mrad=float(r["fov_full_angle_mrad"]), range_m=float(r["range_m"]))
             assert as_written(ds["depolarisation_ratio"].sel(at).item(), 9) == r["delta"]
             assert as_written(ds["depolarisation_ratio_stderr"].sel(at).item(), 9) == r["delta_stderr"]
@@ -277,7 +277,7 @@ def test_jacobians_are_the_command_line_and_jacobians_csv(cli, tmp_path):
         for r in csv.DictReader(f):
             if r["quantity"] == "gas_amount":  # per relative change: the CSV's only
                 continue
-            at = dict(channel=r["channel"], fov_full_angle_mrad=float(r["fov_full_angle_mrad"]),
+            at = dict(channel=text(r["channel"]), fov_full_angle_mrad=float(r["fov_full_angle_mrad"]),
                       range_m=float(r["range_m"]), jacobian_order=r["order"], layer=float(r["layer"]),
                       jacobian_quantity=r["quantity"])
             assert as_written(j.sel(at).item(), 9) == r["derivative"]

@@ -51,7 +51,7 @@ pub struct Var {
 }
 
 impl Var {
-    pub(super) fn attrs<const N: usize>(&mut self, attrs: [(&str, &str); N]) -> &mut Var {
+    pub(crate) fn attrs<const N: usize>(&mut self, attrs: [(&str, &str); N]) -> &mut Var {
         for (k, v) in attrs {
             self.attrs.push((k.into(), Attr::text(v)));
         }
@@ -60,7 +60,7 @@ impl Var {
 
     /// Mark non-finite values as missing: they become `_FillValue` (NetCDF's default fill
     /// for doubles, so that a reader that ignores the attribute still sees the same number).
-    pub(super) fn fill(&mut self) -> &mut Var {
+    pub(crate) fn fill(&mut self) -> &mut Var {
         if let Values::F64(v) = &mut self.values {
             for x in v.iter_mut().filter(|x| !x.is_finite()) {
                 *x = NC_FILL_F64;
@@ -84,15 +84,15 @@ pub struct Dataset {
 }
 
 impl Dataset {
-    pub(super) fn dim(&mut self, name: &str, len: usize) {
+    pub(crate) fn dim(&mut self, name: &str, len: usize) {
         self.dims.push((name.into(), len));
     }
 
-    pub(super) fn global(&mut self, name: &str, value: Attr) {
+    pub(crate) fn global(&mut self, name: &str, value: Attr) {
         self.globals.push((name.into(), value));
     }
 
-    pub(super) fn f64(&mut self, name: &str, dims: &[&str], values: Vec<f64>) -> &mut Var {
+    pub(crate) fn f64(&mut self, name: &str, dims: &[&str], values: Vec<f64>) -> &mut Var {
         self.vars.push(Var {
             name: name.into(),
             dims: dims.iter().map(|d| d.to_string()).collect(),
@@ -105,7 +105,7 @@ impl Dataset {
 
     /// A text variable over `dim`: a char array (`dim`, `<name>_strlen`) as CF-1.8 §2.2 has
     /// it, with `_Encoding = "utf-8"` so that netCDF4-python and xarray read strings.
-    pub(super) fn text(&mut self, name: &str, dim: &str, values: &[String]) -> &mut Var {
+    pub(crate) fn text(&mut self, name: &str, dim: &str, values: &[String]) -> &mut Var {
         let strlen = values.iter().map(String::len).max().unwrap_or(0).max(1);
         let strlen_dim = format!("{name}_strlen");
         self.dim(&strlen_dim, strlen);

@@ -97,6 +97,8 @@ fn write(products: &[Product]) -> Vec<u8> {
         returns: &[&mc, &analytic],
         lidar_constant_j_m2: None,
         gates: &gates(),
+        lidar_altitude_m: 0.0,
+        mu: 1.0,
         lines: &lines,
         polarised: &[],
         signals: &[],
@@ -226,6 +228,8 @@ fn backscatter_variables_are_the_energies_times_the_lidar_equation_factors() {
             returns: &[&mc, &analytic],
             lidar_constant_j_m2: Some(constants),
             gates: &gates(),
+            lidar_altitude_m: 0.0,
+            mu: 1.0,
             lines: &lines,
             polarised: &[],
             signals: &[],
@@ -394,6 +398,8 @@ fn returns_on_different_grids_are_refused() {
         returns: &[&mc, &analytic],
         lidar_constant_j_m2: None,
         gates: &gates(),
+        lidar_altitude_m: 0.0,
+        mu: 1.0,
         lines: &[],
         polarised: &[],
         signals: &[],
@@ -521,6 +527,8 @@ fn polarised_returns_land_in_their_bins_with_the_depolarisation_ratio() {
         returns: &[&mc, &analytic],
         lidar_constant_j_m2: None,
         gates: &gates(),
+        lidar_altitude_m: 0.0,
+        mu: 1.0,
         lines: &[],
         polarised: &polarised,
         signals: &[],
@@ -636,6 +644,8 @@ fn jacobians_land_in_their_bins_with_fill_where_undefined() {
         returns: &[&mc, &analytic],
         lidar_constant_j_m2: None,
         gates: &gates(),
+        lidar_altitude_m: 0.0,
+        mu: 1.0,
         lines: &[],
         polarised: &[],
         signals: &[],
@@ -681,7 +691,7 @@ fn jacobians_land_in_their_bins_with_fill_where_undefined() {
     );
     assert_eq!(
         attr("jacobian_j_m", "coordinates"),
-        "layer_bottom_m layer_top_m"
+        "altitude_m layer_bottom_m layer_top_m"
     );
     assert!(attr("jacobian_j_m", "long_name").contains("1/m"));
     assert_eq!(attr("layer_bottom_m", "units"), "m");
@@ -744,6 +754,8 @@ fn jacobians_are_absent_without_and_refused_off_the_grid() {
             returns: &[&mc, &analytic],
             lidar_constant_j_m2: None,
             gates: &gates(),
+            lidar_altitude_m: 0.0,
+            mu: 1.0,
             lines: &[],
             polarised: &[],
             signals: &[],
@@ -770,4 +782,56 @@ fn jacobians_are_absent_without_and_refused_off_the_grid() {
     let mut no_line = jacobians();
     no_line.channels = vec!["a".into(), "b".into(), "c".into()];
     assert!(matches!(file(Some(&no_line)), Err(NetcdfError::Layout(_))));
+}
+
+/// `altitude_m`, the gates' altitude along the line of sight: a nadir look from 2000 m over the
+/// gates 100–130, 130–160, 160–190 m puts their centres at 1885, 1855, 1825 m and their edges
+/// at 1900 … 1810 m; it is an auxiliary coordinate every variable over `range_m` names, with
+/// CF's standard name, units and direction; a pointing that is not finite is refused.
+#[test]
+fn altitude_is_the_lidar_altitude_along_the_line_of_sight() {
+    let (mc, analytic) = returns();
+    let file = |alt: f64, mu: f64| {
+        run_dataset(&RunFile {
+            returns: &[&mc, &analytic],
+            lidar_constant_j_m2: None,
+            gates: &gates(),
+            lidar_altitude_m: alt,
+            mu,
+            lines: &[],
+            polarised: &[],
+            signals: &[],
+            products: &[],
+            gas: None,
+            jacobians: None,
+            attributes: &attributes(),
+        })
+    };
+    let ds = file(2000.0, -1.0).unwrap();
+    let var = |name: &str| ds.vars.iter().find(|v| v.name == name).unwrap();
+    let text = |v: &Var, k: &str| {
+        v.attrs.iter().find(|(n, _)| n == k).map(|(_, a)| match a {
+            Attr::Text(t) => t.clone(),
+            Attr::F64(_) => panic!("{k} is a number"),
+        })
+    };
+    let z = var("altitude_m");
+    assert_eq!(z.dims, ["range_m"]);
+    assert_eq!(z.values, Values::F64(vec![1885.0, 1855.0, 1825.0]));
+    for (k, want) in [
+        ("standard_name", "altitude"),
+        ("units", "m"),
+        ("positive", "up"),
+        ("bounds", "altitude_m_bounds"),
+    ] {
+        assert_eq!(text(z, k).as_deref(), Some(want), "{k}");
+    }
+    assert_eq!(
+        var("altitude_m_bounds").values,
+        Values::F64(vec![1900.0, 1870.0, 1870.0, 1840.0, 1840.0, 1810.0])
+    );
+    for v in ["energy_j", "stderr_j"] {
+        assert_eq!(text(var(v), "coordinates").as_deref(), Some("altitude_m"));
+    }
+    assert!(file(f64::NAN, 1.0).is_err());
 }

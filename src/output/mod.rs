@@ -174,16 +174,55 @@ impl OutputError {
     }
 }
 
-/// `field` as one RFC 4180 CSV field: quoted, with its quotes doubled, when it holds a comma,
-/// a double quote, a CR or a LF, or reads as a non-finite number (a profile named `NaN`, which
-/// the check of staged CSV files would otherwise take for one); as it is otherwise. Every text
-/// field of lidarsim's CSV files goes through it (names in scenes may hold any text).
+/// `field` as one CSV text field: the house rule for every text column (names of channels,
+/// profiles, line pairs, classes, lines, failure reasons) of every CSV file lidarsim writes,
+/// so that a reader never takes a name for a number:
+///
+/// * a non-empty text that a reader would not load as text (it parses as a number, `1064`,
+///   `-2.5e3`, `inf`, `NaN`; it is a boolean, `True`, `false`; or it is one of pandas'
+///   missing-value words, `NA`, `null`, `None`, `n/a`, …), and a text that starts with an
+///   apostrophe, is written with one apostrophe in front (`'1064`, `'NA`, `''x`), the
+///   spreadsheets' mark of text: pandas, R and a spreadsheet then read a string, whatever the
+///   other rows hold (quoting alone does not do it: pandas reads `"1064"` as the integer 1064).
+///   A reader gets the name back by removing one leading apostrophe ([`csv_text_value`]);
+/// * then, RFC 4180: quoted, with its quotes doubled, when it holds a comma, a double quote,
+///   a CR or a LF.
+///
+/// An empty text stays empty (a missing value). lidarsim's own labels (`mc`, `total`, `ipda`, …)
+/// never need the apostrophe; scattering-order bins (`1`, `2`, `3+`, `total`) are written as
+/// they are.
 pub fn csv_field(field: &str) -> Cow<'_, str> {
-    if field.contains([',', '"', '\r', '\n']) || reads_non_finite(field) {
-        Cow::Owned(format!("\"{}\"", field.replace('"', "\"\"")))
+    let marked: Cow<'_, str> =
+        if !field.is_empty() && (field.starts_with('\'') || reads_as_non_text(field)) {
+            Cow::Owned(format!("'{field}"))
+        } else {
+            Cow::Borrowed(field)
+        };
+    if marked.contains([',', '"', '\r', '\n']) {
+        Cow::Owned(format!("\"{}\"", marked.replace('"', "\"\"")))
     } else {
-        Cow::Borrowed(field)
+        marked
     }
+}
+
+/// The text a field written by [`csv_field`] holds (RFC 4180 unquoting already done by the
+/// CSV reader): one leading apostrophe removed.
+pub fn csv_text_value(field: &str) -> &str {
+    field.strip_prefix('\'').unwrap_or(field)
+}
+
+/// Whether pandas' `read_csv` (its defaults), R's `read.csv` or a spreadsheet would load
+/// `field` as something other than text: a number (surrounding blanks ignored; Rust's float
+/// syntax, which covers theirs: sign, decimals, exponent, `inf`, `infinity`, `nan`), a
+/// boolean, or a missing value (pandas' default `na_values`).
+fn reads_as_non_text(field: &str) -> bool {
+    const WORDS: [&str; 24] = [
+        "#N/A", "#N/A N/A", "#NA", "-1.#IND", "-1.#QNAN", "-NaN", "-nan", "1.#IND", "1.#QNAN",
+        "<NA>", "N/A", "NA", "NULL", "NaN", "None", "n/a", "nan", "null", "True", "TRUE", "true",
+        "False", "FALSE", "false",
+    ];
+    let t = field.trim();
+    t.is_empty() || t.parse::<f64>().is_ok() || reads_non_finite(t) || WORDS.contains(&t)
 }
 
 /// A number as a CSV field: written with the format it is given (`{}`, `{:.9e}`, `{:.6}`) when

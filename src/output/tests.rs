@@ -67,7 +67,7 @@ fn csv_files_with_non_finite_numbers_are_refused() {
     }
     for text in ["NaN", "nan", "-inf", "+Infinity", " inf"] {
         assert!(reads_non_finite(text), "{text}");
-        assert_eq!(csv_field(text), format!("\"{text}\""));
+        assert_eq!(csv_field(text), format!("'{text}"));
     }
     for text in ["info", "nano", "in", "1e308", ""] {
         assert!(!reads_non_finite(text), "{text}");
@@ -117,6 +117,41 @@ fn csv_field_quotes_only_what_needs_it() {
     assert_eq!(csv_field("say \"hi\""), "\"say \"\"hi\"\"\"");
     assert_eq!(csv_field("two\nlines"), "\"two\nlines\"");
     assert_eq!(csv_field("cr\r"), "\"cr\r\"");
+}
+
+/// The text rule: a name that a reader would load as a number, a boolean or a missing value
+/// (pandas' defaults) gets one apostrophe in front, and so does one that starts with an
+/// apostrophe; `csv_text_value` undoes it. Other text is as it was.
+#[test]
+fn csv_field_marks_text_that_reads_as_a_number() {
+    for (text, written) in [
+        ("1064", "'1064"),
+        ("-2.5e3", "'-2.5e3"),
+        (" 7 ", "' 7 "),
+        ("+1", "'+1"),
+        (".5", "'.5"),
+        ("NA", "'NA"),
+        ("null", "'null"),
+        ("None", "'None"),
+        ("n/a", "'n/a"),
+        ("True", "'True"),
+        ("false", "'false"),
+        ("'x", "''x"),
+        ("'a,b", "\"''a,b\""),
+    ] {
+        assert_eq!(csv_field(text), written, "{text}");
+        let unquoted = written
+            .strip_prefix('"')
+            .and_then(|w| w.strip_suffix('"'))
+            .unwrap_or(written);
+        assert_eq!(csv_text_value(unquoted), text);
+    }
+    for text in [
+        "on", "off", "on-1", "1064nm", "R16e", "1/2", "high", "x'", "0x10", "1_000",
+    ] {
+        assert_eq!(csv_field(text), text);
+        assert_eq!(csv_text_value(text), text);
+    }
 }
 
 #[test]

@@ -260,12 +260,14 @@ impl<'a> DialProducts<'a> {
                 .iter()
                 .any(|o| o.records.as_ref().is_ok_and(|r| !r.is_empty()))
             {
-                let nc = dial::profiles_dataset(&result.outcomes, &title, history)?.encode()?;
-                files.write(dir.join(dial::PROFILES_NC), nc)?;
+                let mut nc = dial::profiles_dataset(&result.outcomes, &title, history)?;
+                study_globals(&mut nc, &title, history, scene, set, options.seed);
+                files.write(dir.join(dial::PROFILES_NC), nc.encode()?)?;
             }
             if !summaries.is_empty() {
-                let nc = dial::summary_dataset(summaries, &title, history)?.encode()?;
-                files.write(dir.join(dial::SUMMARY_NC), nc)?;
+                let mut nc = dial::summary_dataset(summaries, &title, history)?;
+                study_globals(&mut nc, &title, history, scene, set, options.seed);
+                files.write(dir.join(dial::SUMMARY_NC), nc.encode()?)?;
             }
         }
         files.write(
@@ -295,6 +297,34 @@ impl<'a> DialProducts<'a> {
         writeln!(out, "wrote {}", names.join(", "))?;
         Ok(())
     }
+}
+
+/// The global attributes of a study's `profiles.nc` and `summary.nc`
+/// ([`crate::netcdf::study_globals`]): the scene's file name (not its path: a merge of shards
+/// has it absolute) and text, the seed and the profile set.
+pub fn study_globals(
+    nc: &mut crate::netcdf::Dataset,
+    title: &str,
+    history: &str,
+    scene: &Scene,
+    set: &ProfileSet,
+    seed: u64,
+) {
+    let file = scene.path.file_name().map_or_else(
+        || scene.path.display().to_string(),
+        |f| f.to_string_lossy().into_owned(),
+    );
+    crate::netcdf::study_globals(
+        nc,
+        &crate::netcdf::StudyAttributes {
+            title,
+            history,
+            scene_file: Some(&file),
+            scene_text: Some(scene.text()),
+            seed: Some(seed),
+            profile_set: Some(&set.name),
+        },
+    );
 }
 
 /// Header of `profiles.csv`, one row per profile, line pair and retrieved quantity.

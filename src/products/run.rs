@@ -527,6 +527,8 @@ fn dataset_of(
         returns,
         lidar_constant_j_m2: constants.as_deref(),
         gates: &scene.gates,
+        lidar_altitude_m: scene.lidar.altitude_m,
+        mu: scene.lidar.zenith_angle_deg.to_radians().cos(),
         lines: &scene.sampling.lines,
         polarised: &polarised,
         signals: &run.signals,

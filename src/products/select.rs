@@ -42,6 +42,34 @@ pub struct SelectProducts<'a> {
 }
 
 impl<'a> SelectProducts<'a> {
+    /// `sensitivities.nc` ([`select::to_dataset`]) with the global attributes of every study
+    /// file ([`crate::netcdf::study_globals`]): the scene's file name and text (the instrument
+    /// of the random error) and the seed.
+    pub fn dataset(
+        &self,
+        history: &str,
+    ) -> Result<crate::netcdf::Dataset, crate::netcdf::NetcdfError> {
+        let title = "lidarsim select-lines: CO2 IPDA line selection";
+        let mut nc = select::to_dataset(&self.rows, title, history)?;
+        let scene = &self.study.scene;
+        let file = scene.path.file_name().map_or_else(
+            || scene.path.display().to_string(),
+            |f| f.to_string_lossy().into_owned(),
+        );
+        crate::netcdf::study_globals(
+            &mut nc,
+            &crate::netcdf::StudyAttributes {
+                title,
+                history,
+                scene_file: Some(&file),
+                scene_text: Some(scene.text()),
+                seed: Some(self.study.options.seed),
+                profile_set: None,
+            },
+        );
+        Ok(nc)
+    }
+
     /// The products of a study; an error when every member failed (nothing is written as if
     /// the study had succeeded).
     pub fn new(
@@ -114,12 +142,7 @@ impl<'a> SelectProducts<'a> {
         files.write(dir.join("sensitivities.csv"), select::to_csv(&self.rows))?;
         files.write(dir.join(FAILED_CSV), failed_csv(self.study, self.outcomes))?;
         if !self.rows.is_empty() {
-            let nc = select::to_dataset(
-                &self.rows,
-                "lidarsim select-lines: CO2 IPDA line selection",
-                history,
-            )?
-            .encode()?;
+            let nc = self.dataset(history)?.encode()?;
             files.write(dir.join("sensitivities.nc"), nc)?;
         }
         figures(&mut files)?;

@@ -65,7 +65,21 @@ impl Quantity {
             Quantity::NumberDensity => "number_density",
         }
     }
-    /// The `unit` column value.
+    /// The suffix of `retrieval.csv`'s value columns of this quantity (its unit).
+    pub fn column_suffix(self) -> &'static str {
+        match self {
+            Quantity::MixingRatio => "ppm",
+            Quantity::SlantColumn => "molecules_per_m2",
+            Quantity::NumberDensity => "molecules_per_m3",
+        }
+    }
+    /// All quantities, in the order of `retrieval.csv`'s column groups.
+    pub const ALL: [Quantity; 3] = [
+        Quantity::MixingRatio,
+        Quantity::SlantColumn,
+        Quantity::NumberDensity,
+    ];
+    /// The unit, as text.
     pub fn unit(self) -> &'static str {
         match self {
             Quantity::MixingRatio => "ppm",
@@ -196,8 +210,24 @@ impl Weighting {
     }
 }
 
-/// Header of `retrieval.csv`, one row per product.
-pub const CSV_HEADER: &str = "method,source,order,channel_pair,fov_full_angle_mrad,range_start_m,range_end_m,altitude_bottom_m,altitude_top_m,quantity,unit,truth,retrieved,bias,mc_stderr,random_error_per_shot_pair,random_error_averaged,shots_averaged,simulated_error_per_shot_pair,simulated_error_averaged,simulated_bias_averaged";
+/// Header of `retrieval.csv`, one row per product: its values in the columns of its
+/// quantity's unit (`_ppm` for a mixing ratio, `_molecules_per_m2` for a slant column,
+/// `_molecules_per_m3` for a number density), the other units' columns empty, so that no
+/// column holds two units.
+pub const CSV_HEADER: &str = "method,source,order,channel_pair,fov_full_angle_mrad,range_start_m,range_end_m,altitude_bottom_m,altitude_top_m,quantity,shots_averaged,truth_ppm,retrieved_ppm,bias_ppm,mc_stderr_ppm,random_error_per_shot_pair_ppm,random_error_averaged_ppm,simulated_error_per_shot_pair_ppm,simulated_error_averaged_ppm,simulated_bias_averaged_ppm,truth_molecules_per_m2,retrieved_molecules_per_m2,bias_molecules_per_m2,mc_stderr_molecules_per_m2,random_error_per_shot_pair_molecules_per_m2,random_error_averaged_molecules_per_m2,simulated_error_per_shot_pair_molecules_per_m2,simulated_error_averaged_molecules_per_m2,simulated_bias_averaged_molecules_per_m2,truth_molecules_per_m3,retrieved_molecules_per_m3,bias_molecules_per_m3,mc_stderr_molecules_per_m3,random_error_per_shot_pair_molecules_per_m3,random_error_averaged_molecules_per_m3,simulated_error_per_shot_pair_molecules_per_m3,simulated_error_averaged_molecules_per_m3,simulated_bias_averaged_molecules_per_m3";
+
+/// The value columns of `retrieval.csv` of one unit, without the unit's suffix, in order.
+pub const CSV_VALUE_COLUMNS: [&str; 9] = [
+    "truth",
+    "retrieved",
+    "bias",
+    "mc_stderr",
+    "random_error_per_shot_pair",
+    "random_error_averaged",
+    "simulated_error_per_shot_pair",
+    "simulated_error_averaged",
+    "simulated_bias_averaged",
+];
 
 impl Product {
     /// Retrieved minus truth.
@@ -216,8 +246,8 @@ impl Product {
                 String::new()
             }
         };
-        format!(
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+        let mut row = format!(
+            "{},{},{},{},{},{},{},{},{},{},{}",
             self.method.label(),
             self.source.label(),
             self.order.label(),
@@ -228,18 +258,28 @@ impl Product {
             v(self.altitude_m.0),
             v(self.altitude_m.1),
             self.quantity.label(),
-            self.quantity.unit(),
-            v(self.truth),
-            v(self.retrieved),
-            v(self.bias()),
-            v(self.mc_stderr),
-            v(self.random_error_per_shot_pair),
-            v(self.random_error_averaged),
             self.shots_averaged,
-            v(self.simulated_error_per_shot_pair),
-            v(self.simulated_error_averaged),
-            v(self.simulated_mean_averaged - self.truth),
-        )
+        );
+        let values = [
+            self.truth,
+            self.retrieved,
+            self.bias(),
+            self.mc_stderr,
+            self.random_error_per_shot_pair,
+            self.random_error_averaged,
+            self.simulated_error_per_shot_pair,
+            self.simulated_error_averaged,
+            self.simulated_mean_averaged - self.truth,
+        ];
+        for q in Quantity::ALL {
+            for x in values {
+                row.push(',');
+                if q == self.quantity {
+                    row.push_str(&v(x));
+                }
+            }
+        }
+        row
     }
 }
 

@@ -102,11 +102,11 @@ def main():
                     s = ipda(rows, "mc", "1", fov)
                     out.append({
                         "instrument": instrument, "low_cloud": int(low), "ice_cloud_tau": tau,
-                        "fov_full_angle_mrad": fov, "truth_ppm": t["truth"],
-                        "bias_ppm": t["bias"],
-                        "ms_bias_ppm": float(t["retrieved"]) - float(s["retrieved"]),
-                        "ms_bias_stderr_ppm": t["mc_stderr"],
-                        "single_scatter_bias_ppm": s["bias"],
+                        "fov_full_angle_mrad": fov, "truth_ppm": t["truth_ppm"],
+                        "bias_ppm": t["bias_ppm"],
+                        "ms_bias_ppm": float(t["retrieved_ppm"]) - float(s["retrieved_ppm"]),
+                        "ms_bias_stderr_ppm": t["mc_stderr_ppm"],
+                        "single_scatter_bias_ppm": s["bias_ppm"],
                     })
                 print(instrument, "low cloud" if low else "", tau, "done", flush=True)
     with open(HERE / "ms_bias.csv", "w", newline="") as f:
