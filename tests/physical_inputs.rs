@@ -50,7 +50,7 @@ fn xco2_truths(out: &Path) -> Vec<f64> {
     let col = |n: &str| header.iter().position(|h| h == n).unwrap();
     rows.iter()
         .filter(|r| r[col("quantity")] == "mixing_ratio" && r[col("method")] == "ipda")
-        .map(|r| r[col("truth")].parse().unwrap())
+        .map(|r| r[col("truth_ppm")].parse().unwrap())
         .collect()
 }
 
