@@ -7,7 +7,7 @@
 //! wavenumber and layer with the Curtis-Godson p and T, the vertical and the slant optical
 //! depth (vertical / |cos θ|, plane-parallel).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use lidarsim::atmosphere::StandardAtmosphere;
@@ -213,7 +213,15 @@ fn run_cross_sections(
         crate::figures::lbl::plot(
             &mut files,
             png,
-            &format!("{} at {p_atm} atm, {t_k} K", lines.source),
+            &format!(
+                "Absorption cross-section of {} at {p_atm} atm, {t_k} K (lines: {})",
+                columns
+                    .iter()
+                    .map(|(n, _)| n.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", "),
+                file_name(&lines.source)
+            ),
             "cross-section [cm²/molecule]",
             &grid.wavenumbers(),
             &series,
@@ -281,10 +289,11 @@ fn run_layers(
             &mut files,
             png,
             &format!(
-                "{}, {} m to {} m",
-                prof.name,
+                "Slant gas optical depth, {} atmosphere, {} m to {} m (lines: {})",
+                file_name(&prof.name),
                 edges[0],
-                edges[edges.len() - 1]
+                edges[edges.len() - 1],
+                file_name(&lines.source)
             ),
             "slant gas optical depth",
             &grid.wavenumbers(),
@@ -293,4 +302,11 @@ fn run_layers(
     }
     files.commit()?;
     Ok(())
+}
+
+/// The last component of a path-like source name, for a figure's title.
+fn file_name(source: &str) -> String {
+    Path::new(source)
+        .file_name()
+        .map_or_else(|| source.to_string(), |f| f.to_string_lossy().into_owned())
 }
