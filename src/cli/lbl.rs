@@ -304,9 +304,18 @@ fn run_layers(
     Ok(())
 }
 
-/// The last component of a path-like source name, for a figure's title.
+/// The file names of a line list's source (paths, several joined by " + "), for a figure's
+/// title.
 fn file_name(source: &str) -> String {
-    Path::new(source)
-        .file_name()
-        .map_or_else(|| source.to_string(), |f| f.to_string_lossy().into_owned())
+    source
+        .split(" + ")
+        .map(|s| match s.starts_with('<') {
+            // A built-in list's name (`<built-in …>`) is no path.
+            true => s.to_string(),
+            false => Path::new(s)
+                .file_name()
+                .map_or_else(|| s.to_string(), |f| f.to_string_lossy().into_owned()),
+        })
+        .collect::<Vec<_>>()
+        .join(" + ")
 }

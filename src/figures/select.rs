@@ -192,7 +192,9 @@ fn errors_figure(
         colour(6),
         style::INK,
     ];
-    let per_label: Vec<(Vec<Vec<(f64, f64)>>, (f64, f64))> = labels
+    // Per line: the six series, and the x range of its positions.
+    type Series = Vec<Vec<(f64, f64)>>;
+    let per_label: Vec<(Series, (f64, f64))> = labels
         .iter()
         .map(|label| {
             let mut pts: Vec<&Row> = rows

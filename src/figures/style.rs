@@ -243,6 +243,9 @@ pub fn chart_with_y_labels<'a, 'b>(
     Ok(b.build_cartesian_2d(x, y)?)
 }
 
+/// A drawing area of a figure.
+pub type Area<'b> = DrawingArea<BitMapBackend<'b>, Shift>;
+
 /// A white canvas of `size` at `path` with the figure's `title` on top, split into the area
 /// for the panels and the legend column on the right (None: no legend column).
 pub fn canvas<'b>(
@@ -250,13 +253,7 @@ pub fn canvas<'b>(
     size: (u32, u32),
     title: &str,
     legend: bool,
-) -> Result<
-    (
-        DrawingArea<BitMapBackend<'b>, Shift>,
-        Option<DrawingArea<BitMapBackend<'b>, Shift>>,
-    ),
-    Box<dyn std::error::Error>,
-> {
+) -> Result<(Area<'b>, Option<Area<'b>>), Box<dyn std::error::Error>> {
     init_font();
     let root = BitMapBackend::new(path, size).into_drawing_area();
     root.fill(&WHITE)?;
