@@ -396,7 +396,7 @@ fn fine_spectra(
 /// half-widths at the surface, so that every far line's wing is smooth over the window.
 const NEAR_CM1: f64 = 0.5;
 /// Nodes at which the far lines are evaluated, per window.
-const FAR_NODES: usize = 17;
+const FAR_NODES: usize = 9;
 
 /// The column optical depth (summed over the layers) at the sorted wavenumbers of each
 /// window, on two grids, the way LBL codes treat far wings on a coarse grid (Clough, Kneizys
