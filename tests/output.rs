@@ -471,6 +471,7 @@ fn a_run_or_merge_removes_the_earlier_outputs_it_does_not_rewrite() {
             "notes.txt",
             "profiles.csv",
             "returns.csv",
+            "returns.png",
             "summary.json"
         ]
     );

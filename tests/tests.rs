@@ -22,6 +22,8 @@ mod clouds;
 /// downward beam with no surface, slant paths to 89°, an optically thick layer; the analytic
 /// lidar equation and the Monte Carlo against closed-form quadratures and each other.
 mod edges;
+/// Every command that produces returns or a study writes its figures.
+mod figures;
 /// Fuzzing: property tests over the readers, a mutation fuzz of the shipped scenes through the
 /// binary.
 mod fuzz;

@@ -7,7 +7,7 @@
 //! wavenumber and layer with the Curtis-Godson p and T, the vertical and the slant optical
 //! depth (vertical / |cos θ|, plane-parallel).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use lidarsim::atmosphere::StandardAtmosphere;
@@ -236,7 +236,15 @@ fn run_cross_sections(
         crate::figures::lbl::plot(
             &mut files,
             png,
-            &format!("{} at {p_atm} atm, {t_k} K", lines.source),
+            &format!(
+                "Absorption cross-section of {} at {p_atm} atm, {t_k} K (lines: {})",
+                columns
+                    .iter()
+                    .map(|(n, _)| n.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", "),
+                file_name(&lines.source)
+            ),
             "cross-section [cm²/molecule]",
             &grid.wavenumbers(),
             &series,
@@ -310,10 +318,11 @@ fn run_layers(
             &mut files,
             png,
             &format!(
-                "{}, {} m to {} m",
-                prof.name,
+                "Slant gas optical depth, {} atmosphere, {} m to {} m (lines: {})",
+                file_name(&prof.name),
                 edges[0],
-                edges[edges.len() - 1]
+                edges[edges.len() - 1],
+                file_name(&lines.source)
             ),
             "slant gas optical depth",
             &grid.wavenumbers(),
@@ -322,4 +331,20 @@ fn run_layers(
     }
     files.commit()?;
     Ok(())
+}
+
+/// The file names of a line list's source (paths, several joined by " + "), for a figure's
+/// title.
+fn file_name(source: &str) -> String {
+    source
+        .split(" + ")
+        .map(|s| match s.starts_with('<') {
+            // A built-in list's name (`<built-in …>`) is no path.
+            true => s.to_string(),
+            false => Path::new(s)
+                .file_name()
+                .map_or_else(|| s.to_string(), |f| f.to_string_lossy().into_owned()),
+        })
+        .collect::<Vec<_>>()
+        .join(" + ")
 }

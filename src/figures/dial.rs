@@ -1,27 +1,17 @@
 //! Figures of `lidarsim dial`: the ensemble's spread (`ensemble.png`), the IPDA errors per
-//! class (`errors.png`) and the error budget per line pair (`budget.png`, the reference study's
-//! Figure 5 in kind).
+//! line pair and class (`errors.png`) and the error budget per line pair (`budget.png`, the
+//! reference study's Figure 5 in kind).
 
 use std::path::Path;
 
 use plotters::prelude::*;
 
-use super::{FONT, draw_legend, init_font};
+use super::style::{self, Axis, Entry, Mark, class_colour, colour};
+use super::{DrawResult, init_font};
 use lidarsim::atmosphere::{LatitudeClass, ProfileSet};
 use lidarsim::output::{OutputError, OutputSet};
 use lidarsim::retrieval::Method;
 use lidarsim::study::dial::{N_SOURCES, Source, StudyResult, Summary};
-
-type DrawResult = Result<(), Box<dyn std::error::Error>>;
-
-fn class_colour(c: &str) -> RGBColor {
-    match c {
-        "tropical" => RGBColor(200, 60, 30),
-        "mid" => RGBColor(30, 120, 60),
-        "high" => RGBColor(30, 70, 190),
-        _ => RGBColor(0, 0, 0),
-    }
-}
 
 /// Draw every figure into `files`, for the directory `dir`.
 pub fn draw(
@@ -95,13 +85,16 @@ fn y_of(p_pa: f64) -> f64 {
 }
 
 fn ensemble_figure(path: &Path, set: &ProfileSet) -> DrawResult {
-    let root = BitMapBackend::new(path, (1000, 650)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let root = root.titled(
-        &format!("Ensemble spread by class ({} profiles)", set.len()),
-        (FONT, 22),
+    let (plots, key) = style::canvas(
+        path,
+        (1100 + style::LEGEND_W, 650),
+        &format!(
+            "Spread of the profile ensemble by latitude class ({} profiles)",
+            set.len()
+        ),
+        true,
     )?;
-    let panels = root.split_evenly((1, 2));
+    let panels = plots.split_evenly((1, 2));
     let data: Vec<(LatitudeClass, Vec<LevelSpread>)> = LatitudeClass::ALL
         .iter()
         .map(|c| (*c, spread(set, *c)))
@@ -114,54 +107,67 @@ fn ensemble_figure(path: &Path, set: &ProfileSet) -> DrawResult {
             .flat_map(|(_, v)| v.iter().filter(|v| v.0 >= 100.0).map(pick))
             .fold(0.0, f64::max)
             * 1.1;
-        let mut chart = ChartBuilder::on(panel)
-            .margin(15)
-            .x_label_area_size(45)
-            .y_label_area_size(60)
-            .build_cartesian_2d(0.0..x_max.max(1e-9), y_of(110_000.0)..y_of(100.0))?;
-        chart
-            .configure_mesh()
-            .x_desc(if i == 0 {
+        let mut chart = style::chart(
+            panel,
+            "",
+            0.0..x_max.max(1e-9),
+            y_of(110_000.0)..y_of(100.0),
+        )?;
+        style::mesh(
+            &mut chart,
+            Axis::Linear(if i == 0 {
                 "temperature standard deviation [K]"
             } else {
                 "water vapour standard deviation [% of mean]"
-            })
-            .y_desc("pressure [hPa]")
-            .y_label_formatter(&|y| format!("{:.0}", 10f64.powf(-*y)))
-            .label_style((FONT, 14))
-            .axis_desc_style((FONT, 16))
-            .draw()?;
+            }),
+            Axis::NegLog10("pressure [hPa]"),
+        )?;
         for (c, v) in &data {
-            let colour = class_colour(c.name());
-            chart
-                .draw_series(LineSeries::new(
-                    v.iter()
-                        .filter(|v| v.0 >= 100.0)
-                        .map(|v| (pick(v), y_of(v.0))),
-                    colour.stroke_width(2),
-                ))?
-                .label(c.name())
-                .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], colour));
+            let pts = v
+                .iter()
+                .filter(|v| v.0 >= 100.0)
+                .map(|v| (pick(v), y_of(v.0)))
+                .collect();
+            style::line(&mut chart, pts, class_colour(c.name()), 2, false)?;
         }
-        draw_legend(&mut chart)?;
     }
-    root.present()?;
+    let mut entries = vec![Entry::heading("latitude class")];
+    for (c, _) in &data {
+        entries.push(Entry::new(
+            c.name(),
+            class_colour(c.name()),
+            Mark::Line(2, false),
+        ));
+    }
+    if data.is_empty() {
+        entries.push(Entry::heading("no class has two profiles of one length"));
+    }
+    style::legend(&key.expect("legend column"), &entries)?;
     Ok(())
 }
 
+/// Histograms of the IPDA XCO2 error over the profiles, noise-free and with one noisy
+/// measurement, one row of panels per line pair and one column per class. The panels of a
+/// pair share their x range (the 2nd–98th percentiles of its errors, with zero; the few
+/// beyond are counted in the edge bins) so the classes compare.
 fn errors_figure(path: &Path, result: &StudyResult) -> DrawResult {
-    // The IPDA errors of the first pair, per class: noise-free and noisy.
-    let first_pair = result
+    let mut pairs: Vec<String> = Vec::new();
+    for r in result
         .outcomes
         .iter()
-        .find_map(|o| o.records.as_ref().ok().and_then(|r| r.first()))
-        .map(|r| r.pair.clone())
-        .unwrap_or_default();
+        .filter_map(|o| o.records.as_ref().ok())
+        .flatten()
+        .filter(|r| r.method == Method::Ipda)
+    {
+        if !pairs.contains(&r.pair) {
+            pairs.push(r.pair.clone());
+        }
+    }
     let classes: Vec<LatitudeClass> = LatitudeClass::ALL
         .into_iter()
         .filter(|c| result.outcomes.iter().any(|o| o.class == *c))
         .collect();
-    let errors = |c: LatitudeClass, noisy: bool| -> Vec<f64> {
+    let errors = |pair: &str, c: LatitudeClass, noisy: bool| -> Vec<f64> {
         result
             .outcomes
             .iter()
@@ -169,7 +175,7 @@ fn errors_figure(path: &Path, result: &StudyResult) -> DrawResult {
             .filter_map(|o| o.records.as_ref().ok())
             .flat_map(|rs| {
                 rs.iter()
-                    .filter(|r| r.method == Method::Ipda && r.pair == first_pair)
+                    .filter(|r| r.method == Method::Ipda && r.pair == pair)
                     .map(|r| {
                         if noisy {
                             r.error_noisy_ppm()
@@ -181,73 +187,92 @@ fn errors_figure(path: &Path, result: &StudyResult) -> DrawResult {
             .filter(|x| x.is_finite())
             .collect()
     };
-    let root =
-        BitMapBackend::new(path, (1000, 360 * classes.len() as u32 + 60)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let root = root.titled(
-        &format!("IPDA XCO2 error, {first_pair} (class-mean virtual σ)"),
-        (FONT, 22),
+    let (rows, cols) = (pairs.len().max(1), classes.len().max(1));
+    let (plots, key) = style::canvas(
+        path,
+        (440 * cols as u32 + style::LEGEND_W, 330 * rows as u32 + 50),
+        "IPDA XCO2 error (retrieved − true) over the profiles, per line pair and latitude class",
+        true,
     )?;
-    let panels = root.split_evenly((classes.len(), 1));
-    for (c, panel) in classes.iter().zip(panels.iter()) {
-        let clean = errors(*c, false);
-        let noisy = errors(*c, true);
-        let all: Vec<f64> = clean.iter().chain(&noisy).copied().collect();
-        if all.is_empty() {
-            continue;
-        }
-        let (lo, hi) = all
+    let panels = plots.split_evenly((rows, cols));
+    let bins = 30;
+    for (i, pair) in pairs.iter().enumerate() {
+        let all: Vec<f64> = classes
             .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| {
-                (a.min(*x), b.max(*x))
-            });
-        let pad = 0.05 * (hi - lo).max(1e-6);
-        let (lo, hi) = (lo - pad, hi + pad);
-        let bins = 40;
-        let w = (hi - lo) / bins as f64;
+            .flat_map(|c| {
+                let mut v = errors(pair, *c, false);
+                v.extend(errors(pair, *c, true));
+                v
+            })
+            .collect();
+        let x = style::robust_range(&all, &[0.0]);
+        let w = (x.end - x.start) / bins as f64;
         let hist = |v: &[f64]| -> Vec<usize> {
             let mut h = vec![0usize; bins];
-            for x in v {
-                let i = (((x - lo) / w) as usize).min(bins - 1);
-                h[i] += 1;
+            for e in v {
+                let k = ((e - x.start) / w).floor().clamp(0.0, (bins - 1) as f64) as usize;
+                h[k] += 1;
             }
             h
         };
-        let (hc, hn) = (hist(&clean), hist(&noisy));
-        let top = hc.iter().chain(&hn).copied().max().unwrap_or(1) as f64 * 1.15;
-        let mut chart = ChartBuilder::on(panel)
-            .margin(12)
-            .caption(format!("{c} ({} profiles)", clean.len()), (FONT, 17))
-            .x_label_area_size(40)
-            .y_label_area_size(55)
-            .build_cartesian_2d(lo..hi, 0.0..top)?;
-        chart
-            .configure_mesh()
-            .x_desc("retrieved − true XCO2 [ppm]")
-            .y_desc("profiles")
-            .label_style((FONT, 13))
-            .axis_desc_style((FONT, 15))
-            .draw()?;
-        for (h, colour, label) in [
-            (&hn, RGBColor(150, 150, 150), "one noisy measurement"),
-            (&hc, class_colour(c.name()), "noise-free"),
-        ] {
-            chart
-                .draw_series(h.iter().enumerate().map(|(i, n)| {
-                    let x0 = lo + i as f64 * w;
-                    Rectangle::new([(x0, 0.0), (x0 + w, *n as f64)], colour.mix(0.6).filled())
-                }))?
-                .label(label)
-                .legend(move |(x, y)| {
-                    Rectangle::new([(x, y - 5), (x + 15, y + 5)], colour.mix(0.6).filled())
-                });
+        let data: Vec<(Vec<usize>, Vec<usize>, usize)> = classes
+            .iter()
+            .map(|c| {
+                let (clean, noisy) = (errors(pair, *c, false), errors(pair, *c, true));
+                (hist(&clean), hist(&noisy), clean.len())
+            })
+            .collect();
+        for (j, (c, (hc, hn, n))) in classes.iter().zip(&data).enumerate() {
+            let top = hc.iter().chain(hn).copied().max().unwrap_or(1).max(1) as f64 * 1.15;
+            let mut chart = style::chart(
+                &panels[i * cols + j],
+                &format!("{pair}, {c} ({n} profiles)"),
+                x.clone(),
+                0.0..top,
+            )?;
+            style::mesh(
+                &mut chart,
+                Axis::Linear("retrieved − true XCO2 [ppm]"),
+                Axis::Count("profiles"),
+            )?;
+            for (h, fill) in [(hn, style::GREY), (hc, class_colour(c.name()))] {
+                chart.draw_series(h.iter().enumerate().filter(|(_, k)| **k > 0).map(
+                    |(b, k)| {
+                        let x0 = x.start + b as f64 * w;
+                        Rectangle::new([(x0, 0.0), (x0 + w, *k as f64)], fill.mix(0.7).filled())
+                    },
+                ))?;
+            }
         }
-        draw_legend(&mut chart)?;
     }
-    root.present()?;
+    let mut entries = vec![Entry::heading("noise-free retrieval, by class")];
+    for c in &classes {
+        entries.push(Entry::new(c.name(), class_colour(c.name()), Mark::Box));
+    }
+    entries.push(Entry::heading("with noise"));
+    entries.push(Entry::new(
+        "one noisy measurement per profile",
+        style::GREY,
+        Mark::Box,
+    ));
+    entries.push(Entry::heading(
+        "x range: 2nd–98th percentile of the pair's errors; the rest in the edge bins",
+    ));
+    style::legend(&key.expect("legend column"), &entries)?;
     Ok(())
 }
 
+/// The colour and line of error source `j` in the budget: random in rose (the total is
+/// black and thick).
+fn source_style(j: usize) -> (RGBColor, bool) {
+    (
+        colour((j + 1) % style::PALETTE.len()),
+        j + 1 >= style::PALETTE.len(),
+    )
+}
+
+/// The IPDA error budget: rms over the profiles of each source and the total, on a log axis.
+/// With one line pair a bar per source; with several, one line per source across the pairs.
 fn budget_figure(path: &Path, summaries: &[Summary]) -> DrawResult {
     // IPDA rows of the pooled group (`all`) if there is one, else of the one class.
     let group = if summaries.iter().any(|m| m.class == "all") {
@@ -263,48 +288,78 @@ fn budget_figure(path: &Path, summaries: &[Summary]) -> DrawResult {
         .filter(|m| m.method == Method::Ipda && m.class == group)
         .collect();
     let n = rows.len();
-    let vals = |j: Option<usize>| -> Vec<(f64, f64)> {
-        rows.iter()
-            .enumerate()
-            .filter_map(|(i, m)| {
-                let v = match j {
-                    Some(j) => m.sources[j].rms_ppm,
-                    None => m.total_ppm,
-                };
-                (v > 0.0 && v.is_finite()).then(|| (i as f64, v.log10()))
-            })
-            .collect()
+    let value = |m: &Summary, j: Option<usize>| -> Option<f64> {
+        let v = match j {
+            Some(j) => m.sources[j].rms_ppm,
+            None => m.total_ppm,
+        };
+        (v > 0.0 && v.is_finite()).then(|| v.log10())
     };
-    let all: Vec<f64> = (0..N_SOURCES)
-        .map(Some)
-        .chain([None])
-        .flat_map(|j| vals(j).into_iter().map(|p| p.1))
+    let all: Vec<f64> = rows
+        .iter()
+        .flat_map(|m| {
+            (0..N_SOURCES)
+                .map(Some)
+                .chain([None])
+                .filter_map(|j| value(m, j))
+        })
         .collect();
     let (lo, hi) = all
         .iter()
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| {
             (a.min(*x), b.max(*x))
         });
+    // Sources far below the largest (a jitter's second-order bias) are left off the axis.
     let (lo, hi) = if lo.is_finite() {
-        ((lo - 0.2).max(hi - 5.0), hi + 0.3)
+        ((lo - 0.2).max(hi - 5.0).floor(), (hi + 0.3).ceil())
     } else {
         (-3.0, 1.0)
     };
-    // Rows far below the largest (e.g. a jitter's second-order bias) are left off the panel.
-    let vals = |j: Option<usize>| -> Vec<(f64, f64)> {
-        vals(j).into_iter().filter(|p| p.1 >= lo).collect()
-    };
-    let root = BitMapBackend::new(path, (1100, 700)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let mut chart = ChartBuilder::on(&root)
-        .margin(15)
-        .caption(
-            format!("IPDA XCO2 error budget by line pair (class {group}; rms over profiles)"),
-            (FONT, 20),
-        )
-        .x_label_area_size(50)
-        .y_label_area_size(70)
-        .build_cartesian_2d(-0.5..(n as f64 - 0.5), lo..hi)?;
+    let title =
+        format!("IPDA XCO2 error budget (class {group}; rms over the profiles; random: 1σ)");
+    let mut entries = Vec::new();
+    if n == 1 {
+        let m = rows[0];
+        let (plots, key) = style::canvas(path, (1000 + style::LEGEND_W, 650), &title, true)?;
+        let mut names: Vec<String> = Source::ALL
+            .iter()
+            .map(|s| s.label().replace('_', " "))
+            .collect();
+        names.push("total (root sum of squares)".into());
+        let mut chart = style::chart_with_y_labels(
+            &plots,
+            &format!("line pair {}", m.pair),
+            lo..hi,
+            -0.6..(names.len() as f64 - 0.4),
+            230,
+        )?;
+        style::mesh(
+            &mut chart,
+            Axis::Log10("error [ppm]"),
+            Axis::Names("", &names),
+        )?;
+        for (j, _) in names.iter().enumerate() {
+            let (c, v) = match j < N_SOURCES {
+                true => (source_style(j).0, value(m, Some(j))),
+                false => (style::INK, value(m, None)),
+            };
+            // A source below the axis (or zero) has no bar; the legend says so.
+            if let Some(v) = v.filter(|v| *v > lo) {
+                let y = j as f64;
+                chart.draw_series(std::iter::once(Rectangle::new(
+                    [(lo, y - 0.35), (v.min(hi), y + 0.35)],
+                    c.filled(),
+                )))?;
+            }
+        }
+        entries.push(Entry::heading(format!(
+            "sources below {} ppm or zero have no bar",
+            style::tick(10f64.powf(lo))
+        )));
+        style::legend(&key.expect("legend column"), &entries)?;
+        return Ok(());
+    }
+    let (plots, key) = style::canvas(path, (1100 + style::LEGEND_W, 700), &title, true)?;
     // Pair names without the off-line when all pairs share it.
     let offs: Vec<&str> = rows
         .iter()
@@ -322,67 +377,49 @@ fn budget_figure(path: &Path, summaries: &[Summary]) -> DrawResult {
         (true, Some(off)) => format!("on-line (off-line `{off}`)"),
         _ => "on-line / off-line".to_string(),
     };
-    chart
-        .configure_mesh()
-        .x_labels(n.max(1))
-        .x_label_formatter(&|x| {
-            let i = x.round();
-            if (x - i).abs() < 1e-6 && i >= 0.0 && (i as usize) < names.len() {
-                names[i as usize].clone()
-            } else {
-                String::new()
-            }
-        })
-        .x_label_style((FONT, 12))
-        .x_desc(x_desc)
-        .y_labels(((hi - lo).ceil() as usize * 2).max(2))
-        .y_desc("error [ppm] (rms over profiles; random: 1σ)")
-        .y_label_formatter(&|y| {
-            // Label the decades only, with no more digits than they need.
-            if (y - y.round()).abs() > 1e-6 {
-                return String::new();
-            }
-            let e = y.round() as i32;
-            if e >= 0 {
-                format!("{}", 10f64.powi(e))
-            } else {
-                format!("{:.*}", (-e) as usize, 10f64.powi(e))
-            }
-        })
-        .label_style((FONT, 13))
-        .axis_desc_style((FONT, 15))
-        .draw()?;
-    let palette = [
-        RGBColor(0, 0, 0),
-        RGBColor(200, 60, 30),
-        RGBColor(30, 120, 200),
-        RGBColor(120, 80, 20),
-        RGBColor(150, 30, 150),
-        RGBColor(230, 150, 0),
-        RGBColor(0, 150, 140),
-        RGBColor(120, 120, 120),
-        RGBColor(30, 160, 60),
-    ];
-    for (j, src) in Source::ALL.iter().enumerate() {
-        let colour = palette[j % palette.len()];
-        let pts = vals(Some(j));
-        if pts.is_empty() {
-            continue;
-        }
+    let mut chart = style::chart(&plots, "", -0.5..(n as f64 - 0.5), lo..hi)?;
+    style::mesh(
+        &mut chart,
+        Axis::Names(&x_desc, &names),
+        Axis::Log10("error [ppm]"),
+    )?;
+    let mut series = |j: Option<usize>, c: RGBColor, dash: bool, width: u32| -> DrawResult {
+        let pts: Vec<(f64, f64)> = rows
+            .iter()
+            .enumerate()
+            .filter_map(|(i, m)| value(m, j).filter(|v| *v >= lo).map(|v| (i as f64, v)))
+            .collect();
+        // Lines only between neighbouring pairs that both have a value.
         for w in pts.windows(2).filter(|w| w[1].0 - w[0].0 == 1.0) {
-            chart.draw_series(LineSeries::new(w.to_vec(), colour.stroke_width(1)))?;
+            style::line(&mut chart, w.to_vec(), c, width, dash)?;
         }
-        chart
-            .draw_series(std::iter::empty::<Circle<(f64, f64), i32>>())?
-            .label(src.label())
-            .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], colour));
-        chart.draw_series(pts.iter().map(|p| Circle::new(*p, 4, colour.filled())))?;
+        chart.draw_series(pts.iter().map(|p| Circle::new(*p, 4, c.filled())))?;
+        Ok(())
+    };
+    for (j, src) in Source::ALL.iter().enumerate() {
+        let (c, dash) = source_style(j);
+        if rows
+            .iter()
+            .any(|m| value(m, Some(j)).is_some_and(|v| v >= lo))
+        {
+            series(Some(j), c, dash, 2)?;
+            entries.push(Entry::new(
+                src.label().replace('_', " "),
+                c,
+                Mark::Line(2, dash),
+            ));
+        }
     }
-    chart
-        .draw_series(LineSeries::new(vals(None), BLACK.stroke_width(3)))?
-        .label("total (root sum of squares)")
-        .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], BLACK.stroke_width(3)));
-    draw_legend(&mut chart)?;
-    root.present()?;
+    series(None, style::INK, false, 3)?;
+    entries.push(Entry::new(
+        "total (root sum of squares)",
+        style::INK,
+        Mark::Line(3, false),
+    ));
+    entries.push(Entry::heading(format!(
+        "sources below {} ppm are left off",
+        style::tick(10f64.powf(lo))
+    )));
+    style::legend(&key.expect("legend column"), &entries)?;
     Ok(())
 }

@@ -3,13 +3,13 @@
 use std::path::Path;
 
 use anyhow::bail;
-use plotters::prelude::*;
 
 use lidarsim::output::OutputSet;
 
-use super::{FONT, init_font};
+use super::style::{self, Axis, Entry, Mark, colour, dashed};
 
-/// Line plot with a logarithmic y axis (positive values only), staged in `files` as `path`.
+/// Line plot with a logarithmic y axis (positive values only), staged in `files` as `path`;
+/// `title` says what is drawn (a quantity and its conditions, not a file).
 pub fn plot(
     files: &mut OutputSet,
     path: &Path,
@@ -18,7 +18,6 @@ pub fn plot(
     x: &[f64],
     series: &[(String, Vec<f64>)],
 ) -> anyhow::Result<()> {
-    init_font();
     let (x0, x1) = (x[0], x[x.len() - 1].max(x[0] + 1e-9));
     let pos = series
         .iter()
@@ -29,36 +28,37 @@ pub fn plot(
         bail!("nothing to plot: every value is zero");
     }
     let lo = lo.max(hi * 1e-8);
-    let draw = |tmp: &Path| -> Result<(), Box<dyn std::error::Error>> {
-        let root = BitMapBackend::new(tmp, (1000, 600)).into_drawing_area();
-        root.fill(&WHITE)?;
-        let mut chart = ChartBuilder::on(&root)
-            .caption(title, (FONT, 18))
-            .margin(12)
-            .x_label_area_size(45)
-            .y_label_area_size(80)
-            // log10 on a linear axis: plotters' log axis draws no labels for values ~1e-25.
-            .build_cartesian_2d(x0..x1, (lo.log10() - 0.1)..(hi.log10() + 0.1))?;
-        chart
-            .configure_mesh()
-            .x_desc("wavenumber [cm⁻¹]")
-            .y_desc(y_label)
-            .label_style((FONT, 13))
-            .y_label_formatter(&|v| format!("{:.1e}", 10f64.powf(*v)))
-            .draw()?;
-        let colours = [BLUE, RED, GREEN, MAGENTA, CYAN, BLACK];
+    let draw = |tmp: &Path| -> super::DrawResult {
+        let (plots, key) = style::canvas(tmp, (1000 + style::LEGEND_W, 600), title, true)?;
+        // log10 on a linear axis: plotters' log axis draws no labels for values ~1e-25.
+        let mut chart = style::chart(&plots, "", x0..x1, (lo.log10() - 0.1)..(hi.log10() + 0.1))?;
+        style::mesh(
+            &mut chart,
+            Axis::Linear("wavenumber [cm⁻¹]"),
+            Axis::Log10(y_label),
+        )?;
+        let mut entries = Vec::new();
         for (k, (name, v)) in series.iter().enumerate() {
-            let c = colours[k % colours.len()];
-            chart
-                .draw_series(LineSeries::new(
-                    x.iter().zip(v).map(|(a, b)| (*a, b.max(lo).log10())),
-                    c.stroke_width(1),
-                ))?
-                .label(name.as_str())
-                .legend(move |(px, py)| PathElement::new(vec![(px, py), (px + 20, py)], c));
+            // At most ~2000 points per series at the figure's width (min/max per bucket).
+            let pts: Vec<(f64, f64)> = x
+                .iter()
+                .zip(v)
+                .map(|(a, b)| (*a, b.max(lo).log10()))
+                .collect();
+            style::line(
+                &mut chart,
+                style::decimate(&pts, 1000),
+                colour(k),
+                1,
+                dashed(k),
+            )?;
+            entries.push(Entry::new(
+                name.clone(),
+                colour(k),
+                Mark::Line(2, dashed(k)),
+            ));
         }
-        super::draw_legend(&mut chart)?;
-        root.present()?;
+        style::legend(&key.expect("legend column"), &entries)?;
         Ok(())
     };
     Ok(files.write_via(path, draw)?)

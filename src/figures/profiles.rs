@@ -27,14 +27,14 @@ pub fn draw(tmp: &Path, set: &ProfileSet, set_path: &Path, top_hpa: f64) -> Draw
     let root = BitMapBackend::new(tmp, (w, h)).into_drawing_area();
     root.fill(&WHITE)?;
     let title = format!(
-        "{} ({} profiles)",
+        "Profile set {}: temperature, H2O and CO2 against pressure, by latitude class ({} profiles)",
         set_path
             .file_name()
             .map(|s| s.to_string_lossy().into_owned())
             .unwrap_or_default(),
         set.len()
     );
-    let root = root.titled(&title, (FONT, 26))?;
+    let root = root.titled(&title, (FONT, super::style::TITLE))?;
     let panels = root.split_evenly((3, classes.len()));
     let p_max = set
         .members
@@ -46,11 +46,7 @@ pub fn draw(tmp: &Path, set: &ProfileSet, set_path: &Path, top_hpa: f64) -> Draw
     let decades = (p_max / (top_hpa * 100.0)).log10().ceil().max(1.0) as usize;
     let keep = |p: f64| p >= top_hpa * 100.0 * 0.999;
     for (ci, (c, sub)) in classes.iter().zip(&subsets).enumerate() {
-        let color = match c {
-            LatitudeClass::Tropical => RGBColor(200, 60, 30),
-            LatitudeClass::Mid => RGBColor(30, 120, 60),
-            LatitudeClass::High => RGBColor(30, 70, 190),
-        };
+        let color = super::style::class_colour(c.name());
         for row in 0..3 {
             let area = &panels[row * classes.len() + ci];
             // x data per member.
@@ -111,15 +107,9 @@ pub fn draw(tmp: &Path, set: &ProfileSet, set_path: &Path, top_hpa: f64) -> Draw
                 .margin(10)
                 .x_label_area_size(45)
                 .y_label_area_size(60)
-                .caption(caption, (FONT, 22));
-            let y_fmt = |v: &f64| {
-                let p = 10f64.powf(-v);
-                if p >= 10.0 {
-                    format!("{p:.0}")
-                } else {
-                    format!("{p:.2}")
-                }
-            };
+                .caption(caption, (FONT, super::style::CAPTION));
+            let y_fmt = |v: &f64| super::style::tick(10f64.powf(-v));
+            let x_fmt = |v: &f64| super::style::tick(*v);
             let style = ShapeStyle::from(&color.mix(0.25)).stroke_width(1);
             let mean_line = means[ci].as_ref().and_then(xs);
             macro_rules! draw_panel {
@@ -130,8 +120,9 @@ pub fn draw(tmp: &Path, set: &ProfileSet, set_path: &Path, top_hpa: f64) -> Draw
                         .x_desc(label)
                         .y_desc("pressure [hPa]")
                         .y_label_formatter(&y_fmt)
-                        .label_style((FONT, 15))
-                        .axis_desc_style((FONT, 17))
+                        .x_label_formatter(&x_fmt)
+                        .label_style((FONT, super::style::TICK))
+                        .axis_desc_style((FONT, super::style::AXIS))
                         .x_labels(6)
                         .y_labels(decades + 1)
                         .draw()?;

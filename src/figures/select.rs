@@ -9,12 +9,11 @@ use lidarsim::output::{OutputError, OutputSet};
 use lidarsim::study::select::{Row, StudyConfig, Uncertainties};
 use lidarsim::study::select_study::{GroupSummary, SPECTRUM_HALF_GHZ};
 
-use super::{FONT, draw_legend};
+use super::DrawResult;
+use super::style::{self, Axis, Entry, Mark, colour};
 
 /// Half width of the laser's spectral window marked in Figure 4 \[GHz\].
 const WINDOW_HALF_GHZ: f64 = 0.5;
-
-type DrawResult = Result<(), Box<dyn std::error::Error>>;
 
 /// Stage the figures of one group in `files`, for the directory `dir`.
 pub fn draw_figures(
@@ -53,7 +52,7 @@ fn best_on<'a>(rows: &'a [Row], label: &str) -> Option<&'a Row> {
 
 /// Figure 4: the two-way transmission (mean, and its standard deviation over the members of a
 /// set) against the offset from each line's centre, the 1 GHz window of the laser marked around
-/// the best-ranked on-line position of the line (around the centre if none).
+/// the best-ranked on-line position of the line (around the centre if none). One panel per line.
 fn transmission_figure(
     path: &Path,
     name: &str,
@@ -63,79 +62,102 @@ fn transmission_figure(
     members: usize,
 ) -> DrawResult {
     let n = cfg.spectra.len().max(1);
-    let root = BitMapBackend::new(path, (520 * n as u32, 560)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let panels = root.split_evenly((1, n));
+    let (plots, key) = style::canvas(
+        path,
+        (560 * n as u32 + style::LEGEND_W, 600),
+        &format!(
+            "Two-way column transmission around the figure lines, {name} ({members} profile{})",
+            if members == 1 { "" } else { "s" }
+        ),
+        true,
+    )?;
+    let panels = plots.split_evenly((1, n));
+    let show_std = members > 1
+        && stats
+            .iter()
+            .any(|(_, s)| s.iter().copied().fold(0.0f64, f64::max) > 0.0);
+    let (window_c, mean_c, std_c) = (colour(7), style::INK, colour(6));
     for ((w, (mean, std)), area) in cfg.spectra.iter().zip(stats).zip(&panels) {
         let std_max = std.iter().copied().fold(0.0f64, f64::max);
-        let show_std = members > 1 && std_max > 0.0;
-        let mut chart = ChartBuilder::on(area)
+        let mut b = ChartBuilder::on(area);
+        b.margin(10)
+            .x_label_area_size(50)
+            .y_label_area_size(75)
+            .right_y_label_area_size(if show_std { 80 } else { 0 })
             .caption(
-                format!(
-                    "{name}: {} ({members} profile{})",
-                    w.label,
-                    if members == 1 { "" } else { "s" }
-                ),
-                (FONT, 17),
-            )
-            .margin(12)
-            .x_label_area_size(45)
-            .y_label_area_size(60)
-            .right_y_label_area_size(if show_std { 70 } else { 0 })
+                format!("{} (centre {} cm⁻¹)", w.label, style::tick(w.centre_cm1)),
+                (style::FONT, style::CAPTION),
+            );
+        let mut chart = b
             .build_cartesian_2d(-SPECTRUM_HALF_GHZ..SPECTRUM_HALF_GHZ, 0.0..1.0)?
             .set_secondary_coord(
                 -SPECTRUM_HALF_GHZ..SPECTRUM_HALF_GHZ,
                 0.0..(1.1 * std_max).max(1e-6),
             );
-        chart
-            .configure_mesh()
-            .x_desc(format!(
-                "frequency from the line centre {:.3} cm⁻¹ [GHz]",
-                w.centre_cm1
-            ))
-            .y_desc("two-way transmission T² (mean)")
-            .label_style((FONT, 13))
-            .draw()?;
+        style::mesh(
+            &mut chart,
+            Axis::Linear("frequency from the line centre [GHz]"),
+            Axis::Linear("two-way transmission T² (mean)"),
+        )?;
         let centre = best_on(rows, &w.label).map_or(0.0, |r| r.position.offset_ghz);
         let (a, b) = (centre - WINDOW_HALF_GHZ, centre + WINDOW_HALF_GHZ);
-        chart
-            .draw_series(std::iter::once(Rectangle::new(
-                [(a, 0.0), (b, 1.0)],
-                BLUE.mix(0.12).filled(),
-            )))?
-            .label(format!(
-                "laser window ±{WINDOW_HALF_GHZ} GHz at {centre:+.1} GHz"
-            ))
-            .legend(|(x, y)| Rectangle::new([(x, y - 5), (x + 20, y + 5)], BLUE.mix(0.3).filled()));
-        chart
-            .draw_series(LineSeries::new(
-                w.offsets_ghz.iter().copied().zip(mean.iter().copied()),
-                BLACK.stroke_width(2),
-            ))?
-            .label("T² mean")
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK));
+        chart.draw_series(std::iter::once(Rectangle::new(
+            [(a, 0.0), (b, 1.0)],
+            window_c.mix(0.25).filled(),
+        )))?;
+        // Spectra of 10⁵ points draw as their per-pixel envelope ([`style::decimate`]).
+        let pts: Vec<(f64, f64)> = w
+            .offsets_ghz
+            .iter()
+            .copied()
+            .zip(mean.iter().copied())
+            .collect();
+        style::line(&mut chart, style::decimate(&pts, 600), mean_c, 2, false)?;
         if show_std {
+            let fy = |v: &f64| style::tick(*v);
             chart
                 .configure_secondary_axes()
-                .y_desc("T² standard deviation")
-                .label_style((FONT, 13))
+                .y_desc("T² standard deviation over profiles")
+                .y_label_formatter(&fy)
+                .label_style((style::FONT, style::TICK))
+                .axis_desc_style((style::FONT, style::AXIS))
                 .draw()?;
-            chart
-                .draw_secondary_series(LineSeries::new(
-                    w.offsets_ghz.iter().copied().zip(std.iter().copied()),
-                    RED.stroke_width(2),
-                ))?
-                .label("T² std over profiles (right axis)")
-                .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED));
+            let pts: Vec<(f64, f64)> = w
+                .offsets_ghz
+                .iter()
+                .copied()
+                .zip(std.iter().copied())
+                .collect();
+            chart.draw_secondary_series(LineSeries::new(
+                style::decimate(&pts, 600),
+                std_c.stroke_width(2),
+            ))?;
         }
-        draw_legend(&mut chart)?;
     }
-    root.present()?;
+    let mut entries = vec![Entry::new(
+        "T² mean over profiles",
+        mean_c,
+        Mark::Line(2, false),
+    )];
+    if show_std {
+        entries.push(Entry::new(
+            "T² standard deviation (right axis)",
+            std_c,
+            Mark::Line(2, false),
+        ));
+    }
+    entries.push(Entry::new(
+        format!("laser window ±{WINDOW_HALF_GHZ} GHz around the best-ranked on-line"),
+        window_c,
+        Mark::Box,
+    ));
+    style::legend(&key.expect("legend column"), &entries)?;
     Ok(())
 }
 
 /// Figure 5: the XCO2 error contributions (sensitivity × uncertainty, signed), the random error
-/// and the total against the on-line's offset from each chosen line's centre.
+/// and the total against the on-line's offset from each chosen line's centre, one panel per
+/// line, on one y range so the lines compare.
 fn errors_figure(
     path: &Path,
     name: &str,
@@ -144,82 +166,97 @@ fn errors_figure(
     unc: &Uncertainties,
 ) -> DrawResult {
     let n = labels.len().max(1);
-    let root = BitMapBackend::new(path, (520 * n as u32, 560)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let panels = root.split_evenly((1, n));
-    for (label, area) in labels.iter().zip(&panels) {
-        let mut pts: Vec<&Row> = rows
-            .iter()
-            .filter(|r| r.position.line.as_deref() == Some(*label))
-            .collect();
-        pts.sort_by(|a, b| a.position.offset_ghz.total_cmp(&b.position.offset_ghz));
-        if pts.is_empty() {
+    let (plots, key) = style::canvas(
+        path,
+        (560 * n as u32 + style::LEGEND_W, 600),
+        &format!("XCO2 error contributions against the on-line position, {name}"),
+        true,
+    )?;
+    let panels = plots.split_evenly((1, n));
+    let names = [
+        format!("temperature ± {} K", style::tick(unc.temperature_k)),
+        format!("frequency ± {} MHz", style::tick(unc.frequency_mhz)),
+        format!(
+            "surface pressure ± {} hPa",
+            style::tick(unc.surface_pressure_hpa)
+        ),
+        format!("H2O ± {} %", style::tick(unc.h2o_percent)),
+        "random (1σ)".to_string(),
+        "total (root sum of squares)".to_string(),
+    ];
+    let colours = [
+        colour(0),
+        colour(2),
+        colour(4),
+        colour(7),
+        colour(6),
+        style::INK,
+    ];
+    // Per line: the six series, and the x range of its positions.
+    type Series = Vec<Vec<(f64, f64)>>;
+    let per_label: Vec<(Series, (f64, f64))> = labels
+        .iter()
+        .map(|label| {
+            let mut pts: Vec<&Row> = rows
+                .iter()
+                .filter(|r| r.position.line.as_deref() == Some(*label))
+                .collect();
+            pts.sort_by(|a, b| a.position.offset_ghz.total_cmp(&b.position.offset_ghz));
+            let series: Vec<Vec<(f64, f64)>> = (0..6)
+                .map(|k| {
+                    pts.iter()
+                        .map(|r| {
+                            let c = unc.contributions_ppm(r);
+                            let v = match k {
+                                0..=3 => c[k],
+                                4 => r.random_error_ppm,
+                                _ => r.total_error_ppm,
+                            };
+                            (r.position.offset_ghz, v)
+                        })
+                        .filter(|p| p.1.is_finite())
+                        .collect()
+                })
+                .collect();
+            let x = match (pts.first(), pts.last()) {
+                (Some(a), Some(b)) => (a.position.offset_ghz, b.position.offset_ghz),
+                _ => (0.0, 0.0),
+            };
+            (series, x)
+        })
+        .collect();
+    // One y range for every panel: the 2nd–98th percentiles of all values, with zero.
+    let all: Vec<f64> = per_label
+        .iter()
+        .flat_map(|(s, _)| s.iter().flatten().map(|p| p.1))
+        .collect();
+    let y = style::robust_range(&all, &[0.0]);
+    for ((label, (series, (x0, x1))), area) in labels.iter().zip(per_label).zip(&panels) {
+        if series.iter().all(Vec::is_empty) {
             continue;
         }
-        let names = [
-            format!("T ± {} K", unc.temperature_k),
-            format!("frequency ± {} MHz", unc.frequency_mhz),
-            format!("surface pressure ± {} hPa", unc.surface_pressure_hpa),
-            format!("H2O ± {} %", unc.h2o_percent),
-            "random".to_string(),
-            "total".to_string(),
-        ];
-        let series: Vec<Vec<(f64, f64)>> = (0..6)
-            .map(|k| {
-                pts.iter()
-                    .map(|r| {
-                        let c = unc.contributions_ppm(r);
-                        let v = match k {
-                            0..=3 => c[k],
-                            4 => r.random_error_ppm,
-                            _ => r.total_error_ppm,
-                        };
-                        (r.position.offset_ghz, v)
-                    })
-                    .filter(|p| p.1.is_finite())
-                    .collect()
-            })
-            .collect();
-        let (lo, hi) = series
-            .iter()
-            .flatten()
-            .fold((0.0f64, 0.0f64), |(a, b), p| (a.min(p.1), b.max(p.1)));
-        let pad = 0.05 * (hi - lo).max(1e-3);
-        let (x0, x1) = (
-            pts[0].position.offset_ghz,
-            pts[pts.len() - 1].position.offset_ghz,
-        );
-        let (x0, x1) = if x1 > x0 {
-            (x0, x1)
-        } else {
-            (x0 - 1.0, x1 + 1.0)
-        };
-        let mut chart = ChartBuilder::on(area)
-            .caption(
-                format!("{name}: XCO2 errors, on-line on {label}"),
-                (FONT, 17),
-            )
-            .margin(12)
-            .x_label_area_size(45)
-            .y_label_area_size(60)
-            .build_cartesian_2d(x0..x1, (lo - pad)..(hi + pad))?;
-        chart
-            .configure_mesh()
-            .x_desc("on-line offset from the line centre [GHz]")
-            .y_desc("XCO2 error [ppm]")
-            .label_style((FONT, 13))
-            .draw()?;
-        let colours = [RED, BLUE, GREEN, CYAN, MAGENTA, BLACK];
-        for ((s, c), label) in series.into_iter().zip(colours).zip(names) {
-            let width = if label == "total" { 3 } else { 2 };
-            chart
-                .draw_series(LineSeries::new(s.clone(), c.stroke_width(width)))?
-                .label(label)
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c));
-            chart.draw_series(s.into_iter().map(|p| Circle::new(p, 3, c.filled())))?;
+        let x = style::padded(x0, x1);
+        let mut chart = style::chart(area, &format!("on-line on {label}"), x, y.clone())?;
+        style::mesh(
+            &mut chart,
+            Axis::Linear("on-line offset from the line centre [GHz]"),
+            Axis::Linear("XCO2 error [ppm]"),
+        )?;
+        for (s, c) in series.into_iter().zip(colours) {
+            let width = if c == style::INK { 3 } else { 2 };
+            let markers = s.len() <= 60;
+            let inside: Vec<(f64, f64)> = s.into_iter().filter(|p| y.contains(&p.1)).collect();
+            if markers {
+                chart.draw_series(inside.iter().map(|p| Circle::new(*p, 3, c.filled())))?;
+            }
+            style::line(&mut chart, inside, c, width, false)?;
         }
-        draw_legend(&mut chart)?;
     }
-    root.present()?;
+    let entries: Vec<Entry> = names
+        .into_iter()
+        .zip(colours)
+        .map(|(n, c)| Entry::new(n, c, Mark::Line(if c == style::INK { 3 } else { 2 }, false)))
+        .collect();
+    style::legend(&key.expect("legend column"), &entries)?;
     Ok(())
 }

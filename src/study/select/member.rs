@@ -13,7 +13,7 @@ use crate::atmosphere::{LatitudeClass, Profile, SetMember, StateShift, shift_mem
 use crate::instrument::laser::{Filter, Laser, Line};
 use crate::instrument::line_shape::MHZ_PER_CM1;
 use crate::retrieval::{AssumedInstrument, ReferenceState};
-use crate::spectroscopy::layer_optical_depths_at;
+use crate::spectroscopy::{LayerDepthMemo, LblOptions, LineList, layer_optical_depths_at};
 
 /// The results of one on-line position for one profile.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -210,7 +210,21 @@ pub fn study_member(member: &SetMember, cfg: &StudyConfig) -> Result<MemberResul
             },
         )?)
     };
-    let s0 = state(&profiles[0], &all)?;
+    // The unshifted profile's prepared lines are kept for the figures' spectra below.
+    let mut memo = LayerDepthMemo::new();
+    let s0 = ReferenceState::new_with(
+        &profiles[0],
+        &edges,
+        "CO2",
+        &cfg.lines,
+        &cfg.options,
+        AssumedInstrument {
+            laser: &Laser::ideal(1.0, all.len()),
+            lines: &all,
+            filter: &Filter::none(),
+        },
+        &mut memo,
+    )?;
     let s_t = state(&profiles[1], &base)?;
     let s_q = if member.profile.gas("H2O").is_some() {
         Some(state(&profiles[2], &base)?)
@@ -292,7 +306,7 @@ pub fn study_member(member: &SetMember, cfg: &StudyConfig) -> Result<MemberResul
         });
     }
 
-    let spectra = fine_spectra(cfg, &profiles[0], &edges)?;
+    let spectra = fine_spectra(cfg, &profiles[0], &edges, &mut memo)?;
     Ok(MemberResult {
         id: member.meta.id.clone(),
         class: member.meta.class(),
@@ -353,28 +367,136 @@ fn rayleigh_optical_depth(
     Ok(tau)
 }
 
-/// The fine spectra of `cfg.spectra` for `profile`.
+/// The fine spectra of `cfg.spectra` for `profile`: the two-way transmission, top to surface,
+/// at every offset of each window ([`column_depths_two_grid`]).
 fn fine_spectra(
     cfg: &StudyConfig,
     profile: &Profile,
     edges: &[f64],
+    memo: &mut LayerDepthMemo,
 ) -> Result<Vec<Vec<f64>>, SelectError> {
-    // Fine spectra of the unshifted profile: two-way transmission, top to surface.
-    let mut spectra = Vec::with_capacity(cfg.spectra.len());
-    for w in &cfg.spectra {
-        let nus: Vec<f64> = w
-            .offsets_ghz
+    let windows: Vec<Vec<f64>> = cfg
+        .spectra
+        .iter()
+        .map(|w| {
+            w.offsets_ghz
+                .iter()
+                .map(|o| w.centre_cm1 + o / GHZ_PER_CM1)
+                .collect()
+        })
+        .collect();
+    let columns = column_depths_two_grid(profile, &cfg.lines, edges, &windows, &cfg.options, memo)?;
+    Ok(columns
+        .iter()
+        .map(|c| c.iter().map(|tau| (-2.0 * tau).exp()).collect())
+        .collect())
+}
+
+/// Distance beyond a window within which a line counts as near [cm⁻¹]: some 7 pressure
+/// half-widths at the surface, so that every far line's wing is smooth over the window.
+const NEAR_CM1: f64 = 0.5;
+/// Nodes at which the far lines are evaluated, per window.
+const FAR_NODES: usize = 9;
+
+/// The column optical depth (summed over the layers) at the sorted wavenumbers of each
+/// window, on two grids, the way LBL codes treat far wings on a coarse grid (Clough, Kneizys
+/// and Davies 1989, "Line shape and the water vapor continuum", Atmos. Res. 23, 229–241; LBLRTM
+/// after it): the lines within [`NEAR_CM1`] of a window at each of its wavenumbers (the
+/// multigrid on a uniform window, [`GasOpticalDepthTable`]), the rest (every line that can reach
+/// the window minus the near ones) at [`FAR_NODES`] of them, by cubic Lagrange in between. A
+/// far line's wing is at least 0.5 cm⁻¹ away, where a Lorentz wing's fourth derivative bounds
+/// the interpolation error to ~1e-5 of the far part; a far line's 25 cm⁻¹ cutoff falling inside
+/// a window is a step of ~1e-5 of its peak, smeared over one node interval. The line-by-line
+/// sum of every line at each of the ~400 wavenumbers made these spectra, drawn only in the
+/// figures, take most of `select-lines`' time.
+fn column_depths_two_grid(
+    profile: &Profile,
+    lines: &LineList,
+    edges: &[f64],
+    windows: &[Vec<f64>],
+    opts: &LblOptions,
+    memo: &mut LayerDepthMemo,
+) -> Result<Vec<Vec<f64>>, SelectError> {
+    let column = |t: &[Vec<f64>], k: usize| -> f64 { t.iter().map(|row| row[k]).sum() };
+    let sorted = |nus: &[f64]| nus.windows(2).all(|p| p[1] > p[0]);
+    if windows.is_empty() {
+        return Ok(Vec::new());
+    }
+    if windows
+        .iter()
+        .any(|w| w.len() <= 2 * FAR_NODES || !sorted(w))
+    {
+        return windows
             .iter()
-            .map(|o| w.centre_cm1 + o / GHZ_PER_CM1)
+            .map(|nus| {
+                let t = layer_optical_depths_at(profile, lines, edges, nus, opts)?;
+                Ok((0..nus.len()).map(|k| column(&t, k)).collect())
+            })
             .collect();
-        let t = layer_optical_depths_at(profile, &cfg.lines, edges, &nus, &cfg.options)?;
-        spectra.push(
-            (0..nus.len())
-                .map(|k| (-2.0 * t.iter().map(|row| row[k]).sum::<f64>()).exp())
+    }
+    let within = |lo: f64, hi: f64| LineList {
+        source: lines.source.clone(),
+        lines: lines
+            .lines
+            .iter()
+            .filter(|l| l.nu_cm1 >= lo && l.nu_cm1 <= hi)
+            .cloned()
+            .collect(),
+    };
+    // Every line at the nodes of all windows at once, from the lines prepared for the study.
+    let nodes = |n: usize| -> Vec<usize> {
+        (0..FAR_NODES)
+            .map(|j| j * (n - 1) / (FAR_NODES - 1))
+            .collect()
+    };
+    let node_nus: Vec<f64> = windows
+        .iter()
+        .flat_map(|w| nodes(w.len()).into_iter().map(|k| w[k]))
+        .collect();
+    let t = memo.layer_optical_depths_at(profile, lines, edges, &node_nus, opts)?;
+    let all_at_nodes: Vec<f64> = (0..node_nus.len()).map(|k| column(&t, k)).collect();
+    let mut out = Vec::with_capacity(windows.len());
+    for (i, nus) in windows.iter().enumerate() {
+        let n = nus.len();
+        let near = within(nus[0] - NEAR_CM1, nus[n - 1] + NEAR_CM1);
+        let near_fine: Vec<f64> = if near.is_empty() {
+            vec![0.0; n]
+        } else {
+            let t = layer_optical_depths_at(profile, &near, edges, nus, opts)?;
+            (0..n).map(|k| column(&t, k)).collect()
+        };
+        let idx = nodes(n);
+        let x: Vec<f64> = idx.iter().map(|&k| nus[k]).collect();
+        // The far part at the nodes: everything minus the near lines, at the same wavenumbers.
+        let far: Vec<f64> = idx
+            .iter()
+            .zip(&all_at_nodes[i * FAR_NODES..(i + 1) * FAR_NODES])
+            .map(|(&k, all)| all - near_fine[k])
+            .collect();
+        out.push(
+            nus.iter()
+                .zip(&near_fine)
+                .map(|(&nu, near)| near + lagrange4(&x, &far, nu))
                 .collect(),
         );
     }
-    Ok(spectra)
+    Ok(out)
+}
+
+/// Cubic Lagrange interpolation of (x, y) at `x0`, through the four nodes around it (the
+/// first or last four at the ends); `x` sorted, at least four nodes.
+fn lagrange4(x: &[f64], y: &[f64], x0: f64) -> f64 {
+    let j = x.partition_point(|v| *v <= x0).clamp(2, x.len() - 2) - 2;
+    let (xs, ys) = (&x[j..j + 4], &y[j..j + 4]);
+    (0..4)
+        .map(|a| {
+            let w: f64 = (0..4)
+                .filter(|b| *b != a)
+                .map(|b| (x0 - xs[b]) / (xs[a] - xs[b]))
+                .product();
+            w * ys[a]
+        })
+        .sum()
 }
 
 /// Study every member with its CO2 set to a dry-air column average of `co2_ppm` first
@@ -409,4 +531,72 @@ pub fn study_members(
             r
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::atmosphere::StandardAtmosphere;
+    use crate::spectroscopy::LineFilter;
+
+    /// The two-grid column depths against the line-by-line sum at every wavenumber, over the
+    /// study's windows (±4 GHz by 0.02 GHz around R16e and R26e): the built-in band model, and
+    /// with the HITRAN CO2 and H2O files when `../shared` has them (read in place).
+    #[test]
+    fn two_grid_spectra_match_the_line_by_line_sum() {
+        let mut profile = StandardAtmosphere::Tropical.profile();
+        set_co2_column_average(&mut profile, 420.0).unwrap();
+        let edges = layer_edges(profile.altitude_m[0], 60_000.0, 1000.0).unwrap();
+        let windows: Vec<Vec<f64>> = [6359.967244, 6366.086989]
+            .iter()
+            .map(|c| {
+                (0..=400)
+                    .map(|k| c + (-4.0 + 0.02 * k as f64) / GHZ_PER_CM1)
+                    .collect()
+            })
+            .collect();
+        let opts = LblOptions::default();
+        let mut lists = vec![LineList::co2_30012_band_model()];
+        let shared = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/hitran");
+        let files = [
+            "CO2_626_6000-6400_HITRAN2016.par",
+            "H2O_161_6000-6400_HITRAN2016.par",
+        ];
+        if files.iter().all(|f| shared.join(f).is_file()) {
+            let mut all = LineList {
+                source: "HITRAN".into(),
+                lines: Vec::new(),
+            };
+            for f in files {
+                let l = LineList::read_par(&shared.join(f), &LineFilter::default()).unwrap();
+                all.lines.extend(l.lines);
+            }
+            all.lines.sort_by(|a, b| a.nu_cm1.total_cmp(&b.nu_cm1));
+            lists.push(all);
+        }
+        for lines in &lists {
+            let fast = column_depths_two_grid(
+                &profile,
+                lines,
+                &edges,
+                &windows,
+                &opts,
+                &mut LayerDepthMemo::new(),
+            )
+            .unwrap();
+            for (w, nus) in windows.iter().enumerate() {
+                let t = layer_optical_depths_at(&profile, lines, &edges, nus, &opts).unwrap();
+                for (k, f) in fast[w].iter().enumerate() {
+                    let exact: f64 = t.iter().map(|row| row[k]).sum();
+                    // 1e-5 of τ, and 1e-5 in the two-way transmission e^(−2τ) the figure draws.
+                    let (t2, t2_exact) = ((-2.0 * f).exp(), (-2.0 * exact).exp());
+                    assert!(
+                        (f - exact).abs() <= 1e-5 * exact && (t2 - t2_exact).abs() <= 1e-5,
+                        "{}: window {w}, point {k}: {f} against {exact}",
+                        lines.source
+                    );
+                }
+            }
+        }
+    }
 }
