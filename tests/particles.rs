@@ -427,10 +427,11 @@ fn cli_mie_single_sphere_json() {
 /// albedo within 1e-3 and g within 0.006. OPAC prints 4 digits (ext, ssa) and 3 (g) and used a
 /// coarse size and angle integration: its extinction ripples by a few 0.1 % from one wavelength
 /// to the next, and its g is up to 0.005 above the exact Mie g for the coarse components at
-/// 0.5 µm (see validation/mie_opac/README.md; worst here: 0.58 %, 5e-4, 0.0052; over all 19
-/// wavelengths 0.25–2.5 µm: 0.58 %, 8.4e-4, 0.0075 at 0.25 µm). Coarse sea
+/// 0.5 µm (see validation/mie_opac/README.md; worst here: 0.50 %, 5e-4, 0.0052; over all 19
+/// wavelengths 0.25–2.5 µm: 0.50 %, 8.4e-4, 0.0075 at 0.25 µm). Coarse sea
 /// salt is checked at λ ≥ 1 µm only: below, its backscatter (which the integrator also
-/// converges) needs 5e5 radii and 15 s; `validation/mie_opac` covers all 19 wavelengths.
+/// converges) needs 0.6–1.9e5 radii and several seconds; `validation/mie_opac` covers all 19
+/// wavelengths.
 #[test]
 fn opac_components_match_opac_tables() {
     use lidarsim::particles::opac::OpacComponent;
