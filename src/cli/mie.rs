@@ -319,18 +319,7 @@ fn run_opac(args: &Args) -> anyhow::Result<()> {
 
 /// Progress of the size integration on stderr: a line every 2 s once it has taken 2 s.
 fn progress_lines() -> impl Fn(&MieProgress) {
-    let started = std::time::Instant::now();
-    let next = std::cell::Cell::new(2.0);
-    move |p: &MieProgress| {
-        let t = started.elapsed().as_secs_f64();
-        if t >= next.get() {
-            next.set(t + 2.0);
-            eprintln!(
-                "lidarsim mie: {} (size integration {} of {}): {} radii, at most {}, {:.0} s",
-                p.component, p.integration, p.integrations, p.radii, p.radii_bound, t
-            );
-        }
-    }
+    lidarsim::particles::distribution::progress_lines("lidarsim mie".into())
 }
 
 /// Write the table (if --out) and print the bulk properties as JSON.

@@ -18,7 +18,8 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, OnceLock};
 
 use super::distribution::{
-    BulkOptions, Component, bulk_optics_mixture, fingerprint, fingerprint_hash,
+    BulkOptions, Component, MieProgress, bulk_optics_mixture_with_progress, fingerprint,
+    fingerprint_hash, progress_lines,
 };
 use super::matrix_table::MatrixTable;
 use crate::input::parse_f64;
@@ -90,13 +91,38 @@ fn memory() -> &'static Mutex<HashMap<String, Arc<LayerOptics>>> {
 /// Bulk optics of an external mixture at one wavelength, from the caches when possible. Errors
 /// (invalid distributions or refractive indices) come back as the Mie stage's message; a disk
 /// cache that cannot be read or written costs time only (with a warning), never the result.
+///
+/// A computation that takes over 2 s says how far it is on standard error every 2 s
+/// ([`progress_lines`]); [`layer_optics_with_progress`] takes another report.
 pub fn layer_optics(
     components: &[Component],
     wavelength_m: f64,
     opts: &BulkOptions,
     cache_dir: Option<&Path>,
 ) -> Result<(Arc<LayerOptics>, CacheUse), String> {
-    lookup(components, wavelength_m, opts, cache_dir, true)
+    let what = format!(
+        "lidarsim: Mie optics at {} nm",
+        (wavelength_m * 1e18).round() / 1e9
+    );
+    layer_optics_with_progress(
+        components,
+        wavelength_m,
+        opts,
+        cache_dir,
+        &progress_lines(what),
+    )
+}
+
+/// [`layer_optics`], telling `progress` how far a computation is (nothing when the result
+/// comes from a cache).
+pub fn layer_optics_with_progress(
+    components: &[Component],
+    wavelength_m: f64,
+    opts: &BulkOptions,
+    cache_dir: Option<&Path>,
+    progress: &dyn Fn(&MieProgress),
+) -> Result<(Arc<LayerOptics>, CacheUse), String> {
+    lookup_with(components, wavelength_m, opts, cache_dir, true, progress)
 }
 
 /// The path of the disk entry of these inputs in `dir`.
@@ -113,12 +139,31 @@ pub fn entry_path(
 }
 
 /// [`layer_optics`], with or without the memory cache (tests take the disk path with it off).
+#[cfg(test)]
 fn lookup(
     components: &[Component],
     wavelength_m: f64,
     opts: &BulkOptions,
     cache_dir: Option<&Path>,
     use_memory: bool,
+) -> Result<(Arc<LayerOptics>, CacheUse), String> {
+    lookup_with(
+        components,
+        wavelength_m,
+        opts,
+        cache_dir,
+        use_memory,
+        &|_| {},
+    )
+}
+
+fn lookup_with(
+    components: &[Component],
+    wavelength_m: f64,
+    opts: &BulkOptions,
+    cache_dir: Option<&Path>,
+    use_memory: bool,
+    progress: &dyn Fn(&MieProgress),
 ) -> Result<(Arc<LayerOptics>, CacheUse), String> {
     let key = fingerprint(components, wavelength_m, opts);
     if use_memory && let Some(hit) = memory().lock().ok().and_then(|m| m.get(&key).cloned()) {
@@ -142,7 +187,8 @@ fn lookup(
             )),
         }
     }
-    let bulk = bulk_optics_mixture(components, wavelength_m, opts).map_err(|e| e.to_string())?;
+    let bulk = bulk_optics_mixture_with_progress(components, wavelength_m, opts, progress)
+        .map_err(|e| e.to_string())?;
     // Pass the table through its text form, as a disk entry would, so that a run gives the
     // same numbers whether or not it found the entry (F11 is printed as the phase is).
     let matrix = MatrixTable::parse(Path::new("<mie>"), &bulk.matrix.to_text())
@@ -250,7 +296,7 @@ fn read_entry(path: &Path, key: &str) -> Result<LayerOptics, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::particles::distribution::SizeDistribution;
+    use crate::particles::distribution::{SizeDistribution, bulk_optics_mixture};
     use crate::particles::table::PhaseTable;
     use num_complex::Complex64;
 

@@ -244,3 +244,22 @@ pub struct MieProgress {
     /// usually stops well before, so this bounds the remaining work rather than predicting it.
     pub radii_bound: u64,
 }
+
+/// A progress report for [`super::bulk_optics_mixture_with_progress`] as plain lines on standard
+/// error, `{what}: COMPONENT (size integration I of N): R radii, at most B, T s`, every 2 s once
+/// the computation has run for 2 s (nothing for a shorter one): what a batch job's log or a
+/// terminal shows until a command has a progress display of its own.
+pub fn progress_lines(what: String) -> impl Fn(&MieProgress) {
+    let started = std::time::Instant::now();
+    let next = std::cell::Cell::new(2.0);
+    move |p: &MieProgress| {
+        let t = started.elapsed().as_secs_f64();
+        if t >= next.get() {
+            next.set(t + 2.0);
+            eprintln!(
+                "{what}: {} (size integration {} of {}): {} radii, at most {}, {:.0} s",
+                p.component, p.integration, p.integrations, p.radii, p.radii_bound, t
+            );
+        }
+    }
+}
