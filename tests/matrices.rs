@@ -232,8 +232,8 @@ fn one_sphere_matrix_is_normalised_like_the_phase_function() {
     }
 }
 
-/// The size integral (matrix products of S±) against the same trapezoid sum written out: the
-/// grid that `bulk_optics` reports (range, step, points), single spheres through
+/// The size integral (matrix products of S±) against the same trapezoid sums written out: the
+/// grid that `bulk_optics` reports (its panels: first point, step, intervals), single spheres through
 /// `MieCoefficients::amplitudes` (Wiscombe's, conjugated) and BH's formulas. An aerosol
 /// (log-normal r_g 0.2 µm, σ_g 1.6, m = 1.5 + 0.01i) at 532 nm: every ratio to 1e-10, and the
 /// F11 column equal to the phase function number for number.
@@ -252,26 +252,31 @@ fn size_integral_of_the_matrix_matches_a_direct_sum() {
     assert_eq!(f11, b.phase.phase_4pi);
     let g = &b.convergence[0];
     let k = 2.0 * PI / (lambda_m * 1e6);
-    let x_lo = k * g.r_range_um.0;
     let mu: Vec<f64> = theta.iter().map(|t| t.to_radians().cos()).collect();
     let mut sum = vec![[0.0f64; 4]; theta.len()];
-    for i in 0..g.points {
-        let x = x_lo + i as f64 * g.step_x;
-        let mut w = d.density(x / k);
-        if i == 0 || i == g.points - 1 {
-            w *= 0.5;
-        }
-        let (s1, s2) = MieCoefficients::compute(m, x)
-            .unwrap()
-            .amplitudes(&mu)
-            .unwrap();
-        for a in 0..theta.len() {
-            let e = bh_elements(s1[a].conj(), s2[a].conj());
-            for j in 0..4 {
-                sum[a][j] += w * e[j];
+    // Panel by panel, each a trapezoid rule with its own step (its first point at the previous
+    // panel's last).
+    for &(x0, dx, intervals) in &g.panels {
+        for i in 0..=intervals {
+            let x = x0 + i as f64 * dx;
+            let mut w = d.density(x / k) * dx;
+            if i == 0 || i == intervals {
+                w *= 0.5;
+            }
+            let (s1, s2) = MieCoefficients::compute(m, x)
+                .unwrap()
+                .amplitudes(&mu)
+                .unwrap();
+            for a in 0..theta.len() {
+                let e = bh_elements(s1[a].conj(), s2[a].conj());
+                for j in 0..4 {
+                    sum[a][j] += w * e[j];
+                }
             }
         }
     }
+    let intervals: usize = g.panels.iter().map(|p| p.2).sum();
+    assert_eq!(g.points, intervals + 1);
     let mut worst = 0.0f64;
     for (a, e) in b.matrix.elements.iter().enumerate() {
         let want = [
@@ -436,9 +441,12 @@ fn c1_matrix_near_backscatter() {
     assert!(d33 < 1e-4 && d22 < 1e-4, "{d33:e} {d22:e}");
 }
 
-/// Scalar runs do not change: the phase function that comes with the matrix is, digit for
-/// digit, the table shipped in `phase_functions/c1_cloud_1572nm.txt` (written by `lidarsim mie`
-/// before matrices existed; validation/mie_c1/README.md gives the command).
+/// The phase function that comes with the matrix against the table shipped in
+/// `phase_functions/c1_cloud_1572nm.txt` (written by `lidarsim mie` before matrices existed,
+/// with the uniform size grid that the panel refinement replaced; validation/mie_c1/README.md
+/// gives the command): the same angles, and every value within 1e-3 relative, the tolerance
+/// both size integrations converge to (found: 8.4e-4 near 180°, where the resonances of the
+/// drops weigh most).
 #[test]
 fn scalar_phase_tables_are_unchanged() {
     let path = crate::util::project_root().join("phase_functions/c1_cloud_1572nm.txt");
@@ -450,14 +458,16 @@ fn scalar_phase_tables_are_unchanged() {
         &BulkOptions::default(),
     )
     .unwrap();
-    let rows = |t: &PhaseTable| -> Vec<String> {
-        t.to_text()
-            .lines()
-            .filter(|l| !l.starts_with('#'))
-            .map(str::to_string)
-            .collect()
-    };
-    assert_eq!(rows(&b.phase), rows(&shipped));
+    assert_eq!(b.phase.theta_deg, shipped.theta_deg);
+    let worst = b
+        .phase
+        .phase_4pi
+        .iter()
+        .zip(&shipped.phase_4pi)
+        .map(|(a, s)| (a / s - 1.0).abs())
+        .fold(0.0, f64::max);
+    println!("C.1 1572 nm: phase function against the shipped table: worst {worst:.2e}");
+    assert!(worst < 1e-3, "{worst:e}");
 }
 
 /// A scene with four particle layers (edges 1000–1300–1600–1900–2200 m) above molecules:

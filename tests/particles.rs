@@ -427,10 +427,11 @@ fn cli_mie_single_sphere_json() {
 /// albedo within 1e-3 and g within 0.006. OPAC prints 4 digits (ext, ssa) and 3 (g) and used a
 /// coarse size and angle integration: its extinction ripples by a few 0.1 % from one wavelength
 /// to the next, and its g is up to 0.005 above the exact Mie g for the coarse components at
-/// 0.5 µm (see validation/mie_opac/README.md; worst here: 0.58 %, 5e-4, 0.0052; over all 19
-/// wavelengths 0.25–2.5 µm: 0.58 %, 8.4e-4, 0.0075 at 0.25 µm). Coarse sea
+/// 0.5 µm (see validation/mie_opac/README.md; worst here: 0.50 %, 5e-4, 0.0052; over all 19
+/// wavelengths 0.25–2.5 µm: 0.50 %, 8.4e-4, 0.0075 at 0.25 µm). Coarse sea
 /// salt is checked at λ ≥ 1 µm only: below, its backscatter (which the integrator also
-/// converges) needs 5e5 radii and 15 s; `validation/mie_opac` covers all 19 wavelengths.
+/// converges) needs 0.6–1.9e5 radii and several seconds; `validation/mie_opac` covers all 19
+/// wavelengths.
 #[test]
 fn opac_components_match_opac_tables() {
     use lidarsim::particles::opac::OpacComponent;
@@ -676,4 +677,117 @@ fn shipped_mie_work_is_a_hundredfold_below_the_limits() {
             "{name}: {w:?}"
         );
     }
+}
+
+/// A scene with a Mie layer (small absorbing spheres at 1064 nm: a second of Mie theory at
+/// most), run without `--photons` work.
+const MIE_CACHE_SCENE: &str = r#"description = "Mie cache"
+[lidar]
+altitude_m = 0.0
+zenith_angle_deg = 0.0
+pulse_energy_j = 0.1
+beam_divergence_full_angle_mrad = 0.1
+telescope_diameter_m = 0.3
+optical_efficiency = 0.5
+fov_full_angle_mrad = 1.0
+[[channel]]
+name = "1064"
+wavelength_nm = 1064.0
+[gates]
+start_m = 100.0
+end_m = 2000.0
+width_m = 10.0
+[[layer]]
+name = "aerosol"
+base_m = 0.0
+top_m = 1500.0
+extinction_per_km = 0.1
+particles = { distribution = "lognormal", median_radius_um = 0.2, sigma_g = 1.5, refractive_index = "1.45+0.001i" }
+"#;
+
+/// The Mie cache through the binary. With no `cache_dir` in the scene and no
+/// `LIDARSIM_CACHE_DIR`, the first run writes one entry in `$XDG_CACHE_HOME/lidarsim`; the
+/// second reads it (the entry is not rewritten: same inode, same modification time) and writes
+/// the same returns byte for byte. A damaged entry is recomputed with a warning naming it, to
+/// the same returns. `LIDARSIM_CACHE_DIR` moves the cache, `off` turns it off, and the scene's
+/// `cache_dir` wins over both. (The other tests run with the cache off: tests/tests.rs.)
+#[test]
+fn mie_cache_is_on_by_default_in_the_user_cache_directory() {
+    use std::process::Command;
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("scene.toml");
+    std::fs::write(&scene, MIE_CACHE_SCENE).unwrap();
+    let xdg = dir.path().join("xdg");
+    let run = |out: &str, env: &[(&str, &Path)], off: bool| {
+        let mut c = Command::new(crate::util::lidarsim_bin());
+        c.args([
+            "run",
+            "--photons",
+            "0",
+            "--no-plots",
+            "--no-netcdf",
+            "--out",
+        ])
+        .arg(dir.path().join(out))
+        .arg(&scene)
+        .env_remove("LIDARSIM_CACHE_DIR")
+        .env("XDG_CACHE_HOME", &xdg);
+        for (k, v) in env {
+            c.env(k, v);
+        }
+        if off {
+            c.env("LIDARSIM_CACHE_DIR", "off");
+        }
+        let o = c.output().unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let returns = std::fs::read(dir.path().join(out).join("returns.csv")).unwrap();
+        (returns, String::from_utf8_lossy(&o.stderr).into_owned())
+    };
+    let entries = |d: &Path| -> Vec<std::path::PathBuf> {
+        match std::fs::read_dir(d) {
+            Ok(r) => r.map(|e| e.unwrap().path()).collect(),
+            Err(_) => Vec::new(),
+        }
+    };
+    let (first, _) = run("a", &[], false);
+    let cache = xdg.join("lidarsim");
+    let made = entries(&cache);
+    assert_eq!(made.len(), 1, "{made:?}");
+    let name = made[0].file_name().unwrap().to_string_lossy().into_owned();
+    assert!(name.starts_with("mie-") && name.ends_with(".txt"), "{name}");
+    let stamp = |p: &Path| {
+        use std::os::unix::fs::MetadataExt;
+        let m = std::fs::metadata(p).unwrap();
+        (m.ino(), m.modified().unwrap())
+    };
+    let before = stamp(&made[0]);
+    let (second, _) = run("b", &[], false);
+    assert_eq!(first, second);
+    assert_eq!(stamp(&made[0]), before, "the entry was rewritten, not read");
+    // A damaged entry: a warning naming it, the same returns, a whole entry again.
+    let whole = std::fs::read(&made[0]).unwrap();
+    std::fs::write(&made[0], &whole[..whole.len() / 3]).unwrap();
+    let (third, stderr) = run("c", &[], false);
+    assert_eq!(first, third);
+    assert!(
+        stderr.contains("Mie cache entry")
+            && stderr.contains(&name)
+            && stderr.contains("recomputed"),
+        "{stderr}"
+    );
+    assert_eq!(std::fs::read(&made[0]).unwrap(), whole);
+    // Moved by LIDARSIM_CACHE_DIR; off writes nothing.
+    let moved = dir.path().join("moved");
+    let (fourth, _) = run("d", &[("LIDARSIM_CACHE_DIR", &moved)], false);
+    assert_eq!(first, fourth);
+    assert_eq!(entries(&moved).len(), 1);
+    std::fs::remove_dir_all(&cache).unwrap();
+    run("e", &[], true);
+    assert!(entries(&cache).is_empty());
+    // The scene's cache_dir (relative to the scene) wins.
+    let text = format!("{MIE_CACHE_SCENE}[simulation]\ncache_dir = \"mine\"\n");
+    std::fs::write(&scene, text).unwrap();
+    run("f", &[("LIDARSIM_CACHE_DIR", &moved)], false);
+    assert_eq!(entries(&dir.path().join("mine")).len(), 1);
+    assert!(entries(&cache).is_empty());
 }

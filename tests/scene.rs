@@ -426,7 +426,9 @@ particles = { distribution = "modified_gamma", alpha = 6.0, b = 1.5, gamma = 1.0
 /// An OPAC aerosol type named in a scene: its extinction is the layer's total number density
 /// times the mixture's mean extinction cross-section, with the single-scattering albedo and
 /// asymmetry of the shipped table for the same type and wavelength (written by `lidarsim mie`
-/// and checked against OPAC's own component optics in tests/particles.rs).
+/// and checked against OPAC's own component optics in tests/particles.rs). The table was made
+/// with the uniform size grid that the panel refinement replaced: the two agree to 1.7e-5 in
+/// extinction, 1.1e-5 in single-scattering albedo and 6e-6 in g (both converge to 1e-3).
 #[test]
 fn opac_aerosol_layer_in_a_scene() {
     let text = BASE
@@ -439,11 +441,11 @@ fn opac_aerosol_layer_in_a_scene() {
     let ext = 15300.4e6 * meta("extinction_cross_section_um2") * 1e-12;
     for k in 0..2 {
         assert!(
-            (l.extinction_per_m[k] / ext - 1.0).abs() < 1e-6,
+            (l.extinction_per_m[k] / ext - 1.0).abs() < 1e-4,
             "{} vs {ext}",
             l.extinction_per_m[k]
         );
-        assert!((l.single_scattering_albedo[k] - meta("single_scattering_albedo")).abs() < 1e-6);
+        assert!((l.single_scattering_albedo[k] - meta("single_scattering_albedo")).abs() < 5e-5);
         assert!((l.phase[k].asymmetry() - meta("asymmetry")).abs() < 1e-4);
     }
     let e = Scene::from_toml(

@@ -7,8 +7,8 @@ use anyhow::{Context, bail};
 use clap::ValueEnum;
 use lidarsim::input::{Bounds, check_finite_range};
 use lidarsim::particles::distribution::{
-    BulkOptions, Component, MIN_INDEX_CONTRAST, MieWork, SizeDistribution, bulk_optics,
-    format_refractive_index,
+    BulkOptions, Component, MIN_INDEX_CONTRAST, MieProgress, MieWork, SizeDistribution,
+    bulk_optics_mixture_with_progress, format_refractive_index,
 };
 use lidarsim::particles::mie::{
     MAX_SIZE_PARAMETER, MieCoefficients, MieError, parse_refractive_index,
@@ -239,15 +239,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         dist = dist.truncated(lo, hi)?;
     }
     let opts = bulk_opts(&args);
-    let work = products::mie::check_work(
-        &[Component {
-            name: "particles".into(),
-            distribution: dist.clone(),
-            refractive_index: m,
-        }],
-        wavelength_nm * 1e-9,
-        &opts,
-    )
+    let components = [Component {
+        name: "particles".into(),
+        distribution: dist.clone(),
+        refractive_index: m,
+    }];
+    let work = products::mie::check_work(&components, wavelength_nm * 1e-9, &opts)
     .map_err(|e| match &e {
         // The library names its own field; say which options made the range empty.
         ProductError::Mie(MieError::Parameter {
@@ -262,7 +259,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ),
         _ => e.into(),
     })?;
-    let mut b = bulk_optics(&dist, m, wavelength_nm * 1e-9, &opts)?;
+    let mut b = bulk_optics_mixture_with_progress(
+        &components,
+        wavelength_nm * 1e-9,
+        &opts,
+        &progress_lines(),
+    )?;
     products::mie::add_meta(&mut b, &args.meta)?;
     finish(
         &b,
@@ -304,10 +306,20 @@ fn run_opac(args: &Args) -> anyhow::Result<()> {
         (None, Some(c)) => Opac::Component(c, args.number_density_per_cm3),
         _ => bail!("--distribution opac needs --aerosol-type TYPE or --opac-component NAME"),
     };
-    let mut o = products::mie::opac(which, wavelength_nm * 1e-9, &bulk_opts(args))?;
+    let mut o = products::mie::opac_with_progress(
+        which,
+        wavelength_nm * 1e-9,
+        &bulk_opts(args),
+        &progress_lines(),
+    )?;
     products::mie::add_meta(&mut o.bulk, &args.meta)?;
     let (indices, description) = (o.indices, o.description);
     finish(&o.bulk, args, wavelength_nm, indices, description, &o.work)
+}
+
+/// Progress of the size integration on stderr: a line every 2 s once it has taken 2 s.
+fn progress_lines() -> impl Fn(&MieProgress) {
+    lidarsim::particles::distribution::progress_lines("lidarsim mie".into())
 }
 
 /// Write the table (if --out) and print the bulk properties as JSON.

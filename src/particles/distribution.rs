@@ -37,15 +37,20 @@
 //! measurable extra cost: S12, S33, S34 are products of the same S± = S1 ± S2
 //! ([`super::mie::four_s_from_s_pm`]).
 //!
-//! Each mode is integrated on a uniform grid in size parameter with the trapezoid rule over the
-//! radius range that holds all but `tail_fraction` of the mode's geometric cross-section
-//! (`∫ π r² n dr`, half in each tail). The step is halved (reusing the previous points) until two
-//! successive halvings both change the extinction, scattering, backscatter and `g·Csca`
-//! integrals by less than `rel_tol` — the backscatter of nearly non-absorbing droplets converges
-//! slowest (narrow resonances; see `docs/particles.md` for the convergence seen). The phase
-//! function is then computed on the final grid, so `P(180°)` in the table is exactly the
-//! backscatter used for the lidar ratio. Radii are evaluated in parallel (rayon) in fixed blocks
-//! whose sums are reduced in block order: the numbers do not depend on the thread count.
+//! Each mode is integrated with the trapezoid rule in size parameter over the radius range that
+//! holds all but `tail_fraction` of the mode's geometric cross-section (`∫ π r² n dr`, half in
+//! each tail), cut into 16 panels equal in ln x, each starting with 8 intervals. All panels are
+//! halved together (reusing their points) until two successive halvings change the mode's
+//! extinction, scattering, backscatter and `g·Csca` integrals by less than `rel_tol`; but a
+//! panel halved twice may stop early, smallest changes first, while the last changes of the
+//! stopped panels sum to at most a tenth of `rel_tol`: the panels in the tails, which hold
+//! little of the integrals, stay coarse. The backscatter of nearly non-absorbing droplets
+//! converges slowest (narrow resonances; `docs/particles.md` gives the convergence seen). The
+//! angular integrals (phase function, matrix) are summed on the fly from the same Mie
+//! coefficients, on the same points, so `P(180°)` in the table is exactly the backscatter used
+//! for the lidar ratio, and nothing is stored per radius: memory does not grow with the number
+//! of radii. Radii are evaluated in parallel (rayon) in fixed blocks whose sums are reduced in
+//! block order: the numbers do not depend on the thread count.
 
 // `!(v > 0.0)` is used on purpose: unlike `v <= 0.0` it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -63,10 +68,11 @@ mod integrate;
 mod options;
 mod work;
 
-pub use bulk::{bulk_optics, bulk_optics_mixture};
-pub use fingerprint::{fingerprint, fingerprint_hash, format_refractive_index};
+pub use bulk::{bulk_optics, bulk_optics_mixture, bulk_optics_mixture_with_progress};
+pub use fingerprint::{MIE_VERSION, fingerprint, fingerprint_hash, format_refractive_index};
 pub use options::{
-    BulkOptics, BulkOptions, Component, MIN_INDEX_CONTRAST, ModeConvergence, default_angle_grid,
+    BulkOptics, BulkOptions, Component, MIN_INDEX_CONTRAST, MieProgress, ModeConvergence,
+    default_angle_grid, progress_lines,
 };
 pub use work::{MieWork, mie_work, mie_work_of};
 

@@ -36,7 +36,9 @@ use std::sync::OnceLock;
 use num_complex::Complex64;
 
 use super::distribution::{BulkOptics, BulkOptions, Component, SizeDistribution};
-use super::distribution::{bulk_optics_mixture, format_refractive_index};
+use super::distribution::{
+    MieProgress, bulk_optics_mixture_with_progress, format_refractive_index,
+};
 use super::mie::MieError;
 use crate::input::CsvTable;
 
@@ -199,10 +201,23 @@ impl OpacComponent {
         wavelength_m: f64,
         opts: &BulkOptions,
     ) -> Result<BulkOptics, MieError> {
-        let mut b = bulk_optics_mixture(
+        self.bulk_optics_with_progress(number_density_per_cm3, wavelength_m, opts, &|_| {})
+    }
+
+    /// [`Self::bulk_optics`], telling `progress` how far it is
+    /// ([`super::distribution::bulk_optics_mixture_with_progress`]).
+    pub fn bulk_optics_with_progress(
+        self,
+        number_density_per_cm3: f64,
+        wavelength_m: f64,
+        opts: &BulkOptions,
+        progress: &dyn Fn(&MieProgress),
+    ) -> Result<BulkOptics, MieError> {
+        let mut b = bulk_optics_mixture_with_progress(
             &[self.component(number_density_per_cm3, wavelength_m)?],
             wavelength_m,
             opts,
+            progress,
         )?;
         insert_meta(
             &mut b,
@@ -313,8 +328,19 @@ impl OpacType {
         wavelength_m: f64,
         opts: &BulkOptions,
     ) -> Result<BulkOptics, MieError> {
+        self.bulk_optics_with_progress(wavelength_m, opts, &|_| {})
+    }
+
+    /// [`Self::bulk_optics`], telling `progress` how far it is
+    /// ([`super::distribution::bulk_optics_mixture_with_progress`]).
+    pub fn bulk_optics_with_progress(
+        self,
+        wavelength_m: f64,
+        opts: &BulkOptions,
+        progress: &dyn Fn(&MieProgress),
+    ) -> Result<BulkOptics, MieError> {
         let comps = self.components(wavelength_m)?;
-        let mut b = bulk_optics_mixture(&comps, wavelength_m, opts)?;
+        let mut b = bulk_optics_mixture_with_progress(&comps, wavelength_m, opts, progress)?;
         let composition = self
             .composition()
             .iter()

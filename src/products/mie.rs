@@ -117,6 +117,16 @@ pub fn opac(
     wavelength_m: f64,
     opts: &BulkOptions,
 ) -> Result<OpacOptics, ProductError> {
+    opac_with_progress(which, wavelength_m, opts, &|_| {})
+}
+
+/// [`opac`], telling `progress` how far the size integration is.
+pub fn opac_with_progress(
+    which: Opac,
+    wavelength_m: f64,
+    opts: &BulkOptions,
+    progress: &dyn Fn(&crate::particles::distribution::MieProgress),
+) -> Result<OpacOptics, ProductError> {
     let (bulk, indices, description, work) = match which {
         Opac::Type(t) => {
             let t = OpacType::from_name(t).ok_or_else(|| {
@@ -129,7 +139,7 @@ pub fn opac(
                 .components(wavelength_m)
                 .map_err(|e| ProductError::context("--wavelength-nm", e))?;
             let work = check_work(&comps, wavelength_m, opts)?;
-            let b = t.bulk_optics(wavelength_m, opts)?;
+            let b = t.bulk_optics_with_progress(wavelength_m, opts, progress)?;
             let indices: serde_json::Map<String, serde_json::Value> = comps
                 .iter()
                 .map(|c| {
@@ -157,7 +167,8 @@ pub fn opac(
                 wavelength_m,
                 opts,
             )?;
-            let b = c.bulk_optics(number_density_per_cm3, wavelength_m, opts)?;
+            let b =
+                c.bulk_optics_with_progress(number_density_per_cm3, wavelength_m, opts, progress)?;
             let desc = c.size_distribution(number_density_per_cm3)?.to_string();
             (b, json!(format_refractive_index(m)), desc, work)
         }

@@ -347,7 +347,8 @@ pub struct Simulation {
     pub threads: usize,
     /// Independent batches for the standard errors.
     pub batches: usize,
-    /// Directory for cached Mie optics (relative paths are relative to the scene), if any.
+    /// Directory for cached Mie optics: the scene's `cache_dir` (relative to the scene), else
+    /// [`crate::particles::cache::default_cache_dir`]; none when turned off.
     pub cache_dir: Option<PathBuf>,
     /// Whether the Monte Carlo runs (`multiple_scattering`; `--photons N` on the command line
     /// makes it [`MultipleScattering::Always`]).

@@ -51,7 +51,13 @@ impl Resolver<'_> {
             receiver,
             retrieval,
         } = c;
-        simulation.cache_dir = simulation.cache_dir.map(|p| self.base_dir.join(p));
+        // The Mie cache: the scene's `cache_dir` (relative to the scene; `off` for none), else
+        // the user's cache directory (README, "The Mie cache").
+        simulation.cache_dir = match simulation.cache_dir {
+            Some(p) if p.as_os_str() == "off" => None,
+            Some(p) => Some(self.base_dir.join(p)),
+            None => crate::particles::cache::default_cache_dir(),
+        };
         // Until the channels are expanded at the end, every per-channel value is per line.
         let laser = self.laser(&laser, lines.len())?;
         // The transport runs with the first line's energy; combinations scale the others.

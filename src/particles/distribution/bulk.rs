@@ -7,7 +7,7 @@ use num_complex::Complex64;
 
 use super::SizeDistribution;
 use super::fingerprint::{fingerprint_hash, format_refractive_index};
-use super::integrate::{MatrixSums, ModeGrid, angle_tables, integrate_mode, matrix_integral};
+use super::integrate::{MatrixSums, ModeGrid, angle_tables, integrate_mode, mode_range_um};
 use super::options::*;
 use super::work::mie_work;
 use crate::particles::matrix::MatrixElements;
@@ -42,20 +42,75 @@ pub fn bulk_optics_mixture(
     wavelength_m: f64,
     opts: &BulkOptions,
 ) -> Result<BulkOptics, MieError> {
+    bulk_optics_mixture_with_progress(components, wavelength_m, opts, &|_| {})
+}
+
+/// [`bulk_optics_mixture`], telling `progress` how far it is ([`MieProgress`], after every
+/// batch of a few thousand radii or fewer): for a progress display where the computation can
+/// take seconds. The numbers do not depend on it.
+pub fn bulk_optics_mixture_with_progress(
+    components: &[Component],
+    wavelength_m: f64,
+    opts: &BulkOptions,
+    progress: &dyn Fn(&MieProgress),
+) -> Result<BulkOptics, MieError> {
     check_inputs(components, wavelength_m, opts)?;
     // Refused before any of it is done when it would run for hours (README, "Limits").
-    mie_work(components, wavelength_m, opts)?
-        .check()
-        .map_err(MieError::Work)?;
+    let work = mie_work(components, wavelength_m, opts)?;
+    work.check().map_err(MieError::Work)?;
     let wavelength_um = wavelength_m * 1e6;
+    let k = 2.0 * PI / wavelength_um;
+    // The angles and their tables come first: the angular integrals are summed on the fly,
+    // from the same Mie coefficients as the efficiencies.
+    let mut x_max = 0.0f64;
+    let (mut area_moment, mut volume_moment) = (0.0, 0.0);
+    let mut integrations = 0;
+    for c in components {
+        let n = c.distribution.number_density_per_cm3();
+        area_moment += n * c.distribution.moment(2.0);
+        volume_moment += n * c.distribution.moment(3.0);
+        for mode in c.distribution.modes() {
+            x_max = x_max.max(k * mode_range_um(&mode, k, opts)?.1);
+            integrations += 1;
+        }
+    }
+    let theta = match &opts.angles_deg {
+        Some(a) => {
+            check_angles(a)?;
+            a.clone()
+        }
+        // The effective size parameter of the untruncated distributions, within the integrated
+        // range: the grid mie_work counts.
+        None => default_angle_grid((k * volume_moment / area_moment).min(x_max)),
+    };
+    let tables = (!theta.is_empty()).then(|| angle_tables(&theta, n_terms(x_max)));
     let mut grids = Vec::new();
     let mut convergence = Vec::new();
     let mut number_density = 0.0;
+    let done = std::sync::atomic::AtomicU64::new(0);
     for c in components {
         number_density += c.distribution.number_density_per_cm3();
         for mode in c.distribution.modes() {
-            let (g, conv) =
-                integrate_mode(&c.name, &mode, c.refractive_index, wavelength_um, opts)?;
+            let integration = grids.len() + 1;
+            let tell = |radii: u64| {
+                let radii = done.fetch_add(radii, std::sync::atomic::Ordering::Relaxed) + radii;
+                progress(&MieProgress {
+                    integration,
+                    integrations,
+                    component: c.name.clone(),
+                    radii,
+                    radii_bound: work.radii,
+                });
+            };
+            let (g, conv) = integrate_mode(
+                &c.name,
+                &mode,
+                c.refractive_index,
+                wavelength_um,
+                opts,
+                tables.as_ref(),
+                &tell,
+            )?;
             grids.push(g);
             convergence.push(conv);
         }
@@ -74,19 +129,10 @@ pub fn bulk_optics_mixture(
     let asym = gsca / sca;
     let lidar_ratio = 4.0 * PI * ext / back;
 
-    // Phase function on the final grids.
-    let x_eff = 2.0 * PI / wavelength_um * r_eff;
-    let theta = match &opts.angles_deg {
-        Some(a) => {
-            check_angles(a)?;
-            a.clone()
-        }
-        None => default_angle_grid(x_eff),
-    };
     let (phase_4pi, elements) = if theta.is_empty() {
         (Vec::new(), Vec::new())
     } else {
-        mixture_matrix(&grids, &theta, sca)?
+        mixture_matrix(&grids, theta.len(), sca)
     };
 
     let mut meta = mixture_description(components, wavelength_m);
@@ -112,7 +158,7 @@ pub fn bulk_optics_mixture(
         push(
             "size_grid",
             format!(
-                "{}: r {:.6e}..{:.6e} um, dx = {:.3e}, {} radii, last change {:.1e}, {}",
+                "{}: r {:.6e}..{:.6e} um, dx >= {:.3e}, {} radii, last change {:.1e}, {}",
                 c.component,
                 c.r_range_um.0,
                 c.r_range_um.1,
@@ -138,7 +184,7 @@ pub fn bulk_optics_mixture(
     meta.push((
         "source".to_string(),
         format!(
-            "lidarsim {} Mie (Wiscombe 1979/1980 method), trapezoid in size parameter, tail_fraction {:e}, rel_tol {:e}; fingerprint {}",
+            "lidarsim {} Mie (Wiscombe 1979/1980 method), trapezoid in size parameter on 16 panels refined where the integrals change, tail_fraction {:e}, rel_tol {:e}; fingerprint {}",
             env!("CARGO_PKG_VERSION"),
             opts.tail_fraction,
             opts.rel_tol,
@@ -170,28 +216,20 @@ pub fn bulk_optics_mixture(
     })
 }
 
-/// The phase function (normalised to 4π) and scattering matrix of a mixture at `theta` \[°\],
-/// on the final grids of its modes.
-fn mixture_matrix(
-    grids: &[ModeGrid],
-    theta: &[f64],
-    sca: f64,
-) -> Result<(Vec<f64>, Vec<MatrixElements>), MieError> {
-    let n_max = grids
-        .iter()
-        .map(|g| n_terms(g.x_lo + g.points as f64 * g.dx))
-        .max()
-        .unwrap_or(1);
-    let tables = angle_tables(theta, n_max);
-    let mut dcdo = MatrixSums::zeros(theta.len());
+/// The phase function (normalised to 4π) and scattering matrix of a mixture on its `kk`
+/// angles, from the angular integrals of its modes.
+fn mixture_matrix(grids: &[ModeGrid], kk: usize, sca: f64) -> (Vec<f64>, Vec<MatrixElements>) {
+    let mut dcdo = MatrixSums::zeros(kk);
     for g in grids {
-        dcdo.add(&matrix_integral(g, &tables)?);
+        if let Some(m) = &g.matrix {
+            dcdo.add(m);
+        }
     }
     // F_ij = 4π ⟨dC_ij/dΩ⟩/⟨Csca⟩: every element normalised like the phase function; for
     // spheres F22 = F11 and F44 = F33.
     let norm = |d: f64| 4.0 * PI * d / sca;
     let phase_4pi: Vec<f64> = dcdo.s11.iter().map(|d| norm(*d)).collect();
-    let elements = (0..theta.len())
+    let elements = (0..kk)
         .map(|a| MatrixElements {
             f11: phase_4pi[a],
             f22: phase_4pi[a],
@@ -201,7 +239,7 @@ fn mixture_matrix(
             f34: norm(dcdo.s34[a]),
         })
         .collect();
-    Ok((phase_4pi, elements))
+    (phase_4pi, elements)
 }
 
 /// The metadata that describe a mixture: wavelength, refractive index and distribution (of

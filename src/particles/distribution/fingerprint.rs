@@ -13,13 +13,18 @@ pub fn format_refractive_index(m: Complex64) -> String {
     }
 }
 
+/// The version of the Mie computation that starts every [`fingerprint`].
+pub const MIE_VERSION: &str = "lidarsim-mie-v3";
+
 /// A stable text fingerprint of the inputs of [`bulk_optics_mixture`] (components, wavelength,
 /// options, solver version): equal inputs give equal text on every machine (shortest round-trip
 /// number formatting). Use [`fingerprint_hash`] for a short file name.
 pub fn fingerprint(components: &[Component], wavelength_m: f64, opts: &BulkOptions) -> String {
-    // v2: results carry the scattering matrix (cache entries of v1 hold the phase function
-    // only, and must be recomputed rather than read).
-    let mut s = format!("lidarsim-mie-v2;wavelength_m={wavelength_m:e}");
+    // The version of the Mie computation: bumped whenever its numbers change, so that cache
+    // entries of another version are recomputed rather than read. v2: results carry the
+    // scattering matrix (v1 entries hold the phase function only); v3: the size integration
+    // refines panels where the integrals change (not one uniform grid).
+    let mut s = format!("{MIE_VERSION};wavelength_m={wavelength_m:e}");
     for c in components {
         s.push_str(&format!(
             ";component={}:m={:e}{:+e}i:{}",

@@ -63,10 +63,14 @@ pub struct ModeConvergence {
     pub component: String,
     /// Radius range integrated \[µm\].
     pub r_range_um: (f64, f64),
-    /// Final size-parameter step.
+    /// Smallest size-parameter step of the final grid (the panels' steps differ).
     pub step_x: f64,
     /// Number of radii on the final grid.
     pub points: usize,
+    /// The final grid, panel by panel: (first size parameter, step, intervals); each panel is
+    /// a trapezoid rule from its first point to the next panel's first (the last to the top of
+    /// the range).
+    pub panels: Vec<(f64, f64, usize)>,
     /// Largest relative change of the four integrals at the last halving.
     pub last_rel_change: f64,
     /// True when the tolerance was met (false: stopped at `min_step_x` or `max_points`).
@@ -222,4 +226,40 @@ pub(super) fn check_angles(a: &[f64]) -> Result<(), MieError> {
         }
     }
     Ok(())
+}
+
+/// Progress of a size integration, as [`super::bulk_optics_mixture_with_progress`] reports
+/// it (after every batch of radii, at most a few thousand radii apart).
+#[derive(Debug, Clone, PartialEq)]
+pub struct MieProgress {
+    /// The integration (mode) under way, from 1.
+    pub integration: usize,
+    /// Integrations in all (modes of all components).
+    pub integrations: usize,
+    /// The component whose mode is integrated.
+    pub component: String,
+    /// Radii evaluated so far, all integrations.
+    pub radii: u64,
+    /// Most radii the integrations can take ([`super::MieWork::radii`]): the refinement
+    /// usually stops well before, so this bounds the remaining work rather than predicting it.
+    pub radii_bound: u64,
+}
+
+/// A progress report for [`super::bulk_optics_mixture_with_progress`] as plain lines on standard
+/// error, `{what}: COMPONENT (size integration I of N): R radii, at most B, T s`, every 2 s once
+/// the computation has run for 2 s (nothing for a shorter one): what a batch job's log or a
+/// terminal shows until a command has a progress display of its own.
+pub fn progress_lines(what: String) -> impl Fn(&MieProgress) {
+    let started = std::time::Instant::now();
+    let next = std::cell::Cell::new(2.0);
+    move |p: &MieProgress| {
+        let t = started.elapsed().as_secs_f64();
+        if t >= next.get() {
+            next.set(t + 2.0);
+            eprintln!(
+                "{what}: {} (size integration {} of {}): {} radii, at most {}, {:.0} s",
+                p.component, p.integration, p.integrations, p.radii, p.radii_bound, t
+            );
+        }
+    }
 }

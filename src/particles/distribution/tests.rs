@@ -130,3 +130,48 @@ fn constructors_reject_bad_parameters() {
             .is_err()
     );
 }
+
+/// The same numbers, bit for bit, on one thread and on four: the blocks of radii are reduced in
+/// block order whatever thread computed them (a bimodal aerosol with its matrix, and the
+/// progress the computation reports).
+#[test]
+fn bulk_optics_do_not_depend_on_the_thread_count() {
+    let d = SizeDistribution::sum(vec![
+        SizeDistribution::lognormal(100.0, 0.05, 1.6).unwrap(),
+        SizeDistribution::lognormal(1.0, 1.0, 1.8).unwrap(),
+    ])
+    .unwrap();
+    let comps = [Component {
+        name: "p".into(),
+        distribution: d,
+        refractive_index: Complex64::new(1.45, 1e-4),
+    }];
+    let run = |threads: usize| {
+        let radii = std::sync::Mutex::new(Vec::new());
+        let b = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| {
+                bulk_optics_mixture_with_progress(&comps, 532e-9, &BulkOptions::default(), &|p| {
+                    radii.lock().unwrap().push((p.integration, p.radii))
+                })
+                .unwrap()
+            });
+        (b, radii.into_inner().unwrap())
+    };
+    let (one, p1) = run(1);
+    let (four, p4) = run(4);
+    assert_eq!(one, four);
+    assert_eq!(p1, p4);
+    // Progress: integrations 1 then 2, radii increasing to the grids' total.
+    let total: usize = one.convergence.iter().map(|c| c.points).sum();
+    assert!(p1.windows(2).all(|w| w[0].1 < w[1].1 && w[0].0 <= w[1].0));
+    assert_eq!(p1.last().unwrap().0, 2);
+    // Each panel's first level counts its ends, which neighbouring panels share.
+    let panels: usize = one.convergence.iter().map(|c| c.panels.len()).sum();
+    assert_eq!(
+        p1.last().unwrap().1 as usize,
+        total + panels - one.convergence.len()
+    );
+}

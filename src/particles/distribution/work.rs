@@ -13,12 +13,12 @@ use crate::particles::mie::{MieError, n_terms};
 /// Time goes in two places: the Mie coefficients of every radius of a mode's grid (Wiscombe's
 /// N(x) = x + 4.05 x^(1/3) + 2 terms each), and the matrix products that turn them into the
 /// phase function and scattering matrix on K angles (N(x)·K multiply-adds a radius). The grid is
-/// the finest the step halving can reach (128·2^j intervals, down to `min_step_x` or up to
-/// `max_points`): the halving may stop sooner on convergence, so the count is an upper bound,
-/// and for the large droplets whose cost matters it is usually the grid reached. The work is
+/// the finest the refinement can reach (every panel halved down to `min_step_x` or up to its
+/// share of `max_points`): the refinement stops sooner on convergence, so the count is an upper
+/// bound, often a loose one (the panels in a mode's tails stop early). The work is
 /// `terms × (angles + c)`, `terms` the sum of N(x) over the grids' radii and `c` the cost of the
-/// coefficients in angles ([`crate::limits::MIE_COEFFICIENT_ANGLES`], twice with a phase
-/// function: they are computed again for the matrix products); its unit, a "term-angle", takes
+/// coefficients in angles ([`crate::limits::MIE_COEFFICIENT_ANGLES`]; the matrix products use
+/// the same coefficients as the efficiencies); its unit, a "term-angle", takes
 /// [`crate::limits::MIE_SECONDS_PER_WORK`] on one core of the reference machine.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct MieWork {
@@ -51,8 +51,7 @@ impl MieWork {
 
     /// The coefficients' cost in angles, `c` (see the type's documentation).
     fn coefficient_angles(&self) -> u64 {
-        let c = crate::limits::MIE_COEFFICIENT_ANGLES;
-        if self.angles > 0 { 2 * c } else { c }
+        crate::limits::MIE_COEFFICIENT_ANGLES
     }
 
     /// Seconds on one core of the reference machine (README, "Limits").
@@ -131,10 +130,16 @@ pub fn mie_work(
         for mode in c.distribution.modes() {
             let (r_lo, r_hi) = mode_range_um(&mode, k, opts)?;
             let (x_lo, x_hi) = (k * r_lo, k * r_hi);
-            let radii = max_intervals(x_lo, x_hi, opts) + 1;
+            // Per panel of the refinement, its finest grid: the points (the panels share their
+            // ends: one point more than the intervals in all), and N(x) at the panel's middle
+            // times its points with both ends, a bound by concavity.
+            let finest = max_intervals(x_lo, x_hi, opts);
+            let radii = finest.iter().map(|p| p.2).sum::<usize>() + 1;
             w.integrations += 1;
             w.radii += radii as u64;
-            w.terms += radii as f64 * n_terms_f(0.5 * (x_lo + x_hi));
+            for (a, b, intervals) in finest {
+                w.terms += (intervals + 1) as f64 * n_terms_f(0.5 * (a + b));
+            }
             x_max = x_max.max(x_hi);
         }
     }
