@@ -55,10 +55,10 @@ pub const MAX_ENSEMBLE_LEVELS: u64 = 2_000_000;
 /// Mie work of one particle layer (all its channels' wavelengths) or of one `lidarsim mie`, in
 /// term-angles (`particles::distribution::MieWork`: Mie terms summed over the radii of the
 /// finest size grids × (phase-function angles + the coefficients' cost in angles)). About 2.4 h
-/// on one core at [`MIE_SECONDS_PER_WORK`]: a hundredfold the largest shipped computation, OPAC
-/// maritime clean at 532 nm with its phase function (3.9·10¹¹, the table in
-/// `phase_functions/`; 42 s measured, the bound counting the grids its two smaller modes did
-/// not need).
+/// on one core at [`MIE_SECONDS_PER_WORK`]: several hundredfold the largest shipped
+/// computation, OPAC maritime clean at 532 nm with its phase function (1.26·10¹¹ since the
+/// size grids are refined panel by panel in ln x and the coefficients counted once; it was
+/// 3.9·10¹¹ and 42 s before).
 pub const MAX_MIE_WORK: f64 = 4.0e13;
 
 /// Mie work above which the size integration says, before it starts, how long it may take
