@@ -162,14 +162,23 @@ def _fraction_unit(units):
 
 def _robust_window(points, floor_frac=0.02, k=10.0):
     """A window [lo, hi] holding the bulk of ``points``: median ± k·(1.4826·MAD), at least
-    ± floor_frac·|median|; a wild value (a DIAL cell with next to no signal) falls outside."""
+    ± floor_frac·|median| (where the MAD is below that, up to 1.5 × the 10–90 % percentile
+    range, at most three times it); a wild value (a DIAL cell with next to no signal) falls
+    outside."""
     p = np.asarray(points, dtype=float)
     p = p[np.isfinite(p)]
     if p.size == 0:
         return -1.0, 1.0
     med = float(np.median(p))
     mad = 1.4826 * float(np.median(np.abs(p - med)))
-    half = max(k * mad, floor_frac * abs(med), 1e-12)
+    floor = floor_frac * abs(med)
+    half = max(k * mad, floor, 1e-12)
+    if k * mad < floor:
+        # Most values coincide (noise-free cells equal to a well-mixed truth), so the MAD is
+        # ~0: the central 80 % of the points, widened by half, keeps the noisy cells in view,
+        # up to three times the floor.
+        spread = 1.5 * float(np.percentile(p, 90) - np.percentile(p, 10))
+        half = max(half, min(spread, 3.0 * floor))
     return med - half, med + half
 
 
