@@ -367,16 +367,15 @@ pub fn dial<'py>(
         .iter()
         .any(|o| o.records.as_ref().is_ok_and(|r| !r.is_empty()))
     {
-        let mut ds = dial_study::profiles_dataset(&result.outcomes, &title, &history)
-            .map_err(runtime_error)?;
-        lidarsim::products::dial::study_globals(
-            &mut ds,
+        let ds = lidarsim::products::dial::profiles_nc(
+            &result.outcomes,
             &title,
             &history,
             &inputs.scene,
             &inputs.set,
             inputs.options.seed,
-        );
+        )
+        .map_err(runtime_error)?;
         dataset_to_py(py, ds)?.into_any()
     } else {
         py.None().into_bound(py)
@@ -384,16 +383,15 @@ pub fn dial<'py>(
     let summary = if products.summaries.is_empty() {
         py.None().into_bound(py)
     } else {
-        let mut ds = dial_study::summary_dataset(&products.summaries, &title, &history)
-            .map_err(runtime_error)?;
-        lidarsim::products::dial::study_globals(
-            &mut ds,
+        let ds = lidarsim::products::dial::summary_nc(
+            &products.summaries,
             &title,
             &history,
             &inputs.scene,
             &inputs.set,
             inputs.options.seed,
-        );
+        )
+        .map_err(runtime_error)?;
         dataset_to_py(py, ds)?.into_any()
     };
     let failed = PyList::empty(py);

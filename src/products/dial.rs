@@ -260,13 +260,11 @@ impl<'a> DialProducts<'a> {
                 .iter()
                 .any(|o| o.records.as_ref().is_ok_and(|r| !r.is_empty()))
             {
-                let mut nc = dial::profiles_dataset(&result.outcomes, &title, history)?;
-                study_globals(&mut nc, &title, history, scene, set, options.seed);
+                let nc = profiles_nc(&result.outcomes, &title, history, scene, set, options.seed)?;
                 files.write(dir.join(dial::PROFILES_NC), nc.encode()?)?;
             }
             if !summaries.is_empty() {
-                let mut nc = dial::summary_dataset(summaries, &title, history)?;
-                study_globals(&mut nc, &title, history, scene, set, options.seed);
+                let nc = summary_nc(summaries, &title, history, scene, set, options.seed)?;
                 files.write(dir.join(dial::SUMMARY_NC), nc.encode()?)?;
             }
         }
@@ -297,6 +295,35 @@ impl<'a> DialProducts<'a> {
         writeln!(out, "wrote {}", names.join(", "))?;
         Ok(())
     }
+}
+
+/// `profiles.nc`'s data set ([`dial::profiles_dataset`]) with the study's global attributes
+/// ([`study_globals`]): what the command line writes and the Python package returns.
+pub fn profiles_nc(
+    outcomes: &[crate::study::dial::ProfileOutcome],
+    title: &str,
+    history: &str,
+    scene: &Scene,
+    set: &ProfileSet,
+    seed: u64,
+) -> Result<crate::netcdf::Dataset, crate::netcdf::NetcdfError> {
+    let mut nc = dial::profiles_dataset(outcomes)?;
+    study_globals(&mut nc, title, history, scene, set, seed);
+    Ok(nc)
+}
+
+/// `summary.nc`'s data set ([`dial::summary_dataset`]) with the study's global attributes.
+pub fn summary_nc(
+    summaries: &[crate::study::dial::Summary],
+    title: &str,
+    history: &str,
+    scene: &Scene,
+    set: &ProfileSet,
+    seed: u64,
+) -> Result<crate::netcdf::Dataset, crate::netcdf::NetcdfError> {
+    let mut nc = dial::summary_dataset(summaries)?;
+    study_globals(&mut nc, title, history, scene, set, seed);
+    Ok(nc)
 }
 
 /// The global attributes of a study's `profiles.nc` and `summary.nc`

@@ -168,13 +168,12 @@ fn altitudes(
 /// `retrieval` each pair's retrieved quantities in the CSV's order (IPDA, then the DIAL
 /// cells), with `method` as coordinate and the altitude interval of each value as auxiliary
 /// coordinates. Mixing ratios in ppm have the units `1e-6` (UDUNITS, CF-1.8 §3.1). An error
-/// when no profile has records. Global attributes: [`crate::netcdf::study_globals`].
+/// when no profile has records. Without global attributes: the caller adds the scene's, seed
+/// and set ([`crate::products::dial::profiles_nc`]).
 pub fn profiles_dataset(
     outcomes: &[ProfileOutcome],
-    title: &str,
-    history: &str,
 ) -> Result<crate::netcdf::Dataset, crate::netcdf::NetcdfError> {
-    use crate::netcdf::{Dataset, NetcdfError, StudyAttributes, study_globals};
+    use crate::netcdf::{Dataset, NetcdfError};
     let ran: Vec<(&ProfileOutcome, &Vec<Record>)> = outcomes
         .iter()
         .filter_map(|o| o.records.as_ref().ok().map(|r| (o, r)))
@@ -188,17 +187,6 @@ pub fn profiles_dataset(
             .map(|(_, rs)| rs.iter().map(|r| (r.pair.as_str(), r.method)).collect()),
     )?;
     let mut nc = Dataset::default();
-    study_globals(
-        &mut nc,
-        &StudyAttributes {
-            title,
-            history,
-            scene_file: None,
-            scene_text: None,
-            seed: None,
-            profile_set: None,
-        },
-    );
     nc.dim("profile", ran.len());
     let ids: Vec<String> = ran.iter().map(|(o, _)| o.id.clone()).collect();
     nc.text("profile", "profile", &ids)
@@ -284,13 +272,12 @@ pub fn profiles_dataset(
 /// The statistics as the CF NetCDF data set of `summary.nc`: the numbers of `summary.csv`
 /// at full precision on the dimensions (`class`, `pair`, `retrieval`): `class` the latitude
 /// classes (and `all`) by name, `pair` and `retrieval` as in `profiles.nc`
-/// ([`profiles_dataset`]). An error when there are no rows.
+/// ([`profiles_dataset`]). An error when there are no rows. Without global attributes
+/// ([`crate::products::dial::summary_nc`]).
 pub fn summary_dataset(
     summaries: &[Summary],
-    title: &str,
-    history: &str,
 ) -> Result<crate::netcdf::Dataset, crate::netcdf::NetcdfError> {
-    use crate::netcdf::{Dataset, NetcdfError, StudyAttributes, study_globals};
+    use crate::netcdf::{Dataset, NetcdfError};
     // The summaries come class by class, each class's rows in the records' order.
     let mut classes: Vec<String> = Vec::new();
     let mut groups: Vec<Vec<&Summary>> = Vec::new();
@@ -312,17 +299,6 @@ pub fn summary_dataset(
             .map(|ms| ms.iter().map(|m| (m.pair.as_str(), m.method)).collect()),
     )?;
     let mut nc = Dataset::default();
-    study_globals(
-        &mut nc,
-        &StudyAttributes {
-            title,
-            history,
-            scene_file: None,
-            scene_text: None,
-            seed: None,
-            profile_set: None,
-        },
-    );
     nc.dim("class", classes.len());
     nc.text("class", "class", &classes)
         .attrs([("long_name", "latitude class, or all")]);
