@@ -26,6 +26,7 @@
 
 use std::f64::consts::{LN_2, PI};
 use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
 
 use nalgebra::{DMatrix, SymmetricEigen};
 
@@ -679,7 +680,27 @@ impl LineShape {
 ///
 /// [^gw]: Golub & Welsch (1969), Math. Comp. 23, 221, doi:10.1090/S0025-5718-69-99647-1.
 pub fn gauss_hermite(n: usize) -> Vec<QuadratureNode> {
-    symmetric_gauss_rule(n, |k| (k as f64).sqrt())
+    static RULES: [OnceLock<Vec<QuadratureNode>>; CACHED_RULES] =
+        [const { OnceLock::new() }; CACHED_RULES];
+    cached(&RULES, n, || symmetric_gauss_rule(n, |k| (k as f64).sqrt()))
+}
+
+/// Rules of up to this many nodes are computed once per process ([`cached`]).
+const CACHED_RULES: usize = 65;
+
+/// The rule of `n` nodes from `rules` (computed by `make` the first time), or `make`'s for a
+/// larger n: a study rebuilds its laser's line-shape quadrature for every truth of every profile,
+/// and the eigen decomposition behind it is the same each time. The values are `make`'s, bit
+/// for bit.
+fn cached(
+    rules: &'static [OnceLock<Vec<QuadratureNode>>; CACHED_RULES],
+    n: usize,
+    make: impl FnOnce() -> Vec<QuadratureNode>,
+) -> Vec<QuadratureNode> {
+    match rules.get(n) {
+        Some(rule) => rule.get_or_init(make).clone(),
+        None => make(),
+    }
 }
 
 /// Gauss–Legendre rule on \[−1, 1\], n nodes (`n = 0` is treated as 1), weights summing to 2,
@@ -692,13 +713,17 @@ pub fn gauss_hermite(n: usize) -> Vec<QuadratureNode> {
 ///
 /// [^gw]: Golub & Welsch (1969), Math. Comp. 23, 221, doi:10.1090/S0025-5718-69-99647-1.
 pub fn gauss_legendre(n: usize) -> Vec<QuadratureNode> {
-    symmetric_gauss_rule(n, |k| {
-        let k = k as f64;
-        k / (4.0 * k * k - 1.0).sqrt()
+    static RULES: [OnceLock<Vec<QuadratureNode>>; CACHED_RULES] =
+        [const { OnceLock::new() }; CACHED_RULES];
+    cached(&RULES, n, || {
+        symmetric_gauss_rule(n, |k| {
+            let k = k as f64;
+            k / (4.0 * k * k - 1.0).sqrt()
+        })
+        .into_iter()
+        .map(|q| QuadratureNode::new(q.offset_mhz, 2.0 * q.weight))
+        .collect()
     })
-    .into_iter()
-    .map(|q| QuadratureNode::new(q.offset_mhz, 2.0 * q.weight))
-    .collect()
 }
 
 /// Golub–Welsch: nodes and weights of the n-point Gauss rule of a unit-mass weight whose
@@ -1000,6 +1025,31 @@ mod tests {
             assert!(rel > 1e-3, "n={n}: degree 2n integrated exactly?");
         }
         eprintln!("Gauss–Hermite worst relative moment error (n ≤ 12, k ≤ 2n − 1): {worst:.1e}");
+    }
+
+    /// The rules kept per process are the rules computed afresh, bit for bit, below and above
+    /// the largest one kept, asked for once or many times.
+    #[test]
+    fn cached_rules_are_the_computed_rules() {
+        let bits = |r: &[QuadratureNode]| {
+            r.iter()
+                .map(|q| (q.offset_mhz.to_bits(), q.weight.to_bits()))
+                .collect::<Vec<_>>()
+        };
+        for n in [0, 1, 2, 5, 8, 33, 64, 65, 70] {
+            let hermite = symmetric_gauss_rule(n, |k| (k as f64).sqrt());
+            let legendre: Vec<QuadratureNode> = symmetric_gauss_rule(n, |k| {
+                let k = k as f64;
+                k / (4.0 * k * k - 1.0).sqrt()
+            })
+            .into_iter()
+            .map(|q| QuadratureNode::new(q.offset_mhz, 2.0 * q.weight))
+            .collect();
+            for _ in 0..2 {
+                assert_eq!(bits(&gauss_hermite(n)), bits(&hermite), "Hermite {n}");
+                assert_eq!(bits(&gauss_legendre(n)), bits(&legendre), "Legendre {n}");
+            }
+        }
     }
 
     #[test]
