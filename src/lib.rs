@@ -89,6 +89,7 @@ pub mod returns;
 pub mod rng;
 pub mod scene;
 pub mod shard;
+mod simd;
 /// What a scene does not need: whether the Monte Carlo runs ([`pipeline::skip`]).
 pub use pipeline::skip;
 pub mod spectroscopy;

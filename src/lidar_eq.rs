@@ -283,7 +283,47 @@ struct RayReturns {
 }
 
 impl RayReturns {
-    fn of(
+    /// [`Self::traced`] with the widest vector instructions the processor has
+    /// ([`crate::simd`]: the same numbers).
+    fn of<B: Fn(&OpticalAtmosphere, usize, usize, Option<f64>) -> f64>(
+        scene: &Scene,
+        atm: &OpticalAtmosphere,
+        ap: &Aperture,
+        back: &B,
+        e0: f64,
+        mu: f64,
+    ) -> Self {
+        struct Op<'a, B> {
+            scene: &'a Scene,
+            atm: &'a OpticalAtmosphere,
+            ap: &'a Aperture,
+            back: &'a B,
+            e0: f64,
+            mu: f64,
+        }
+        impl<B: Fn(&OpticalAtmosphere, usize, usize, Option<f64>) -> f64> crate::simd::WithSimd
+            for Op<'_, B>
+        {
+            type Output = RayReturns;
+            #[inline(always)]
+            fn with_simd<S: crate::simd::Simd>(self, _: S) -> RayReturns {
+                RayReturns::traced(self.scene, self.atm, self.ap, self.back, self.e0, self.mu)
+            }
+        }
+        crate::simd::dispatch(Op {
+            scene,
+            atm,
+            ap,
+            back,
+            e0,
+            mu,
+        })
+    }
+
+    /// The volume returns of every gate and channel and the surface echo along the ray of
+    /// direction cosine `mu`.
+    #[inline(always)]
+    fn traced(
         scene: &Scene,
         atm: &OpticalAtmosphere,
         ap: &Aperture,
@@ -483,6 +523,7 @@ impl Lanes {
     /// Add the piece [a, b] of layer l to `row` (the gate's energies per channel) for every
     /// channel not marked in `self.rest`.
     #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
     fn add_piece(
         &mut self,
         atm: &OpticalAtmosphere,

@@ -1,0 +1,30 @@
+//! Run a loop with the widest vector instructions the processor has, chosen at run time.
+//!
+//! lidarsim is built for the baseline of its target (x86-64: SSE2, two f64 an instruction) so
+//! that one binary runs on every machine, and it forbids `unsafe`. Its hot loops are written
+//! branch-free over small arrays (per-channel lanes, a line's wing over a cluster of
+//! wavenumbers) so that the compiler vectorises them; [`dispatch`] compiles such a loop a
+//! second time with AVX2 (four f64 an instruction) and picks the copy the processor can run,
+//! through `pulp`, which does the detection and the `unsafe` call behind a safe interface.
+//!
+//! The numbers do not change: the same IEEE operations run in the same order, only more of them
+//! at once (Rust never fuses a multiply and an add into an FMA on its own), so a result is the
+//! same bit for bit on every processor.
+
+use std::sync::OnceLock;
+
+pub(crate) use pulp::{Simd, WithSimd};
+
+/// The instruction set detected once per process.
+fn arch() -> pulp::Arch {
+    static ARCH: OnceLock<pulp::Arch> = OnceLock::new();
+    *ARCH.get_or_init(pulp::Arch::new)
+}
+
+/// `op` compiled for the best instruction set of this processor. Everything `op` does must be
+/// inlined into it (`#[inline(always)]` on its `with_simd` and on the functions that calls) for
+/// the wider instructions to reach it.
+#[inline(always)]
+pub(crate) fn dispatch<Op: WithSimd>(op: Op) -> Op::Output {
+    arch().dispatch(op)
+}
