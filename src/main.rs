@@ -10,6 +10,9 @@ use clap::{Parser, Subcommand};
 mod cli;
 mod figures;
 
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 /// Simulation testbed for atmospheric lidars (DIAL, IPDA): line-by-line gas absorption, Mie and
 /// Rayleigh scattering, time-resolved Monte Carlo transport and the analytic lidar equation.
 #[derive(Parser)]
