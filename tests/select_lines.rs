@@ -496,6 +496,39 @@ fn cli_profile_set_classes_failures_and_figures() {
         let len = std::fs::metadata(out.join(f)).unwrap().len();
         assert!(len > 10_000, "{f}: {len} bytes");
     }
+    // The figures change no table: the same study with `--no-plots` (no figure spectra, no
+    // figures) writes the same tables, byte for byte.
+    let bare = dir.path().join("bare");
+    lidarsim_ok([
+        "select-lines",
+        "--profiles",
+        set.to_str().unwrap(),
+        "--per-profile",
+        "--max-j",
+        "18",
+        "--offsets-ghz=1.5,2",
+        "--off-cm1",
+        "6360.61",
+        "--co2-ppm",
+        "410",
+        "--layer-m",
+        "4000",
+        "--top-km",
+        "40",
+        "--figure-lines",
+        "R16e",
+        "--no-plots",
+        "--out",
+        bare.to_str().unwrap(),
+    ]);
+    for f in ["sensitivities.csv", "failed.csv"] {
+        assert_eq!(
+            std::fs::read(out.join(f)).unwrap(),
+            std::fs::read(bare.join(f)).unwrap(),
+            "{f}"
+        );
+    }
+    assert!(!bare.join("transmission_tropical.png").exists());
 }
 
 /// The random error against the retrieval stage's analytic random error of the same IPDA: the

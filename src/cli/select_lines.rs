@@ -168,13 +168,16 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let bar = super::progress::Progress::new(study.len(), "select-lines", "profiles");
     let outcomes = pool.install(|| study.study(0..study.len(), &|| bar.tick()));
     bar.finish();
-    super::write::select(
-        &a.out,
-        a.no_plots,
-        &study,
-        &outcomes,
-        lidarsim::study::FailurePolicy::strict_if(a.strict),
-    )
+    // On the same threads: the summary computes each group's figure spectra in parallel.
+    pool.install(|| {
+        super::write::select(
+            &a.out,
+            a.no_plots,
+            &study,
+            &outcomes,
+            lidarsim::study::FailurePolicy::strict_if(a.strict),
+        )
+    })
 }
 
 /// The study's options from the command line. A shard names its files by their absolute

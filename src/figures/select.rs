@@ -1,12 +1,14 @@
 //! Figures of `lidarsim select-lines`, per group (an AFGL atmosphere or a latitude class):
 //! `transmission_<group>.png` (Figure 4 of the reference study) and `errors_<group>.png` (Figure 5).
+//! Their numbers are the study's: the rows of `sensitivities.csv` and the spectra of each
+//! group's mean profile ([`GroupSummary::spectra`]); nothing is computed here.
 
 use std::path::Path;
 
 use plotters::prelude::*;
 
 use lidarsim::output::{OutputError, OutputSet};
-use lidarsim::study::select::{Row, StudyConfig, Uncertainties};
+use lidarsim::study::select::{GHZ_PER_CM1, Row, StudyConfig, Uncertainties};
 use lidarsim::study::select_study::{GroupSummary, SPECTRUM_HALF_GHZ};
 
 use super::DrawResult;
@@ -23,10 +25,16 @@ pub fn draw_figures(
     cfg: &StudyConfig,
     unc: &Uncertainties,
 ) -> Result<(), OutputError> {
-    let (name, rows, stats, members) = (g.name.as_str(), &g.rows, &g.spectra, g.profiles);
-    files.write_via(dir.join(format!("transmission_{name}.png")), |p| {
-        transmission_figure(p, name, rows, cfg, stats, members)
-    })?;
+    let (name, rows, members) = (g.name.as_str(), &g.rows, g.profiles);
+    match &g.spectra {
+        Ok(spectra) if spectra.len() == cfg.spectra.len() => {
+            files.write_via(dir.join(format!("transmission_{name}.png")), |p| {
+                transmission_figure(p, name, rows, cfg, spectra, members)
+            })?;
+        }
+        Ok(_) => eprintln!("{name}: no spectra of its mean profile: no transmission figure"),
+        Err(e) => eprintln!("{name}: the spectra of its mean profile: {e}: no transmission figure"),
+    }
     let labels: Vec<&str> = cfg.spectra.iter().map(|w| w.label.as_str()).collect();
     if rows.iter().any(|r| {
         r.position
@@ -50,15 +58,18 @@ fn best_on<'a>(rows: &'a [Row], label: &str) -> Option<&'a Row> {
         .min_by_key(|r| r.rank)
 }
 
-/// Figure 4: the two-way transmission (mean, and its standard deviation over the members of a
-/// set) against the offset from each line's centre, the 1 GHz window of the laser marked around
-/// the best-ranked on-line position of the line (around the centre if none). One panel per line.
+/// Figure 4: the two-way transmission against the offset from each line's centre, one panel
+/// per line: the spectrum of the group's mean profile ([`GroupSummary::spectra`]), and at the
+/// candidate on-lines of the study in the panel the mean and standard deviation over the
+/// profiles of their transmission (the rows' `t2_on_mean`, `t2_on_std`), the 1 GHz window of
+/// the laser marked around the best-ranked on-line position of the line (around the centre if
+/// none).
 fn transmission_figure(
     path: &Path,
     name: &str,
     rows: &[Row],
     cfg: &StudyConfig,
-    stats: &[(Vec<f64>, Vec<f64>)],
+    spectra: &[Vec<f64>],
     members: usize,
 ) -> DrawResult {
     let n = cfg.spectra.len().max(1);
@@ -72,13 +83,33 @@ fn transmission_figure(
         true,
     )?;
     let panels = plots.split_evenly((1, n));
-    let show_std = members > 1
-        && stats
-            .iter()
-            .any(|(_, s)| s.iter().copied().fold(0.0f64, f64::max) > 0.0);
+    // Each panel's candidate on-lines: (offset from its centre [GHz], T² mean, T² std).
+    let candidates: Vec<Vec<(f64, f64, f64)>> = cfg
+        .spectra
+        .iter()
+        .map(|w| {
+            let mut c: Vec<(f64, f64, f64)> = rows
+                .iter()
+                .map(|r| {
+                    let x = (r.position.nu_cm1 - w.centre_cm1) * GHZ_PER_CM1;
+                    (x, r.t2_on_mean, r.t2_on_std)
+                })
+                .filter(|(x, m, s)| x.abs() <= SPECTRUM_HALF_GHZ && m.is_finite() && s.is_finite())
+                .collect();
+            c.sort_by(|a, b| a.0.total_cmp(&b.0));
+            c
+        })
+        .collect();
+    let show_std = members > 1 && candidates.iter().flatten().any(|c| c.2 > 0.0);
     let (window_c, mean_c, std_c) = (colour(7), style::INK, colour(6));
-    for ((w, (mean, std)), area) in cfg.spectra.iter().zip(stats).zip(&panels) {
-        let std_max = std.iter().copied().fold(0.0f64, f64::max);
+    for (((w, spectrum), cands), area) in cfg
+        .spectra
+        .iter()
+        .zip(spectra)
+        .zip(&candidates)
+        .zip(&panels)
+    {
+        let std_max = cands.iter().map(|c| c.2).fold(0.0f64, f64::max);
         let mut b = ChartBuilder::on(area);
         b.margin(10)
             .x_label_area_size(50)
@@ -97,7 +128,7 @@ fn transmission_figure(
         style::mesh(
             &mut chart,
             Axis::Linear("frequency from the line centre [GHz]"),
-            Axis::Linear("two-way transmission T² (mean)"),
+            Axis::Linear("two-way transmission T²"),
         )?;
         let centre = best_on(rows, &w.label).map_or(0.0, |r| r.position.offset_ghz);
         let (a, b) = (centre - WINDOW_HALF_GHZ, centre + WINDOW_HALF_GHZ);
@@ -105,14 +136,19 @@ fn transmission_figure(
             [(a, 0.0), (b, 1.0)],
             window_c.mix(0.25).filled(),
         )))?;
-        // Spectra of 10⁵ points draw as their per-pixel envelope ([`style::decimate`]).
+        // Spectra of many points draw as their per-pixel envelope ([`style::decimate`]).
         let pts: Vec<(f64, f64)> = w
             .offsets_ghz
             .iter()
             .copied()
-            .zip(mean.iter().copied())
+            .zip(spectrum.iter().copied())
             .collect();
         style::line(&mut chart, style::decimate(&pts, 600), mean_c, 2, false)?;
+        chart.draw_series(
+            cands
+                .iter()
+                .map(|c| Circle::new((c.0, c.1), 4, mean_c.stroke_width(2))),
+        )?;
         if show_std {
             let fy = |v: &f64| style::tick(*v);
             chart
@@ -122,28 +158,35 @@ fn transmission_figure(
                 .label_style((style::FONT, style::TICK))
                 .axis_desc_style((style::FONT, style::AXIS))
                 .draw()?;
-            let pts: Vec<(f64, f64)> = w
-                .offsets_ghz
-                .iter()
-                .copied()
-                .zip(std.iter().copied())
-                .collect();
-            chart.draw_secondary_series(LineSeries::new(
-                style::decimate(&pts, 600),
-                std_c.stroke_width(2),
-            ))?;
+            let pts: Vec<(f64, f64)> = cands.iter().map(|c| (c.0, c.2)).collect();
+            chart.draw_secondary_series(LineSeries::new(pts.clone(), std_c.stroke_width(1)))?;
+            chart.draw_secondary_series(
+                pts.into_iter().map(|p| Circle::new(p, 4, std_c.filled())),
+            )?;
         }
     }
-    let mut entries = vec![Entry::new(
-        "T² mean over profiles",
-        mean_c,
-        Mark::Line(2, false),
-    )];
+    let profile = if members == 1 {
+        "T² of the profile".to_string()
+    } else {
+        format!("T² of the mean of the {members} profiles")
+    };
+    let mut entries = vec![
+        Entry::new(profile, mean_c, Mark::Line(2, false)),
+        Entry::new(
+            if members == 1 {
+                "T² at the candidate on-lines"
+            } else {
+                "T² mean over profiles at the candidate on-lines"
+            },
+            mean_c,
+            Mark::Point(false),
+        ),
+    ];
     if show_std {
         entries.push(Entry::new(
-            "T² standard deviation (right axis)",
+            "T² standard deviation over profiles at the candidate on-lines (right axis)",
             std_c,
-            Mark::Line(2, false),
+            Mark::Point(true),
         ));
     }
     entries.push(Entry::new(

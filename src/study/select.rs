@@ -56,11 +56,9 @@ mod summary;
 
 pub use member::{
     MemberFailure, MemberResult, PositionResult, WeightingFunction, study_member, study_members,
-    weighting_function,
+    transmission_spectra, weighting_function,
 };
-pub use summary::{
-    CSV_HEADER, Row, Uncertainties, spectrum_statistics, summarise, to_csv, to_dataset,
-};
+pub use summary::{CSV_HEADER, Row, Uncertainties, summarise, to_csv, to_dataset};
 
 /// GHz per cm⁻¹ (c = 299 792 458 m/s): 1 GHz = 1/29.979 cm⁻¹.
 pub const GHZ_PER_CM1: f64 = MHZ_PER_CM1 / 1000.0;
@@ -421,7 +419,7 @@ pub struct SpectrumWindow {
     pub offsets_ghz: Vec<f64>,
 }
 
-/// What a study computes for every profile.
+/// What a study computes for every profile (and, [`StudyConfig::spectra`], for every group).
 #[derive(Debug, Clone)]
 pub struct StudyConfig {
     /// Lines of every gas, reaching every position with their wings.
@@ -438,7 +436,8 @@ pub struct StudyConfig {
     pub steps: Steps,
     /// The instrument, for the random error (None: NaN).
     pub noise: Option<NoiseModel>,
-    /// Fine transmission spectra to compute (may be empty).
+    /// Fine transmission spectra of each group's mean profile, for the figures (may be empty;
+    /// [`transmission_spectra`]).
     pub spectra: Vec<SpectrumWindow>,
 }
 

@@ -25,7 +25,9 @@
 //! | 8 | XCO2 over the grid \[ppm\] (f64) |
 //! | 8 + 8·n | layer edges \[m\]: n (u64), n f64 |
 //! | 8 + 64·n | positions: n (u64), per position the eight values of [`PositionResult`] in declaration order (f64) |
-//! | 8 + … | fine spectra: windows (u64), per window n (u64) and n f64 |
+//!
+//! (The figures' spectra are not in it: they are of each group's mean profile, computed when
+//! the study is summarised, [`SelectStudy::summarise`].)
 //!
 //! Floats are stored as their IEEE-754 bits, so the results round-trip exactly (NaN included).
 
@@ -105,7 +107,7 @@ pub struct SelectShardHeader {
     pub uncertainties_bits: [u64; 4],
     /// Lines of the figures.
     pub figure_lines: Vec<String>,
-    /// Whether the figures' spectra were computed (no `--no-plots`).
+    /// Whether the figures are drawn (no `--no-plots`): the merge draws them too.
     pub plots: bool,
     /// This shard, `0..shard_count`.
     pub shard_index: u64,
@@ -344,10 +346,6 @@ fn write_outcome(w: &mut impl Write, o: &MemberOutcome) -> io::Result<()> {
                     w.write_all(&v.to_le_bytes())?;
                 }
             }
-            w.write_all(&(m.spectra.len() as u64).to_le_bytes())?;
-            for s in &m.spectra {
-                write_f64s(w, s)?;
-            }
             Ok(())
         }
     }
@@ -383,17 +381,12 @@ fn read_outcome(body: &mut Body) -> Result<MemberOutcome, String> {
                     random_error_ppm: h,
                 });
             }
-            let windows = body.count(8, &format!("spectra of profile {id}"))?;
-            let spectra = (0..windows)
-                .map(|_| body.f64s(&format!("spectrum values of profile {id}")))
-                .collect::<Result<_, _>>()?;
             Ok(Ok(MemberResult {
                 id,
                 class,
                 edges_m,
                 xco2_ppm,
                 positions,
-                spectra,
             }))
         }
         s => Err(format!("corrupt: status {s} of profile {id}")),
@@ -427,12 +420,6 @@ impl ReadOutcome for MemberOutcome {
                 "profile {id}: its layer edges are not finite and increasing"
             ));
         }
-        let transmission = |t: f64| (0.0..=1.0).contains(&t);
-        if let Some(t) = m.spectra.iter().flatten().find(|t| !transmission(**t)) {
-            return Err(format!(
-                "profile {id}: a transmission of its spectra is {t}, outside [0, 1]"
-            ));
-        }
         for (i, p) in m.positions.iter().enumerate() {
             if !p.daod_one_way.is_finite() {
                 return Err(format!(
@@ -452,7 +439,7 @@ impl ReadOutcome for MemberOutcome {
             ];
             let nan_or_non_negative = |v: f64| v.is_nan() || (v.is_finite() && v >= 0.0);
             if !sensitivities.iter().all(|v| v.is_finite())
-                || !transmission(p.t2_on)
+                || !(0.0..=1.0).contains(&p.t2_on)
                 || !nan_or_non_negative(p.wf_peak_hpa)
                 || !nan_or_non_negative(p.random_error_ppm)
             {
@@ -543,7 +530,7 @@ pub struct SelectMerged {
     pub shards: usize,
 }
 
-/// `o` is the outcome of `member` with the study's shapes (positions, spectra), or what
+/// `o` is the outcome of `member` with the study's shapes (class, positions), or what
 /// differs.
 fn check_outcome(
     config: &StudyConfig,
@@ -558,14 +545,9 @@ fn check_outcome(
         return Err(format!("`{id}` where the study has `{}`", member.meta.id));
     }
     let Ok(r) = o else { return Ok(()) };
-    let spectra: Vec<usize> = r.spectra.iter().map(Vec::len).collect();
-    let want: Vec<usize> = config.spectra.iter().map(|w| w.offsets_ghz.len()).collect();
-    if r.class != member.meta.class()
-        || r.positions.len() != config.positions.len()
-        || spectra != want
-    {
+    if r.class != member.meta.class() || r.positions.len() != config.positions.len() {
         return Err(format!(
-            "class {}, {} positions, spectra of {spectra:?} values where the study has class {}, {} positions, spectra of {want:?}",
+            "class {}, {} positions where the study has class {}, {} positions",
             r.class,
             r.positions.len(),
             member.meta.class(),
@@ -675,7 +657,6 @@ mod tests {
                 edges_m: vec![0.0, 1000.5, 2e4],
                 xco2_ppm: 420.123,
                 positions: vec![p(0.5), p(-1e-300)],
-                spectra: vec![vec![0.1, 0.2], Vec::new()],
             }),
             Err(MemberFailure {
                 id: "b\n\"x\"".into(),
@@ -687,7 +668,6 @@ mod tests {
                 edges_m: Vec::new(),
                 xco2_ppm: f64::NAN,
                 positions: Vec::new(),
-                spectra: Vec::new(),
             }),
         ];
         let mut bytes = Vec::new();

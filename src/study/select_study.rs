@@ -14,7 +14,12 @@ use std::ops::Range;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use crate::atmosphere::{LatitudeClass, SetMember, StandardAtmosphere, read_profile_set};
+use rayon::prelude::*;
+
+use crate::atmosphere::{
+    LatitudeClass, ProfileSet, SetMember, StandardAtmosphere, StateShift, read_profile_set,
+    shift_member,
+};
 use crate::scene::Scene;
 use crate::spectroscopy::{LblOptions, LineFilter, LineList};
 use crate::study::dial::{self, ProfileSource};
@@ -406,15 +411,24 @@ impl SelectStudy {
     }
 
     /// Summarise every group from the outcomes of all members ([`SelectStudy::study`] of
-    /// `0..len`, in member order).
+    /// `0..len`, in member order); the groups in parallel on the current rayon pool (each
+    /// alone: the same numbers on any thread count).
     pub fn summarise(&self, outcomes: &[MemberOutcome]) -> Vec<GroupSummary> {
         let unc = &self.options.uncertainties;
-        let mut at = 0;
-        self.groups
+        let starts: Vec<usize> = self
+            .groups
             .iter()
-            .map(|(name, members)| {
+            .scan(0, |at, (_, m)| {
+                let s = *at;
+                *at += m.len();
+                Some(s)
+            })
+            .collect();
+        self.groups
+            .par_iter()
+            .zip(starts)
+            .map(|((name, members), at)| {
                 let group = outcomes.get(at..at + members.len()).unwrap_or(&[]);
-                at += members.len();
                 let mut ok: Vec<&MemberResult> = Vec::new();
                 let mut failed = Vec::new();
                 for r in group {
@@ -431,10 +445,16 @@ impl SelectStudy {
                 } else {
                     Vec::new()
                 };
-                let spectra = if self.options.plots {
-                    select::spectrum_statistics(&ok, self.config.spectra.len())
+                let spectra = if self.options.plots && !ok.is_empty() {
+                    let studied: Vec<&SetMember> = members
+                        .iter()
+                        .zip(group)
+                        .filter(|(_, o)| o.is_ok())
+                        .map(|(m, _)| m)
+                        .collect();
+                    self.mean_spectra(&studied).map_err(|e| e.to_string())
                 } else {
-                    Vec::new()
+                    Ok(Vec::new())
                 };
                 GroupSummary {
                     name: name.clone(),
@@ -448,6 +468,27 @@ impl SelectStudy {
                 }
             })
             .collect()
+    }
+}
+
+impl SelectStudy {
+    /// The figures' transmission spectra ([`select::transmission_spectra`]) of the mean
+    /// profile of `members` ([`ProfileSet::mean_member`], as the class-mean profiles of
+    /// `lidarsim dial`; a single member itself), its CO2 set as every member's and shifted by
+    /// nothing as a member's unshifted state is.
+    fn mean_spectra(&self, members: &[&SetMember]) -> Result<Vec<Vec<f64>>, SelectError> {
+        let mut mean = match members {
+            [one] => (*one).clone(),
+            _ => ProfileSet {
+                name: "the group's profiles".into(),
+                members: members.iter().map(|m| (*m).clone()).collect(),
+                notes: Vec::new(),
+            }
+            .mean_member()?,
+        };
+        select::set_co2_column_average(&mut mean.profile, self.options.co2_ppm)?;
+        let mean = shift_member(&mean, &StateShift::NONE)?;
+        select::transmission_spectra(&self.config, &mean.profile)
     }
 }
 
@@ -468,8 +509,9 @@ pub struct GroupSummary {
     pub mean_xco2_ppm: f64,
     /// One group of rows per member studied, with `per_profile` (else empty).
     pub per_profile: Vec<Row>,
-    /// Mean and standard deviation of each fine spectrum, with plots (else empty).
-    pub spectra: Vec<(Vec<f64>, Vec<f64>)>,
+    /// Two-way transmission of the group's mean profile per [`StudyConfig::spectra`] window
+    /// and offset, with plots (else empty), or why it could not be computed.
+    pub spectra: Result<Vec<Vec<f64>>, String>,
 }
 
 impl GroupSummary {

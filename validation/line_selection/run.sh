@@ -2,7 +2,7 @@
 # The seed paper's line-selection study (issue 9): 3 latitude classes x 300 NWP-perturbed
 # profiles, on-lines around CO2 R16e and R26e. Usage: validation/line_selection/run.sh OUT_DIR
 # [SHARED_DIR]. Needs the HITRAN2016 CO2 626 and H2O 161 files of ../shared/data/hitran for the
-# select-lines part (tests-only data: read in place, never copied). About 12 minutes on 2 cores.
+# select-lines part (tests-only data: read in place, never copied). About 1.5 minutes of CPU.
 set -eu
 out=${1:?usage: run.sh OUT_DIR [SHARED_DIR]}
 shared=${2:-$(dirname "$0")/../../../shared}

@@ -49,8 +49,6 @@ pub struct MemberResult {
     pub xco2_ppm: f64,
     /// One result per [`StudyConfig::positions`].
     pub positions: Vec<PositionResult>,
-    /// Two-way gas transmission per [`StudyConfig::spectra`] window and offset.
-    pub spectra: Vec<Vec<f64>>,
 }
 
 /// A profile that could not be studied, and why.
@@ -210,7 +208,6 @@ pub fn study_member(member: &SetMember, cfg: &StudyConfig) -> Result<MemberResul
             },
         )?)
     };
-    // The unshifted profile's prepared lines are kept for the figures' spectra below.
     let mut memo = LayerDepthMemo::new();
     let s0 = ReferenceState::new_with(
         &profiles[0],
@@ -306,14 +303,12 @@ pub fn study_member(member: &SetMember, cfg: &StudyConfig) -> Result<MemberResul
         });
     }
 
-    let spectra = fine_spectra(cfg, &profiles[0], &edges, &mut memo)?;
     Ok(MemberResult {
         id: member.meta.id.clone(),
         class: member.meta.class(),
         edges_m: edges,
         xco2_ppm: x0 * 1e6,
         positions,
-        spectra,
     })
 }
 
@@ -367,14 +362,21 @@ fn rayleigh_optical_depth(
     Ok(tau)
 }
 
-/// The fine spectra of `cfg.spectra` for `profile`: the two-way transmission, top to surface,
-/// at every offset of each window ([`column_depths_two_grid`]).
-fn fine_spectra(
+/// The fine spectra of `cfg.spectra` for `profile` (a group's mean profile, its CO2 set: the
+/// figures'): the two-way gas transmission, top to surface over the layers a member's study
+/// would use ([`layer_edges`] from the surface to the grid's top), at every offset of each
+/// window ([`column_depths_two_grid`]). Computed once per group, not per member: every
+/// member's spectra made the figures a third of `select-lines`' CPU time.
+pub fn transmission_spectra(
     cfg: &StudyConfig,
     profile: &Profile,
-    edges: &[f64],
-    memo: &mut LayerDepthMemo,
 ) -> Result<Vec<Vec<f64>>, SelectError> {
+    if cfg.spectra.is_empty() {
+        return Ok(Vec::new());
+    }
+    let top_m = profile.altitude_m[profile.len() - 1].min(cfg.grid.top_m);
+    let edges = layer_edges(profile.altitude_m[0], top_m, cfg.grid.layer_m)?;
+    let memo = &mut LayerDepthMemo::new();
     let windows: Vec<Vec<f64>> = cfg
         .spectra
         .iter()
@@ -385,7 +387,8 @@ fn fine_spectra(
                 .collect()
         })
         .collect();
-    let columns = column_depths_two_grid(profile, &cfg.lines, edges, &windows, &cfg.options, memo)?;
+    let columns =
+        column_depths_two_grid(profile, &cfg.lines, &edges, &windows, &cfg.options, memo)?;
     Ok(columns
         .iter()
         .map(|c| c.iter().map(|tau| (-2.0 * tau).exp()).collect())

@@ -1,5 +1,4 @@
-//! The study's results over the set: error budget, ranking, the CSV and NetCDF tables and the
-//! spectrum statistics.
+//! The study's results over the set: error budget, ranking, the CSV and NetCDF tables.
 
 use super::{MemberResult, OnPosition, PositionResult, StudyConfig};
 
@@ -312,17 +311,4 @@ pub fn to_dataset(
         num("profiles", "profiles averaged", "1", |r| r.profiles as f64),
     ];
     table_dataset("row", &columns, title, history)
-}
-
-/// Mean and standard deviation over members of each fine spectrum ([`StudyConfig::spectra`]):
-/// per window, (mean, std) per offset.
-pub fn spectrum_statistics(results: &[&MemberResult], windows: usize) -> Vec<(Vec<f64>, Vec<f64>)> {
-    (0..windows)
-        .map(|w| {
-            let len = results.first().map_or(0, |r| r.spectra[w].len());
-            (0..len)
-                .map(|k| mean_std(&results.iter().map(|r| r.spectra[w][k]).collect::<Vec<_>>()))
-                .unzip()
-        })
-        .collect()
 }
