@@ -63,14 +63,14 @@ def run(scene=None, *, photons=None, seed=None, threads=None, progress=False):
     xarray.Dataset
         What ``run.nc`` holds: ``energy_j`` and ``stderr_j`` [J] on (source, channel,
         fov_full_angle_mrad, range_m, order) — source ``mc`` and ``analytic``, order ``total``,
-        ``1``, …, ``N+`` (a bin a source does not compute is NaN) — with polarised light
+        ``1st``, ``2nd``, …, ``6th+`` (a bin a source does not compute is NaN) — with polarised light
         ``polarised_energy_j`` on a last dimension ``polarisation`` (co, cross) and
         ``depolarisation_ratio``, with a receiver the signals, with a retrieval its products
         (``mixing_ratio_*`` and others, one row per product), with ``[simulation] jacobians``
         the derivatives ``jacobian_j_m`` and ``jacobian_stderr_j_m`` [J m] of the Monte Carlo
         returns (those of ``jacobians.csv``) on (channel, fov_full_angle_mrad, range_m,
-        jacobian_order, layer, jacobian_quantity) — ``jacobian_order`` ``total``, ``1``,
-        ``2+``; ``layer`` with ``layer_bottom_m`` and ``layer_top_m``; ``jacobian_quantity``
+        jacobian_order, layer, jacobian_quantity) — ``jacobian_order`` ``total``, ``1st``,
+        ``2nd+``; ``layer`` with ``layer_bottom_m`` and ``layer_top_m``; ``jacobian_quantity``
         ``absorption``, ``molecular_scattering``, ``particle_scattering``,
         ``particle_extinction``; NaN where a layer lacks the scatterer; units and CF names in the attributes, the
         scene's TOML text in ``attrs["scene"]``. The GIL is released while it runs; Ctrl-C
