@@ -3,7 +3,7 @@ defaults): one type per column in every run, one unit per numeric column."""
 
 import pandas as pd
 import pytest
-from conftest import ROOT
+from conftest import ROOT, shared_file
 
 # The files of `lidarsim run` with a scattering-order column.
 ORDER_FILES = ["returns", "backscatter", "signals", "retrieval", "weighting", "jacobians"]
@@ -95,3 +95,26 @@ def test_jacobians_csv_has_one_unit_per_column(runs):
     sure = both[both["derivative_j_m_a"].abs() > 5 * both["stderr_j_m_a"]]
     assert len(sure) > 10
     assert ((sure["derivative_j_m_a"] > 0) == (sure["derivative_j_g"] > 0)).all()
+
+
+def test_a_converted_sets_numeric_ids_load_as_text_and_read_back(cli, tmp_path):
+    """ECMWF 52's profile ids are numbers (`1`, `2`, …): `profiles convert` writes them marked
+    as text (`'1`), so pandas loads `profile` as strings; lidarsim reads them back as the ids
+    (`profiles.read`, `--profile-id 7`)."""
+    import lidarsim
+
+    levels = shared_file("data/profiles/ecmwf52_chevallier_101L.csv")
+    meta = shared_file("data/profiles/ecmwf52_chevallier_meta.csv")
+    out = tmp_path / "e52.csv"
+    cli("profiles", "convert", "--format", "ecmwf52", "--levels", levels, "--meta", meta,
+        "--co2-ppm", "420", "--out", out, "--quiet")
+    table = pd.read_csv(out, comment="#")
+    assert pd.api.types.is_string_dtype(table["profile"]), table["profile"].dtype
+    ids = list(dict.fromkeys(table["profile"]))
+    assert len(ids) == 49 and all(i.startswith("'") and i[1:].isdigit() for i in ids), ids[:5]
+    back = lidarsim.profiles.read(out)
+    assert list(back["profile"].values) == [i[1:] for i in ids]
+    gen = tmp_path / "gen.csv"
+    cli("profiles", "generate", "--mean-profile", out, "--profile-id", ids[6][1:], "--n", "2",
+        "--seed", "1", "--out", gen, "--quiet")
+    assert len(set(pd.read_csv(gen, comment="#")["profile"])) == 2
