@@ -54,7 +54,19 @@ impl JacobianQuantity {
             _ => "J m",
         }
     }
+
+    /// The suffix of `jacobians.csv`'s value columns of this quantity (its unit):
+    /// `j_m` for ∂E/∂θ with θ in 1/m, `j` for `gas_amount` (per relative change).
+    pub fn column_suffix(self) -> &'static str {
+        match self {
+            JacobianQuantity::GasAmount => "j",
+            _ => "j_m",
+        }
+    }
 }
+
+/// The units of `jacobians.csv`'s value columns, by their suffix, in column order.
+pub const CSV_UNIT_SUFFIXES: [&str; 2] = ["j_m", "j"];
 
 /// Derivatives of the Monte Carlo returns with respect to layer properties, with standard
 /// errors from the same batches as the returns: ∂E/∂θ \[J·m\] (energy per unit coefficient
@@ -131,15 +143,17 @@ impl Jacobians {
     }
 }
 
-/// The header line of `jacobians.csv`.
+/// The header line of `jacobians.csv`: each row's derivative and error in the two columns of
+/// its quantity's unit (`derivative_j_m`, `stderr_j_m`; `gas_amount`: `derivative_j`,
+/// `stderr_j`), the other unit's columns empty, so that no column holds two units.
 pub const CSV_HEADER: &str = "source,channel,fov_full_angle_mrad,range_m,order,layer,\
-layer_bottom_m,layer_top_m,quantity,unit,derivative,stderr";
+layer_bottom_m,layer_top_m,quantity,derivative_j_m,stderr_j_m,derivative_j,stderr_j";
 
 impl Jacobians {
     /// `jacobians.csv`: one row per defined, nonzero derivative (a layer the gate's photons
     /// cannot reach in time has none), ordered by channel, FOV, gate, order,
-    /// layer and quantity; ∂E/∂θ in J per (1/m), i.e. J·m (`gas_amount`: J per unit relative
-    /// change).
+    /// layer and quantity; ∂E/∂θ in J per (1/m), i.e. J·m, in the `_j_m` columns
+    /// (`gas_amount`: J per unit relative change, in the `_j` columns).
     pub fn to_csv(&self) -> String {
         use crate::output::{csv_field, csv_number};
         use std::fmt::Write as _;
@@ -162,17 +176,27 @@ impl Jacobians {
                                 if self.value[i] == 0.0 && self.stderr[i] == 0.0 {
                                     continue;
                                 }
-                                let _ = writeln!(
+                                let _ = write!(
                                     out,
-                                    "mc,{ch},{fov},{r},{label},{},{},{},{},{},{:.9e},{:.9e}",
+                                    "mc,{ch},{fov},{r},{label},{},{},{},{}",
                                     self.first_layer + l,
                                     self.layer_bottom_m[l],
                                     self.layer_top_m[l],
                                     quantity.label(),
-                                    quantity.unit(),
-                                    csv_number(self.value[i]),
-                                    csv_number(self.stderr[i])
                                 );
+                                for suffix in CSV_UNIT_SUFFIXES {
+                                    if suffix == quantity.column_suffix() {
+                                        let _ = write!(
+                                            out,
+                                            ",{:.9e},{:.9e}",
+                                            csv_number(self.value[i]),
+                                            csv_number(self.stderr[i])
+                                        );
+                                    } else {
+                                        out.push_str(",,");
+                                    }
+                                }
+                                out.push('\n');
                             }
                         }
                     }

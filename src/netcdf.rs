@@ -26,7 +26,7 @@
 //!
 //! **Layout** (README, "Output: `run.nc`"). The dimensions and coordinates carry the CSV
 //! columns' names: `source` (`mc`, `analytic`), `channel`, `fov_full_angle_mrad`, `range_m`
-//! (gate centres, with `range_m_bounds`), `order` (`total`, `1`, …, `N+`). Returns and
+//! (gate centres, with `range_m_bounds`), `order` (`total`, `1st`, `2nd`, …, `Nth+`). Returns and
 //! signals are variables over all five; a (source, order) pair a run does not compute (the
 //! analytic returns above order 1, say) is `_FillValue`. Retrievals are tables, one per
 //! quantity (its unit differs: ppm, m⁻², m⁻³), with a dimension `<quantity>_product` and the
@@ -553,8 +553,8 @@ fn coordinates(nc: &mut Dataset, grid: &Grid, run: &RunFile) -> Result<(), Netcd
     nc.f64("altitude_m_bounds", &["range_m", "nv"], altitude_edges);
     nc.text("order", "order", &grid.orders).attrs([(
         "long_name",
-        "scattering-order bin: total = all orders, n = exactly n scattering events (surface \
-         reflections count), n+ = n or more",
+        "scattering-order bin: total = all orders, 1st, 2nd, ... = exactly that many scattering \
+         events (surface reflections count), 2nd+, 6th+ = that many or more",
     )]);
     Ok(())
 }
@@ -980,7 +980,7 @@ fn jacobian_variables(nc: &mut Dataset, grid: &Grid, j: &Jacobians) -> Result<()
     nc.text("jacobian_order", "jacobian_order", &orders)
         .attrs([(
             "long_name",
-            "scattering-order bin of the Jacobians: total = all orders, 1 = single scattering, 2+ = multiple scattering",
+            "scattering-order bin of the Jacobians: total = all orders, 1st = single scattering, 2nd+ = multiple scattering",
         )]);
     nc.f64(
         "layer",

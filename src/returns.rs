@@ -42,14 +42,30 @@ pub enum Order {
 }
 
 impl Order {
-    /// The `order` column value: `total`, `1`, `2`, …, `N+`.
+    /// The `order` column value (and the NetCDF files' `order` coordinate): `total`, then the
+    /// ordinals `1st`, `2nd`, `3rd`, `4th`, …, and `N+` as `2nd+`, `6th+`. A bin is named as
+    /// one says it ("first-order scattering") and never as a bare number: a reader (pandas, R,
+    /// a spreadsheet) would load a column of `1`, `2`, `3+` as numbers in a run that has only
+    /// order 1 (`--photons 0`) and as text in every other, where `1st` is text in every run.
     pub fn label(self) -> String {
         match self {
             Order::Total => "total".into(),
-            Order::Exactly(n) => n.to_string(),
-            Order::AtLeast(n) => format!("{n}+"),
+            Order::Exactly(n) => ordinal(n),
+            Order::AtLeast(n) => format!("{}+", ordinal(n)),
         }
     }
+}
+
+/// `n` as an English ordinal: `1st`, `2nd`, `3rd`, `4th`, `11th`, `12th`, `13th`, `21st`, ….
+fn ordinal(n: u32) -> String {
+    let suffix = match (n % 10, n % 100) {
+        (_, 11..=13) => "th",
+        (1, _) => "st",
+        (2, _) => "nd",
+        (3, _) => "rd",
+        _ => "th",
+    };
+    format!("{n}{suffix}")
 }
 
 /// Returns on a grid of channel × FOV × gate × order, with standard errors.
@@ -389,6 +405,31 @@ mod tests {
         r.energy_j[0] = energy_j;
         r.stderr_j[0] = stderr_j;
         r
+    }
+
+    /// Order bins are English ordinals, never a text a CSV reader loads as a number.
+    #[test]
+    fn order_labels_are_ordinals_that_never_read_as_numbers() {
+        let cases = [
+            (Order::Total, "total"),
+            (Order::Exactly(1), "1st"),
+            (Order::Exactly(2), "2nd"),
+            (Order::Exactly(3), "3rd"),
+            (Order::Exactly(4), "4th"),
+            (Order::Exactly(11), "11th"),
+            (Order::Exactly(12), "12th"),
+            (Order::Exactly(13), "13th"),
+            (Order::Exactly(21), "21st"),
+            (Order::Exactly(102), "102nd"),
+            (Order::AtLeast(2), "2nd+"),
+            (Order::AtLeast(6), "6th+"),
+        ];
+        for (o, want) in cases {
+            assert_eq!(o.label(), want);
+            assert!(want.parse::<f64>().is_err());
+            // Written as they are: no apostrophe, no quotes.
+            assert_eq!(crate::output::csv_field(want), want);
+        }
     }
 
     /// δ = cross/co with σ²_δ = δ²(σ²_x/x² + σ²_c/c² − 2 cov/(x c)) (first-order

@@ -266,7 +266,7 @@ fn c1_backscatter_rows_and_monte_carlo_order_one_against_analytic() {
         "1064".into(),
         "0.1".into(),
         "1005".into(),
-        "1".into(),
+        "1st".into(),
         "total".into(),
     )]
         .0;

@@ -611,7 +611,7 @@ fn weighting_functions_sum_to_the_products_and_their_difference_to_the_bias() {
             continue;
         }
         let mut k1 = k.clone();
-        k1.4 = "1".into();
+        k1.4 = Order::Exactly(1).label();
         let (x1, _) = products[&k1];
         let (xt, se) = products[k];
         let bias = xt - x1;

@@ -305,7 +305,7 @@ fn run_nc_jacobians_are_the_rows_of_jacobians_csv() {
     let channels = nc_texts(&mut r, "channel");
     assert_eq!(channels, ["532, \"green\"", "1064"]);
     let orders = nc_texts(&mut r, "jacobian_order");
-    assert_eq!(orders, ["total", "1", "2+"]);
+    assert_eq!(orders, ["total", "1st", "2nd+"]);
     let quantities = nc_texts(&mut r, "jacobian_quantity");
     let fov = r.read_var_f64("fov_full_angle_mrad").unwrap();
     let range = r.read_var_f64("range_m").unwrap();
@@ -332,10 +332,23 @@ fn run_nc_jacobians_are_the_rows_of_jacobians_csv() {
         list.iter().position(|y| *y == x).unwrap()
     };
     let mut seen = vec![false; value.len()];
+    // One unit per column: ∂E/∂θ of a coefficient θ [1/m] is in J m, the derivative per
+    // relative change of the gases (`gas_amount`) in J; a row fills its unit's two columns
+    // and leaves the other's empty.
+    assert!(!header.iter().any(|h| h == "unit" || h == "derivative"));
     for row in &rows {
         assert_eq!(row[col("source")], "mc");
+        let gas = row[col("quantity")] == "gas_amount";
+        let (own, other) = if gas { ("j", "j_m") } else { ("j_m", "j") };
+        for v in ["derivative", "stderr"] {
+            assert!(
+                row[col(&format!("{v}_{own}"))].parse::<f64>().is_ok()
+                    && row[col(&format!("{v}_{other}"))].is_empty(),
+                "{row:?}"
+            );
+        }
         // The derivative per relative change of the gases is the CSV's only.
-        if row[col("quantity")] == "gas_amount" {
+        if gas {
             continue;
         }
         let l = findf(&layer, &row[col("layer")]);
@@ -361,10 +374,14 @@ fn run_nc_jacobians_are_the_rows_of_jacobians_csv() {
         assert_eq!(row[col("layer_top_m")].parse::<f64>().unwrap(), top[l]);
         assert_eq!(
             format!("{:.9e}", value[k]),
-            row[col("derivative")],
+            row[col("derivative_j_m")],
             "{row:?}"
         );
-        assert_eq!(format!("{:.9e}", stderr[k]), row[col("stderr")], "{row:?}");
+        assert_eq!(
+            format!("{:.9e}", stderr[k]),
+            row[col("stderr_j_m")],
+            "{row:?}"
+        );
     }
     for (k, s) in seen.iter().enumerate() {
         if !s {

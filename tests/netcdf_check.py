@@ -210,7 +210,9 @@ def check_jacobians(ds, out):
         seen[idx] = True
         if float(row[col["layer_bottom_m"]]) != bottom[l] or float(row[col["layer_top_m"]]) != top[l]:
             fail(f"jacobians.csv line {n}: layer edges {row[col['layer_bottom_m']]}, {row[col['layer_top_m']]}")
-        for c, v in [("derivative", value[idx]), ("stderr", stderr[idx])]:
+        if row[col["derivative_j"]] or row[col["stderr_j"]]:
+            fail(f"jacobians.csv line {n}: a J m derivative in the J columns")
+        for c, v in [("derivative_j_m", value[idx]), ("stderr_j_m", stderr[idx])]:
             if not same_e9(row[col[c]], float(v)):
                 fail(f"jacobians.csv line {n}, {c}: CSV {row[col[c]]}, run.nc {float(v)!r}")
     with netCDF4.Dataset(f"{out}/run.nc") as nc:

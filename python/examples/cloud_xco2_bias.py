@@ -60,7 +60,7 @@ fovs = np.unique(table["mixing_ratio_fov_full_angle_mrad"].values[np.isfinite(ta
 for i, fov in enumerate(fovs):
     colour = plt.get_cmap("tab10")(i)
     for source, order, style, label in [("mc", "total", "-o", "all orders (Monte Carlo)"),
-                                        ("analytic", "1", "--", "single scattering")]:
+                                        ("analytic", "1st", "--", "single scattering")]:
         pick = ((table["mixing_ratio_source"] == source) & (table["mixing_ratio_order"] == order)
                 & (table["mixing_ratio_fov_full_angle_mrad"] == fov))
         bias = table["mixing_ratio_bias"].where(pick).max("mixing_ratio_product")

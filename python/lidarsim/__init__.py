@@ -8,7 +8,7 @@ bit those of the ``lidarsim`` command line for the same scene and seed.
 >>> import lidarsim
 >>> scene = lidarsim.Scene.default()                  # space-borne CO2 IPDA at 1572 nm
 >>> ds = lidarsim.run(scene, photons=20_000, seed=1)   # energy_j on (source, channel, fov, range, order)
->>> ds["energy_j"].sel(source="analytic", order="1")
+>>> ds["energy_j"].sel(source="analytic", order="1st")
 
 See the README's Python section.
 """

@@ -63,14 +63,14 @@ def run(scene=None, *, photons=None, seed=None, threads=None, progress=False):
     xarray.Dataset
         What ``run.nc`` holds: ``energy_j`` and ``stderr_j`` [J] on (source, channel,
         fov_full_angle_mrad, range_m, order) — source ``mc`` and ``analytic``, order ``total``,
-        ``1``, …, ``N+`` (a bin a source does not compute is NaN) — with polarised light
+        ``1st``, ``2nd``, …, ``6th+`` (a bin a source does not compute is NaN) — with polarised light
         ``polarised_energy_j`` on a last dimension ``polarisation`` (co, cross) and
         ``depolarisation_ratio``, with a receiver the signals, with a retrieval its products
         (``mixing_ratio_*`` and others, one row per product), with ``[simulation] jacobians``
         the derivatives ``jacobian_j_m`` and ``jacobian_stderr_j_m`` [J m] of the Monte Carlo
         returns (those of ``jacobians.csv``) on (channel, fov_full_angle_mrad, range_m,
-        jacobian_order, layer, jacobian_quantity) — ``jacobian_order`` ``total``, ``1``,
-        ``2+``; ``layer`` with ``layer_bottom_m`` and ``layer_top_m``; ``jacobian_quantity``
+        jacobian_order, layer, jacobian_quantity) — ``jacobian_order`` ``total``, ``1st``,
+        ``2nd+``; ``layer`` with ``layer_bottom_m`` and ``layer_top_m``; ``jacobian_quantity``
         ``absorption``, ``molecular_scattering``, ``particle_scattering``,
         ``particle_extinction``; NaN where a layer lacks the scatterer; units and CF names in the attributes, the
         scene's TOML text in ``attrs["scene"]``. The GIL is released while it runs; Ctrl-C
@@ -237,7 +237,7 @@ class StudyResult:
 
 
 def dial(scene=None, profiles=None, *, ensemble=None, seed=None, latitude_class="all", on=(),
-         photons=None, threads=0, budget=None, progress=False):
+         photons=None, threads=0, budget=None, progress=False, strict=False):
     """A DIAL/IPDA study of a scene over an ensemble of profiles, with an error budget (as
     ``lidarsim dial``).
 
@@ -266,12 +266,18 @@ def dial(scene=None, profiles=None, *, ensemble=None, seed=None, latitude_class=
         ``surface_pressure_hpa`` (1), ``frequency_offset_mhz`` (1), ``linewidth_fraction`` (0.1).
     progress : bool or callable
         As in :func:`run`, over the profiles.
+    strict : bool
+        As ``lidarsim dial --strict``: any failed profile (it cannot be run, is
+        supersaturated, a retrieval fails) raises RuntimeError with the counts by reason and
+        the first profile of each (one that cannot be run at all, before the work). False
+        (default): a study where some profiles fail returns, leaves them out of the
+        statistics and lists them in ``failed``.
 
     Returns
     -------
     StudyResult
         ``records`` (``profiles.nc``), ``summary`` (``summary.nc``) and ``failed``. A study in
-        which every profile failed raises RuntimeError with the reasons.
+        which every profile failed raises RuntimeError with the reasons, whatever ``strict``.
     """
     scene = _scene(scene)
     given = path = None
@@ -294,7 +300,7 @@ def dial(scene=None, profiles=None, *, ensemble=None, seed=None, latitude_class=
     records, summary, failed = call_with(
         progress, "dial", "profiles",
         lambda cb: _lidarsim.dial(scene._inner, given, path, ensemble, seed, latitude_class, list(on),
-                                  photons, int(threads), steps, cb, history),
+                                  photons, int(threads), steps, cb, history, bool(strict)),
     )
     return StudyResult(
         records=None if records is None else to_xarray(records),
@@ -308,7 +314,8 @@ def select_lines(scene=None, *, off_cm1, co2_ppm, on_cm1=(), atmospheres=(), pro
                  offsets_ghz=(-3, -2.5, -2, -1.5, -1, -0.5, 0, 0.5, 1, 1.5, 2, 2.5, 3),
                  layer_m=250.0, top_km=60.0, wing_cm1=25.0, temperature_uncertainty_k=1.0,
                  frequency_uncertainty_mhz=1.0, surface_pressure_uncertainty_hpa=1.0,
-                 h2o_uncertainty_percent=10.0, per_profile=False, threads=0, progress=False):
+                 h2o_uncertainty_percent=10.0, per_profile=False, threads=0, progress=False,
+                 strict=False):
     """CO2 IPDA line selection (as ``lidarsim select-lines``): for on-line positions (given,
     or scanned over the band's lines at ``offsets_ghz`` from each centre up to J″ = ``max_j``)
     against the off-line ``off_cm1`` [cm⁻¹], the weighting function, the random error of the
@@ -318,6 +325,11 @@ def select_lines(scene=None, *, off_cm1, co2_ppm, on_cm1=(), atmospheres=(), pro
     dry air at every level. Lines:
     HITRAN ``.par`` paths (default the built-in band model); the grid ``layer_m`` [m] to
     ``top_km`` [km].
+
+    ``strict``, as ``lidarsim select-lines --strict``: any failed profile raises
+    RuntimeError with the counts by reason and the first profile of each; False (default): a
+    study where some profiles fail returns without them and lists them in ``failed`` (one where
+    every profile failed raises either way).
 
     Returns
     -------
@@ -335,6 +347,6 @@ def select_lines(scene=None, *, off_cm1, co2_ppm, on_cm1=(), atmospheres=(), pro
             [float(v) for v in offsets_ghz], float(layer_m), float(top_km), float(wing_cm1),
             (float(temperature_uncertainty_k), float(frequency_uncertainty_mhz),
              float(surface_pressure_uncertainty_hpa), float(h2o_uncertainty_percent)),
-            bool(per_profile), int(threads), cb, history),
+            bool(per_profile), int(threads), cb, history, bool(strict)),
     )
     return StudyResult(records=None if table is None else to_xarray(table), summary=None, failed=list(failed))

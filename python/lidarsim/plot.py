@@ -39,14 +39,14 @@ _LEGEND = 10
 # Colours of the kinds of returns a retrieval used, as the CLI draws them (analytic blue,
 # Monte Carlo red); Monte Carlo single scattering in between.
 _KIND_COLOUR = {
-    ("analytic", "1"): "tab:blue",
+    ("analytic", "1st"): "tab:blue",
     ("mc", "total"): "tab:red",
-    ("mc", "1"): "tab:orange",
+    ("mc", "1st"): "tab:orange",
 }
 _KIND_LABEL = {
-    ("analytic", "1"): "analytic, single scattering",
+    ("analytic", "1st"): "analytic, single scattering",
     ("mc", "total"): "Monte Carlo, all orders",
-    ("mc", "1"): "Monte Carlo, single scattering",
+    ("mc", "1st"): "Monte Carlo, single scattering",
 }
 # Latitude classes as the CLI colours them.
 _CLASS_COLOUR = {
@@ -217,7 +217,7 @@ def _limits(points, keep, half_widths=(), floor_frac=0.02, bar_cap=0.0):
 # --- returns ------------------------------------------------------------------------------
 
 
-def returns(ds, *, fov=None, source=None, orders=("total", "1"), ax=None):
+def returns(ds, *, fov=None, source=None, orders=("total", "1st"), ax=None):
     """Received energy per pulse against range, every channel and field of view.
 
     The Monte Carlo returns are drawn as solid lines with a band of ± one standard error,
@@ -241,9 +241,9 @@ def returns(ds, *, fov=None, source=None, orders=("total", "1"), ax=None):
     source : {"mc", "analytic"} or sequence, optional
         Sources to draw; default all of them in ``ds``.
     orders : sequence of str
-        Scattering orders of the Monte Carlo returns to draw (``"total"``, ``"1"``, …,
-        ``"N+"``); orders ``ds`` does not hold are skipped. The analytic returns are drawn at
-        order ``"1"`` whatever this says.
+        Scattering orders of the Monte Carlo returns to draw (``"total"``, ``"1st"``,
+        ``"2nd"``, …, ``"6th+"``); orders ``ds`` does not hold are skipped. The analytic
+        returns are drawn at order ``"1st"`` whatever this says.
     ax : matplotlib.axes.Axes or sequence of Axes, optional
         One Axes: everything in it. A sequence with one Axes per field of view: one panel
         each. Default: a new figure.
@@ -342,7 +342,7 @@ def returns(ds, *, fov=None, source=None, orders=("total", "1"), ax=None):
     mc_styles = ["-", "-.", ":", (0, (5, 1, 1, 1, 1, 1))]
     drawn = []  # (source, order)
     for s in sources:
-        for o in mc_orders if s == "mc" else ["1"]:
+        for o in mc_orders if s == "mc" else ["1st"]:
             if o in ds_orders:
                 drawn.append((s, o))
     style = {}
@@ -374,7 +374,7 @@ def returns(ds, *, fov=None, source=None, orders=("total", "1"), ax=None):
                         color=col,
                         linestyle=style[(s, o)],
                         linewidth=1.6 if s == "mc" else 1.3,
-                        label=f"{name(key(c, f))}, {s}, order {o}",
+                        label=f"{name(key(c, f))}, {s}, {o} order",
                     )
                     line.lidarsim_series = (s, c, float(f), o)
                     if s == "mc" and has_err:
@@ -425,7 +425,7 @@ def returns(ds, *, fov=None, source=None, orders=("total", "1"), ax=None):
         lab = (
             "analytic, single scattering"
             if s == "analytic"
-            else ("Monte Carlo, all orders" if o == "total" else f"Monte Carlo, order {o}")
+            else ("Monte Carlo, all orders" if o == "total" else f"Monte Carlo, {o} order")
         )
         handles.append(
             Line2D([], [], color="0.2", linestyle=style[(s, o)], linewidth=1.6, label=lab)
@@ -570,7 +570,7 @@ def _kinds(rows):
 
 
 def _kind_label(k):
-    return _KIND_LABEL.get(k, f"{k[0]}, order {k[1]}")
+    return _KIND_LABEL.get(k, f"{k[0]}, {k[1]} order")
 
 
 def _series_colours(pairs, kinds):

@@ -289,7 +289,7 @@ pub fn ensemble<'py>(
 /// ensemble of `ensemble` members per class): (the data set of `profiles.nc`, that of
 /// `summary.nc`, the failed profiles as (id, reason)). A data set is None without rows.
 #[pyfunction]
-#[pyo3(signature = (scene, profiles=None, profiles_path=None, ensemble=None, seed=None, latitude_class="all", on=Vec::new(), photons=None, threads=0, steps=None, progress=None, history=String::new()))]
+#[pyo3(signature = (scene, profiles=None, profiles_path=None, ensemble=None, seed=None, latitude_class="all", on=Vec::new(), photons=None, threads=0, steps=None, progress=None, history=String::new(), strict=false))]
 #[allow(clippy::too_many_arguments)]
 pub fn dial<'py>(
     py: Python<'py>,
@@ -305,6 +305,7 @@ pub fn dial<'py>(
     steps: Option<(f64, f64, f64, f64, f64)>,
     progress: Option<&Bound<'py, PyAny>>,
     history: String,
+    strict: bool,
 ) -> PyResult<Bound<'py, PyTuple>> {
     let source = match (profiles, profiles_path, ensemble) {
         (Some(d), None, None) => ProfileSource::Given(set_from_py(d)?),
@@ -345,6 +346,10 @@ pub fn dial<'py>(
     let inputs = py
         .detach(|| request.resolve_with(scene, source))
         .map_err(value_error)?;
+    // `--strict` of the command line: a profile that cannot be run is refused before the
+    // work, any failed one after it.
+    let policy = lidarsim::study::FailurePolicy::strict_if(strict);
+    lidarsim::products::dial::check_before_run(&inputs, policy).map_err(runtime_error)?;
     let pool = lidarsim::study::thread_pool(threads).map_err(value_error)?;
     let result = watch(py, progress, |control| {
         control.report(0, inputs.set.len());
@@ -359,8 +364,8 @@ pub fn dial<'py>(
         })
     })?
     .map_err(runtime_error)?;
-    let products =
-        lidarsim::products::dial::DialProducts::new(&inputs, &result).map_err(runtime_error)?;
+    let products = lidarsim::products::dial::DialProducts::with_policy(&inputs, &result, policy)
+        .map_err(runtime_error)?;
     let title = format!("lidarsim dial: retrievals over {}", inputs.set.name);
     let records = if result
         .outcomes
@@ -406,7 +411,7 @@ pub fn dial<'py>(
 /// A line-selection study (`lidarsim select-lines`): (the data set of `sensitivities.nc`,
 /// the failed profiles as (id, reason)).
 #[pyfunction]
-#[pyo3(signature = (scene, off_cm1, co2_ppm, on_cm1=Vec::new(), atmospheres=Vec::new(), profiles_path=None, ensemble=None, seed=1, latitude_class="all", lines=Vec::new(), max_j=40, offsets_ghz=vec![-3.0, -2.5, -2.0, -1.5, -1.0, -0.5, 0.0, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0], layer_m=250.0, top_km=60.0, wing_cm1=25.0, uncertainties=(1.0, 1.0, 1.0, 10.0), per_profile=false, threads=0, progress=None, history=String::new()))]
+#[pyo3(signature = (scene, off_cm1, co2_ppm, on_cm1=Vec::new(), atmospheres=Vec::new(), profiles_path=None, ensemble=None, seed=1, latitude_class="all", lines=Vec::new(), max_j=40, offsets_ghz=vec![-3.0, -2.5, -2.0, -1.5, -1.0, -0.5, 0.0, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0], layer_m=250.0, top_km=60.0, wing_cm1=25.0, uncertainties=(1.0, 1.0, 1.0, 10.0), per_profile=false, threads=0, progress=None, history=String::new(), strict=false))]
 #[allow(clippy::too_many_arguments)]
 pub fn select_lines<'py>(
     py: Python<'py>,
@@ -430,6 +435,7 @@ pub fn select_lines<'py>(
     threads: usize,
     progress: Option<&Bound<'py, PyAny>>,
     history: String,
+    strict: bool,
 ) -> PyResult<Bound<'py, PyTuple>> {
     let source = match (profiles_path, ensemble) {
         (Some(p), None) => SelectSource::Set(p),
@@ -489,7 +495,12 @@ pub fn select_lines<'py>(
         pool.install(|| study.study_until(&|| control.tick(), control.stop()))
     })?
     .ok_or_else(|| runtime_error("the study was stopped before its end"))?;
-    let products = SelectProducts::new(&study, &outcomes).map_err(runtime_error)?;
+    let products = SelectProducts::with_policy(
+        &study,
+        &outcomes,
+        lidarsim::study::FailurePolicy::strict_if(strict),
+    )
+    .map_err(runtime_error)?;
     let table = if products.rows.is_empty() {
         py.None().into_bound(py)
     } else {

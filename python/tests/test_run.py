@@ -57,7 +57,7 @@ def test_analytic_single_scattering_is_platt_closed_form(top_m, g):
     """Σ E r²/A over the cloud = (1 − e^(−2τ))/(2S), S the lidar ratio (Platt 1979, "Lidar
     and radiometric observations of cirrus clouds", J. Appl. Meteorol. 18, 1130)."""
     ds = lidarsim.run(lidarsim.Scene(platt_scene(top_m, g)), photons=0)
-    e = ds["energy_j"].sel(source="analytic", order="1").isel(channel=0, fov_full_angle_mrad=0)
+    e = ds["energy_j"].sel(source="analytic", order="1st").isel(channel=0, fov_full_angle_mrad=0)
     area = math.pi * 0.25
     gamma = float((e * ds["range_m"] ** 2 / area).sum())
     tau = 17.23e-3 * (top_m - 1000.0)
@@ -73,7 +73,7 @@ def test_analytic_returns_are_the_lidar_equation_quadrature():
     d["layer"][0].update(single_scattering_albedo=0.9, extinction_per_km=5.0)
     d["gates"] = {"start_m": 1000.0, "end_m": 1100.0, "width_m": 5.0}
     ds = lidarsim.run(lidarsim.Scene(d), photons=0)
-    e = ds["energy_j"].sel(source="analytic", order="1").isel(channel=0, fov_full_angle_mrad=0).values
+    e = ds["energy_j"].sel(source="analytic", order="1st").isel(channel=0, fov_full_angle_mrad=0).values
     sigma, g = 5e-3, 0.7
     beta = 0.9 * sigma * ((1 - g * g) / (1 + g) ** 3) / (4 * math.pi)
     k = 0.1 * 0.7 * math.pi * 0.2 ** 2
@@ -89,9 +89,9 @@ def test_c1_order_one_is_the_lidar_equation_and_platt():
     equation within 4 standard errors + 1 % wherever its error is below 10 % (the Rust suite's
     rule), and the analytic integral over the cloud is Platt's with miepython's lidar ratio."""
     ds = lidarsim.run(ROOT / "scenes" / "bissonnette_c1.toml", photons=200_000, seed=3)
-    mc = ds["energy_j"].sel(source="mc", order="1")
-    se = ds["stderr_j"].sel(source="mc", order="1")
-    an = ds["energy_j"].sel(source="analytic", order="1")
+    mc = ds["energy_j"].sel(source="mc", order="1st")
+    se = ds["stderr_j"].sel(source="mc", order="1st")
+    an = ds["energy_j"].sel(source="analytic", order="1st")
     judged = (mc > 0) & (se <= 0.10 * mc)
     assert int(judged.sum()) > 50
     assert bool((abs(mc - an) <= 4 * se + 0.01 * an).where(judged, True).all())
@@ -199,7 +199,7 @@ def test_polarised_returns_are_the_csv_rows(cli, tmp_path):
             checked += 1
     assert checked > 200
     # Single scattering by spheres keeps the polarisation: the analytic δ is 0 in the cloud.
-    assert float(ds["depolarisation_ratio"].sel(source="analytic", order="1").max()) == 0.0
+    assert float(ds["depolarisation_ratio"].sel(source="analytic", order="1st").max()) == 0.0
 
 
 JACOBIAN_SCENE = """
@@ -269,7 +269,7 @@ def test_jacobians_are_the_command_line_and_jacobians_csv(cli, tmp_path):
     j, se = ds["jacobian_j_m"], ds["jacobian_stderr_j_m"]
     assert j.dims == ("channel", "fov_full_angle_mrad", "range_m", "jacobian_order", "layer", "jacobian_quantity")
     assert j.attrs["units"] == "J m" and se.attrs["units"] == "J m"
-    assert list(ds["jacobian_order"].values) == ["total", "1", "2+"]
+    assert list(ds["jacobian_order"].values) == ["total", "1st", "2nd+"]
     assert list(ds["jacobian_quantity"].values) == [
         "absorption", "molecular_scattering", "particle_scattering", "particle_extinction"]
     seen = np.zeros(j.shape, dtype=bool)
@@ -280,8 +280,10 @@ def test_jacobians_are_the_command_line_and_jacobians_csv(cli, tmp_path):
             at = dict(channel=text(r["channel"]), fov_full_angle_mrad=float(r["fov_full_angle_mrad"]),
                       range_m=float(r["range_m"]), jacobian_order=r["order"], layer=float(r["layer"]),
                       jacobian_quantity=r["quantity"])
-            assert as_written(j.sel(at).item(), 9) == r["derivative"]
-            assert as_written(se.sel(at).item(), 9) == r["stderr"]
+            # ∂E/∂θ per coefficient θ [1/m]: the J m columns; the J columns are gas_amount's.
+            assert as_written(j.sel(at).item(), 9) == r["derivative_j_m"]
+            assert as_written(se.sel(at).item(), 9) == r["stderr_j_m"]
+            assert r["derivative_j"] == r["stderr_j"] == ""
             layer = ds["layer"].sel(layer=float(r["layer"]))
             assert float(r["layer_bottom_m"]) == layer["layer_bottom_m"].item()
             assert float(r["layer_top_m"]) == layer["layer_top_m"].item()

@@ -14,7 +14,7 @@ C1 = ROOT / "scenes" / "bissonnette_c1.toml"
 
 
 def analytic(scene):
-    return lidarsim.run(scene, photons=0)["energy_j"].sel(source="analytic", order="1")
+    return lidarsim.run(scene, photons=0)["energy_j"].sel(source="analytic", order="1st")
 
 
 def test_a_dict_is_the_same_scene_as_its_toml():

@@ -87,3 +87,38 @@ def test_study_arguments_are_checked():
         lidarsim.profiles.ensemble(3, seed=1, co2_std_ppm=-1.0)
     with pytest.raises(ValueError, match="rh_over"):
         lidarsim.profiles.ensemble(3, seed=1, rh_over="steam")
+
+
+@pytest.fixture
+def set_with_a_short_profile(cli, tmp_path):
+    """Three tropical profiles, the first cut at 700 hPa (about 3 km): it does not reach the
+    top of the default scene's retrieval nor a 4 km layer of line selection."""
+    import pandas as pd
+
+    full = tmp_path / "full.csv"
+    cli("profiles", "generate", "--n", 3, "--seed", 5, "--class", "tropical", "--co2-ppm", 420,
+        "--out", full)
+    t = pd.read_csv(full, comment="#", dtype={"profile": str, "time_utc": str})
+    first = t["profile"] == t["profile"].iloc[0]
+    t = t[~first | (t["pressure_hPa"] >= 700.0)]
+    out = tmp_path / "set.csv"
+    t.to_csv(out, index=False)
+    return out, t["profile"].iloc[0]
+
+
+def test_strict_makes_a_failed_profile_an_error(set_with_a_short_profile):
+    """`strict=True` is `--strict`: one failed profile of three raises RuntimeError naming the
+    policy; without it the study returns the other two and lists the failed one."""
+    path, short = set_with_a_short_profile
+    r = lidarsim.dial(profiles=path, seed=2)
+    assert [f[0] for f in r.failed] == [short]
+    assert r.records.sizes["profile"] == 2
+    with pytest.raises(RuntimeError, match="strict: any failed profile is an error"):
+        lidarsim.dial(profiles=path, seed=2, strict=True)
+
+    args = dict(off_cm1=6360.61, co2_ppm=410, on_cm1=[6360.04], profiles=path, layer_m=4000.0,
+                top_km=40.0, per_profile=True)
+    r = lidarsim.select_lines(**args)
+    assert [f[0] for f in r.failed] == [short]
+    with pytest.raises(RuntimeError, match="strict: any failed profile is an error"):
+        lidarsim.select_lines(**args, strict=True)

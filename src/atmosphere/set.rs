@@ -15,7 +15,7 @@
 //!
 //! | column | required | meaning |
 //! |---|---|---|
-//! | `profile` | yes | profile id (text; the rows of one profile are contiguous) |
+//! | `profile` | yes | profile id (text; the rows of one profile are contiguous; written by the house rule of [`crate::output::csv_field`], `'1064` for an id that reads as a number, and read back by [`crate::output::csv_text_value`]) |
 //! | `latitude_deg`, `longitude_deg` | yes | location [°N, °E] |
 //! | `time_utc` | no | `YYYY-MM-DD` or `YYYY-MM-DDTHH:MM[:SS]Z`, or empty (unknown) |
 //! | `weight` | no | a profile weight (e.g. RFMIP's), kept and written back |
@@ -418,7 +418,7 @@ impl ProfileSet {
                 let _ = write!(
                     out,
                     "{},{},{},{},",
-                    meta.id,
+                    crate::output::csv_field(&meta.id),
                     fmt_num(meta.latitude_deg),
                     fmt_num(meta.longitude_deg),
                     meta.time_utc

@@ -7,11 +7,12 @@ use std::path::Path;
 use plotters::prelude::*;
 
 use super::style::{self, Axis, Entry, Mark, class_colour, colour};
-use super::{DrawResult, init_font};
+use super::{DrawResult, FONT, init_font};
 use lidarsim::atmosphere::{LatitudeClass, ProfileSet};
 use lidarsim::output::{OutputError, OutputSet};
 use lidarsim::retrieval::Method;
 use lidarsim::study::dial::{N_SOURCES, Source, StudyResult, Summary};
+use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 /// Draw every figure into `files`, for the directory `dir`.
 pub fn draw(
@@ -235,6 +236,21 @@ fn errors_figure(path: &Path, result: &StudyResult) -> DrawResult {
                 Axis::Linear("retrieved − true XCO2 [ppm]"),
                 Axis::Count("profiles"),
             )?;
+            if *n == 0 {
+                // An empty panel would read as a drawing fault: say why it is empty.
+                let text = TextStyle::from((FONT, style::LEGEND).into_font())
+                    .color(&style::INK)
+                    .pos(Pos::new(HPos::Center, VPos::Center));
+                let mid = 0.5 * (x.start + x.end);
+                for (k, line) in empty_panel_note(result, *c).iter().enumerate() {
+                    chart.draw_series(std::iter::once(Text::new(
+                        line.clone(),
+                        (mid, top * (0.62 - 0.12 * k as f64)),
+                        text.clone(),
+                    )))?;
+                }
+                continue;
+            }
             for (h, fill) in [(hn, style::GREY), (hc, class_colour(c.name()))] {
                 chart.draw_series(h.iter().enumerate().filter(|(_, k)| **k > 0).map(
                     |(b, k)| {
@@ -260,6 +276,23 @@ fn errors_figure(path: &Path, result: &StudyResult) -> DrawResult {
     ));
     style::legend(&key.expect("legend column"), &entries)?;
     Ok(())
+}
+
+/// Why a panel of class `c` of `errors.png` has no profile: all of them failed (how many,
+/// and where they are listed), or none retrieved an IPDA product.
+fn empty_panel_note(result: &StudyResult, c: LatitudeClass) -> Vec<String> {
+    let of_class = result.outcomes.iter().filter(|o| o.class == c);
+    let failed = of_class.clone().filter(|o| o.records.is_err()).count();
+    let mut note = if failed > 0 && failed == of_class.count() {
+        vec![format!("no profile of class {c} succeeded:")]
+    } else {
+        vec![format!("no IPDA retrieval in class {c}")]
+    };
+    if failed > 0 {
+        let s = if failed == 1 { "" } else { "s" };
+        note.push(format!("{failed} profile{s} failed, see failed.csv"));
+    }
+    note
 }
 
 /// The colour and line of error source `j` in the budget: random in rose (the total is

@@ -144,7 +144,7 @@ fn returns_land_in_their_bins_and_missing_bins_are_fill() {
     }
     assert_eq!(texts(&mut r, "source"), ["mc", "analytic"]);
     assert_eq!(texts(&mut r, "channel"), ["on", "off, \"ref\""]);
-    assert_eq!(texts(&mut r, "order"), ["total", "1", "2+"]);
+    assert_eq!(texts(&mut r, "order"), ["total", "1st", "2nd+"]);
     assert_eq!(r.read_var_f64("range_m").unwrap(), [115.0, 145.0, 175.0]);
     assert_eq!(
         r.read_var_f64("range_m_bounds").unwrap(),
@@ -695,7 +695,7 @@ fn jacobians_land_in_their_bins_with_fill_where_undefined() {
     );
     assert!(attr("jacobian_j_m", "long_name").contains("1/m"));
     assert_eq!(attr("layer_bottom_m", "units"), "m");
-    assert_eq!(texts(&mut r, "jacobian_order"), ["total", "1", "2+"]);
+    assert_eq!(texts(&mut r, "jacobian_order"), ["total", "1st", "2nd+"]);
     assert_eq!(
         texts(&mut r, "jacobian_quantity"),
         [

@@ -189,8 +189,8 @@ impl OutputError {
 ///   a CR or a LF.
 ///
 /// An empty text stays empty (a missing value). lidarsim's own labels (`mc`, `total`, `ipda`, …)
-/// never need the apostrophe; scattering-order bins (`1`, `2`, `3+`, `total`) are written as
-/// they are.
+/// never need the apostrophe; scattering-order bins are ordinals (`1st`, `2nd`, `3rd+`,
+/// `total`; [`crate::returns::Order::label`]), text in every run, and written as they are.
 pub fn csv_field(field: &str) -> Cow<'_, str> {
     let marked: Cow<'_, str> =
         if !field.is_empty() && (field.starts_with('\'') || reads_as_non_text(field)) {

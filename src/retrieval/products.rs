@@ -185,14 +185,21 @@ pub struct Weighting {
     pub stderr: f64,
 }
 
-/// Header of `weighting.csv`.
-pub const WEIGHTING_HEADER: &str = "method,order,channel_pair,fov_full_angle_mrad,range_start_m,range_end_m,quantity,unit,layer,layer_bottom_m,layer_top_m,derivative,stderr_independent";
+/// Header of `weighting.csv`: as `retrieval.csv` ([`CSV_HEADER`]), one row per (product,
+/// layer) with its derivative and error in the two columns of its quantity's unit
+/// (`derivative_ppm`, `stderr_independent_ppm` for a mixing ratio, `…_molecules_per_m2`,
+/// `…_molecules_per_m3`), the other units' columns empty, so that no column holds two units.
+pub const WEIGHTING_HEADER: &str = "method,order,channel_pair,fov_full_angle_mrad,range_start_m,range_end_m,quantity,layer,layer_bottom_m,layer_top_m,derivative_ppm,stderr_independent_ppm,derivative_molecules_per_m2,stderr_independent_molecules_per_m2,derivative_molecules_per_m3,stderr_independent_molecules_per_m3";
+
+/// The value columns of `weighting.csv` of one unit, without the unit's suffix, in order.
+pub const WEIGHTING_VALUE_COLUMNS: [&str; 2] = ["derivative", "stderr_independent"];
 
 impl Weighting {
     /// The row of `weighting.csv` (no newline).
     pub fn csv_row(&self) -> String {
-        format!(
-            "{},{},{},{},{},{},{},{},{},{},{},{:.9e},{:.9e}",
+        use std::fmt::Write as _;
+        let mut row = format!(
+            "{},{},{},{},{},{},{},{},{},{}",
             self.method.label(),
             self.order.label(),
             crate::output::csv_field(&self.channel_pair),
@@ -200,13 +207,23 @@ impl Weighting {
             self.range_m.0,
             self.range_m.1,
             self.quantity.label(),
-            self.quantity.unit(),
             self.layer,
             self.layer_m.0,
             self.layer_m.1,
-            crate::output::csv_number(self.value),
-            crate::output::csv_number(self.stderr),
-        )
+        );
+        for q in Quantity::ALL {
+            if q == self.quantity {
+                let _ = write!(
+                    row,
+                    ",{:.9e},{:.9e}",
+                    crate::output::csv_number(self.value),
+                    crate::output::csv_number(self.stderr)
+                );
+            } else {
+                row.push_str(",,");
+            }
+        }
+        row
     }
 }
 

@@ -40,7 +40,9 @@ def compare(case, scene, ms_csv, out_dir):
         if r["quantity"] != "particle_extinction" or r["order"] not in ("total", "1"):
             continue
         base = round(alts[int(r["layer"])][0], 3)
-        key = (float(r["fov_full_angle_mrad"]), float(r["range_m"]), r["order"], base)
+        # multiscatter's files name the orders `total` and `1`; lidarsim's `total` and `1st`.
+        order = {"1": "1st"}.get(r["order"], r["order"])
+        key = (float(r["fov_full_angle_mrad"]), float(r["range_m"]), order, base)
         if key not in ours:
             continue
         v, se = ours[key]

@@ -99,7 +99,7 @@ def main():
                 rows, _ = run(instrument, tau, low)
                 for fov in FOVS:
                     t = ipda(rows, "mc", "total", fov)
-                    s = ipda(rows, "mc", "1", fov)
+                    s = ipda(rows, "mc", "1st", fov)
                     out.append({
                         "instrument": instrument, "low_cloud": int(low), "ice_cloud_tau": tau,
                         "fov_full_angle_mrad": fov, "truth_ppm": t["truth_ppm"],
@@ -167,14 +167,14 @@ def plot(out, weights):
             by_layer = {int(r["layer"]): r for r in pts}
             return by_layer
         for c, fov in zip(colours, FOVS):
-            one, total = profile("1", fov), profile("total", fov)
+            one, total = profile("1st", fov), profile("total", fov)
             layers = sorted(set(one) | set(total))
             z = [0.5e-3 * (float((one.get(l) or total[l])["layer_bottom_m"])
                            + float((one.get(l) or total[l])["layer_top_m"])) for l in layers]
             dz = [1e-3 * (float((one.get(l) or total[l])["layer_top_m"])
                           - float((one.get(l) or total[l])["layer_bottom_m"])) for l in layers]
-            w1 = [float(one[l]["derivative"]) if l in one else 0.0 for l in layers]
-            wt = [float(total[l]["derivative"]) if l in total else 0.0 for l in layers]
+            w1 = [float(one[l]["derivative_ppm"]) if l in one else 0.0 for l in layers]
+            wt = [float(total[l]["derivative_ppm"]) if l in total else 0.0 for l in layers]
             if fov in (FOVS[0], FOVS[-1]):
                 axes[0][col].plot([w / d for w, d in zip(w1, dz)], z, ":", color=c,
                                   label=f"{fov:g} mrad, single scattering")

@@ -24,7 +24,7 @@ for r in csv.DictReader(open(f"{out_dir}/run/returns.csv")):
     key = (float(r["fov_full_angle_mrad"]), float(r["range_m"]))
     if r["source"] == "mc" and r["order"] == "total":
         total[key] = (float(r["energy_j"]), float(r["stderr_j"]))
-    if r["source"] == "analytic" and r["order"] == "1":
+    if r["source"] == "analytic" and r["order"] == "1st":
         single[key] = float(r["energy_j"])
 rows = []
 for i, fov in enumerate([0.1, 0.5, 1.0, 2.0, 5.0, 10.0]):

@@ -102,6 +102,18 @@ fn parse_gas_column(h: &str) -> Option<(String, GasUnit)> {
     })
 }
 
+/// The id a `profile` field holds: as written by [`crate::output::csv_field`] (the set's
+/// writer), an RFC 4180 quoted field unquoted (a profile id holds no comma or line break, so
+/// the plain comma split keeps it whole) and one leading apostrophe removed (`'1064` → `1064`).
+/// A field written by hand without either is the id as it is.
+fn profile_id(field: &str) -> String {
+    let unquoted = match field.strip_prefix('"').and_then(|f| f.strip_suffix('"')) {
+        Some(inner) if field.len() >= 2 => inner.replace("\"\"", "\""),
+        _ => field.to_string(),
+    };
+    crate::output::csv_text_value(&unquoted).to_string()
+}
+
 /// Parse the text of a profile-set file (`path` for messages only).
 pub fn parse_profile_set(path: &Path, text: &str) -> Result<ProfileSet, InputError> {
     let t = CsvTable::parse(path, text)?;
@@ -122,7 +134,8 @@ pub fn parse_profile_set(path: &Path, text: &str) -> Result<ProfileSet, InputErr
     let mut r = 0;
     while r < nrows {
         let line0 = rows[r].0;
-        let id = rows[r].1[c_id].clone();
+        let raw_id = &rows[r].1[c_id];
+        let id = profile_id(raw_id);
         if id.is_empty() {
             return Err(InputError::at(path, line0, "profile", "empty profile id"));
         }
@@ -135,7 +148,7 @@ pub fn parse_profile_set(path: &Path, text: &str) -> Result<ProfileSet, InputErr
             ));
         }
         let mut end = r;
-        while end < nrows && rows[end].1[c_id] == id {
+        while end < nrows && rows[end].1[c_id] == *raw_id {
             end += 1;
         }
         let member = parse_member(path, &t, &rows[r..end], &id, &stem, &cols)?;
