@@ -86,8 +86,10 @@ pub use write::run;
 
 /// First bytes of every shard file.
 pub const MAGIC: &[u8; 16] = b"lidarsim shard\n\0";
-/// Version of the shard file layout this lidarsim writes and reads.
-pub const FORMAT: u32 = 1;
+/// Version of the shard file layout this lidarsim writes and reads (2: a select-lines shard no
+/// longer carries each profile's transmission spectra, which the figures now take from each
+/// group's mean profile).
+pub const FORMAT: u32 = 2;
 /// Extension of shard files; a merge of a directory reads every file with it.
 pub const EXTENSION: &str = "lshard";
 /// The lidarsim version written into shards; a merge refuses shards of another version, whose
