@@ -81,4 +81,3 @@ mod transport;
 /// Every input validated: hostile scene values, options and file fields refused at their file,
 /// line and key; problem sizes refused before allocating.
 mod validation_inputs;
-

@@ -153,7 +153,8 @@ pub fn lidarsim_bounded(
     let log = |name: &str| std::fs::File::create(logs.join(name)).map(Stdio::from);
     let mut cmd = if cfg!(unix) && Path::new("/bin/sh").exists() {
         let mut c = Command::new("/bin/sh");
-        c.env(NO_MIE_CACHE.0, NO_MIE_CACHE.1).arg("-c")
+        c.env(NO_MIE_CACHE.0, NO_MIE_CACHE.1)
+            .arg("-c")
             .arg(format!(
                 "ulimit -v {MEMORY_LIMIT_KIB} && exec \"$0\" \"$@\""
             ))
