@@ -445,8 +445,8 @@ pub(super) fn integrate_mode(
             let scale = total[q].abs().max(floor);
             if scale == 0.0 { 0.0 } else { d / scale }
         };
-        // A panel that has been halved twice may stop, the panels of smallest change first,
-        // while the changes of the stopped panels sum to at most FROZEN_SHARE × rel_tol.
+        // A panel that has been halved twice may stop (the order below), while the changes of
+        // the stopped panels sum to at most FROZEN_SHARE × rel_tol.
         // Each panel's largest relative change at its last (up to two) halvings: 0 for a
         // panel that could not be halved at all (its start is finer than min_step_x).
         let errors: Vec<f64> = panels
