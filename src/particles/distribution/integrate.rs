@@ -40,10 +40,22 @@ pub(super) const PANELS: usize = 16;
 /// Intervals of a panel before any halving (16 × 8 = 128, the old uniform grid's start).
 const PANEL_START_INTERVALS: usize = 8;
 
-/// Radii per Mie block: the block's amplitudes come from two matrix products over its radii.
-/// 128 (not 32): the products repack the angle tables on every call, which then costs a
+/// Most radii per Mie block: the block's amplitudes come from two matrix products over its
+/// radii. 128 (not 32): the products repack the angle tables on every call, which then costs a
 /// fraction of the arithmetic (9 % of the OPAC maritime-clean run at 532 nm, from 22 %).
 const R: usize = 128;
+
+/// Bytes of one thread's product matrices (coefficients and amplitudes, 32 × radii ×
+/// (terms + angles)) above which a block takes fewer radii ([`block_radii`]).
+const SCRATCH_BYTES: usize = 32 << 20;
+
+/// Radii per block for `n_max` terms and `angles` angles: [`R`], or fewer (at least 4) where
+/// the product matrices would exceed [`SCRATCH_BYTES`] (size parameters of several 10⁴), so
+/// memory stays bounded. It depends on the inputs only: the blocks, and so the order of the
+/// sums, are the same at any thread count.
+fn block_radii(n_max: usize, angles: usize) -> usize {
+    (SCRATCH_BYTES / (32 * (n_max + angles).max(1))).clamp(4, R)
+}
 
 /// Blocks evaluated between two reductions: the blocks' partial sums are held this many at a
 /// time (16 × 4 × angles × 8 bytes: 0.7 MB with the default 1391 angles), so memory does not
@@ -182,6 +194,8 @@ struct Integrand<'a> {
     m: Complex64,
     k: f64,
     tables: Option<&'a AngleTables>,
+    /// Radii per block ([`block_radii`]).
+    radii: usize,
 }
 
 /// Per-thread scratch matrices of the block products (reused: large fresh allocations cost
@@ -190,7 +204,7 @@ struct Integrand<'a> {
 type Scratch = Option<(DMatrix<f64>, DMatrix<f64>, DMatrix<f64>, DMatrix<f64>)>;
 
 impl Integrand<'_> {
-    /// The raw sums over points `idx` of `run` (at most [`R`]): Σ w n(r) {Q π r², …} and, with
+    /// The raw sums over points `idx` of `run` (at most [`block_radii`]): Σ w n(r) {Q π r², …} and, with
     /// angle tables, Σ w n(r) S_ij/k², w = ½ at a first level's ends and 1 elsewhere.
     fn block(
         &self,
@@ -246,10 +260,10 @@ impl Integrand<'_> {
         let len = coeffs.len();
         let (bp, bm, cp, cm) = scratch.get_or_insert_with(|| {
             (
-                DMatrix::<f64>::zeros(n_max, 2 * R),
-                DMatrix::<f64>::zeros(n_max, 2 * R),
-                DMatrix::<f64>::zeros(kk, 2 * R),
-                DMatrix::<f64>::zeros(kk, 2 * R),
+                DMatrix::<f64>::zeros(n_max, 2 * self.radii),
+                DMatrix::<f64>::zeros(n_max, 2 * self.radii),
+                DMatrix::<f64>::zeros(kk, 2 * self.radii),
+                DMatrix::<f64>::zeros(kk, 2 * self.radii),
             )
         });
         // Zero only what the products read (shorter series of the block leave zeros).
@@ -302,7 +316,7 @@ impl Integrand<'_> {
         Ok((sums, Some(acc)))
     }
 
-    /// Evaluate `runs` and add each run's raw sums to its panel. Blocks of [`R`] radii run in
+    /// Evaluate `runs` and add each run's raw sums to its panel. Blocks of [`block_radii`] radii run in
     /// parallel, [`BLOCKS_PER_BATCH`] at a time; their sums are added in block order, so the
     /// numbers do not depend on the thread count. `progress` hears the radii of each batch.
     fn evaluate(
@@ -311,11 +325,12 @@ impl Integrand<'_> {
         panels: &mut [Panel],
         progress: &dyn Fn(u64),
     ) -> Result<(), MieError> {
+        let r = self.radii;
         let blocks: Vec<(usize, std::ops::Range<usize>)> = runs
             .iter()
             .enumerate()
             .flat_map(|(j, run)| {
-                (0..run.count.div_ceil(R)).map(move |b| (j, b * R..((b + 1) * R).min(run.count)))
+                (0..run.count.div_ceil(r)).map(move |b| (j, b * r..((b + 1) * r).min(run.count)))
             })
             .collect();
         for batch in blocks.chunks(BLOCKS_PER_BATCH) {
@@ -373,7 +388,14 @@ pub(super) fn integrate_mode(
     let k = 2.0 * PI / wavelength_um;
     let (r_lo, r_hi) = mode_range_um(mode, k, opts)?;
     let (x_lo, x_hi) = (k * r_lo, k * r_hi);
-    let f = Integrand { mode, m, k, tables };
+    let radii = tables.map_or(R, |t| block_radii(t.plus.ncols(), t.plus.nrows()));
+    let f = Integrand {
+        mode,
+        m,
+        k,
+        tables,
+        radii,
+    };
     let kk = tables.map_or(0, |t| t.plus.nrows());
     let mut panels: Vec<Panel> = panels(x_lo, x_hi)
         .into_iter()
