@@ -244,7 +244,7 @@ fn impossible_retrieval_exits_2_and_writes_nothing() {
 #[test]
 fn a_closed_pipe_ends_a_listing_quietly() {
     use std::io::{BufRead, BufReader};
-    use std::process::{Command, Stdio};
+    use std::process::Stdio;
     let dir = tempfile::tempdir().unwrap();
     let set = dir.path().join("ens.csv");
     lidarsim_ok([
@@ -259,7 +259,7 @@ fn a_closed_pipe_ends_a_listing_quietly() {
         "--out".as_ref(),
         set.as_os_str(),
     ]);
-    let mut child = Command::new(crate::util::lidarsim_bin())
+    let mut child = crate::util::lidarsim_command()
         .args(["profiles".as_ref(), "info".as_ref(), set.as_os_str()])
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())

@@ -5,15 +5,15 @@
 
 use std::io::Write;
 use std::path::Path;
-use std::process::{Command, Output, Stdio};
+use std::process::{Output, Stdio};
 
-use crate::util::{lidarsim, lidarsim_bin, lidarsim_ok, project_root, read_csv};
+use crate::util::{lidarsim, lidarsim_command, lidarsim_ok, project_root, read_csv};
 
 const DEFAULT: &str = lidarsim::scene::DEFAULT_SCENE_TOML;
 
 /// Run lidarsim with `stdin` as its standard input, in `cwd`.
 fn with_stdin(args: &[&str], stdin: &str, cwd: &Path) -> Output {
-    let mut child = Command::new(lidarsim_bin())
+    let mut child = lidarsim_command()
         .args(args)
         .current_dir(cwd)
         .stdin(Stdio::piped())
@@ -672,7 +672,7 @@ fn lbl_merges_several_line_files() {
 fn progress_is_logged_to_stderr_off_a_terminal() {
     let dir = tempfile::tempdir().unwrap();
     let run = |extra: &[&str], env: bool| {
-        let mut c = Command::new(lidarsim_bin());
+        let mut c = lidarsim_command();
         c.args([
             "run",
             "--photons",
@@ -715,7 +715,7 @@ fn progress_is_logged_to_stderr_off_a_terminal() {
     // A short run says nothing by default.
     assert_eq!(run(&[], false), "");
     // The studies report through the same facility.
-    let o = Command::new(lidarsim_bin())
+    let o = lidarsim_command()
         .args([
             "select-lines",
             "--atmosphere",
@@ -742,7 +742,7 @@ fn progress_is_logged_to_stderr_off_a_terminal() {
     assert!(log.contains("select-lines: 33 % (1/3 profiles)"), "{log}");
     assert!(log.contains("select-lines: done, 3 profiles in "), "{log}");
     // And lbl's layer mode, layer by layer.
-    let o = Command::new(lidarsim_bin())
+    let o = lidarsim_command()
         .args([
             "lbl",
             "--atmosphere",

@@ -138,6 +138,7 @@ fn a_full_disk_exits_2_and_leaves_nothing_behind() {
     // `unshare -rm`: a user and mount namespace, so that no root is needed where user
     // namespaces are allowed, and the tmpfs goes away with the script whatever happens.
     let r = std::process::Command::new("unshare")
+        .env(crate::util::NO_MIE_CACHE.0, crate::util::NO_MIE_CACHE.1)
         .args(["-rm", "sh", "-c", FULL_DISK_SCRIPT, "sh"])
         .arg(&d)
         .arg(lidarsim_bin())

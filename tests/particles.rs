@@ -710,7 +710,7 @@ particles = { distribution = "lognormal", median_radius_um = 0.2, sigma_g = 1.5,
 /// second reads it (the entry is not rewritten: same inode, same modification time) and writes
 /// the same returns byte for byte. A damaged entry is recomputed with a warning naming it, to
 /// the same returns. `LIDARSIM_CACHE_DIR` moves the cache, `off` turns it off, and the scene's
-/// `cache_dir` wins over both. (The other tests run with the cache off: tests/tests.rs.)
+/// `cache_dir` wins over both. (The other tests run with the cache off: tests/util.rs, `NO_MIE_CACHE`.)
 #[test]
 fn mie_cache_is_on_by_default_in_the_user_cache_directory() {
     use std::process::Command;

@@ -231,7 +231,7 @@ fn cloud_scene(layer: &str) -> String {
 fn cloud_extinction_per_m(dir: &Path, layer: &str) -> Result<f64, String> {
     let path = dir.join("cloud.toml");
     std::fs::write(&path, cloud_scene(layer)).unwrap();
-    let scene = Scene::read(&path).map_err(|e| e.to_string())?;
+    let scene = crate::util::scene_read(&path).map_err(|e| e.to_string())?;
     let l = scene
         .layers
         .iter()

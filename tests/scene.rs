@@ -400,7 +400,7 @@ top_m = 1300.0
 extinction_per_km = 17.23
 particles = { distribution = "modified_gamma", alpha = 6.0, b = 1.5, gamma = 1.0, refractive_index = "1.3205+1.28e-6i" }
 "#;
-    let scene = Scene::from_toml(Path::new("c1.toml"), scene_text).unwrap();
+    let scene = crate::util::scene_from_toml(Path::new("c1.toml"), scene_text).unwrap();
     let layer = &scene.layers[0];
     assert!((layer.extinction_per_m[0] - 17.23e-3).abs() < 1e-12);
     assert!((layer.single_scattering_albedo[0] / 0.9999076 - 1.0).abs() < 1e-6);
@@ -434,7 +434,7 @@ fn opac_aerosol_layer_in_a_scene() {
     let text = BASE
         .replacen("extinction_per_km = [0.1, 0.1]\nsingle_scattering_albedo = 0.95\nphase = { kind = \"henyey_greenstein\", g = 0.7 }", "number_density_per_cm3 = 15300.4\nparticles = { distribution = \"opac\", aerosol_type = \"continental_average\" }", 1)
         .replacen("wavenumber_cm1 = 6361.0", "wavelength_nm = 1572.0", 1);
-    let scene = Scene::from_toml(Path::new("opac.toml"), &text).unwrap();
+    let scene = crate::util::scene_from_toml(Path::new("opac.toml"), &text).unwrap();
     let table = lidarsim::particles::builtin_table("continental_average_1572nm").unwrap();
     let meta = |k: &str| table.meta(k).unwrap().parse::<f64>().unwrap();
     let l = &scene.layers[0];

@@ -13,7 +13,7 @@ use lidarsim::spectroscopy::{
     WavenumberGrid, cross_section, cross_section_at, layer_optical_depths_at,
 };
 
-use crate::util::{lidarsim_bin, project_root, shared_file};
+use crate::util::{project_root, shared_file};
 
 fn read_lines(rel: &str) -> Option<LineList> {
     let p = shared_file(rel)?;
@@ -380,7 +380,7 @@ fn lines_of_a_gas_the_profile_lacks_are_an_error() {
 }
 
 fn run_lidarsim(args: &[&str]) -> std::process::Output {
-    std::process::Command::new(lidarsim_bin())
+    crate::util::lidarsim_command()
         .args(args)
         .output()
         .expect("lidarsim runs")

@@ -81,19 +81,3 @@ mod transport;
 /// Every input validated: hostile scene values, options and file fields refused at their file,
 /// line and key; problem sizes refused before allocating.
 mod validation_inputs;
-
-/// Before `main`, while the process has one thread: the Mie disk cache is off for every test
-/// and every `lidarsim` the tests run (they inherit the environment), so that no test writes
-/// into the user's cache directory; the test of the cache
-/// (`particles::mie_cache_is_on_by_default_in_the_user_cache_directory`) sets its own.
-#[cfg(any(target_os = "linux", target_os = "macos"))]
-#[used]
-#[cfg_attr(target_os = "linux", unsafe(link_section = ".init_array"))]
-#[cfg_attr(target_os = "macos", unsafe(link_section = "__DATA,__mod_init_func"))]
-static MIE_CACHE_OFF: extern "C" fn() = {
-    extern "C" fn off() {
-        // SAFETY: this runs before main, when no other thread can read the environment.
-        unsafe { std::env::set_var("LIDARSIM_CACHE_DIR", "off") };
-    }
-    off
-};

@@ -55,8 +55,10 @@ pub(crate) fn edited(text: &str, edits: &[(&str, &str)]) -> String {
     })
 }
 
+/// A scene from text, the Mie disk cache off (its Mie layers must not write into the user's
+/// cache).
 pub(crate) fn scene_text(text: &str) -> Scene {
-    Scene::from_toml(Path::new("test.toml"), text).expect("test scene")
+    crate::util::scene_from_toml(Path::new("test.toml"), text).expect("test scene")
 }
 
 /// Compare MC order 1 with the analytic equation in every judged bin; returns (judged, bins

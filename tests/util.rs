@@ -42,18 +42,60 @@ pub fn par_records_in(path: &Path, lo_cm1: f64, hi_cm1: f64) -> String {
         .collect()
 }
 
-/// Path of the lidarsim binary built for these tests.
+/// Path of the lidarsim binary built for these tests. Run it through [`lidarsim_command`] (or
+/// give the command [`NO_MIE_CACHE`] yourself), so that it does not write into the user's cache.
 pub fn lidarsim_bin() -> &'static Path {
     Path::new(env!("CARGO_BIN_EXE_lidarsim"))
 }
 
-/// Run `lidarsim` with arguments and return its output.
+/// The environment that turns the Mie disk cache off (`LIDARSIM_CACHE_DIR=off`): every process
+/// the tests start that may run lidarsim's Mie theory gets it, so no test writes into the user's
+/// cache directory. The test of the cache itself
+/// (`particles::mie_cache_is_on_by_default_in_the_user_cache_directory`) sets its own.
+pub const NO_MIE_CACHE: (&str, &str) = (lidarsim::particles::cache::CACHE_DIR_ENV, "off");
+
+/// A `lidarsim` command with the Mie disk cache off ([`NO_MIE_CACHE`]).
+pub fn lidarsim_command() -> Command {
+    let mut c = Command::new(lidarsim_bin());
+    c.env(NO_MIE_CACHE.0, NO_MIE_CACHE.1);
+    c
+}
+
+/// The scene override that turns the Mie disk cache off for a scene resolved in this process
+/// (`simulation.cache_dir = "off"`: the scene's own setting wins over the environment, see
+/// `Scene::read_with`), for in-process tests that run Mie theory.
+pub fn no_mie_cache() -> Vec<lidarsim::scene::SceneOverride> {
+    vec![lidarsim::scene::SceneOverride {
+        key: "simulation.cache_dir".into(),
+        value: "\"off\"".into(),
+    }]
+}
+
+/// [`lidarsim::scene::Scene::from_toml`] with the Mie disk cache off ([`no_mie_cache`]).
+pub fn scene_from_toml(
+    path: &Path,
+    text: &str,
+) -> Result<lidarsim::scene::Scene, lidarsim::input::InputError> {
+    lidarsim::scene::Scene::from_toml_with(
+        path,
+        text,
+        path.parent().unwrap_or(Path::new(".")),
+        &no_mie_cache(),
+    )
+}
+
+/// [`lidarsim::scene::Scene::read`] with the Mie disk cache off ([`no_mie_cache`]).
+pub fn scene_read(path: &Path) -> Result<lidarsim::scene::Scene, lidarsim::input::InputError> {
+    lidarsim::scene::Scene::read_with(path, &no_mie_cache())
+}
+
+/// Run `lidarsim` with arguments (the Mie disk cache off) and return its output.
 pub fn lidarsim<I, S>(args: I) -> std::process::Output
 where
     I: IntoIterator<Item = S>,
     S: AsRef<std::ffi::OsStr>,
 {
-    std::process::Command::new(lidarsim_bin())
+    lidarsim_command()
         .args(args)
         .output()
         .expect("lidarsim runs")
@@ -111,14 +153,15 @@ pub fn lidarsim_bounded(
     let log = |name: &str| std::fs::File::create(logs.join(name)).map(Stdio::from);
     let mut cmd = if cfg!(unix) && Path::new("/bin/sh").exists() {
         let mut c = Command::new("/bin/sh");
-        c.arg("-c")
+        c.env(NO_MIE_CACHE.0, NO_MIE_CACHE.1)
+            .arg("-c")
             .arg(format!(
                 "ulimit -v {MEMORY_LIMIT_KIB} && exec \"$0\" \"$@\""
             ))
             .arg(lidarsim_bin());
         c
     } else {
-        Command::new(lidarsim_bin())
+        lidarsim_command()
     };
     cmd.args(args)
         .current_dir(cwd)

@@ -101,6 +101,7 @@ where
     let started = Instant::now();
     let out = if cfg!(unix) && Path::new("/bin/sh").exists() {
         Command::new("/bin/sh")
+            .env(crate::util::NO_MIE_CACHE.0, crate::util::NO_MIE_CACHE.1)
             .arg("-c")
             .arg("ulimit -v 1048576 && exec \"$0\" \"$@\"")
             .arg(lidarsim_bin())

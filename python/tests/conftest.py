@@ -13,6 +13,11 @@ ROOT = Path(__file__).resolve().parents[2]
 SHARED = Path(os.environ.get("LIDARSIM_SHARED", ROOT.parent / "shared"))
 BIN = Path(os.environ.get("LIDARSIM_BIN", ROOT / "target" / "release" / "lidarsim"))
 
+# No test writes into the user's Mie cache (README, "The Mie cache"): set before any test runs,
+# so every `lidarsim` the tests start (the `cli` fixture, the README's examples) inherits it and
+# the package in this process reads it when it resolves a scene with a Mie layer.
+os.environ["LIDARSIM_CACHE_DIR"] = "off"
+
 
 def shared_file(relative):
     """The path of a "tests only" file of ../shared, or a skip naming it."""

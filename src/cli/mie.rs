@@ -317,9 +317,16 @@ fn run_opac(args: &Args) -> anyhow::Result<()> {
     finish(&o.bulk, args, wavelength_nm, indices, description, &o.work)
 }
 
-/// Progress of the size integration on stderr: a line every 2 s once it has taken 2 s.
-fn progress_lines() -> impl Fn(&MieProgress) {
-    lidarsim::particles::distribution::progress_lines("lidarsim mie".into())
+/// Progress of the size integration on stderr: a line every 2 s once it has taken 2 s; none
+/// with `--quiet`.
+fn progress_lines() -> Box<dyn Fn(&MieProgress)> {
+    if crate::cli::progress::quiet() {
+        Box::new(|_: &MieProgress| {})
+    } else {
+        Box::new(lidarsim::particles::distribution::progress_lines(
+            "lidarsim mie".into(),
+        ))
+    }
 }
 
 /// Write the table (if --out) and print the bulk properties as JSON.

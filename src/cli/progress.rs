@@ -24,6 +24,11 @@ pub fn set_quiet(quiet: bool) {
     QUIET.store(quiet, Ordering::Relaxed);
 }
 
+/// Whether `--quiet` was given (for reports that do not go through [`Progress`]).
+pub fn quiet() -> bool {
+    QUIET.load(Ordering::Relaxed)
+}
+
 /// When a log line is written off a terminal: not before the work has run this long
 /// (`LIDARSIM_PROGRESS_AFTER_S` sets another, e.g. 0 to log from the start).
 const LOG_AFTER: Duration = Duration::from_secs(2);

@@ -42,9 +42,10 @@
 //! each tail), cut into 16 panels equal in ln x, each starting with 8 intervals. All panels are
 //! halved together (reusing their points) until two successive halvings change the mode's
 //! extinction, scattering, backscatter and `g·Csca` integrals by less than `rel_tol`; but a
-//! panel halved twice may stop early, smallest changes first, while the last changes of the
-//! stopped panels sum to at most a tenth of `rel_tol`: the panels in the tails, which hold
-//! little of the integrals, stay coarse. The backscatter of nearly non-absorbing droplets
+//! panel halved twice may stop early, smallest changes per unit cost of the next halving first
+//! (radii times Mie terms), while the last changes of the stopped panels sum to at most a tenth
+//! of `rel_tol`: the panels in the tails, which hold little of the integrals, stay coarse, and
+//! a settled panel of large size parameters stops before a cheap one. The backscatter of nearly non-absorbing droplets
 //! converges slowest (narrow resonances; `docs/particles.md` gives the convergence seen). The
 //! angular integrals (phase function, matrix) are summed on the fly from the same Mie
 //! coefficients, on the same points, so `P(180°)` in the table is exactly the backscatter used

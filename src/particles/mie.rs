@@ -171,8 +171,9 @@ fn lentz_dn(z: Complex64, n: usize) -> Complex64 {
     // |z| + N + 100 iterations always suffice (the fraction converges once k exceeds |z|).
     let max_iter = (z.norm() as usize + n + 100).min(10_000_000);
     for _ in 0..max_iter {
-        // |ratio − 1| ≤ ε also bounds ||ratio| − 1|: one test is enough.
-        if (ratio - 1.0).norm() <= 1e-14 {
+        // |ratio − 1| ≤ ε also bounds ||ratio| − 1|: one test is enough (squared: no hypot,
+        // which cost 2 % of an OPAC run).
+        if (ratio - 1.0).norm_sqr() <= 1e-28 {
             break;
         }
         aj = sign_zinv - aj;

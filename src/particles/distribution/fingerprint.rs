@@ -14,7 +14,7 @@ pub fn format_refractive_index(m: Complex64) -> String {
 }
 
 /// The version of the Mie computation that starts every [`fingerprint`].
-pub const MIE_VERSION: &str = "lidarsim-mie-v3";
+pub const MIE_VERSION: &str = "lidarsim-mie-v4";
 
 /// A stable text fingerprint of the inputs of [`bulk_optics_mixture`] (components, wavelength,
 /// options, solver version): equal inputs give equal text on every machine (shortest round-trip
@@ -23,7 +23,8 @@ pub fn fingerprint(components: &[Component], wavelength_m: f64, opts: &BulkOptio
     // The version of the Mie computation: bumped whenever its numbers change, so that cache
     // entries of another version are recomputed rather than read. v2: results carry the
     // scattering matrix (v1 entries hold the phase function only); v3: the size integration
-    // refines panels where the integrals change (not one uniform grid).
+    // refines panels where the integrals change (not one uniform grid); v4: the panels that
+    // stop early are chosen by their change per unit cost (other final grids, same tolerance).
     let mut s = format!("{MIE_VERSION};wavelength_m={wavelength_m:e}");
     for c in components {
         s.push_str(&format!(
