@@ -332,7 +332,9 @@ fn merge_refuses_damaged_and_foreign_shard_files() {
     let mut flipped = good.clone();
     flipped[good.len() / 2] ^= 0x10;
     let mut future = good.clone();
-    future[16] = 2;
+    // A format this lidarsim does not know: the next one.
+    future[16..20].copy_from_slice(&(lidarsim::shard::FORMAT + 1).to_le_bytes());
+    let future_message = format!("shard file format {}", lidarsim::shard::FORMAT + 1);
     let cases: Vec<(&str, Vec<u8>, &str)> = vec![
         ("truncated", good[..good.len() - 100].to_vec(), "truncated"),
         ("flipped", flipped, "corrupt: checksum"),
@@ -342,7 +344,7 @@ fn merge_refuses_damaged_and_foreign_shard_files() {
             "not a lidarsim shard file",
         ),
         ("empty", Vec::new(), "not a lidarsim shard file"),
-        ("future", future, "shard file format 2"),
+        ("future", future, future_message.as_str()),
         (
             "version",
             with_header(&good, |h| h["lidarsim_version"] = "0.0.1".into()),
