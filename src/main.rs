@@ -60,6 +60,7 @@ fn main() -> ExitCode {
         },
     };
     cli::progress::set_quiet(cli.quiet);
+    lidarsim::particles::distribution::set_progress_lines(cli::progress::library_lines_after_s());
     let result = match cli.command {
         Command::Run(a) => cli::run::run(a),
         Command::Lbl(a) => cli::lbl::run(a),

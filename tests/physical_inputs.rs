@@ -310,6 +310,50 @@ fn mie_cloud_by_liquid_water_content_matches_miepython() {
     assert!((b / want - 1.0).abs() < 5e-3, "{b} vs {want}");
 }
 
+/// A scene's first Mie computation reports its progress from inside the library while the
+/// scene is resolved: as the command line's own progress, from the start with
+/// `LIDARSIM_PROGRESS_AFTER_S=0`, and not at all with `--quiet` (which silences every progress
+/// report of the process). The cache is off, so both runs compute.
+#[test]
+fn a_scenes_first_mie_computation_is_silent_with_quiet() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("mie.toml");
+    std::fs::write(
+        &path,
+        cloud_scene(
+            "extinction_per_km = 5.0
+particles = { distribution = \"lognormal\", \
+             median_radius_um = 2.0, sigma_g = 1.5, refractive_index = \"1.33+0i\" }",
+        ),
+    )
+    .unwrap();
+    let run = |quiet: bool| {
+        let mut c = crate::util::lidarsim_command();
+        c.args([
+            "run",
+            &s(&path),
+            "--photons",
+            "0",
+            "--no-plots",
+            "--no-netcdf",
+        ])
+        .arg("--out")
+        .arg(dir.path().join(if quiet { "q" } else { "v" }))
+        .env("LIDARSIM_PROGRESS_AFTER_S", "0");
+        if quiet {
+            c.arg("--quiet");
+        }
+        let o = c.output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr).into_owned();
+        assert!(o.status.success(), "{err}");
+        err
+    };
+    let loud = run(false);
+    assert!(loud.contains("lidarsim: Mie optics at 1064 nm: "), "{loud}");
+    let quiet = run(true);
+    assert!(!quiet.contains("Mie optics"), "{quiet}");
+}
+
 /// Exactly one amount: an extinction and a water content together, a water content without
 /// `r_eff_um`, `r_eff_um` alone, liquid and ice together, and a water content with a
 /// number density of `particles` are each refused with the file, line and key.

@@ -40,6 +40,12 @@ fn log_after() -> Duration {
         .filter(|s| s.is_finite() && *s >= 0.0)
         .map_or(LOG_AFTER, Duration::from_secs_f64)
 }
+/// When the library's own progress lines (a scene's first Mie computation) start: as the
+/// log lines here, never with `--quiet`.
+pub fn library_lines_after_s() -> Option<f64> {
+    (!quiet()).then(|| log_after().as_secs_f64())
+}
+
 const LOG_EVERY: Duration = Duration::from_secs(10);
 const LOG_STEP_PERCENT: f64 = 10.0;
 

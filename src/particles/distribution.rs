@@ -73,7 +73,7 @@ pub use bulk::{bulk_optics, bulk_optics_mixture, bulk_optics_mixture_with_progre
 pub use fingerprint::{MIE_VERSION, fingerprint, fingerprint_hash, format_refractive_index};
 pub use options::{
     BulkOptics, BulkOptions, Component, MIN_INDEX_CONTRAST, MieProgress, ModeConvergence,
-    default_angle_grid, progress_lines,
+    default_angle_grid, progress_lines, set_progress_lines,
 };
 pub use work::{MieWork, mie_work, mie_work_of};
 

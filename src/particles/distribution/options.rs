@@ -245,13 +245,31 @@ pub struct MieProgress {
     pub radii_bound: u64,
 }
 
+/// When [`progress_lines`] first prints \[s\] (f64 bits; infinite: never).
+static PROGRESS_AFTER_S: std::sync::atomic::AtomicU64 =
+    std::sync::atomic::AtomicU64::new(2.0f64.to_bits());
+
+/// When the progress lines of [`progress_lines`] start, for the whole process: after `after_s`
+/// seconds of a computation (2 s unless set), or never (`None`). The command line's `--quiet`
+/// turns them off, so that a scene's first Mie computation, reported from inside the library
+/// while the scene is resolved, is silent too; `LIDARSIM_PROGRESS_AFTER_S` moves the start as
+/// it does for the command line's own progress. Errors and warnings are not progress and
+/// still print.
+pub fn set_progress_lines(after_s: Option<f64>) {
+    let s = after_s.filter(|s| *s >= 0.0).unwrap_or(f64::INFINITY);
+    PROGRESS_AFTER_S.store(s.to_bits(), std::sync::atomic::Ordering::Relaxed);
+}
+
 /// A progress report for [`super::bulk_optics_mixture_with_progress`] as plain lines on standard
 /// error, `{what}: COMPONENT (size integration I of N): R radii, at most B, T s`, every 2 s once
-/// the computation has run for 2 s (nothing for a shorter one): what a batch job's log or a
+/// the computation has run for 2 s (nothing for a shorter one; [`set_progress_lines`] moves that or
+/// turns the lines off): what a batch job's log or a
 /// terminal shows until a command has a progress display of its own.
 pub fn progress_lines(what: String) -> impl Fn(&MieProgress) {
     let started = std::time::Instant::now();
-    let next = std::cell::Cell::new(2.0);
+    let next = std::cell::Cell::new(f64::from_bits(
+        PROGRESS_AFTER_S.load(std::sync::atomic::Ordering::Relaxed),
+    ));
     move |p: &MieProgress| {
         let t = started.elapsed().as_secs_f64();
         if t >= next.get() {
