@@ -55,7 +55,8 @@ use super::tally::{Flux, TallyShape};
 use super::{RunStats, Setup};
 use crate::aperture;
 use crate::rng::Rng;
-use sampling::{exp_neg, lambertian, one_minus_exp_neg, pick_component, rotate, unit_azimuth};
+use lanes::exp_neg;
+use sampling::{lambertian, one_minus_exp_neg, pick_component, rotate, unit_azimuth};
 
 /// Weight below which Russian roulette is played, and the weight survivors continue with.
 const ROULETTE_BELOW: f64 = 1e-2;

@@ -12,18 +12,6 @@ use crate::rng::Rng;
 use crate::scene::BeamProfile;
 use crate::transport::Setup;
 
-/// e^{−x} for x ≥ 0. Below 1e-3 (the absorption of a flight through a nearly conservative
-/// cloud, once per flight) by its Taylor series to x⁴, whose remainder x⁵/120 < 1e-17 is below
-/// the last bit: the same number at a fraction of a library call's cost.
-#[inline]
-pub(super) fn exp_neg(x: f64) -> f64 {
-    if x < 1e-3 {
-        1.0 - x * (1.0 - x * (0.5 - x * (1.0 / 6.0 - x * (1.0 / 24.0))))
-    } else {
-        (-x).exp()
-    }
-}
-
 /// 1 − e^{−τ} for τ ≥ 0, to a few ulps relative: expm1 only where the difference would cancel
 /// (it costs about 3× exp in glibc, and this runs once per flight); exactly 1 beyond τ ≈ 37.
 #[inline]
