@@ -40,6 +40,7 @@ fn log_after() -> Duration {
         .filter(|s| s.is_finite() && *s >= 0.0)
         .map_or(LOG_AFTER, Duration::from_secs_f64)
 }
+
 /// When the library's own progress lines (a scene's first Mie computation) start: as the
 /// log lines here, never with `--quiet`.
 pub fn library_lines_after_s() -> Option<f64> {

@@ -262,9 +262,9 @@ pub fn set_progress_lines(after_s: Option<f64>) {
 
 /// A progress report for [`super::bulk_optics_mixture_with_progress`] as plain lines on standard
 /// error, `{what}: COMPONENT (size integration I of N): R radii, at most B, T s`, every 2 s once
-/// the computation has run for 2 s (nothing for a shorter one; [`set_progress_lines`] moves that or
-/// turns the lines off): what a batch job's log or a
-/// terminal shows until a command has a progress display of its own.
+/// the computation has run for 2 s (nothing for a shorter one; [`set_progress_lines`] moves
+/// that or turns the lines off): what a batch job's log or a terminal shows until a command has
+/// a progress display of its own.
 pub fn progress_lines(what: String) -> impl Fn(&MieProgress) {
     let started = std::time::Instant::now();
     let next = std::cell::Cell::new(f64::from_bits(
