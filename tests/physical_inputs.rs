@@ -16,22 +16,30 @@ fn s(p: &Path) -> String {
     p.to_string_lossy().into_owned()
 }
 
+/// `lidarsim run PATH --photons 0 --no-plots --no-netcdf --out OUT`: the analytic lidar
+/// equation alone, for the warnings and summaries of a scene.
+fn analytic_run(path: &Path, out: &Path) -> std::process::Command {
+    let mut c = crate::util::lidarsim_command();
+    c.args([
+        "run",
+        &s(path),
+        "--photons",
+        "0",
+        "--no-plots",
+        "--no-netcdf",
+        "--out",
+        &s(out),
+    ]);
+    c
+}
+
 /// Run `scene_text` (written into `dir`) with the analytic lidar equation only; its stdout,
 /// stderr and output directory.
 fn run_text(dir: &Path, name: &str, scene_text: &str) -> (String, String, std::path::PathBuf) {
     let path = dir.join(name);
     std::fs::write(&path, scene_text).unwrap();
     let out = dir.join(format!("{name}.out"));
-    let o = lidarsim([
-        "run",
-        &s(&path),
-        "--photons",
-        "0",
-        "--no-plots",
-        "--no-netcdf",
-        "--out",
-        &s(&out),
-    ]);
+    let o = analytic_run(&path, &out).output().unwrap();
     let (stdout, stderr) = (
         String::from_utf8_lossy(&o.stdout).into_owned(),
         String::from_utf8_lossy(&o.stderr).into_owned(),
@@ -328,18 +336,8 @@ particles = { distribution = \"lognormal\", \
     )
     .unwrap();
     let run = |quiet: bool| {
-        let mut c = crate::util::lidarsim_command();
-        c.args([
-            "run",
-            &s(&path),
-            "--photons",
-            "0",
-            "--no-plots",
-            "--no-netcdf",
-        ])
-        .arg("--out")
-        .arg(dir.path().join(if quiet { "q" } else { "v" }))
-        .env("LIDARSIM_PROGRESS_AFTER_S", "0");
+        let mut c = analytic_run(&path, &dir.path().join(if quiet { "q" } else { "v" }));
+        c.env("LIDARSIM_PROGRESS_AFTER_S", "0");
         if quiet {
             c.arg("--quiet");
         }
@@ -497,16 +495,7 @@ fn shipped_scenes_give_no_warning() {
     for n in names {
         let path = project_root().join("scenes").join(&n);
         let out = dir.path().join(&n);
-        let o = lidarsim([
-            "run",
-            &s(&path),
-            "--photons",
-            "0",
-            "--no-plots",
-            "--no-netcdf",
-            "--out",
-            &s(&out),
-        ]);
+        let o = analytic_run(&path, &out).output().unwrap();
         let stderr = String::from_utf8_lossy(&o.stderr);
         assert!(o.status.success(), "{n}: {stderr}");
         assert!(!stderr.contains("warning"), "{n}: {stderr}");
