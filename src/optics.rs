@@ -384,6 +384,13 @@ impl OpticalAtmosphere {
     /// comparisons instead of a search through hundreds of edges.
     #[inline]
     pub fn layer_near(&self, z: f64, hint: usize) -> usize {
+        self.layer_near_or(z, hint, |z| self.layer_of(z))
+    }
+
+    /// [`Self::layer_near`] with its own `search` of the layers where the hint and its
+    /// neighbours miss (the transport's bucketed index).
+    #[inline]
+    pub fn layer_near_or(&self, z: f64, hint: usize, search: impl FnOnce(f64) -> usize) -> usize {
         let e = &self.edges_m;
         let n = self.n_layers();
         if hint < n {
@@ -398,7 +405,7 @@ impl OpticalAtmosphere {
                 return hint - 1;
             }
         }
-        self.layer_of(z)
+        search(z)
     }
 
     /// Every channel's cumulative vertical optical depths at an altitude z in layer l (clamped

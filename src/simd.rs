@@ -31,3 +31,51 @@ fn arch() -> pulp::Arch {
 pub(crate) fn dispatch<Op: WithSimd>(op: Op) -> Op::Output {
     arch().dispatch(op)
 }
+
+/// Channels from which a per-channel kernel ([`wide_fn!`]) takes the dispatched copy: with fewer
+/// the AVX2 loop would run no full vector of four, and the call through the dispatch costs more
+/// than SSE2's two lanes lose.
+pub(crate) const WIDE_FROM: usize = 8;
+
+/// A function whose body is compiled twice, for the baseline and (through [`dispatch`]) for
+/// the best instruction set of the processor, the copy chosen at each call by a condition
+/// (`where wide(cond)`, on the arguments): for the per-channel kernels of the Monte Carlo, one
+/// SSE2 pass over each channel array at a one- or two-channel scene (C.1's walk keeps its code),
+/// the AVX2 copy at many channels. The body is an `#[inline(always)]` function of the same
+/// arguments, wrapped in a [`WithSimd`] struct, so that all of it reaches the wider copy.
+/// Each argument's type names the one lifetime parameter.
+macro_rules! wide_fn {
+    (
+        $(#[$attr:meta])*
+        $vis:vis fn $name:ident<$lt:lifetime>($($arg:ident : $ty:ty),* $(,)?) $(-> $out:ty)?
+        where wide($cond:expr)
+        $body:block
+    ) => {
+        $(#[$attr])*
+        #[inline]
+        $vis fn $name<$lt>($($arg: $ty),*) $(-> $out)? {
+            #[inline(always)]
+            #[allow(clippy::too_many_arguments)]
+            fn body<$lt>($($arg: $ty),*) $(-> $out)? $body
+            struct Op<$lt> {
+                $($arg: $ty),*
+            }
+            impl<$lt> $crate::simd::WithSimd for Op<$lt> {
+                type Output = $crate::simd::wide_fn!(@out $($out)?);
+                #[inline(always)]
+                fn with_simd<S: $crate::simd::Simd>(self, _: S) -> Self::Output {
+                    let Op { $($arg),* } = self;
+                    body($($arg),*)
+                }
+            }
+            if $cond {
+                $crate::simd::dispatch(Op { $($arg),* })
+            } else {
+                body($($arg),*)
+            }
+        }
+    };
+    (@out) => { () };
+    (@out $t:ty) => { $t };
+}
+pub(crate) use wide_fn;

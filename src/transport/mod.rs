@@ -12,6 +12,7 @@
 mod cone;
 mod crossing;
 mod fold;
+mod index;
 mod jacobian;
 pub(crate) mod lanes;
 mod photon;

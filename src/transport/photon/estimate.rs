@@ -319,15 +319,18 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
         } else {
             s.mixture_phase(layer, 0, omega_rx.dot(omega))
         };
-        let p0 = s.mixture_phase(layer, 0, mu_in);
-        let q = (1.0 - s.ddis_epsilon) * p0 + s.ddis_epsilon * p_b;
-        let norm = 1.0 / (q + p_b);
         let nch = self.nch();
-        if atm.grey_scattering {
+        // Channel 0's phase function is the first of the channels' (the same arithmetic).
+        let p0 = if atm.grey_scattering {
+            let p0 = s.mixture_phase(layer, 0, mu_in);
             self.phase[..nch].fill(p0);
+            p0
         } else {
             s.mixture_phases(layer, mu_in, &mut self.phase[..nch]);
-        }
+            self.phase[0]
+        };
+        let q = (1.0 - s.ddis_epsilon) * p0 + s.ddis_epsilon * p_b;
+        let norm = 1.0 / (q + p_b);
         for k in 0..nch {
             self.virt[k] = self.w[k] * self.phase[k] * norm;
         }
@@ -431,7 +434,7 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
             return;
         }
         let e_xy = (y - x) / l;
-        let layer_y = atm.layer_near(y.z, p.layer);
+        let layer_y = s.layer_near(y.z, p.layer);
         if atm.components[layer_y].is_empty() {
             return;
         }

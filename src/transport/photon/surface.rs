@@ -41,7 +41,7 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
         // The surface is the bottom of layer 0: every channel's optical depths there at once.
         if s.has_layers {
             let z = hit.z.clamp(s.bottom_m, s.top_m);
-            let l = s.atm.layer_near(z, 0);
+            let l = s.layer_near(z, 0);
             s.atm
                 .cumulative_taus_in(l, z, &mut self.ts_y[..n], &mut self.ta_y[..n]);
         } else {

@@ -94,8 +94,8 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
     ) {
         let s = self.s;
         let at_layer = match prev {
-            Some(p) if s.has_layers => s.atm.layer_near(pos.z, p.layer),
-            _ if s.has_layers => s.atm.layer_of(pos.z),
+            Some(p) if s.has_layers => s.layer_near(pos.z, p.layer),
+            _ if s.has_layers => s.layer_of(pos.z),
             _ => 0,
         };
         self.set_altitude_in(at_layer, pos.z);
@@ -202,7 +202,7 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
         // Scattering optical depth of the flight for each class (class 0: channel 0's).
         let inside = pos.z >= s.bottom_m && pos.z <= s.top_m && s.has_layers;
         let layer0 = if horizontal && inside {
-            atm.layer_near(pos.z, walk.at_layer)
+            s.layer_near(pos.z, walk.at_layer)
         } else {
             0
         };
@@ -247,7 +247,7 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
                         End::Cut => walk.at_layer,
                     };
                     let z = z_end.clamp(s.bottom_m, s.top_m);
-                    let l = atm.layer_near(z, hint);
+                    let l = s.layer_near(z, hint);
                     atm.cumulative_taus_in(l, z, &mut self.ts_y[..nch], &mut self.ta_y[..nch]);
                 } else {
                     self.ts_y[..nch].fill(0.0);
@@ -591,33 +591,46 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
             .sample_with_value(rng.random());
         let centre = if towards_rx { omega_rx } else { dir };
         let new_dir = rotate(centre, mu_sampled, unit_azimuth(rng));
+        // With one class the mean phase function is channel 0's, the first of the channels'
+        // phase functions (`mixture_phases`, the same arithmetic): not evaluated again.
+        let grey = atm.grey_scattering;
+        let mean_is_first = ncls == 1 && !grey;
         if ddis {
             let mu_s = dir.dot(new_dir);
+            if !grey {
+                s.mixture_phases(layer, mu_s, &mut self.phase[..nch]);
+            }
+            let mean_s = || {
+                if mean_is_first {
+                    self.phase[0]
+                } else {
+                    mean_phase(mu_s)
+                }
+            };
             // One scatterer in one class: the density sampled is the mean phase function,
             // and its value at the sampled angle came with the sample.
             let sampled_is_mean = ncls == 1 && atm.components[layer].len() == 1;
             let (p0, p_rx) = match (sampled_is_mean, towards_rx) {
                 (true, false) => (p_sampled, mean_phase(omega_rx.dot(new_dir))),
-                (true, true) => (mean_phase(mu_s), p_sampled),
-                _ => (mean_phase(mu_s), mean_phase(omega_rx.dot(new_dir))),
+                (true, true) => (mean_s(), p_sampled),
+                _ => (mean_s(), mean_phase(omega_rx.dot(new_dir))),
             };
             let q = (1.0 - s.ddis_epsilon) * p0 + s.ddis_epsilon * p_rx;
-            if atm.grey_scattering {
+            if grey {
                 self.w[..nch].iter_mut().for_each(|w| *w *= p0 / q);
             } else {
-                s.mixture_phases(layer, mu_s, &mut self.phase[..nch]);
-                for k in 0..nch {
-                    self.w[k] *= self.phase[k] / q;
-                }
+                lanes::reweight(&mut self.w[..nch], &self.phase, q);
             }
             // Against the DDIS crossing made here, whose direction density is P(Θ_rx).
             self.cross_mis = if virtual_done { q / (q + p_rx) } else { 1.0 };
-        } else if !atm.grey_scattering {
-            let p_mean = mean_phase(mu_sampled);
+        } else if !grey {
             s.mixture_phases(layer, mu_sampled, &mut self.phase[..nch]);
-            for k in 0..nch {
-                self.w[k] *= self.phase[k] / p_mean;
-            }
+            let p_mean = if mean_is_first {
+                self.phase[0]
+            } else {
+                mean_phase(mu_sampled)
+            };
+            lanes::reweight(&mut self.w[..nch], &self.phase, p_mean);
         }
         if s.analyser.is_some() {
             self.polarise(layer, dir, new_dir);

@@ -8,7 +8,6 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
     #[inline(always)]
     pub(super) fn sample_collision(&self, walk: &Walk, f: &Flight, rng: &mut Rng) -> Collision {
         let s = self.s;
-        let atm = s.atm;
         let ncls = self.ncls();
         let (pos, mu, horizontal, inv_mu, layer0) =
             (walk.pos, f.mu, f.horizontal, f.inv_mu, f.layer0);
@@ -33,7 +32,7 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
                 (s_u, layer0, s.classes[0].sigma[layer0] * s_u)
             } else {
                 // One search for the layer, which gives the optical depth too.
-                let l = atm.layer_of(z);
+                let l = s.layer_of(z);
                 (
                     s_u,
                     l,
@@ -278,7 +277,7 @@ impl<'a, const ONE_CHANNEL: bool> Tracer<'a, ONE_CHANNEL> {
             Some(l) => s.atm.cumulative_taus_in(l, z, ts, ta),
             None => {
                 let z = z.clamp(s.bottom_m, s.top_m);
-                s.atm.cumulative_taus_in(s.atm.layer_of(z), z, ts, ta);
+                s.atm.cumulative_taus_in(s.layer_of(z), z, ts, ta);
             }
         }
     }
