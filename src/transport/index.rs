@@ -75,6 +75,24 @@ impl TableIndex {
 mod tests {
     use super::*;
 
+    /// The grid is sharp where the table is even: on 800 layers of 100 m (the default scene's)
+    /// every query starts in its own interval or the next one down, so the walk is one step at
+    /// most; and a table's index covers its range with 4 cells an interval.
+    #[test]
+    fn queries_start_next_to_their_interval() {
+        let v: Vec<f64> = (0..=800).map(|i| 100.0 * i as f64).collect();
+        let idx = TableIndex::new(&v);
+        assert_eq!(idx.start.len(), 3200);
+        assert_eq!((idx.lo, idx.inv_h), (0.0, 1.0 / 25.0));
+        for i in 0..=160_000 {
+            let z = 0.5 * i as f64;
+            let cell = ((z * idx.inv_h) as usize).min(idx.start.len() - 1);
+            let want = v.partition_point(|e| *e <= z).saturating_sub(1).min(799);
+            let start = idx.start[cell] as usize;
+            assert!(start <= want && want <= start + 1, "z {z}: start {start}, interval {want}");
+        }
+    }
+
     /// The same interval as the binary search over the whole table, for both predicates, on
     /// tables with repeated entries (layers that do not scatter), very uneven intervals (thin
     /// air above a cloud), one interval, and values outside, on and between the entries.
