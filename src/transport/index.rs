@@ -89,7 +89,10 @@ mod tests {
             let cell = ((z * idx.inv_h) as usize).min(idx.start.len() - 1);
             let want = v.partition_point(|e| *e <= z).saturating_sub(1).min(799);
             let start = idx.start[cell] as usize;
-            assert!(start <= want && want <= start + 1, "z {z}: start {start}, interval {want}");
+            assert!(
+                start <= want && want <= start + 1,
+                "z {z}: start {start}, interval {want}"
+            );
         }
     }
 
