@@ -445,11 +445,14 @@ mod tests {
     }
 
     /// Each kernel gives, to the bit, the per-channel expression it vectorises, with [`exp`]
-    /// (19 channels: vector bodies and a remainder), and with the library's for one channel.
+    /// (19 channels: the dispatched copy, AVX2 where the processor has it, vector bodies and a
+    /// remainder; 5: the baseline copy below `WIDE_FROM`), and with the library's for one
+    /// channel.
     #[test]
     fn kernels_are_their_per_channel_expressions() {
         use super::*;
-        for n in [19, 1] {
+        const { assert!(5 < WIDE_FROM && WIDE_FROM <= 19) };
+        for n in [19, 5, 1] {
             let lib = n == 1;
             let ex = |x: f64| if lib { x.exp() } else { exp(x) };
             let v = |seed: f64| -> Vec<f64> {
@@ -458,7 +461,7 @@ mod tests {
                     .collect()
             };
             let (w, a, b, c, d, g, f) = (v(1.1), v(2.3), v(3.7), v(4.1), v(5.9), v(6.3), v(7.7));
-            let mut out = vec![vec![0.0; n]; 15];
+            let mut out = vec![vec![0.0; n]; 16];
             estimate_phase(&mut out[0], &w, &a, &b, 0.7);
             crossing(&mut out[1], &w, &a, &b, &c, &d, &g, &f, &a, 1.3, 0.2, 0.9);
             cone(&mut out[2], &w, &a, &b, &c, 0.4, &d, &g);
@@ -478,6 +481,8 @@ mod tests {
             collide_grey(&mut out[12], &a, 0.8);
             step(&mut out[13], &a, &b, 1.3);
             scale(&mut out[14], &a, 0.9);
+            out[15].copy_from_slice(&w);
+            reweight(&mut out[15], &a, 0.7);
             let mut clear = w.clone();
             collide_grey(&mut clear, &vec![0.0; n], 0.8);
             for k in 0..n {
@@ -509,6 +514,7 @@ mod tests {
                 same(12, w[k] * (0.8 * ex(-a[k])));
                 same(13, (a[k] - b[k]).abs() * 1.3);
                 same(14, a[k] * 0.9);
+                same(15, w[k] * (a[k] / 0.7));
                 assert_eq!(clear[k].to_bits(), (w[k] * 0.8).to_bits());
             }
         }
