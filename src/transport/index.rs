@@ -57,10 +57,7 @@ impl TableIndex {
         if n <= 1 {
             return 0;
         }
-        let c = (x - self.lo) * self.inv_h;
-        // A float-to-integer cast saturates (NaN to 0): any cell is a correct start.
-        let cell = (c as usize).min(self.start.len() - 1);
-        let mut l = (self.start[cell] as usize).min(n - 1);
+        let mut l = self.start_of(x, n);
         while l > 0 && !below(v[l]) {
             l -= 1;
         }
@@ -68,6 +65,15 @@ impl TableIndex {
             l += 1;
         }
         l
+    }
+
+    /// The interval a query for x starts from (of n): the one at the lower end of x's cell.
+    #[inline]
+    fn start_of(&self, x: f64, n: usize) -> usize {
+        let c = (x - self.lo) * self.inv_h;
+        // A float-to-integer cast saturates (NaN to 0): any cell is a correct start.
+        let cell = (c as usize).min(self.start.len() - 1);
+        (self.start[cell] as usize).min(n - 1)
     }
 }
 
@@ -86,9 +92,8 @@ mod tests {
         assert_eq!((idx.lo, idx.inv_h), (0.0, 1.0 / 25.0));
         for i in 0..=160_000 {
             let z = 0.5 * i as f64;
-            let cell = ((z * idx.inv_h) as usize).min(idx.start.len() - 1);
             let want = v.partition_point(|e| *e <= z).saturating_sub(1).min(799);
-            let start = idx.start[cell] as usize;
+            let start = idx.start_of(z, 800);
             assert!(
                 start <= want && want <= start + 1,
                 "z {z}: start {start}, interval {want}"
