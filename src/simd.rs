@@ -39,9 +39,9 @@ pub(crate) const WIDE_FROM: usize = 8;
 
 /// A function whose body is compiled twice, for the baseline and (through [`dispatch`]) for
 /// the best instruction set of the processor, the copy chosen at each call by a condition
-/// (`where wide(cond)`, on the arguments): for the per-channel kernels of the Monte Carlo, one
-/// SSE2 pass over each channel array at a one- or two-channel scene (C.1's walk keeps its code),
-/// the AVX2 copy at many channels. The body is an `#[inline(always)]` function of the same
+/// (`where wide(cond)`, on the arguments): for the per-channel kernels of the Monte Carlo, the
+/// baseline's SSE2 pass below [`WIDE_FROM`] channels (C.1's one-channel walk keeps its code),
+/// the AVX2 copy from there on. The body is an `#[inline(always)]` function of the same
 /// arguments, wrapped in a [`WithSimd`] struct, so that all of it reaches the wider copy.
 /// Each argument's type names the one lifetime parameter.
 macro_rules! wide_fn {

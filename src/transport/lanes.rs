@@ -2,10 +2,12 @@
 //! optical depths and so on per channel, each quantity a contiguous array; a scattering event
 //! updates or scores every channel with the same few operations. Written branch-free, those
 //! loops compile to SIMD instructions (two channels an instruction on the baseline x86-64
-//! target), so that a 16-channel DIAL scene costs little more per
-//! event than a one-channel one (the idea of pbrt-v4's `SampledSpectrum`). The one operation
-//! per channel that a library call would keep scalar is the exponential: [`exp`] is an inline,
-//! branch-free one, used where there are several channels (`per_channel!`).
+//! target; from `WIDE_FROM` channels on, the kernels with an exponential or a division run a
+//! second, AVX2 copy where the processor has it: [`wide_fn!`]), so that a 16-channel DIAL scene
+//! costs little more per event than a one-channel one (the idea of pbrt-v4's
+//! `SampledSpectrum`). The one operation per channel that a library call would keep scalar is
+//! the exponential: [`exp`] is an inline, branch-free one, used where there are several
+//! channels (`per_channel!`).
 
 use crate::simd::{WIDE_FROM, wide_fn};
 
