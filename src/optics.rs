@@ -390,7 +390,12 @@ impl OpticalAtmosphere {
     /// [`Self::layer_near`] with its own `search` of the layers where the hint and its
     /// neighbours miss (the transport's bucketed index).
     #[inline]
-    pub fn layer_near_or(&self, z: f64, hint: usize, search: impl FnOnce(f64) -> usize) -> usize {
+    pub(crate) fn layer_near_or(
+        &self,
+        z: f64,
+        hint: usize,
+        search: impl FnOnce(f64) -> usize,
+    ) -> usize {
         let e = &self.edges_m;
         let n = self.n_layers();
         if hint < n {
